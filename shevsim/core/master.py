@@ -1,0 +1,442 @@
+"""master.py - the fixed-step, multi-rate co-simulation master.
+
+One communication step of length ``h`` from ``t`` to ``t + h`` (Gauss-Seidel)::
+
+    for comp in order:                     # order from the connection graph
+        if step_index % comp.multiple == 0:
+            copy its connected inputs        # sources earlier in the order are at t + h already
+            comp.do_step(t, multiple * h)  # a multi-rate component covers [t, t + k h]
+    t = t + h; record every output; stop on NaN/inf (component, port, time)
+
+Jacobi copies *all* inputs from the outputs at ``t`` first, then steps every
+component, so the result does not depend on the order.
+
+The order is a topological order of the component graph in which only
+direct-feedthrough edges are mandatory: a component whose output depends
+directly on an input must run after that input's source. A cycle made only of
+feedthrough edges is an algebraic loop and is reported with every
+``component.port`` in it. Other cycles (through a state) are broken where the
+declaration order puts them.
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from .errors import AlgebraicLoopError, ConnectionError_, ScenarioError, SimulationError
+from .variables import units_compatible
+from .results import Result
+
+
+@dataclass
+class MasterSettings:
+    """Settings of a run.
+
+    Parameters
+    ----------
+    step_s : float
+        Communication step (s).
+    method : {'gauss-seidel', 'jacobi'}
+    progress : bool
+        Show a progress bar (tqdm) on long runs.
+    """
+
+    step_s: float = 0.1
+    method: str = "gauss-seidel"
+    progress: bool = False
+
+    def check(self) -> None:
+        if not (isinstance(self.step_s, (int, float)) and self.step_s > 0 and math.isfinite(self.step_s)):
+            raise ScenarioError(f"master: step_s must be a positive number, got {self.step_s!r}")
+        if self.method not in ("gauss-seidel", "jacobi"):
+            raise ScenarioError(f"master: method must be 'gauss-seidel' or 'jacobi', got {self.method!r}")
+
+
+@dataclass(frozen=True)
+class Connection:
+    """``dst.dst_port`` (an input) takes the value of ``src.src_port`` (an output)."""
+
+    src: str
+    src_port: str
+    dst: str
+    dst_port: str
+
+    @classmethod
+    def parse(cls, dst: str, src: str) -> "Connection":
+        try:
+            d, dp = dst.split(".", 1)
+            s, sp = src.split(".", 1)
+        except ValueError:
+            raise ConnectionError_(f"connection '{dst}' = '{src}': both ends must be 'component.port'") from None
+        return cls(s, sp, d, dp)
+
+    def __str__(self) -> str:
+        return f"{self.src}.{self.src_port} -> {self.dst}.{self.dst_port}"
+
+
+@dataclass(frozen=True)
+class Fault:
+    """From ``at_s`` on, input ``component.port`` is forced to ``value`` (its connection is cut)."""
+
+    at_s: float
+    component: str
+    port: str
+    value: float
+
+
+@dataclass
+class MasterState:
+    """A whole-system snapshot (see :meth:`Master.save_state`)."""
+
+    step_index: int
+    time_s: float
+    components: dict[str, Any]
+    n_rows: int
+    forced: dict
+    faults_done: int
+
+
+class Master:
+    """Fixed-step multi-rate co-simulation master.
+
+    Parameters
+    ----------
+    components : sequence of components (native or FMU adapters)
+    connections : sequence of :class:`Connection`
+    settings : MasterSettings
+    step_multiples : dict, optional
+        ``{name: k}``: the component steps every ``k`` communication steps.
+    faults : sequence of :class:`Fault`, optional
+    """
+
+    def __init__(self, components: Sequence, connections: Iterable[Connection],
+                 settings: MasterSettings | None = None,
+                 step_multiples: dict[str, int] | None = None,
+                 faults: Iterable[Fault] = ()):
+        self.settings = settings or MasterSettings()
+        self.settings.check()
+        self.components = {}
+        for c in components:
+            if c.name in self.components:
+                raise ScenarioError(f"duplicate component name '{c.name}'")
+            self.components[c.name] = c
+        self.connections = list(connections)
+        self.step_multiples = {n: 1 for n in self.components}
+        for n, k in (step_multiples or {}).items():
+            if n not in self.components:
+                raise ScenarioError(f"step multiple given for unknown component '{n}'")
+            if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+                raise ScenarioError(f"component '{n}': step_multiple must be an integer >= 1, got {k!r}")
+            self.step_multiples[n] = k
+        self.faults = sorted(faults, key=lambda f: f.at_s)
+        self._vars = {n: {v.name: v for v in c.variables()} for n, c in self.components.items()}
+        self._check_connections()
+        for f in self.faults:
+            self._port(f.component, f.port, "input", f"fault at {f.at_s} s")
+        self.order = self._execution_order()
+        self._build_links()
+        self.step_index = 0
+        self.time_s = 0.0
+        self.t0 = 0.0
+        self._rows: list[list[float]] = []
+        self._times: list[float] = []
+        self._forced: dict[tuple[str, str], float] = {}
+        self._faults_done = 0
+        self._initialized = False
+
+    # ------------------------------------------------------------------ checks
+    def _port(self, comp: str, port: str, want: str, ctx: str):
+        if comp not in self.components:
+            import difflib
+            best = difflib.get_close_matches(comp, list(self.components), n=1)
+            hint = f" (did you mean '{best[0]}'?)" if best else ""
+            raise ConnectionError_(f"{ctx}: unknown component '{comp}'{hint}")
+        vs = self._vars[comp]
+        if port not in vs or vs[port].causality != want:
+            import difflib
+            cands = [n for n, v in vs.items() if v.causality == want]
+            best = difflib.get_close_matches(port, cands, n=1)
+            hint = f" (did you mean '{best[0]}'?)" if best else f" ({want}s: {', '.join(cands) or 'none'})"
+            raise ConnectionError_(f"{ctx}: component '{comp}' has no {want} '{port}'{hint}")
+        return vs[port]
+
+    def _check_connections(self) -> None:
+        seen = {}
+        for c in self.connections:
+            ctx = f"connection {c}"
+            so = self._port(c.src, c.src_port, "output", ctx)
+            di = self._port(c.dst, c.dst_port, "input", ctx)
+            key = (c.dst, c.dst_port)
+            if key in seen:
+                raise ConnectionError_(f"{ctx}: input {c.dst}.{c.dst_port} is already connected to "
+                                       f"{seen[key].src}.{seen[key].src_port}")
+            seen[key] = c
+            if not units_compatible(so.unit, di.unit):
+                raise ConnectionError_(f"{ctx}: unit mismatch, output {c.src}.{c.src_port} is in '{so.unit}' "
+                                       f"but input {c.dst}.{c.dst_port} expects '{di.unit}'")
+
+    def _execution_order(self) -> list[str]:
+        names = list(self.components)
+        # port-level feedthrough graph: output node -> input node (connection), input -> output (depends_on)
+        succ: dict[tuple, list[tuple]] = {}
+        for c in self.connections:
+            succ.setdefault((c.src, "out", c.src_port), []).append((c.dst, "in", c.dst_port))
+        for n, vs in self._vars.items():
+            for v in vs.values():
+                if v.causality == "output":
+                    for i in v.depends_on:
+                        succ.setdefault((n, "in", i), []).append((n, "out", v.name))
+        cycle = _find_cycle(succ)
+        if cycle:
+            ports = " -> ".join(f"{c}.{p}" for c, _, p in cycle)
+            comps = sorted({c for c, _, _ in cycle})
+            raise AlgebraicLoopError(f"algebraic loop (a cycle of direct feedthrough) through components "
+                                     f"{', '.join(comps)}: {ports}")
+        # mandatory component edges: src -> dst when dst's input feeds an output directly
+        ft_inputs = {n: {i for v in vs.values() if v.causality == "output" for i in v.depends_on}
+                     for n, vs in self._vars.items()}
+        hard: dict[str, set[str]] = {n: set() for n in names}
+        soft: dict[str, set[str]] = {n: set() for n in names}
+        for c in self.connections:
+            if c.src == c.dst:
+                continue
+            (hard if c.dst_port in ft_inputs[c.dst] else soft)[c.dst].add(c.src)
+        order: list[str] = []
+        placed: set[str] = set()
+        remaining = list(names)
+        while remaining:
+            # prefer a component whose all predecessors are placed; else whose hard ones are
+            pick = next((n for n in remaining if (hard[n] | soft[n]) <= placed), None)
+            if pick is None:
+                pick = next(n for n in remaining if hard[n] <= placed)
+            order.append(pick)
+            placed.add(pick)
+            remaining.remove(pick)
+        return order
+
+    def _build_links(self) -> None:
+        self._links: dict[str, list[tuple[dict, str, dict, str]]] = {n: [] for n in self.components}
+        for c in self.connections:
+            self._links[c.dst].append((self.components[c.dst].u, c.dst_port, self.components[c.src].y, c.src_port))
+        self._signal_names: list[str] = []
+        self._signal_units: list[str] = []
+        self._signal_src: list[tuple[dict, str]] = []
+        for n in self.order:
+            comp = self.components[n]
+            for v in self._vars[n].values():
+                if v.causality == "output":
+                    self._signal_names.append(f"{n}.{v.name}")
+                    self._signal_units.append(v.unit)
+                    self._signal_src.append((comp.y, v.name))
+        self._sched = [(self.components[n], self._links[n], self.step_multiples[n]) for n in self.order]
+
+    # ----------------------------------------------------------------- running
+    def initialize(self, t0: float = 0.0) -> None:
+        """Initialise every component at ``t0`` in execution order (sources first)."""
+        self.t0 = self.time_s = float(t0)
+        self.step_index = 0
+        self._apply_faults()
+        for comp, links, _ in self._sched:
+            for du, dk, sy, sk in links:
+                du[dk] = sy[sk]
+            self._apply_forced(comp)
+            try:
+                comp.initialize(self.t0)
+            except Exception as exc:
+                raise SimulationError(f"component '{comp.name}' failed to initialise at t={self.t0} s: {exc}") from exc
+        self._rows = []
+        self._times = []
+        self._record()
+        self._initialized = True
+
+    def _apply_forced(self, comp) -> None:
+        for (cn, port), val in self._forced.items():
+            if cn == comp.name:
+                comp.u[port] = val
+
+    def _apply_faults(self) -> None:
+        eps = 1e-9 * max(1.0, abs(self.time_s))
+        while self._faults_done < len(self.faults) and self.faults[self._faults_done].at_s <= self.time_s + eps:
+            f = self.faults[self._faults_done]
+            self._forced[(f.component, f.port)] = float(f.value)
+            comp = self.components[f.component]
+            comp.u[f.port] = float(f.value)
+            self._links[f.component] = [l for l in self._links[f.component] if l[1] != f.port]
+            self._sched = [(self.components[n], self._links[n], self.step_multiples[n]) for n in self.order]
+            self._faults_done += 1
+
+    def _record(self) -> None:
+        row = [y[k] for y, k in self._signal_src]
+        self._times.append(self.time_s)
+        self._rows.append(row)
+        try:
+            s = math.fsum(row)
+        except (TypeError, OverflowError):
+            s = float("nan")
+        if not math.isfinite(s):
+            for (name, val) in zip(self._signal_names, row):
+                try:
+                    ok = math.isfinite(val)
+                except TypeError:
+                    ok = False
+                if not ok:
+                    comp, port = name.split(".", 1)
+                    raise SimulationError(f"component '{comp}' output '{port}' is {val!r} at t={self.time_s:.6g} s "
+                                          f"(step {self.step_index})")
+
+    def step(self) -> None:
+        """Advance the whole system by one communication step."""
+        h = self.settings.step_s
+        t = self.time_s
+        k = self.step_index
+        if self._faults_done < len(self.faults):
+            self._apply_faults()
+        if self.settings.method == "jacobi":
+            for comp, links, m in self._sched:
+                if k % m == 0:
+                    for du, dk, sy, sk in links:
+                        du[dk] = sy[sk]
+            # snapshot semantics: every component above read outputs at t; now step them all
+            for comp, links, m in self._sched:
+                if k % m == 0:
+                    self._do_step(comp, t, m * h)
+        else:
+            for comp, links, m in self._sched:
+                if k % m == 0:
+                    for du, dk, sy, sk in links:
+                        du[dk] = sy[sk]
+                    self._do_step(comp, t, m * h)
+        self.step_index = k + 1
+        self.time_s = self.t0 + self.step_index * h
+        self._record()
+
+    def _do_step(self, comp, t: float, h: float) -> None:
+        try:
+            comp.do_step(t, h)
+        except SimulationError:
+            raise
+        except Exception as exc:
+            raise SimulationError(f"component '{comp.name}' failed in do_step at t={t:.6g} s "
+                                  f"(step {self.step_index}): {type(exc).__name__}: {exc}") from exc
+
+    def run(self, stop_s: float, t0: float = 0.0) -> Result:
+        """Initialise (if needed) and step until ``stop_s``; return the result."""
+        if not self._initialized:
+            self.initialize(t0)
+        n = int(round((stop_s - self.t0) / self.settings.step_s)) - self.step_index
+        termination = "completed"
+        bar = None
+        if self.settings.progress and n > 1000:
+            try:
+                from tqdm import tqdm
+                bar = tqdm(total=n, unit="step", desc="simulating", mininterval=0.5)
+            except ImportError:  # pragma: no cover
+                bar = None
+        wall = _time.perf_counter()
+        try:
+            if bar is None:
+                step = self.step
+                for _ in range(n):
+                    step()
+            else:
+                for i in range(n):
+                    self.step()
+                    if i % 500 == 499:
+                        bar.update(500)
+        finally:
+            if bar is not None:
+                bar.close()
+        self.wall_s = _time.perf_counter() - wall
+        return self.result(termination)
+
+    def result(self, termination: str = "completed") -> Result:
+        data = np.array(self._rows, dtype=float) if self._rows else np.zeros((0, len(self._signal_names)))
+        signals = {name: data[:, j] for j, name in enumerate(self._signal_names)}
+        units = dict(zip(self._signal_names, self._signal_units))
+        params = {}
+        for n, c in self.components.items():
+            p = getattr(c, "params", None)
+            from .params import params_to_dict
+            try:
+                params[n] = params_to_dict(p)
+            except TypeError:
+                params[n] = {}
+        return Result(np.array(self._times), signals, units, params, termination)
+
+    def terminate(self) -> None:
+        for comp in self.components.values():
+            comp.terminate()
+
+    # ------------------------------------------------------------ save/restore
+    def save_state(self) -> MasterState:
+        """Snapshot of the whole system (components, time, recorded length, faults)."""
+        return MasterState(self.step_index, self.time_s,
+                           {n: c.get_state() for n, c in self.components.items()},
+                           len(self._rows), dict(self._forced), self._faults_done)
+
+    def restore_state(self, s: MasterState) -> None:
+        """Return to a snapshot made by :meth:`save_state`; later records are dropped."""
+        for n, c in self.components.items():
+            c.set_state(s.components[n])
+        self.step_index = s.step_index
+        self.time_s = s.time_s
+        del self._rows[s.n_rows:]
+        del self._times[s.n_rows:]
+        self._forced = dict(s.forced)
+        self._faults_done = s.faults_done
+        # components' u/y dicts may be new objects after set_state: rebuild the links
+        self._build_links()
+        for (cn, port) in self._forced:
+            self._links[cn] = [l for l in self._links[cn] if l[1] != port]
+        self._sched = [(self.components[n], self._links[n], self.step_multiples[n]) for n in self.order]
+
+    def describe(self) -> str:
+        """Human-readable summary: components, ports with units, connections, order."""
+        lines = ["components (execution order):"]
+        for n in self.order:
+            c = self.components[n]
+            lines.append(f"  {n}  [{type(c).__name__}]  step x{self.step_multiples[n]}")
+            for v in self._vars[n].values():
+                if v.causality in ("input", "output"):
+                    dep = f"  (feedthrough from {', '.join(v.depends_on)})" if v.depends_on else ""
+                    lines.append(f"      {v.causality:6s} {v.name:28s} [{v.unit}]  {v.description}{dep}")
+        lines.append("connections:")
+        for c in self.connections:
+            lines.append(f"  {c}")
+        unconnected = [f"{n}.{v.name}" for n, vs in self._vars.items() for v in vs.values()
+                       if v.causality == "input" and not any(c.dst == n and c.dst_port == v.name for c in self.connections)]
+        if unconnected:
+            lines.append("unconnected inputs (held at start value): " + ", ".join(unconnected))
+        return "\n".join(lines)
+
+
+def _find_cycle(succ: dict[tuple, list[tuple]]) -> list[tuple] | None:
+    """Return one cycle of the directed graph ``succ`` as a node list, or None."""
+    WHITE, GREY, BLACK = 0, 1, 2
+    color: dict[tuple, int] = {}
+    for root in list(succ):
+        if color.get(root, WHITE) != WHITE:
+            continue
+        stack = [(root, iter(succ.get(root, ())))]
+        path = [root]
+        color[root] = GREY
+        while stack:
+            node, it = stack[-1]
+            nxt = next(it, None)
+            if nxt is None:
+                color[node] = BLACK
+                stack.pop()
+                path.pop()
+                continue
+            c = color.get(nxt, WHITE)
+            if c == GREY:
+                return path[path.index(nxt):] + [nxt]
+            if c == WHITE:
+                color[nxt] = GREY
+                stack.append((nxt, iter(succ.get(nxt, ()))))
+                path.append(nxt)
+    return None
