@@ -1,0 +1,1 @@
+"""Battery physics: cell models, thermal models (thermal.py) and their verification."""

@@ -1,0 +1,1 @@
+"""Battery management: state, parameter and power-capability estimators."""
