@@ -1,0 +1,305 @@
+"""cycles.py - drive-cycle loading, validation and statistics.
+
+A drive cycle is a plain CSV with the columns ``time_s`` and ``speed_mps``
+(other columns are ignored). Lines starting with ``#`` and blank lines are
+comments. The loader rejects anything a simulation cannot follow faithfully:
+missing columns, unparsable or non-finite values, negative speed, duplicate or
+decreasing time, and gaps (a time step that differs from the cycle's step by
+more than a tolerance). Every error is a :class:`shevsim.core.errors.DataError`
+naming the file, the line and the column.
+
+Statistics (all from the sampled trace, interval ``i`` between samples ``i`` and
+``i + 1``, acceleration ``a_i = (v_{i+1} - v_i) / dt``):
+
+* ``distance_m``: trapezoidal integral of speed.
+* ``idle_frac``: fraction of intervals whose both end speeds are below
+  :data:`IDLE_SPEED_MPS`.
+* ``accel_p50_mps2``, ``accel_p95_mps2``: median and 95th percentile of ``a_i``
+  over the intervals with ``a_i > ACCEL_THRESHOLD_MPS2``; ``decel_*`` the same
+  for ``-a_i`` over ``a_i < -ACCEL_THRESHOLD_MPS2`` (reported positive).
+* ``pke_mps2``: positive kinetic energy per unit mass and distance,
+  ``sum(max(v_{i+1}^2 - v_i^2, 0)) / (2 * distance)`` (J/kg/m = m/s^2), the
+  standard aggressiveness measure of a cycle.
+* ``rms_accel_mps2``: root mean square of ``a_i`` over all intervals.
+"""
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from shevsim.core.errors import DataError
+
+#: Speed below which the vehicle counts as standing still (m/s).
+IDLE_SPEED_MPS = 0.1
+#: Accelerations of smaller magnitude count as cruising in the percentile statistics (m/s^2).
+ACCEL_THRESHOLD_MPS2 = 0.1
+#: Relative tolerance on the time step before a row is called a gap.
+DT_REL_TOL = 1e-6
+#: Speeds down to this small negative value are rounding noise and clipped to 0 (m/s).
+NEG_SPEED_TOL_MPS = 1e-9
+
+REQUIRED_COLUMNS = ("time_s", "speed_mps")
+
+
+@dataclass(frozen=True, eq=False)
+class Cycle:
+    """A validated, uniformly sampled drive cycle.
+
+    Parameters
+    ----------
+    name : str
+        Cycle name (file stem for loaded cycles).
+    time_s : ndarray
+        Sample times (s), starting at 0, uniform step ``dt_s``.
+    speed_mps : ndarray
+        Speed at each sample (m/s, >= 0).
+    source : str
+        Where the cycle came from (path), for messages and provenance.
+    time_offset_s : float
+        Time of the first row in the file (subtracted so that ``time_s[0] == 0``).
+    """
+
+    name: str
+    time_s: np.ndarray
+    speed_mps: np.ndarray
+    source: str = ""
+    time_offset_s: float = 0.0
+    _stats: dict = field(default_factory=dict, repr=False, compare=False)
+
+    # -- basic quantities ----------------------------------------------------
+    @property
+    def dt_s(self) -> float:
+        """Sample step (s)."""
+        return float(self.time_s[1] - self.time_s[0])
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last sample (s)."""
+        return float(self.time_s[-1] - self.time_s[0])
+
+    @property
+    def accel_mps2(self) -> np.ndarray:
+        """Interval accelerations ``(v[i+1] - v[i]) / dt`` (m/s^2), length n - 1."""
+        return np.diff(self.speed_mps) / self.dt_s
+
+    @property
+    def distance_m(self) -> float:
+        """Trapezoidal distance (m)."""
+        v = self.speed_mps
+        return float(np.sum(0.5 * (v[1:] + v[:-1])) * self.dt_s)
+
+    def stats(self) -> dict[str, float]:
+        """All statistics as a dict with unit-suffixed keys (see module docstring)."""
+        if self._stats:
+            return dict(self._stats)
+        v = self.speed_mps
+        a = self.accel_mps2
+        dist = self.distance_m
+        dur = self.duration_s
+        idle = (v[1:] < IDLE_SPEED_MPS) & (v[:-1] < IDLE_SPEED_MPS)
+        pos = a[a > ACCEL_THRESHOLD_MPS2]
+        neg = -a[a < -ACCEL_THRESHOLD_MPS2]
+        dke = np.diff(v * v)
+        # number of stops: transitions from moving to standing
+        moving = v >= IDLE_SPEED_MPS
+        n_stops = int(np.sum(moving[:-1] & ~moving[1:]))
+
+        def pct(x, q):
+            return float(np.percentile(x, q)) if x.size else 0.0
+
+        s = {
+            "duration_s": dur,
+            "distance_m": dist,
+            "max_speed_mps": float(v.max()),
+            "mean_speed_mps": dist / dur if dur > 0 else 0.0,
+            "idle_frac": float(np.mean(idle)) if idle.size else 0.0,
+            "n_stops": n_stops,
+            "accel_p50_mps2": pct(pos, 50),
+            "accel_p95_mps2": pct(pos, 95),
+            "accel_max_mps2": float(max(a.max(), 0.0)),
+            "decel_p50_mps2": pct(neg, 50),
+            "decel_p95_mps2": pct(neg, 95),
+            "decel_max_mps2": float(max(-a.min(), 0.0)),
+            "pke_mps2": float(np.sum(dke[dke > 0]) / (2.0 * dist)) if dist > 0 else 0.0,
+            "rms_accel_mps2": float(math.sqrt(np.mean(a * a))),
+        }
+        self._stats.update(s)
+        return dict(s)
+
+
+def _fail(path, line: int | None, column: str | None, msg: str) -> DataError:
+    where = f"{path}"
+    if line is not None:
+        where += f", line {line}"
+    if column is not None:
+        where += f", column '{column}'"
+    return DataError(f"{where}: {msg}")
+
+
+def load_cycle(path: str | Path, name: str | None = None) -> Cycle:
+    """Load and validate a ``time_s,speed_mps`` drive-cycle CSV.
+
+    Parameters
+    ----------
+    path : str or Path
+        CSV file. ``#`` lines and blank lines are comments; the first other line is
+        the header and must contain ``time_s`` and ``speed_mps``.
+    name : str, optional
+        Cycle name; defaults to the file stem.
+
+    Returns
+    -------
+    Cycle
+
+    Raises
+    ------
+    DataError
+        Missing file or columns, unparsable/NaN/infinite values, negative speed,
+        duplicate or decreasing time, non-uniform step (gap), fewer than 2 rows.
+        The message names the file, the line (1-based, as in an editor) and the column.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise _fail(path, None, None, "cycle file not found")
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise _fail(path, None, None, f"cannot read cycle file: {exc}") from exc
+
+    rows: list[tuple[int, list[str]]] = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        rows.append((lineno, next(csv.reader([s]))))
+    if not rows:
+        raise _fail(path, None, None, "no header and no data (file empty or only comments)")
+    header_line, header = rows[0]
+    header = [h.strip() for h in header]
+    idx = {}
+    for col in REQUIRED_COLUMNS:
+        if col not in header:
+            raise _fail(path, header_line, col,
+                        f"missing column (header is {header}; required: {', '.join(REQUIRED_COLUMNS)})")
+        idx[col] = header.index(col)
+    data = rows[1:]
+    if len(data) < 2:
+        raise _fail(path, None, None, f"needs at least 2 data rows, found {len(data)}")
+
+    t = np.empty(len(data))
+    v = np.empty(len(data))
+    lines = np.empty(len(data), dtype=int)
+    for k, (lineno, fields) in enumerate(data):
+        lines[k] = lineno
+        for col, arr in (("time_s", t), ("speed_mps", v)):
+            j = idx[col]
+            if j >= len(fields) or fields[j].strip() == "":
+                raise _fail(path, lineno, col, "missing value")
+            raw = fields[j].strip()
+            try:
+                val = float(raw)
+            except ValueError:
+                raise _fail(path, lineno, col, f"not a number: {raw!r}") from None
+            if not math.isfinite(val):
+                raise _fail(path, lineno, col, f"non-finite value {raw!r}")
+            arr[k] = val
+        if v[k] < 0.0:
+            if v[k] < -NEG_SPEED_TOL_MPS:
+                raise _fail(path, lineno, "speed_mps", f"negative speed {v[k]!r} m/s")
+            v[k] = 0.0
+
+    dt = np.diff(t)
+    bad = np.nonzero(dt <= 0)[0]
+    if bad.size:
+        k = int(bad[0]) + 1
+        kind = "duplicate time" if dt[k - 1] == 0 else "time decreases (non-monotonic)"
+        raise _fail(path, int(lines[k]), "time_s",
+                    f"{kind}: {t[k]!r} s after {t[k - 1]!r} s on line {int(lines[k - 1])}")
+    step = float(dt[0])
+    tol = DT_REL_TOL * step + 1e-9
+    bad = np.nonzero(np.abs(dt - step) > tol)[0]
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise _fail(path, int(lines[k]), "time_s",
+                    f"non-uniform time step (gap?): {dt[k - 1]:.6g} s from {t[k - 1]!r} s, "
+                    f"the cycle's step is {step:.6g} s")
+    offset = float(t[0])
+    # rebuild a clean uniform grid (removes accumulated rounding of the file's times)
+    tt = np.arange(len(t)) * step
+    return Cycle(name=name or path.stem, time_s=tt, speed_mps=v, source=str(path), time_offset_s=offset)
+
+
+def cycle_from_arrays(name: str, time_s, speed_mps, source: str = "<arrays>") -> Cycle:
+    """Build a :class:`Cycle` from arrays with the same checks as :func:`load_cycle`."""
+    t = np.asarray(time_s, dtype=float)
+    v = np.asarray(speed_mps, dtype=float)
+    if t.shape != v.shape or t.ndim != 1 or t.size < 2:
+        raise DataError(f"{source}: time_s and speed_mps must be 1-D of equal length >= 2")
+    for col, arr in (("time_s", t), ("speed_mps", v)):
+        badv = np.nonzero(~np.isfinite(arr))[0]
+        if badv.size:
+            raise DataError(f"{source}, row {int(badv[0])}, column '{col}': non-finite value")
+    neg = np.nonzero(v < -NEG_SPEED_TOL_MPS)[0]
+    if neg.size:
+        raise DataError(f"{source}, row {int(neg[0])}, column 'speed_mps': negative speed {v[neg[0]]!r} m/s")
+    dt = np.diff(t)
+    if np.any(dt <= 0) or np.any(np.abs(dt - dt[0]) > DT_REL_TOL * dt[0] + 1e-9):
+        k = int(np.nonzero((dt <= 0) | (np.abs(dt - dt[0]) > DT_REL_TOL * dt[0] + 1e-9))[0][0]) + 1
+        raise DataError(f"{source}, row {k}, column 'time_s': time not strictly increasing with a uniform step")
+    return Cycle(name=name, time_s=np.arange(t.size) * float(dt[0]), speed_mps=np.maximum(v, 0.0),
+                 source=source, time_offset_s=float(t[0]))
+
+
+def write_cycle_csv(cycle: Cycle, path: str | Path, header_comment: str = "") -> None:
+    """Write a cycle as ``time_s,speed_mps`` CSV (5 decimals), with optional ``#`` comment lines."""
+    lines = []
+    for c in header_comment.splitlines():
+        lines.append("# " + c if c else "#")
+    lines.append("time_s,speed_mps")
+    dt = cycle.dt_s
+    int_time = abs(dt - round(dt)) < 1e-12
+    for t, v in zip(cycle.time_s, cycle.speed_mps):
+        ts = f"{int(round(t))}" if int_time else f"{t:.6f}"
+        lines.append(f"{ts},{v:.5f}")
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+def list_cycles(folder: str | Path) -> list[Cycle]:
+    """Load every ``*.csv`` in ``folder`` (sorted by name). Raises on the first bad file."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise DataError(f"{folder}: cycle folder not found")
+    return [load_cycle(p) for p in sorted(folder.glob("*.csv"))]
+
+
+def cycles_command(folder: str | Path) -> str:
+    """The text table printed by ``shevsim cycles``: one row per cycle with its statistics.
+
+    A file that fails validation is listed with its error instead of statistics.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise DataError(f"{folder}: cycle folder not found")
+    head = (f"{'cycle':<20} {'dur s':>6} {'dist km':>8} {'vmax km/h':>9} {'vmean km/h':>10} "
+            f"{'idle %':>6} {'stops':>5} {'a95 m/s2':>8} {'d95 m/s2':>8} {'amax':>5} {'dmax':>5} "
+            f"{'PKE m/s2':>8} {'RMSa m/s2':>9}")
+    out = [head, "-" * len(head)]
+    for p in sorted(folder.glob("*.csv")):
+        try:
+            s = load_cycle(p).stats()
+        except DataError as exc:
+            out.append(f"{p.stem:<20} INVALID: {exc}")
+            continue
+        out.append(
+            f"{p.stem:<20} {s['duration_s']:>6.0f} {s['distance_m'] / 1000:>8.3f} "
+            f"{s['max_speed_mps'] * 3.6:>9.1f} {s['mean_speed_mps'] * 3.6:>10.1f} "
+            f"{100 * s['idle_frac']:>6.1f} {s['n_stops']:>5d} {s['accel_p95_mps2']:>8.2f} "
+            f"{s['decel_p95_mps2']:>8.2f} {s['accel_max_mps2']:>5.2f} {s['decel_max_mps2']:>5.2f} "
+            f"{s['pke_mps2']:>8.3f} {s['rms_accel_mps2']:>9.3f}")
+    if len(out) == 2:
+        out.append(f"(no *.csv cycles in {folder})")
+    return "\n".join(out)
