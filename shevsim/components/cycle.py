@@ -1,0 +1,120 @@
+"""cycle.py - drive-cycle source component (TYPE ``cycle``).
+
+Plays a drive cycle (a ``time_s,speed_mps`` CSV, see :mod:`shevsim.cycles`)
+``repeat`` times back to back. No inputs.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from shevsim.core.component import Component
+from shevsim.core.variables import out
+from shevsim.cycles import load_cycle
+
+_DEFAULT_CYCLE = str(Path(__file__).resolve().parents[2] / "cycles" / "hd_udds.csv")
+
+
+@dataclass(frozen=True, slots=True)
+class CycleParams:
+    """Parameters of :class:`CycleSource`.
+
+    Attributes
+    ----------
+    cycle_file : str
+        Path of the cycle CSV (relative paths in a parameter file resolve against that file).
+    repeat : int
+        Number of consecutive repetitions of the cycle (>= 1). The seed's fuel
+        economy (A.1) is evaluated over two consecutive cycles.
+    """
+
+    cycle_file: str = _DEFAULT_CYCLE
+    repeat: int = 1
+
+    def __post_init__(self):
+        if self.repeat < 1:
+            raise ValueError(f"parameter 'repeat' must be >= 1, got {self.repeat}")
+
+
+class CycleSource(Component):
+    """Drive-cycle speed reference.
+
+    Outputs
+    -------
+    speed_ref_mps : m/s
+        Reference speed at the current time, linear interpolation of the trace (>= 0).
+    accel_ref_mps2 : m/s^2
+        Reference acceleration for driver feed-forward: the slope of the trace
+        segment that is driven in the next interval, i.e. the segment
+        ``[t_i, t_i + dt)`` containing the current time (right-continuous). Positive
+        = speeding up. 0 after the last repetition.
+    time_in_cycle_s : s
+        Time since the start of the current repetition, in ``[0, duration)``;
+        equals the duration after the end of the last repetition.
+
+    Notes
+    -----
+    The run is ``duration x repeat`` long (:meth:`natural_stop_time`). Beyond it the
+    source holds the last speed of the trace with zero acceleration. The cycle
+    starts at the ``t0`` given to :meth:`initialize`.
+    """
+
+    TYPE = "cycle"
+    Params = CycleParams
+    VARIABLES = (
+        out("speed_ref_mps", "m/s", 0.0, "reference speed (>= 0)"),
+        out("accel_ref_mps2", "m/s2", 0.0, "reference acceleration: slope of the segment driven next (+ speeding up)"),
+        out("time_in_cycle_s", "s", 0.0, "time since the start of the current repetition"),
+    )
+    _static = ("name", "params", "cycle", "_v", "_slope", "_dt", "_n", "_dur", "_repeat")
+
+    def __init__(self, name: str, params: CycleParams | None = None):
+        super().__init__(name, params)
+        self.cycle = load_cycle(self.params.cycle_file)
+        self._v = [float(x) for x in self.cycle.speed_mps]
+        self._dt = self.cycle.dt_s
+        self._slope = [(self._v[i + 1] - self._v[i]) / self._dt for i in range(len(self._v) - 1)] + [0.0]
+        self._n = len(self._v)
+        self._dur = self.cycle.duration_s
+        self._repeat = int(self.params.repeat)
+        self.t0 = 0.0
+
+    def natural_stop_time(self) -> float:
+        """Cycle duration x repeat (s), counted from the start time."""
+        return self.t0 + self._dur * self._repeat
+
+    def _evaluate(self, t: float) -> None:
+        y = self.y
+        rel = t - self.t0
+        dur = self._dur
+        # repetition index, robust to floating-point round-off at the boundaries
+        k = math.floor(rel / dur + 1e-9)
+        if rel < 0.0:
+            k, rel = 0, 0.0
+        if k >= self._repeat:
+            y["speed_ref_mps"] = self._v[-1]
+            y["accel_ref_mps2"] = 0.0
+            y["time_in_cycle_s"] = dur
+            return
+        tc = rel - k * dur
+        if tc < 0.0:
+            tc = 0.0
+        x = tc / self._dt
+        i = int(math.floor(x + 1e-9))
+        if i >= self._n - 1:
+            i = self._n - 2
+        frac = x - i
+        if frac < 0.0:
+            frac = 0.0
+        v = self._v
+        y["speed_ref_mps"] = v[i] + (v[i + 1] - v[i]) * frac
+        y["accel_ref_mps2"] = self._slope[i]
+        y["time_in_cycle_s"] = tc
+
+    def initialize(self, t0: float) -> None:
+        self.t0 = float(t0)
+        self._evaluate(self.t0)
+
+    def do_step(self, t: float, h: float) -> None:
+        self._evaluate(t + h)
