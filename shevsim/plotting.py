@@ -1,0 +1,65 @@
+"""plotting.py - the standard figures of a SHEV run (cf. seed Figs. 5.15, A.6).
+
+Every panel is drawn only when its signals are in the result, so any scenario
+(also the verification ones) gets the figures that apply to it.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+PANELS = [
+    ("speed tracking [km/h]", [("cycle.speed_ref_mps", 3.6, "reference"), ("vehicle.speed_mps", 3.6, "vehicle")]),
+    ("power split [kW]", [("bus.demand_power_w", 1e-3, "demand"), ("engine_generator.elec_power_w", 1e-3, "engine-generator"),
+                          ("bus.battery_power_w", 1e-3, "battery (+ discharge)")]),
+    ("battery limits [kW]", [("bms.power_max_w", 1e-3, "P_b,max (BMS)"), ("bms.power_min_w", 1e-3, "P_b,min (BMS)"),
+                             ("bus.battery_power_w", 1e-3, "battery power")]),
+    ("SOC [%]", [("battery.soc_pct", 1.0, "plant"), ("bms.soc_pct", 1.0, "BMS estimate")]),
+    ("engine power [kW]", [("engine_generator.engine_power_w", 1e-3, "engine"), ("supervisor.power_cmd_w", 1e-3, "command")]),
+    ("engine power rate [kW/s]", [("__rate__engine_generator.elec_power_w", 1e-3, "dP_g/dt")]),
+    ("soot rate [mg/s]", [("engine_generator.soot_rate_mgps", 1.0, "soot")]),
+    ("battery current [A] (+ discharge)", [("battery.current_a", 1.0, "pack current")]),
+    ("battery voltage [V]", [("battery.voltage_v", 1.0, "pack voltage")]),
+    ("cell temperatures [°C]", [("battery.t_core_c", 1.0, "core"), ("battery.t_surface_c", 1.0, "surface"),
+                                ("bms.t_core_c", 1.0, "core (BMS)")]),
+]
+
+
+def scenario_plots(result, folder: Path) -> list[Path]:
+    """Write ``overview.png`` (all applicable panels) and one PNG per panel into ``folder``."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    folder = Path(folder)
+    t = result.time_s
+    drawn = []
+    for title, sigs in PANELS:
+        series = []
+        for name, scale, label in sigs:
+            if name.startswith("__rate__"):
+                base = name[len("__rate__"):]
+                if base in result.signals and len(t) > 1:
+                    series.append((np.gradient(result.signals[base], t) * scale, label))
+            elif name in result.signals:
+                series.append((result.signals[name] * scale, label))
+        if series:
+            drawn.append((title, series))
+    if not drawn:
+        names = list(result.signals)[:8]
+        drawn = [("signals", [(result.signals[n], n) for n in names])]
+    fig, axes = plt.subplots(len(drawn), 1, figsize=(10, 2.1 * len(drawn)), sharex=True, squeeze=False)
+    for ax, (title, series) in zip(axes[:, 0], drawn):
+        for y, label in series:
+            ax.plot(t, y, lw=0.8, label=label)
+        ax.set_ylabel(title, fontsize=7)
+        ax.legend(fontsize=6, loc="upper right")
+        ax.grid(True, alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    name = result.meta.get("scenario", "")
+    fig.suptitle(f"{name}", fontsize=9)
+    fig.tight_layout()
+    path = folder / "overview.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return [path]

@@ -1,0 +1,226 @@
+"""Bad inputs to the core: each gets a clear error that names the file/field or component/port/time."""
+from pathlib import Path
+
+import pytest
+
+from shevsim.core.errors import AlgebraicLoopError, ConnectionError_, ScenarioError, SimulationError
+from shevsim.core.scenario import build_master, load_scenario, stop_time
+
+GOOD = """
+[scenario]
+name = "t"
+step_s = 0.01
+stop_s = 0.1
+
+[components.body1]
+type = "mass_spring"
+
+[components.coupling]
+type = "spring_damper"
+
+[connections]
+"body1.force_n" = "coupling.force_n"
+"coupling.position_m" = "body1.position_m"
+"coupling.velocity_mps" = "body1.velocity_mps"
+"""
+
+
+def load(text, tmp_path, name="s.toml", sets=()):
+    p = tmp_path / name
+    p.write_text(text)
+    return load_scenario(p, list(sets))
+
+
+def build(text, tmp_path, **kw):
+    sc = load(text, tmp_path, **kw)
+    return sc, build_master(sc)
+
+
+def test_good_scenario_runs(tmp_path):
+    sc, m = build(GOOD, tmp_path)
+    r = m.run(stop_time(sc, m))
+    assert len(r.time_s) == 11
+
+
+def test_malformed_toml_names_file(tmp_path):
+    with pytest.raises(ScenarioError, match=r"s\.toml: malformed TOML"):
+        load(GOOD + "\n[components.x\n", tmp_path)
+
+
+def test_unknown_top_level_key_suggests(tmp_path):
+    with pytest.raises(ScenarioError, match=r"unknown key 'conections' \(did you mean 'connections'\?\)"):
+        load(GOOD + '\n[conections]\n"a.b" = "c.d"\n', tmp_path)
+
+
+def test_unknown_component_type(tmp_path):
+    bad = GOOD.replace('type = "spring_damper"', 'type = "spring_dampr"')
+    with pytest.raises(ScenarioError, match=r"\[components.coupling\]: unknown component type 'spring_dampr' "
+                                            r"\(did you mean 'spring_damper'\?\)"):
+        build(bad, tmp_path)
+
+
+def test_unknown_component_in_connection(tmp_path):
+    bad = GOOD.replace('"body1.force_n" = "coupling.force_n"', '"body1.force_n" = "couplng.force_n"')
+    with pytest.raises(ScenarioError, match=r"unknown component 'couplng' \(did you mean 'coupling'\?\)"):
+        load(bad, tmp_path)
+
+
+def test_unknown_port(tmp_path):
+    bad = GOOD.replace('"body1.force_n" = "coupling.force_n"', '"body1.force_n" = "coupling.forc_n"')
+    with pytest.raises(ConnectionError_, match=r"component 'coupling' has no output 'forc_n' \(did you mean 'force_n'\?\)"):
+        build(bad, tmp_path)
+
+
+def test_unit_mismatch(tmp_path):
+    bad = GOOD.replace('"coupling.position_m" = "body1.position_m"', '"coupling.position_m" = "body1.velocity_mps"')
+    bad = bad.replace('"coupling.velocity_mps" = "body1.velocity_mps"', '"coupling.velocity_mps" = "body1.position_m"')
+    with pytest.raises(ConnectionError_, match=r"unit mismatch, output body1.velocity_mps is in 'm/s' but input "
+                                               r"coupling.position_m expects 'm'"):
+        build(bad, tmp_path)
+
+
+def test_input_connected_twice(tmp_path):
+    text = """
+[scenario]
+stop_s = 1
+[components.a]
+type = "gain"
+[components.b]
+type = "gain"
+[components.c]
+type = "gain"
+[connections]
+"c.in_1" = "a.out_1"
+"""
+    sc = load(text, tmp_path)
+    from shevsim.core import Connection
+    sc.connections.append(Connection.parse("c.in_1", "b.out_1"))
+    with pytest.raises(ConnectionError_, match=r"input c.in_1 is already connected to a.out_1"):
+        build_master(sc)
+
+
+def test_algebraic_loop_names_every_port(tmp_path):
+    text = """
+[scenario]
+stop_s = 1
+[components.a]
+type = "gain"
+[components.b]
+type = "gain"
+[connections]
+"a.in_1" = "b.out_1"
+"b.in_1" = "a.out_1"
+"""
+    with pytest.raises(AlgebraicLoopError) as ei:
+        build(text, tmp_path)
+    msg = str(ei.value)
+    for port in ("a.in_1", "a.out_1", "b.in_1", "b.out_1"):
+        assert port in msg
+    assert "algebraic loop" in msg
+
+
+def test_bad_step_ratio(tmp_path):
+    bad = GOOD.replace('type = "spring_damper"', 'type = "spring_damper"\nstep_multiple = 1.5')
+    with pytest.raises(ScenarioError, match=r"\[components.coupling\]: field 'step_multiple' must be an integer >= 1"):
+        load(bad, tmp_path)
+
+
+def test_missing_parameter_file(tmp_path):
+    bad = GOOD.replace('type = "spring_damper"', 'type = "spring_damper"\nparams = "components/nowhere.toml"')
+    with pytest.raises(ScenarioError, match=r"field 'params': parameter file 'components/nowhere.toml' not found"):
+        load(bad, tmp_path)
+
+
+def test_unknown_parameter_suggests(tmp_path):
+    bad = GOOD.replace('type = "spring_damper"', 'type = "spring_damper"\nset = { stifness_n_per_m = 3.0 }')
+    with pytest.raises(ScenarioError, match=r"unknown parameter 'stifness_n_per_m' for SpringDamperParams "
+                                            r"\(did you mean 'stiffness_n_per_m'\?\)"):
+        build(bad, tmp_path)
+
+
+def test_wrong_parameter_type(tmp_path):
+    bad = GOOD.replace('type = "spring_damper"', 'type = "spring_damper"\nset = { mass_kg = "heavy" }')
+    with pytest.raises(ScenarioError, match=r"parameter 'mass_kg': expected a number, got 'heavy'"):
+        build(bad, tmp_path)
+
+
+def test_parameter_file_unknown_key(tmp_path):
+    pf = tmp_path / "sd.toml"
+    pf.write_text("[params]\nmass_kg = 2.0\ndamping_n_s_per_m = 1.0\n")
+    bad = GOOD.replace('type = "spring_damper"', f'type = "spring_damper"\nparams = "{pf}"')
+    with pytest.raises(ScenarioError, match=r"sd.toml: unknown parameter 'damping_n_s_per_m'.*did you mean 'damping_ns_per_m'"):
+        build(bad, tmp_path)
+
+
+def test_set_override_unknown_component(tmp_path):
+    with pytest.raises(ScenarioError, match=r"--set 'bdy1.mass_kg=2': unknown component 'bdy1' \(did you mean 'body1'\?\)"):
+        load(GOOD, tmp_path, sets=["bdy1.mass_kg=2"])
+
+
+def test_set_override_applies(tmp_path):
+    sc, m = build(GOOD, tmp_path, sets=["body1.mass_kg=2.5"])
+    assert m.components["body1"].params.mass_kg == 2.5
+
+
+def test_fault_on_unknown_port(tmp_path):
+    bad = GOOD + '\n[[faults]]\nat_s = 0.05\nport = "body1.forc_n"\nvalue = 1.0\n'
+    with pytest.raises(ConnectionError_, match=r"fault at 0.05 s: component 'body1' has no input 'forc_n'"):
+        build(bad, tmp_path)
+
+
+def test_fault_forces_input_from_its_time(tmp_path):
+    text = """
+[scenario]
+step_s = 0.1
+stop_s = 1.0
+[components.a]
+type = "gain"
+start = { in_1 = 1.0 }
+[components.b]
+type = "gain"
+[connections]
+"b.in_1" = "a.out_1"
+[[faults]]
+at_s = 0.5
+port = "b.in_1"
+value = 7.0
+"""
+    sc, m = build(text, tmp_path)
+    r = m.run(stop_time(sc, m))
+    y = r["b.out_1"]
+    assert y[4] == 1.0 and y[6] == 7.0 and y[-1] == 7.0
+
+
+def test_nan_at_runtime_names_component_port_time(tmp_path):
+    text = """
+[scenario]
+step_s = 0.1
+stop_s = 1.0
+[components.a]
+type = "gain"
+start = { in_1 = 0.0 }
+set = { gain = inf }
+"""
+    sc, m = build(text, tmp_path)
+    with pytest.raises(SimulationError, match=r"component 'a' output 'out_1' is nan at t=0 s"):
+        m.run(stop_time(sc, m))
+
+
+def test_component_exception_names_component_and_time(tmp_path):
+    bad = GOOD.replace('type = "mass_spring"', 'type = "mass_spring"\nset = { substeps = 0 }')
+    sc, m = build(bad, tmp_path)
+    with pytest.raises(SimulationError, match=r"component 'body1' failed in do_step at t=0 s \(step 0\): ZeroDivisionError"):
+        m.run(stop_time(sc, m))
+
+
+def test_missing_stop_time(tmp_path):
+    bad = GOOD.replace("stop_s = 0.1\n", "")
+    sc, m = build(bad, tmp_path)
+    with pytest.raises(ScenarioError, match=r"needs 'stop_s'"):
+        stop_time(sc, m)
+
+
+def test_bad_method(tmp_path):
+    bad = GOOD.replace("step_s = 0.01", 'step_s = 0.01\nmethod = "gauss"')
+    with pytest.raises(ScenarioError, match=r"method must be 'gauss-seidel' or 'jacobi'"):
+        load(bad, tmp_path)

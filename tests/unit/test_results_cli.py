@@ -1,0 +1,55 @@
+"""Results saving (atomic), loading, and the CLI on the verification scenario."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from shevsim.cli import main
+from shevsim.core.results import load_result, save_result
+from shevsim.run import run_scenario
+
+ROOT = Path(__file__).resolve().parents[2]
+TWO_BODY = ROOT / "scenarios" / "verification" / "two_body.toml"
+
+
+def test_run_saves_everything(tmp_path):
+    res, metrics, out = run_scenario(TWO_BODY, tmp_path / "tb", plots=True)
+    for f in ("timeseries.parquet", "run.json", "metrics.json", "scenario.toml", "overview.png"):
+        assert (out / f).exists(), f
+    meta = json.loads((out / "run.json").read_text())
+    assert meta["scenario"] == "two_body" and meta["seed"] == 0 and meta["version"]
+    assert meta["units"]["body1.position_m"] == "m"
+    back = load_result(out)
+    np.testing.assert_array_equal(back["body1.position_m"], res["body1.position_m"])
+
+
+def test_crash_during_save_keeps_previous_result(tmp_path):
+    res, _, out = run_scenario(TWO_BODY, tmp_path / "tb", plots=False)
+    before = (out / "timeseries.parquet").read_bytes()
+
+    def boom(result, folder):
+        (folder / "partial.png").write_text("half")
+        raise RuntimeError("disk full")
+    with pytest.raises(RuntimeError, match="disk full"):
+        save_result(res, out, plots=boom)
+    assert (out / "timeseries.parquet").read_bytes() == before
+    assert not (out / "partial.png").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".tb")]
+
+
+def test_cli_run_and_info(tmp_path, capsys):
+    assert main(["run", str(TWO_BODY), "--out", str(tmp_path / "o"), "--no-plots", "--quiet",
+                 "--set", "coupling.damping_ns_per_m=1.0"]) == 0
+    assert (tmp_path / "o" / "metrics.json").exists()
+    assert main(["info", str(TWO_BODY)]) == 0
+    out = capsys.readouterr().out
+    assert "body1" in out and "force_n" in out and "[N]" in out and "feedthrough" in out
+
+
+def test_cli_reports_errors_cleanly(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[scenario]\nstep_s = -1\n[components.a]\ntype='gain'\n")
+    assert main(["run", str(bad), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "bad.toml" in err and "step_s must be a positive number" in err
