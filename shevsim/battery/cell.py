@@ -1,0 +1,327 @@
+"""cell.py - OCV-R-RC-RC electrical model of one A123 26650 LFP cell (seed 4.6, B.4-B.5, 5.16).
+
+Model (current ``i`` positive = discharge, seed App. B)::
+
+    dSOC/dt = -i / (3600 Q)                                  (4.6a)
+    dV_j/dt = -V_j / (R_j C_j) + i / C_j,   j = 1, 2          (4.6b, B.5)
+    V_t     = V_oc(SOC) - R_s i - V_1 - V_2                   (4.6c, B.4)
+
+with R_s, R_j, C_j looked up (bilinear, clamped at the table edges) in SOC and temperature,
+from separate tables for discharge (``i >= 0``) and charge (``i < 0``).
+
+Heat generation (seed 5.16, with the RC-RC plant's two branches)::
+
+    q = i^2 R_s + sum_j V_j^2 / R_j - i T dU_oc/dT,     dU_oc/dT = Delta S / F   (n = 1)
+
+Sign convention: with ``i`` positive on discharge this is Bernardi's form
+``q = i (U_oc - V_t) - i T dU_oc/dT`` with the capacitor storage term removed (the resistors
+dissipate ``V_j^2/R_j``; ``i V_j - V_j^2/R_j = C_j V_j dV_j/dt`` is energy stored in C_j, not heat).
+``T`` is in kelvin.  With Delta S < 0 (low SOC for LFP) discharge releases reversible heat
+(q_rev > 0) and charge absorbs it, which is the seed's 4.1c sign for discharge-positive current.
+
+Power to current (seed 5.1b corrected as in SPEC 2.1): from ``P = V i - R i^2``,
+``i = (V - sqrt(V^2 - 4 R P)) / (2 R)`` (the root that tends to ``P/V`` as ``R -> 0``).
+
+Parameter tables live in ``components/battery/`` (CSV, representative values, not measured;
+provenance in ``components/battery/make_a123_tables.py``).  Everything here is plain Python
+floats for the simulation hot path.
+"""
+from __future__ import annotations
+
+import bisect
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from shevsim.core.errors import DataError, SimulationError
+
+__all__ = [
+    "FARADAY_C_MOL",
+    "CellTables",
+    "default_tables",
+    "cell_params",
+    "ocv",
+    "docv_dsoc",
+    "entropy_change",
+    "current_from_power",
+    "max_discharge_power",
+    "heat_generation",
+    "rc_step",
+    "rc_integrals",
+    "DATA_DIR",
+]
+
+FARADAY_C_MOL = 96485.3365  # seed 5.16
+DATA_DIR = Path(__file__).resolve().parents[2] / "components" / "battery"
+_ECM_COLS = ("soc_frac", "t_c", "rs_ohm", "r1_ohm", "c1_f", "r2_ohm", "c2_f")
+
+
+def _read_csv(path: Path, cols: tuple[str, ...]) -> list[list[float]]:
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: table file not found")
+    rows: list[list[float]] = []
+    with open(path, newline="") as fh:
+        lines = [ln for ln in fh if ln.strip() and not ln.lstrip().startswith("#")]
+    reader = csv.reader(lines)
+    header = [h.strip() for h in next(reader, [])]
+    missing = [c for c in cols if c not in header]
+    if missing:
+        raise DataError(f"{path}: missing column(s) {', '.join(missing)} (header: {', '.join(header)})")
+    idx = [header.index(c) for c in cols]
+    for lineno, row in enumerate(reader, start=2):
+        try:
+            vals = [float(row[i]) for i in idx]
+        except (ValueError, IndexError) as exc:
+            raise DataError(f"{path}: data row {lineno}: cannot parse {row!r} ({exc})") from exc
+        if not all(math.isfinite(v) for v in vals):
+            raise DataError(f"{path}: data row {lineno}: non-finite value in {row!r}")
+        rows.append(vals)
+    if len(rows) < 2:
+        raise DataError(f"{path}: need at least two data rows")
+    return rows
+
+
+def _check_increasing(xs: list[float], path: Path, col: str) -> None:
+    for a, b in zip(xs, xs[1:]):
+        if not b > a:
+            raise DataError(f"{path}: column '{col}' must be strictly increasing ({a} then {b})")
+
+
+class _Grid2:
+    """Bilinear lookup of several quantities on a regular (soc, T) grid, clamped at the edges."""
+
+    def __init__(self, rows: list[list[float]], path: Path):
+        socs = sorted({r[0] for r in rows})
+        temps = sorted({r[1] for r in rows})
+        if len(socs) * len(temps) != len(rows):
+            raise DataError(f"{path}: rows must form a full soc x temperature grid "
+                            f"({len(socs)} x {len(temps)} != {len(rows)} rows)")
+        self.socs, self.temps = socs, temps
+        nq = len(rows[0]) - 2
+        table = {(r[0], r[1]): r[2:] for r in rows}
+        # vals[it][is] -> list of nq values
+        self.vals = [[table[(s, t)] for s in socs] for t in temps]
+        for r in rows:
+            if any(v <= 0.0 for v in r[2:]):
+                raise DataError(f"{path}: resistances and capacitances must be > 0 (soc {r[0]}, T {r[1]} degC)")
+        self.nq = nq
+
+    @staticmethod
+    def _locate(xs: list[float], x: float):
+        n = len(xs)
+        if x <= xs[0]:
+            return 0, 0.0
+        if x >= xs[-1]:
+            return n - 2, 1.0
+        j = bisect.bisect_right(xs, x) - 1
+        return j, (x - xs[j]) / (xs[j + 1] - xs[j])
+
+    def __call__(self, soc: float, t_c: float) -> tuple[float, ...]:
+        i, ws = self._locate(self.socs, soc)
+        j, wt = self._locate(self.temps, t_c)
+        r0 = self.vals[j]
+        r1 = self.vals[j + 1]
+        a, b, c, d = r0[i], r0[i + 1], r1[i], r1[i + 1]
+        w00 = (1.0 - ws) * (1.0 - wt)
+        w01 = ws * (1.0 - wt)
+        w10 = (1.0 - ws) * wt
+        w11 = ws * wt
+        return tuple(w00 * a[k] + w01 * b[k] + w10 * c[k] + w11 * d[k] for k in range(self.nq))
+
+
+class _Table1:
+    """Piecewise-linear 1-D table with clamped ends, its slope and its exact antiderivative."""
+
+    def __init__(self, xs: list[float], ys: list[float]):
+        self.xs, self.ys = xs, ys
+        self.slopes = [(ys[k + 1] - ys[k]) / (xs[k + 1] - xs[k]) for k in range(len(xs) - 1)]
+        cum = [0.0]
+        for k in range(len(xs) - 1):
+            cum.append(cum[-1] + 0.5 * (ys[k] + ys[k + 1]) * (xs[k + 1] - xs[k]))
+        self.cum = cum
+
+    def _seg(self, x: float) -> int:
+        xs = self.xs
+        if x <= xs[0]:
+            return 0
+        if x >= xs[-1]:
+            return len(xs) - 2
+        return bisect.bisect_right(xs, x) - 1
+
+    def __call__(self, x: float) -> float:
+        xs = self.xs
+        if x <= xs[0]:
+            return self.ys[0]
+        if x >= xs[-1]:
+            return self.ys[-1]
+        k = bisect.bisect_right(xs, x) - 1
+        return self.ys[k] + self.slopes[k] * (x - xs[k])
+
+    def slope(self, x: float) -> float:
+        """Derivative (right slope at knots; the end segments' slopes beyond the table)."""
+        return self.slopes[self._seg(x)]
+
+    def integral(self, x: float) -> float:
+        """Exact integral of the clamped interpolant from xs[0] to x (also beyond the ends)."""
+        xs, ys = self.xs, self.ys
+        if x <= xs[0]:
+            return ys[0] * (x - xs[0])
+        if x >= xs[-1]:
+            return self.cum[-1] + ys[-1] * (x - xs[-1])
+        k = bisect.bisect_right(xs, x) - 1
+        dx = x - xs[k]
+        return self.cum[k] + ys[k] * dx + 0.5 * self.slopes[k] * dx * dx
+
+
+@dataclass(frozen=True)
+class _Paths:
+    ocv: Path
+    entropy: Path
+    discharge: Path
+    charge: Path
+
+
+class CellTables:
+    """The cell's OCV, entropy-change and ECM parameter tables.
+
+    Parameters
+    ----------
+    ocv_file, entropy_file, discharge_file, charge_file : path-like, optional
+        CSV tables (``#`` comment lines allowed). Defaults: the representative A123 26650
+        tables in ``components/battery/``. Columns: ``soc_frac, ocv_v``;
+        ``soc_frac, delta_s_j_molk``; ``soc_frac, t_c, rs_ohm, r1_ohm, c1_f, r2_ohm, c2_f``.
+    """
+
+    def __init__(self, ocv_file=None, entropy_file=None, discharge_file=None, charge_file=None):
+        p = _Paths(Path(ocv_file or DATA_DIR / "a123_26650_ocv.csv"),
+                   Path(entropy_file or DATA_DIR / "a123_26650_entropy.csv"),
+                   Path(discharge_file or DATA_DIR / "a123_26650_ecm_discharge.csv"),
+                   Path(charge_file or DATA_DIR / "a123_26650_ecm_charge.csv"))
+        self.paths = p
+        rows = _read_csv(p.ocv, ("soc_frac", "ocv_v"))
+        xs = [r[0] for r in rows]
+        _check_increasing(xs, p.ocv, "soc_frac")
+        _check_increasing([r[1] for r in rows], p.ocv, "ocv_v")
+        self._ocv = _Table1(xs, [r[1] for r in rows])
+        rows = _read_csv(p.entropy, ("soc_frac", "delta_s_j_molk"))
+        xs = [r[0] for r in rows]
+        _check_increasing(xs, p.entropy, "soc_frac")
+        self._ds = _Table1(xs, [r[1] for r in rows])
+        self._dch = _Grid2(_read_csv(p.discharge, _ECM_COLS), p.discharge)
+        self._chg = _Grid2(_read_csv(p.charge, _ECM_COLS), p.charge)
+
+    # -- lookups (soc as a fraction 0..1, temperature in degC) -------------------------
+    def params(self, soc: float, t_c: float, sign: float) -> tuple[float, float, float, float, float]:
+        """``(rs_ohm, r1_ohm, c1_f, r2_ohm, c2_f)``; ``sign >= 0`` discharge table, ``< 0`` charge."""
+        return (self._dch if sign >= 0.0 else self._chg)(soc, t_c)
+
+    def ocv(self, soc: float) -> float:
+        """Open-circuit voltage [V]."""
+        return self._ocv(soc)
+
+    def docv_dsoc(self, soc: float) -> float:
+        """dV_oc/dSOC [V per unit SOC]."""
+        return self._ocv.slope(soc)
+
+    def ocv_integral(self, soc: float) -> float:
+        """Integral of V_oc from the table's first SOC to ``soc`` [V * unit SOC] (exact)."""
+        return self._ocv.integral(soc)
+
+    def entropy_change(self, soc: float) -> float:
+        """Delta S = F dU_oc/dT [J/mol/K]."""
+        return self._ds(soc)
+
+
+_DEFAULT: CellTables | None = None
+
+
+def default_tables() -> CellTables:
+    """The default (representative A123 26650) tables, loaded once."""
+    global _DEFAULT
+    if _DEFAULT is None:
+        _DEFAULT = CellTables()
+    return _DEFAULT
+
+
+def cell_params(soc: float, t_c: float, sign: float = 1.0):
+    """ECM parameters ``(rs_ohm, r1_ohm, c1_f, r2_ohm, c2_f)`` at SOC [frac], temperature [degC].
+
+    ``sign >= 0`` selects the discharge table, ``sign < 0`` the charge table.
+    """
+    return default_tables().params(soc, t_c, sign)
+
+
+def ocv(soc: float) -> float:
+    """Open-circuit voltage [V] of the default cell at SOC [frac] (LFP shape, clamped ends)."""
+    return default_tables().ocv(soc)
+
+
+def docv_dsoc(soc: float) -> float:
+    """dV_oc/dSOC [V/unit SOC] of the default cell."""
+    return default_tables().docv_dsoc(soc)
+
+
+def entropy_change(soc: float) -> float:
+    """Entropy change Delta S [J/mol/K] of the default cell (Fig. 5.5 shape)."""
+    return default_tables().entropy_change(soc)
+
+
+def current_from_power(p_w: float, voc_eff_v: float, rs_ohm: float) -> float:
+    """Current [A] (+ discharge) drawing power ``p_w`` [W] (+ discharge) from ``V - R i``.
+
+    Solves ``p = V i - R i^2`` for the root continuous with ``p / V`` as ``R -> 0``:
+    ``i = (V - sqrt(V^2 - 4 R p)) / (2 R)`` = ``2 p / (V + sqrt(V^2 - 4 R p))`` (the second form
+    is used: it is exact at R = 0 and free of cancellation).
+
+    Raises
+    ------
+    ValueError
+        When ``V^2 - 4 R p < 0``: the source cannot deliver ``p`` (max is ``V^2 / (4 R)``).
+    """
+    disc = voc_eff_v * voc_eff_v - 4.0 * rs_ohm * p_w
+    if disc < 0.0:
+        raise ValueError(f"current_from_power: power {p_w!r} W exceeds the maximum "
+                         f"V^2/(4R) = {voc_eff_v * voc_eff_v / (4.0 * rs_ohm)!r} W")
+    den = voc_eff_v + math.sqrt(disc)
+    if den <= 0.0:
+        raise ValueError(f"current_from_power: non-positive source voltage {voc_eff_v!r} V")
+    return 2.0 * p_w / den
+
+
+def max_discharge_power(voc_eff_v: float, rs_ohm: float) -> float:
+    """Largest power [W] a source ``V - R i`` can deliver: ``V^2 / (4 R)`` (at ``i = V / (2R)``)."""
+    return voc_eff_v * voc_eff_v / (4.0 * rs_ohm)
+
+
+def heat_generation(i_a: float, rs_ohm: float, v_rc, r_rc, t_k: float, delta_s_j_molk: float) -> float:
+    """Heat generation rate [W] of one cell, seed 5.16 generalised to any number of RC branches.
+
+    ``q = i^2 R_s + sum V_j^2 / R_j - i T Delta S / F`` with ``i`` + discharge, ``T`` in kelvin.
+    """
+    q = i_a * i_a * rs_ohm - i_a * t_k * delta_s_j_molk / FARADAY_C_MOL
+    for v, r in zip(v_rc, r_rc):
+        q += v * v / r
+    return q
+
+
+def rc_step(v0: float, i_a: float, r_ohm: float, c_f: float, dt_s: float) -> float:
+    """Exact RC branch voltage after ``dt_s`` with the current held (ZOH of 4.6b)."""
+    if not (r_ohm > 0.0 and c_f > 0.0):
+        raise SimulationError(f"rc_step: R and C must be > 0 (R={r_ohm!r}, C={c_f!r})")
+    e = math.exp(-dt_s / (r_ohm * c_f))
+    return e * v0 + r_ohm * (1.0 - e) * i_a
+
+
+def rc_integrals(v0: float, i_a: float, r_ohm: float, c_f: float, dt_s: float):
+    """Exact ``(v_end, int v dt, int v^2 dt)`` of an RC branch over ``dt_s`` with the current held."""
+    tau = r_ohm * c_f
+    e = math.exp(-dt_s / tau)
+    vinf = r_ohm * i_a
+    d = v0 - vinf
+    one_e = tau * (1.0 - e)
+    v_end = vinf + d * e
+    iv = vinf * dt_s + d * one_e
+    iv2 = vinf * vinf * dt_s + 2.0 * vinf * d * one_e + d * d * 0.5 * tau * (1.0 - e * e)
+    return v_end, iv, iv2
