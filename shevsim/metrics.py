@@ -54,7 +54,9 @@ Metrics
   ``grade_energy_j``) + change of kinetic energy (``vehicle.kinetic_energy_j``).
   Residual = sources - sinks; closure error = residual / throughput, with
   throughput = fuel energy + gross battery energy (sum of |increments| of
-  ``chem_energy_j``).
+  ``chem_energy_j``). Per-node residuals (engine-generator, bus, battery, motor,
+  driveline, vehicle) are reported too when the bus/motor cumulative energies are
+  recorded (:func:`node_balances`), to locate a closure error.
 """
 from __future__ import annotations
 
@@ -306,8 +308,9 @@ def energy_balance(df, vehicle: str = "vehicle") -> dict:
     -------
     dict
         ``sources_j``, ``sinks_j`` (term -> J), ``residual_j``, ``throughput_j``,
-        ``closure_error_frac`` (residual / throughput) and ``missing`` (expected columns
-        not found; the closure is None when any is missing).
+        ``closure_error_frac`` (residual / throughput), ``missing`` (expected columns
+        not found; the closure is None when any is missing) and ``nodes_j`` (per-node
+        residuals, :func:`node_balances`).
     """
     cols = list(df.columns)
     fuel = [c for c in cols if c.endswith(".fuel_energy_j")]
@@ -324,7 +327,7 @@ def energy_balance(df, vehicle: str = "vehicle") -> dict:
     if not losses:
         missing.append("*loss_energy_j")
     out: dict[str, Any] = {"sources_j": {}, "sinks_j": {}, "residual_j": None, "throughput_j": None,
-                           "closure_error_frac": None, "missing": missing}
+                           "closure_error_frac": None, "missing": missing, "nodes_j": node_balances(df, vehicle)}
     if missing:
         return out
     src = {c: _delta(df, c) for c in fuel + chem}
@@ -335,6 +338,38 @@ def energy_balance(df, vehicle: str = "vehicle") -> dict:
     out.update(sources_j=src, sinks_j=sink, residual_j=residual, throughput_j=throughput,
                closure_error_frac=residual / throughput if throughput > 0 else None)
     return out
+
+
+#: Per-node balances (name -> (+terms, -terms)); each residual should be ~0. Evaluated when all columns exist.
+NODE_BALANCES = {
+    "engine_generator": (("engine_generator.fuel_energy_j",),
+                         ("engine_generator.engine_loss_energy_j", "engine_generator.gen_loss_energy_j",
+                          "bus.gen_energy_j")),
+    "bus": (("bus.gen_energy_j", "bus.battery_energy_j"), ("bus.motor_energy_j", "bus.aux_energy_j")),
+    "battery": (("battery.chem_energy_j",), ("battery.loss_energy_j", "bus.battery_energy_j")),
+    "motor_electrical": (("bus.motor_energy_j",), ("motor.elec_energy_j",)),
+    "motor": (("motor.elec_energy_j",), ("motor.loss_energy_j", "motor.mech_energy_j")),
+    "driveline": (("motor.mech_energy_j",), ("{v}.traction_energy_j",)),
+    "vehicle": (("{v}.traction_energy_j",),
+                ("{v}.brake_energy_j", "{v}.aero_energy_j", "{v}.rolling_energy_j", "{v}.grade_energy_j",
+                 "{v}.kinetic_energy_j")),
+}
+
+
+def node_balances(df, vehicle: str = "vehicle") -> dict:
+    """Residual (J) of each node of :data:`NODE_BALANCES` whose columns are all present.
+
+    Locates where a whole-chain closure error comes from: e.g. ``motor`` =
+    delta(elec_energy) - delta(loss_energy) - delta(mech_energy). Nodes with missing
+    columns are omitted.
+    """
+    res = {}
+    for node, (plus, minus) in NODE_BALANCES.items():
+        plus = [c.format(v=vehicle) for c in plus]
+        minus = [c.format(v=vehicle) for c in minus]
+        if all(c in df.columns for c in plus + minus):
+            res[node] = sum(_delta(df, c) for c in plus) - sum(_delta(df, c) for c in minus)
+    return res
 
 
 # ------------------------------------------------------------------- all in one

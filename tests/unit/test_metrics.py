@@ -187,6 +187,9 @@ def _shev_run(n=2001, dt=0.1):
         "vehicle.aero_energy_j": cum(p_aero), "vehicle.rolling_energy_j": cum(p_roll),
         "vehicle.brake_energy_j": cum(p_brake), "vehicle.grade_energy_j": np.zeros_like(t),
         "vehicle.kinetic_energy_j": ke,
+        "vehicle.traction_energy_j": cum(p_trac), "motor.mech_energy_j": cum(p_trac),
+        "motor.elec_energy_j": cum(p_motor_el), "bus.motor_energy_j": cum(p_motor_el),
+        "bus.gen_energy_j": cum(p_gen_el), "bus.battery_energy_j": cum(p_batt_term),
     })
 
 
@@ -203,6 +206,14 @@ def test_energy_balance_closes_and_detects_a_missing_term():
     eb2 = M.energy_balance(df2)
     assert eb2["residual_j"] == pytest.approx(df["vehicle.brake_energy_j"].iloc[-1], rel=1e-9)
     assert eb2["closure_error_frac"] > 1e-3
+    # per-node residuals are all ~0; a wrong motor loss shows up at the motor node only
+    assert set(eb["nodes_j"]) == set(M.NODE_BALANCES)
+    assert max(abs(r) for r in eb["nodes_j"].values()) < 1e-9 * fuel
+    df3 = df.copy()
+    df3["motor.loss_energy_j"] *= 1.1
+    nodes = M.energy_balance(df3)["nodes_j"]
+    bad = {k for k, r in nodes.items() if abs(r) > 1e-9 * fuel}
+    assert bad == {"motor"}
     # a missing column is reported, not guessed
     eb3 = M.energy_balance(df.drop(columns=["vehicle.aero_energy_j"]))
     assert eb3["closure_error_frac"] is None and "vehicle.aero_energy_j" in eb3["missing"]
