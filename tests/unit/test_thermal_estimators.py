@@ -1,0 +1,134 @@
+"""Tests of the thermal KF / DKF / JEKF (seed Ch. III) against exact plants and each other."""
+import math
+
+import numpy as np
+import pytest
+
+from shevsim.battery.thermal import ThermalParams, TwoStateThermal, _zoh, two_state_matrices
+from shevsim.battery.verification import drive_like_current
+from shevsim.bms.thermal_estimators import (ThermalDKF, ThermalJEKF, ThermalKF, TwoStateDiscretiser, run_stage,
+                                            table_3_3)
+from shevsim.core.errors import SimulationError
+
+P = ThermalParams()
+
+
+@pytest.mark.parametrize("h", [0.0, 3.0, 56.2, 400.0])
+@pytest.mark.parametrize("dt", [0.1, 1.0, 10.0])
+def test_closed_form_discretisation_equals_matrix_exponential(h, dt):
+    d = TwoStateDiscretiser(P, dt)
+    A, B, C, D = two_state_matrices(P, h)
+    Ad, Bd = _zoh(A, B, dt)
+    np.testing.assert_allclose(d.ad_bd(h), np.r_[Ad.ravel(), Bd.ravel()], rtol=1e-10, atol=1e-14)
+    e = TwoStateDiscretiser(P, dt, "euler").ad_bd(h)
+    np.testing.assert_allclose(e, np.r_[(np.eye(2) + A * dt).ravel(), (B * dt).ravel()], rtol=1e-12, atol=1e-16)
+    cs0, cs1, ds, cc0, cc1, dc = d.out(h)
+    np.testing.assert_allclose([cc0, cc1, dc, cs0, cs1, ds], [C[0, 0], C[0, 1], D[0, 1], C[1, 0], C[1, 1], D[1, 1]],
+                               rtol=1e-12)
+
+
+def test_h_derivatives_match_finite_differences_of_exact_model():
+    d = TwoStateDiscretiser(P, 1.0)
+    h, eps = 40.0, 1e-3
+    num = (np.array(d.ad_bd(h + eps)) - np.array(d.ad_bd(h - eps))) / (2 * eps)
+    np.testing.assert_allclose(d.d_ad_bd(h), num, rtol=1e-5, atol=1e-13)
+    num_out = (np.array(d.out(h + eps)[:3]) - np.array(d.out(h - eps)[:3])) / (2 * eps)
+    np.testing.assert_allclose(d.dout(h), num_out, rtol=1e-6)
+
+
+def _two_state_run(n, h_true, seed=0, sigma=0.0, t0=30.0):
+    rng = np.random.default_rng(seed)
+    m = TwoStateThermal(P)
+    q = drive_like_current(n, 1.0, seed=seed) ** 2 * 0.015
+    x = m.initial_state(t0)
+    ys = []
+    for k in range(n):
+        ta = 27.0
+        tc, ts = m.outputs(x, q[k], ta, h_true)
+        ys.append((tc, ts, ts + sigma * rng.standard_normal(), ta, q[k]))
+        x = m.step(x, q[k], ta, h_true, 1.0)
+    return ys
+
+
+def test_kf_on_its_own_model_without_noise_is_exact():
+    ys = _two_state_run(600, 30.0)
+    kf = ThermalKF(P, 30.0, 1.0, x0_c=(30.0, 0.0))
+    err = max(abs(kf.update(ym, ta, q).t_core_c - tc) for tc, ts, ym, ta, q in ys)
+    assert err < 1e-9      # zero innovation throughout: predict/correct timing is consistent with the plant
+
+
+def test_kf_filters_measurement_noise():
+    ys = _two_state_run(2000, 30.0, seed=1, sigma=0.05)
+    kf = ThermalKF(P, 30.0, 1.0, sigma_c=0.05)
+    e_s, e_m = [], []
+    for tc, ts, ym, ta, q in ys:
+        e = kf.update(ym, ta, q)
+        e_s.append(e.t_surface_c - ts)
+        e_m.append(ym - ts)
+    rms_f, rms_m = np.sqrt(np.mean(np.square(e_s[200:]))), np.sqrt(np.mean(np.square(e_m[200:])))
+    assert rms_f < 0.5 * rms_m
+    assert kf.p00 > 0 and kf.p11 > 0 and kf.p00 * kf.p11 - kf.p01 ** 2 > 0
+
+
+@pytest.mark.parametrize("cls", [ThermalDKF, ThermalJEKF])
+@pytest.mark.parametrize("h0", [15.0, 120.0])
+def test_parameter_converges_from_wrong_initial_h(cls, h0):
+    h_true = 40.0
+    ys = _two_state_run(2500, h_true, seed=2, sigma=0.05)
+    f = cls(P, h0, 1.0, sigma_c=0.05)
+    errs = []
+    for tc, ts, ym, ta, q in ys:
+        e = f.update(ym, ta, q)
+        errs.append(e.t_core_c - tc)
+    assert abs(f.h - h_true) / h_true < 0.10
+    assert np.sqrt(np.mean(np.square(errs[-500:]))) < 0.15
+
+
+def test_dkf_partial_derivative_option_runs_and_converges():
+    ys = _two_state_run(2500, 40.0, seed=3, sigma=0.05)
+    f = ThermalDKF(P, 80.0, 1.0, total_derivative=False)
+    for tc, ts, ym, ta, q in ys:
+        f.update(ym, ta, q)
+    assert abs(f.h - 40.0) / 40.0 < 0.10
+
+
+def test_table_3_3_analogue():
+    res = table_3_3(None, seed=0)
+    f1, f3 = res["I"]["filters"], res["III"]["filters"]
+    # stage I: h right - DKF and JEKF within 20 % of the KF (seed: 0.18 / 0.18 / 0.18)
+    for k in ("DKF", "JEKF"):
+        assert f1[k]["rmse_core_c"] < 1.2 * f1["KF"]["rmse_core_c"]
+        assert f1[k]["rmse_core_c"] < 0.2
+    # stage II: h steps; DKF/JEKF track every step to within 10 %
+    for k in ("DKF", "JEKF"):
+        assert all(math.isfinite(v) and v < 1000.0 for v in res["II"]["filters"][k]["h_settle_10pct_s"])
+    # stage III: KF given 2h -> worse than DKF/JEKF, which converge to the true h
+    for k in ("DKF", "JEKF"):
+        assert f3[k]["rmse_core_c"] < f3["KF"]["rmse_core_c"]
+        assert f3[k]["h_final_rel_err"] < 0.10
+    assert f3["KF"]["rmse_surface_c"] > 3 * f3["DKF"]["rmse_surface_c"]
+
+
+@pytest.mark.slow
+def test_table_3_3_conclusions_hold_over_seeds(tmp_path):
+    ratios = []
+    for seed in range(5):
+        res = table_3_3(tmp_path / str(seed) if seed == 0 else None, seed=seed, duration_s=7200.0)
+        f3 = res["III"]["filters"]
+        ratios.append(f3["KF"]["rmse_core_c"] / max(f3["DKF"]["rmse_core_c"], f3["JEKF"]["rmse_core_c"]))
+        for k in ("DKF", "JEKF"):
+            assert res["I"]["filters"][k]["rmse_core_c"] < 1.2 * res["I"]["filters"]["KF"]["rmse_core_c"]
+            assert f3[k]["h_final_rel_err"] < 0.10
+    assert min(ratios) > 1.0
+    assert (tmp_path / "0" / "table_3_3.csv").exists() and (tmp_path / "0" / "table_3_3.png").exists()
+
+
+def test_bad_inputs():
+    with pytest.raises(SimulationError, match="t_surface_meas_c"):
+        ThermalDKF().update(float("nan"), 25.0, 1.0)
+    with pytest.raises(SimulationError, match="dt_s"):
+        ThermalKF(dt_s=0.0)
+    with pytest.raises(SimulationError, match="h_w_m2k"):
+        ThermalJEKF(h0_w_m2k=-1.0)
+    with pytest.raises(SimulationError, match="discretisation"):
+        ThermalKF(discretisation="rk4")
