@@ -211,15 +211,60 @@ def write_uac_proxy(cycle_folder: str | Path, out_path: str | Path | None = None
     return out
 
 
+def plot_accel_comparison(cycle_folder: str | Path, out_png: str | Path) -> Path:
+    """Fig. A.1-style comparison: acceleration and deceleration distributions, UAC proxy vs HD-UDDS.
+
+    Left: share of time per acceleration bin (|a| > 0.1 m/s^2); right: acceleration versus
+    speed (each 1 s interval), with the proxy's drivability limit.
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    folder = Path(cycle_folder)
+    cyc = {"HD-UDDS": load_cycle(folder / "hd_udds.csv"), "UAC proxy": load_cycle(folder / "uac_proxy.csv")}
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    bins = np.arange(-3.0, 3.01, 0.25)
+    for (name, c), col in zip(cyc.items(), ("tab:blue", "tab:red")):
+        a = c.accel_mps2
+        a = a[np.abs(a) > RETIME_THRESHOLD_MPS2]
+        w = np.full(a.size, 100.0 / c.accel_mps2.size)
+        ax1.hist(a, bins=bins, weights=w, histtype="step", lw=2, color=col, label=name)
+        vm = 0.5 * (c.speed_mps[1:] + c.speed_mps[:-1]) * 3.6
+        ax2.plot(vm, c.accel_mps2, ".", ms=3, alpha=0.5, color=col, label=name)
+        s = c.stats()
+        for q, ls in ((s["accel_p95_mps2"], "--"), (-s["decel_p95_mps2"], "--")):
+            ax1.axvline(q, color=col, ls=ls, lw=1)
+    v = np.linspace(0.5, 70 / 3.6, 200)
+    a_lim = np.minimum(ACCEL_CAP_MPS2, (WHEEL_POWER_BUDGET_W / v - road_load_n(v)) / (MASS_KG * ROT_INERTIA_FACTOR))
+    ax2.plot(v * 3.6, a_lim, "k-", lw=1, label="proxy limit (300 kW wheel, 2 m/s2)")
+    ax2.axhline(-DECEL_CAP_MPS2, color="k", lw=1)
+    ax1.set_xlabel("acceleration [m/s2] (dashed: 95th percentiles)")
+    ax1.set_ylabel("share of cycle time [%]")
+    ax1.legend()
+    ax2.set_xlabel("speed [km/h]")
+    ax2.set_ylabel("acceleration [m/s2]")
+    ax2.legend(fontsize=8)
+    fig.suptitle("Acceleration/deceleration: UAC proxy (not the UAC) vs HD-UDDS (cf. seed Fig. A.1)")
+    fig.tight_layout()
+    out = Path(out_png)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description="Regenerate the UAC proxy cycle CSV.")
     ap.add_argument("--cycles", default=str(Path(__file__).resolve().parents[1] / "cycles"))
     ap.add_argument("--out", default=None)
+    ap.add_argument("--plot", default=None, help="also save the Fig. A.1-style comparison PNG here")
     a = ap.parse_args(argv)
     out = write_uac_proxy(a.cycles, a.out)
     cyc, info = build_uac_proxy(a.cycles)
     print(f"wrote {out}: {cyc.duration_s:.0f} s, {cyc.distance_m / 1000:.4f} km, "
           f"{len(info['trips'])} micro-trips, speed scale {info['speed_scale']:.4f}")
+    if a.plot:
+        print(f"wrote {plot_accel_comparison(a.cycles, a.plot)}")
 
 
 if __name__ == "__main__":
