@@ -1,0 +1,69 @@
+"""bus.py - DC power bus component (TYPE ``bus``): power balance of seed Fig. 5.1.
+
+    battery_power_w = motor_power_w + aux_power_w - gen_power_w      (+ = battery discharges)
+
+A lossless node (converter losses are inside the motor and generator maps). Cumulative energies
+are the inputs integrated with the same zero-order hold the master applies, so
+``battery_energy_j = motor_energy_j + aux_energy_j - gen_energy_j`` exactly.
+
+Ports
+-----
+Inputs
+    ``motor_power_w`` [W] (+ drawn by the motors), ``gen_power_w`` [W] (+ delivered by the
+    generator), ``aux_power_w`` [W] (+ drawn by auxiliaries, start 0).
+Outputs (direct feedthrough of the inputs they use)
+    ``battery_power_w`` [W] + discharge; ``demand_power_w`` [W] = motor + aux;
+    cumulative ``aux_energy_j``, ``motor_energy_j``, ``gen_energy_j``, ``battery_energy_j`` [J].
+"""
+from __future__ import annotations
+
+from shevsim.core.component import Component
+from shevsim.core.errors import SimulationError
+from shevsim.core.variables import inp, out
+
+_ALL = ("motor_power_w", "gen_power_w", "aux_power_w")
+
+
+class PowerBus(Component):
+    """Lossless power balance (see module docstring for ports)."""
+
+    TYPE = "bus"
+    Params = None
+    VARIABLES = (
+        inp("motor_power_w", "W", 0.0, "motor electrical power, + drawn from the bus"),
+        inp("gen_power_w", "W", 0.0, "generator electrical power, + delivered to the bus"),
+        inp("aux_power_w", "W", 0.0, "auxiliary load, + drawn from the bus"),
+        out("battery_power_w", "W", 0.0, "battery power, + discharge", _ALL),
+        out("demand_power_w", "W", 0.0, "motor + auxiliary power", ("motor_power_w", "aux_power_w")),
+        out("aux_energy_j", "J", 0.0, "cumulative auxiliary energy", ("aux_power_w",)),
+        out("motor_energy_j", "J", 0.0, "cumulative motor electrical energy", ("motor_power_w",)),
+        out("gen_energy_j", "J", 0.0, "cumulative generator electrical energy", ("gen_power_w",)),
+        out("battery_energy_j", "J", 0.0, "cumulative battery energy, + discharged", _ALL),
+    )
+
+    def initialize(self, t0: float) -> None:
+        self.e = [0.0, 0.0, 0.0, 0.0]
+        u, y = self.u, self.y
+        y["demand_power_w"] = u["motor_power_w"] + u["aux_power_w"]
+        y["battery_power_w"] = y["demand_power_w"] - u["gen_power_w"]
+        for k in ("aux_energy_j", "motor_energy_j", "gen_energy_j", "battery_energy_j"):
+            y[k] = 0.0
+
+    def do_step(self, t: float, h: float) -> None:
+        u, y, e = self.u, self.y, self.e
+        pm, pg, pa = u["motor_power_w"], u["gen_power_w"], u["aux_power_w"]
+        if pm != pm or pg != pg or pa != pa:
+            raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
+                                  f"(motor_power_w={pm}, gen_power_w={pg}, aux_power_w={pa})")
+        d = pm + pa
+        b = d - pg
+        e[0] += pa * h
+        e[1] += pm * h
+        e[2] += pg * h
+        e[3] += b * h
+        y["demand_power_w"] = d
+        y["battery_power_w"] = b
+        y["aux_energy_j"] = e[0]
+        y["motor_energy_j"] = e[1]
+        y["gen_energy_j"] = e[2]
+        y["battery_energy_j"] = e[3]

@@ -1,0 +1,167 @@
+"""motor.py - traction motor component (TYPE ``motor``): equivalent machine of the in-hub motors.
+
+Force request -> motor torque -> limits -> delivered traction force, friction brakes, bus power.
+
+* wheel force ``F`` <-> motor torque (total of all motors): ``tau = F r_w / G``, motor speed
+  ``w = v G / r_w`` (hub reduction ``G``, gear assumed lossless);
+* torque limit (heat index, seed B.2-B.3 as corrected, see :mod:`shevsim.powertrain.motor`):
+  ``tau_max = tau_cont + (1 - gamma)(tau_peak - tau_cont)``,
+  ``d gamma/dt = (0.3/180)(|tau|/tau_cont - 1)``, gamma in [0, 1], gamma(0) = ``heat_index_init_frac``;
+  the same limit bounds motoring and regenerative torque;
+* propulsion beyond the limit is not delivered (no other source); braking beyond the regen limit
+  (and all braking below ``regen_speed_min_mps``, where an induction machine cannot regenerate
+  usefully) goes to the friction brakes: ``brake_force_n = -(F_req - F_regen)``;
+* electrical power ``P = tau w / eta`` (motoring) or ``tau w eta`` (generating), map
+  ``eta(w, tau)``.
+
+The torque and the powers are held over the step (feedthrough of the held inputs), so the
+cumulative energies integrate exactly what was output: ``elec_energy_j = mech_energy_j +
+loss_energy_j``. Note: ``mech_energy_j`` uses the input speed at the start of the step; the
+vehicle books traction work at the step-mean speed - their difference is the co-simulation
+coupling error of the explicit motor/vehicle exchange (it shrinks with the step).
+
+Ports
+-----
+Inputs
+    ``force_req_n`` [N] signed wheel force demand (+ propel, - brake); ``speed_mps`` [m/s].
+Outputs (all direct feedthrough of both inputs)
+    ``traction_force_n`` [N] signed force delivered by the motors at the wheels;
+    ``brake_force_n`` [N] friction brake force (>= 0); ``elec_power_w`` [W] + drawn from the bus;
+    ``torque_nm`` [N m] total motor torque; ``speed_radps`` [rad/s] motor speed;
+    ``torque_max_nm`` [N m] current torque limit; ``heat_index_frac`` [1] gamma (at t + h);
+    cumulative ``loss_energy_j``, ``elec_energy_j``, ``mech_energy_j`` [J].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from shevsim.core.component import Component
+from shevsim.core.errors import SimulationError
+from shevsim.core.variables import inp, out
+from shevsim.powertrain.maps import load_curve_csv, load_grid_csv
+from shevsim.powertrain.motor import HEAT_RATE_PER_S, MotorMaps, electrical_power, heat_index_step, torque_limit
+
+_DIR = Path(__file__).resolve().parents[2] / "components" / "motor"
+
+
+@dataclass(frozen=True)
+class MotorParams:
+    """Motor parameters (defaults: components/motor/default.toml).
+
+    Attributes
+    ----------
+    efficiency_map_file : str
+        CSV ``speed_radps, torque_nm, efficiency_frac`` (equivalent machine).
+    torque_curves_file : str
+        CSV ``speed_radps, peak_torque_nm, cont_torque_nm``.
+    gear_ratio : float
+        Hub reduction, motor speed / wheel speed [-].
+    wheel_radius_m : float
+        Loaded tyre radius [m].
+    heat_index_init_frac : float
+        gamma(0) [-] (seed B.3: 0.3).
+    heat_rate_per_s : float
+        Heat-index rate at |tau| = 2 tau_cont [1/s] (seed: 0.3/180).
+    regen_speed_min_mps : float
+        Below this vehicle speed braking is all friction [m/s].
+    """
+
+    efficiency_map_file: str = str(_DIR / "motor_eff_map.csv")
+    torque_curves_file: str = str(_DIR / "motor_torque_curves.csv")
+    gear_ratio: float = 19.0
+    wheel_radius_m: float = 0.55
+    heat_index_init_frac: float = 0.3
+    heat_rate_per_s: float = HEAT_RATE_PER_S
+    regen_speed_min_mps: float = 0.5
+
+    def __post_init__(self):
+        for k in ("gear_ratio", "wheel_radius_m"):
+            if not getattr(self, k) > 0:
+                raise ValueError(f"parameter '{k}' must be > 0, got {getattr(self, k)!r}")
+        if not 0.0 <= self.heat_index_init_frac <= 1.0:
+            raise ValueError(f"parameter 'heat_index_init_frac' must be in [0, 1], got {self.heat_index_init_frac!r}")
+        if not (self.heat_rate_per_s >= 0 and self.regen_speed_min_mps >= 0):
+            raise ValueError("parameters 'heat_rate_per_s' and 'regen_speed_min_mps' must be >= 0")
+
+
+class Motor(Component):
+    """Equivalent traction motor with heat-index derating (see module docstring for ports)."""
+
+    TYPE = "motor"
+    Params = MotorParams
+    _FT = ("force_req_n", "speed_mps")
+    VARIABLES = (
+        inp("force_req_n", "N", 0.0, "signed wheel force demand, + propel / - brake"),
+        inp("speed_mps", "m/s", 0.0, "vehicle speed"),
+        out("traction_force_n", "N", 0.0, "signed force delivered at the wheels by the motors", _FT),
+        out("brake_force_n", "N", 0.0, "friction brake force, >= 0", _FT),
+        out("elec_power_w", "W", 0.0, "electrical power, + drawn from the bus", _FT),
+        out("torque_nm", "N.m", 0.0, "total motor torque (+ motoring)", _FT),
+        out("speed_radps", "rad/s", 0.0, "motor speed", _FT),
+        out("torque_max_nm", "N.m", 0.0, "torque limit after heat-index derating", _FT),
+        out("heat_index_frac", "1", 0.0, "heat index gamma (0 cold .. 1 limited to continuous)", _FT),
+        out("loss_energy_j", "J", 0.0, "cumulative motor+inverter loss", _FT),
+        out("elec_energy_j", "J", 0.0, "cumulative electrical energy drawn (signed)", _FT),
+        out("mech_energy_j", "J", 0.0, "cumulative shaft energy delivered (signed)", _FT),
+    )
+    _static = ("name", "params", "maps", "_k_tau", "_k_w")
+
+    def __init__(self, name: str = "motor", params: MotorParams | None = None):
+        super().__init__(name, params)
+        p = self.params
+        self.maps = MotorMaps(
+            load_grid_csv(p.efficiency_map_file, "speed_radps", "torque_nm", "efficiency_frac", "clamp"),
+            load_curve_csv(p.torque_curves_file, "speed_radps", "peak_torque_nm"),
+            load_curve_csv(p.torque_curves_file, "speed_radps", "cont_torque_nm"))
+        self._k_tau = p.wheel_radius_m / p.gear_ratio      # N m of motor torque per N at the wheel
+        self._k_w = p.gear_ratio / p.wheel_radius_m        # rad/s of motor per m/s
+
+    def initialize(self, t0: float) -> None:
+        self.gamma = self.params.heat_index_init_frac
+        self.e_loss = self.e_elec = self.e_mech = 0.0
+        w = max(self.u["speed_mps"], 0.0) * self._k_w
+        self.y["heat_index_frac"] = self.gamma
+        self.y["torque_max_nm"] = self.maps.limit(w, self.gamma)
+        self.y["speed_radps"] = w
+        for k in ("traction_force_n", "brake_force_n", "elec_power_w", "torque_nm",
+                  "loss_energy_j", "elec_energy_j", "mech_energy_j"):
+            self.y[k] = 0.0
+
+    def do_step(self, t: float, h: float) -> None:
+        f_req = self.u["force_req_n"]
+        v = self.u["speed_mps"]
+        if f_req != f_req or v != v:
+            raise SimulationError(f"{self.name}: NaN input at t={t:g} s (force_req_n={f_req}, speed_mps={v})")
+        if v < 0.0:
+            v = 0.0
+        w = v * self._k_w
+        maps = self.maps
+        t_peak, t_cont = maps.peak(w), maps.cont(w)
+        t_lim = torque_limit(t_peak, t_cont, self.gamma)
+        tau = f_req * self._k_tau
+        brake = 0.0
+        if tau > t_lim:
+            tau = t_lim
+        elif tau < 0.0:
+            t_regen = t_lim if v >= self.params.regen_speed_min_mps else 0.0
+            if tau < -t_regen:
+                tau = -t_regen
+            brake = -(f_req - tau / self._k_tau)
+        p_el = electrical_power(tau, w, maps.eff(w, tau))
+        p_m = tau * w
+        self.e_elec += p_el * h
+        self.e_mech += p_m * h
+        self.e_loss += (p_el - p_m) * h
+        self.gamma = heat_index_step(self.gamma, tau, t_cont, h, self.params.heat_rate_per_s)
+        y = self.y
+        y["traction_force_n"] = tau / self._k_tau
+        y["brake_force_n"] = brake
+        y["elec_power_w"] = p_el
+        y["torque_nm"] = tau
+        y["speed_radps"] = w
+        y["torque_max_nm"] = t_lim
+        y["heat_index_frac"] = self.gamma
+        y["loss_energy_j"] = self.e_loss
+        y["elec_energy_j"] = self.e_elec
+        y["mech_energy_j"] = self.e_mech

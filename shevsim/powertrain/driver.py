@@ -1,0 +1,37 @@
+"""driver.py - driver model: PI on speed error with feed-forward (seed App. B end, [137]).
+
+    F_req = F_ff + k_P e + I,     e = v_ref - v,     dI/dt = k_I e
+    F_ff  = M a_ref + F_rr + 1/2 rho C_d A v_ref^2         (rolling only while v_ref > 0)
+
+The feed-forward uses the driver's *belief* of the vehicle (its own mass/road-load parameters),
+so a 15.5 t vehicle follows a cycle with small PI action; the PI removes the model error
+(unknown grade, wrong mass). Output saturates at ``[-force_brake_max_n, force_prop_max_n]``;
+anti-windup: the integral is frozen while the output is saturated in the direction of the error.
+At a standstill request (``v_ref <= 0`` and ``a_ref <= 0``) the integral is reset to 0 and the
+driver holds the brake (``F_req <= 0``).
+
+Discretisation: the output of a step is computed from the held inputs and the integral at the
+start of the step (direct feedthrough); the integral is then advanced by ``k_I e h``.
+"""
+from __future__ import annotations
+
+from .vehicle import G_MPS2
+
+
+def feedforward_n(v_ref: float, a_ref: float, mass_kg: float, c_aero: float, f_roll: float,
+                  g: float = G_MPS2) -> float:
+    """Feed-forward force [N] for reference speed and acceleration."""
+    f = mass_kg * a_ref + c_aero * v_ref * v_ref
+    if v_ref > 0.0:
+        f += f_roll * mass_kg * g
+    return f
+
+
+def pi_force(e: float, integ: float, ff: float, kp: float, f_min: float, f_max: float) -> tuple[float, bool]:
+    """Saturated PI output and whether the integral may integrate ``e`` (anti-windup)."""
+    f = ff + kp * e + integ
+    if f > f_max:
+        return f_max, e < 0.0
+    if f < f_min:
+        return f_min, e > 0.0
+    return f, True

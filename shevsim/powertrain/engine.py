@@ -1,0 +1,214 @@
+"""engine.py - diesel engine-generator physics (seed Ch. V Fig. 5.2, App. B B.1, Figs. B.1-B.3, A.2).
+
+Chain, advanced in sub-steps of at most ``max_substep_s`` with the inputs held:
+
+1. **Power-rate limit** on the electrical power command ``P_cmd`` (clipped to ``[0, P_max]``):
+   ``P_lim += clip(P_cmd - P_lim, -R_down dt, R_up dt)``; ``R_up`` is the input
+   ``power_rate_max_wps`` (the supervisor's / study's limit).
+2. **Optimal operating line** (``optimal_operating_line.csv``): speed set point ``w*(P_lim)`` and the
+   shaft power ``P_sh*(P_lim)`` that yields ``P_lim`` at the generator terminals in steady state.
+3. **Shaft speed** follows ``w*`` through the generator's speed loop, modelled as a first-order
+   response (time constant ``speed_time_constant_s``, exact exponential) with an acceleration
+   limit. Justification: the generator torque is the fast actuator that closes the speed loop;
+   what matters at the supervisory time scale (0.2 s) is that speed changes are not instantaneous
+   and that the inertia energy is booked. The generator torque is whatever keeps that trajectory:
+   ``tau_g = tau_e - J dw/dt``.
+4. **Torque demand** ``tau* = P_sh*(P_lim) / w`` (at the actual speed), clipped to the full-load
+   curve.
+5. **PI fuel (rack) controller** (B.1): ``zeta = k_P (tau* - tau_e) + k_I int (tau* - tau_e) dt``,
+   ``zeta in [0, 1]``; anti-windup by conditional integration (the integral is frozen while the rack
+   is saturated in the direction of the error).
+6. **Turbo lag** (B.1 text): the fuel rate the engine can burn follows the rack's fuel command
+   ``m_c = zeta * m_fl(w)`` (``m_fl`` = full-load fuel) through a first-order filter with time constant
+   ``turbo_lag_s`` when rising (air path / boost lag) and ``fuel_fall_s`` when falling (fuel cut is
+   immediate); exact exponential update, and the fuel mass over a sub-step is the exact integral.
+7. **Engine torque map** (Fig. B.1 form): ``tau_e = T(w, m_f)`` (``engine_torque_map.csv``; negative at
+   fuel cut = friction).
+8. **Soot**: quasi-static map ``S(w, tau_e)`` [mg/s] (Fig. B.2 role, ``soot_map.csv``) times
+   ``soot_scale_frac`` plus a **transient term**
+   ``S_tr = transient_soot_mg_per_g * d * (d / m_fl(w))`` [mg/s] with the fuel deficit
+   ``d = max(0, m_c - m_f)``: the fuel the rack demands but the lagging air path cannot yet support
+   (the over-fuelling of a tip-in against turbo lag). Soot per gram of deficit grows with the
+   relative deficit ``d / m_fl`` (the air-fuel ratio drop), reaching ``transient_soot_mg_per_g`` at a
+   full-load deficit. It must be super-linear: for a linear filter ``int d dt = tau_turbo * (rise
+   of m_f)`` whatever the ramp, so a linear term could not respond to the ramp rate. Seed App. A.2: more than 50 % of soot is produced in transients [142], which a
+   quasi-static map misses. A slower power ramp (tighter ``power_rate_max_wps``) keeps the torque
+   error, hence the rack and ``m_c - m_f``, small, so it cuts transient soot - the seed's
+   fuel/soot trade-off.
+9. **Generator** efficiency ``eta_g(w, |tau_g|)`` (Fig. B.3 role, ``generator_eff_map.csv``).
+
+Energy bookkeeping per sub-step (all exact for the discrete trajectory):
+``E_fuel = LHV * fuel mass``; ``W_e = mean(tau_e) * mean(w) * dt`` (trapezoid in torque);
+``dKE = J (w1^2 - w0^2)/2``; generator shaft work ``W_g = W_e - dKE``; electrical
+``E_el = W_g eta_g`` (``W_g / eta_g`` when motoring); ``engine_loss = E_fuel - W_e``;
+``gen_loss = W_g - E_el``; hence ``E_fuel = E_el + engine_loss + gen_loss + dKE_shaft``.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from .maps import load_curve_csv, load_grid_csv
+
+ROOT = Path(__file__).resolve().parents[2]
+EG_DIR = ROOT / "components" / "engine_generator"
+
+
+class EngineGenMaps:
+    """All maps of the engine-generator, loaded from the derived CSVs (see build_maps)."""
+
+    def __init__(self, fuel_map_file, torque_map_file, max_torque_file, soot_map_file,
+                 generator_eff_file, generator_max_torque_file, ool_file):
+        self.fuel = load_grid_csv(fuel_map_file, "speed_radps", "torque_nm", "fuel_gps", ("clamp", "linear"))
+        self.torque = load_grid_csv(torque_map_file, "speed_radps", "fuel_gps", "torque_nm", ("clamp", "clamp"))
+        self.tmax = load_curve_csv(max_torque_file, "speed_radps", "torque_max_nm")
+        self.fmax = load_curve_csv(max_torque_file, "speed_radps", "fuel_max_gps")
+        self.soot = load_grid_csv(soot_map_file, "speed_radps", "torque_nm", "soot_mgps", "clamp")
+        self.geff = load_grid_csv(generator_eff_file, "speed_radps", "torque_nm", "efficiency_frac", "clamp")
+        self.gmax = load_curve_csv(generator_max_torque_file, "speed_radps", "torque_max_nm")
+        self.ool_speed = load_curve_csv(ool_file, "elec_power_w", "speed_radps")
+        self.ool_shaft = load_curve_csv(ool_file, "elec_power_w", "shaft_power_w")
+        self.ool_fuel = load_curve_csv(ool_file, "elec_power_w", "fuel_gps")
+        self.p_max_w = float(self.ool_speed.x[-1])
+        self.w_min = float(self.fuel.x[0])
+
+    @classmethod
+    def default(cls) -> "EngineGenMaps":
+        return cls(EG_DIR / "engine_fuel_map.csv", EG_DIR / "engine_torque_map.csv",
+                   EG_DIR / "engine_max_torque.csv", EG_DIR / "soot_map.csv",
+                   EG_DIR / "generator_eff_map.csv", EG_DIR / "generator_max_torque.csv",
+                   EG_DIR / "optimal_operating_line.csv")
+
+    def fuel_quasi_static(self, p_elec_w: float) -> float:
+        """Steady-state fuel rate [g/s] at electrical output ``p_elec_w`` (Fig. 5.2a)."""
+        return self.ool_fuel(p_elec_w)
+
+
+class EngineGenState:
+    """Mutable state of the engine-generator (plain floats; deep-copied for save/restore)."""
+
+    __slots__ = ("p_lim", "w", "integ", "rack", "m_f", "tau_e", "fuel_cmd",
+                 "fuel_g", "fuel_j", "soot_mg", "soot_tr_mg", "eng_loss_j", "gen_loss_j",
+                 "elec_j", "shaft_j", "ke_j")
+
+    def __init__(self):
+        for s in self.__slots__:
+            setattr(self, s, 0.0)
+
+    def __deepcopy__(self, memo):
+        c = EngineGenState()
+        for s in self.__slots__:
+            setattr(c, s, getattr(self, s))
+        return c
+
+
+def steady_state(maps: EngineGenMaps, p_elec_w: float, state: EngineGenState | None = None) -> EngineGenState:
+    """State in steady operation at ``p_elec_w`` on the optimal line (cumulative sums left as given)."""
+    st = state if state is not None else EngineGenState()
+    p = min(max(p_elec_w, 0.0), maps.p_max_w)
+    st.p_lim = p
+    st.w = maps.ool_speed(p)
+    st.tau_e = maps.ool_shaft(p) / st.w
+    st.m_f = maps.fuel(st.w, st.tau_e)
+    st.fuel_cmd = st.m_f
+    st.rack = st.m_f / maps.fmax(st.w)
+    st.integ = st.rack
+    st.ke_j = 0.0
+    return st
+
+
+def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_up_wps: float,
+            h: float) -> tuple[float, float, float]:
+    """Advance ``st`` by ``h`` with the inputs held; return (elec J, fuel g, soot mg) of this step.
+
+    ``prm`` provides ``rack_kp_per_nm, rack_ki_per_nm_s, turbo_lag_s, fuel_fall_s,
+    speed_time_constant_s, speed_accel_max_radps2, shaft_inertia_kg_m2, power_rate_down_max_wps,
+    fuel_lhv_j_per_g, transient_soot_mg_per_g, soot_scale_frac, max_substep_s``.
+    """
+    n = max(1, math.ceil(h / prm.max_substep_s - 1e-9))
+    dt = h / n
+    target = min(max(p_cmd_w, 0.0), maps.p_max_w)
+    r_up = max(rate_up_wps, 0.0) * dt
+    r_dn = prm.power_rate_down_max_wps * dt
+    J = prm.shaft_inertia_kg_m2
+    kp, ki = prm.rack_kp_per_nm, prm.rack_ki_per_nm_s
+    a_w = math.exp(-dt / prm.speed_time_constant_s)
+    dw_max = prm.speed_accel_max_radps2 * dt
+    a_up = math.exp(-dt / prm.turbo_lag_s)
+    a_dn = math.exp(-dt / prm.fuel_fall_s)
+    lhv, c_tr, s_qs = prm.fuel_lhv_j_per_g, prm.transient_soot_mg_per_g, prm.soot_scale_frac
+    e_el = fuel = soot = 0.0
+    for _ in range(n):
+        # 1. rate limit
+        dp = target - st.p_lim
+        st.p_lim += r_up if dp > r_up else (-r_dn if dp < -r_dn else dp)
+        # 2-3. speed set point and speed response
+        w0 = st.w
+        w_set = maps.ool_speed(st.p_lim)
+        w1 = w_set + (w0 - w_set) * a_w
+        if w1 - w0 > dw_max:
+            w1 = w0 + dw_max
+        elif w0 - w1 > dw_max:
+            w1 = w0 - dw_max
+        # 4. torque demand
+        tau_ref = maps.ool_shaft(st.p_lim) / w0
+        tl = maps.tmax(w0)
+        if tau_ref > tl:
+            tau_ref = tl
+        # 5. PI rack with conditional integration
+        e = tau_ref - st.tau_e
+        integ = st.integ + ki * e * dt
+        rack = kp * e + integ
+        if rack > 1.0:
+            rack = 1.0
+            if e > 0.0:
+                integ = st.integ
+        elif rack < 0.0:
+            rack = 0.0
+            if e < 0.0:
+                integ = st.integ
+        st.integ, st.rack = integ, rack
+        # 6. fuel command and turbo lag (exact)
+        fl = maps.fmax(w1)
+        m_c = rack * fl
+        m0 = st.m_f
+        if m_c > m0:
+            a, tf = a_up, prm.turbo_lag_s
+        else:
+            a, tf = a_dn, prm.fuel_fall_s
+        m1 = m_c + (m0 - m_c) * a
+        dm = m_c * dt + (m0 - m_c) * tf * (1.0 - a)          # fuel mass over the sub-step [g]
+        # 7. engine torque
+        tau1 = maps.torque(w1, m1)
+        w_avg = 0.5 * (w0 + w1)
+        tau_avg = 0.5 * (st.tau_e + tau1)
+        w_e = tau_avg * w_avg * dt
+        dke = 0.5 * J * (w1 * w1 - w0 * w0)
+        w_g = w_e - dke
+        tau_g = w_g / (w_avg * dt)
+        eta = maps.geff(w_avg, abs(tau_g))
+        el = w_g * eta if w_g >= 0.0 else w_g / eta
+        # 8. soot: quasi-static + transient (deficit of burnt fuel against the rack's command)
+        s = s_qs * maps.soot(w_avg, tau_avg) * dt if tau_avg > 0.0 else 0.0
+        deficit = m_c * dt - dm                              # int (m_c - m_f) dt over the sub-step [g]
+        s_tr = c_tr * deficit * deficit / (dt * fl) if deficit > 0.0 else 0.0
+        # bookkeeping
+        st.w, st.m_f, st.tau_e, st.fuel_cmd = w1, m1, tau1, m_c
+        st.fuel_g += dm
+        st.fuel_j += dm * lhv
+        st.eng_loss_j += dm * lhv - w_e
+        st.shaft_j += w_g
+        st.ke_j += dke
+        st.gen_loss_j += w_g - el
+        st.elec_j += el
+        st.soot_mg += s + s_tr
+        st.soot_tr_mg += s_tr
+        e_el += el
+        fuel += dm
+        soot += s + s_tr
+    return e_el, fuel, soot
+
+
+def generator_torque_limit(maps: EngineGenMaps, w: float) -> float:
+    """Max generator shaft torque at engine speed ``w`` [N m] (for checks and plots)."""
+    return maps.gmax(w)
