@@ -36,7 +36,37 @@ import numpy as np
 from shevsim.battery.thermal import ThermalParams
 from shevsim.core.errors import SimulationError
 
-__all__ = ["ThermalEstimate", "ThermalKF", "ThermalDKF", "ThermalJEKF", "TwoStateDiscretiser"]
+__all__ = ["ThermalEstimate", "ThermalKF", "ThermalDKF", "ThermalJEKF", "TwoStateDiscretiser", "tuning",
+           "run_stage", "table_3_3"]
+
+
+def tuning(table: str = "3.2", kind: str = "dkf", dt_s: float = 1.0, dt_ref_s: float = 1.0) -> dict:
+    """Seed tunings as keyword arguments for the filter constructors.
+
+    ``table="3.2"`` (Ch. III experiments: sigma 0.05 degC, beta_1 5e-4, beta_2 7e-3 (DKF) / 6e-3 (JEKF),
+    P(0) diag(1, 1[, 0.05]), S(0) 0.05) or ``"5.4"`` (Ch. V SHEV simulation, thermal DKF:
+    Sigma_w diag(2.5e-7, 2.5e-7), Sigma_v 2.5e-4, Sigma_r 9e-4, P(0) diag(1, 1), S(0) 1e-2; Table 5.4
+    has no JEKF column, the JEKF gets the DKF's values).  ``kind`` in {"kf", "dkf", "jekf"}.
+    The seed's values are per sample; the random-walk variances (Sigma_w, Sigma_r) are scaled
+    by ``dt_s / dt_ref_s`` (the seed's sample time is not printed; 1 s is assumed).
+    """
+    if table not in ("3.2", "5.4") or kind not in ("kf", "dkf", "jekf"):
+        raise SimulationError(f"tuning: unknown table {table!r} or kind {kind!r} (tables '3.2', '5.4'; "
+                              "kinds 'kf', 'dkf', 'jekf')")
+    sc = math.sqrt(dt_s / dt_ref_s)
+    if table == "3.2":
+        sigma, b1, s0 = 0.05, 5e-4, 0.05
+        b2 = 6e-3 if kind == "jekf" else 7e-3
+    else:
+        sigma, b1, b2, s0 = math.sqrt(2.5e-4), 5e-4, 0.03, 1e-2
+    kw = {"sigma_c": sigma, "beta1": b1 * sc}
+    if kind == "kf":
+        kw["p0"] = (1.0, 1.0)
+    elif kind == "dkf":
+        kw.update(beta2=b2 * sc, p0=(1.0, 1.0), s0=s0)
+    else:
+        kw.update(beta2=b2 * sc, p0=(1.0, 1.0, s0 if table == "5.4" else 0.05))
+    return kw
 
 
 class ThermalEstimate(NamedTuple):

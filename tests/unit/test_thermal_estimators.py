@@ -6,8 +6,9 @@ import pytest
 
 from shevsim.battery.thermal import ThermalParams, TwoStateThermal, _zoh, two_state_matrices
 from shevsim.battery.verification import drive_like_current
-from shevsim.bms.thermal_estimators import (ThermalDKF, ThermalJEKF, ThermalKF, TwoStateDiscretiser, run_stage,
-                                            table_3_3)
+from shevsim.battery.thermal import FDThermal
+from shevsim.bms.thermal_estimators import (ThermalDKF, ThermalJEKF, ThermalKF, TwoStateDiscretiser, table_3_3,
+                                            tuning)
 from shevsim.core.errors import SimulationError
 
 P = ThermalParams()
@@ -121,6 +122,39 @@ def test_table_3_3_conclusions_hold_over_seeds(tmp_path):
             assert f3[k]["h_final_rel_err"] < 0.10
     assert min(ratios) > 1.0
     assert (tmp_path / "0" / "table_3_3.csv").exists() and (tmp_path / "0" / "table_3_3.png").exists()
+
+
+@pytest.mark.parametrize("cls,kind", [(ThermalDKF, "dkf"), (ThermalJEKF, "jekf")])
+def test_cooling_fault_tracked_with_chapter5_tuning(cls, kind):
+    # seed Sec. 5.4: h 20 -> 3 W/m2K at t = 300 s, sigma_T = 0.016 degC, Table 5.4 tuning; plant = 30-node model
+    rng = np.random.default_rng(7)
+    n = 1200
+    q = drive_like_current(n, 1.0, seed=4) ** 2 * 0.015
+    plant = FDThermal(P)
+    x = plant.initial_state(25.0)
+    f = cls(P, 20.0, 1.0, x0_c=(25.0, 0.0), **tuning("5.4", kind))
+    hs, ec = [], []
+    for k in range(n):
+        h = 20.0 if k < 300 else 3.0
+        tc, ts = plant.outputs(x, q[k], 25.0, h)
+        e = f.update(ts + 0.016 * rng.standard_normal(), 25.0 + 0.016 * rng.standard_normal(), q[k])
+        hs.append(e.h_w_m2k)
+        ec.append(e.t_core_c - tc)
+        x = plant.step(x, q[k], 25.0, h, 1.0)
+    hs = np.array(hs)
+    assert tc > 45.0                                   # the fault does heat the cell past T_c,max
+    assert np.all(np.abs(hs[700:] - 3.0) < 0.3)        # within 10 % from 400 s after the fault
+    assert np.all(np.abs(hs[100:300] - 20.0) < 2.0)
+    assert np.max(np.abs(ec[700:])) < 0.2
+
+
+def test_tuning_presets():
+    kw = tuning("3.2", "jekf")
+    assert kw["beta2"] == 6e-3 and kw["p0"] == (1.0, 1.0, 0.05) and kw["sigma_c"] == 0.05
+    kw = tuning("5.4", "dkf", dt_s=0.25)
+    assert kw["beta2"] ** 2 == pytest.approx(9e-4 * 0.25) and kw["sigma_c"] ** 2 == pytest.approx(2.5e-4)
+    with pytest.raises(SimulationError, match="table"):
+        tuning("9.9")
 
 
 def test_bad_inputs():
