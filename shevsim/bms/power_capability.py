@@ -1,0 +1,202 @@
+"""power_capability.py - battery power capability by Algebraic Propagation (seed 4.7-4.19, 5.26-5.36).
+
+For a model ``x_{k+1} = A x_k + B u + G``, ``y = C x + D u + H`` the constant input that puts
+the output exactly on its limit ``y_bar`` after N steps is (4.9)
+``u_bar = (sum_{i<N} C A^i B + D)^{-1} (y_bar - C A^N x_k - sum_{i<N} C A^i G - H)``.
+
+Electrical side (one cell, OCV-R-RC of the DEKF, current + discharge, 4.14-4.16 / 5.26-5.28)::
+
+    SOC_{k+N} = SOC_k - N dt i / (3600 C_b)
+    V_{k+N}   ~ V_oc(SOC_k) - a^N V1_k - i [R_s + R1 (1 - a^N) + V_oc'(SOC_k) N dt / (3600 C_b)]
+
+(``a = exp(-dt/(R1 C1))``; V_oc linearised at SOC_k as in 4.15e - the seed's 5.27c writes
+``V_t,k`` for ``V_oc(SOC_k)``, a typo) gives the currents that put SOC on SOC_min / SOC_max and
+the terminal voltage on V_min / V_max after N steps.
+
+Thermal side (5.29-5.33): the two-state model (T_mean, gamma) with heat input
+``q = mu + V1^2/R1``, ``mu = i^2 R_s - i T_mean Delta S / F``.  With exact ZOH the N-step response
+to a held input equals the one-step response over ``N dt``, so ``A^N`` and ``sum_{i<N} A^i B`` are
+the ZOH matrices for the step ``N dt`` (closed form, :class:`TwoStateDiscretiser`).  The
+polarisation heat is bounded over the horizon by 5.31: ``max(V1_k^2, V1_{k+N}^2)/R1`` with
+``V1_{k+N}`` propagated under the previous step's current limit.  Solving ``T_core,k+N =
+T_c,max`` for ``mu`` and then ``R_s i^2 - beta i - mu = 0`` (``beta = T_mean Delta S / F``, T in
+kelvin) gives 5.33::
+
+    i_T,dch = (beta + sqrt(beta^2 + 4 R_s mu_max)) / (2 R_s),
+    i_T,chg = (beta - sqrt(beta^2 + 4 R_s mu_max)) / (2 R_s).
+
+If ``beta^2 + 4 R_s mu_max < 0`` no current keeps T_core at or below the limit; both limits
+collapse to the least-heating current ``beta / (2 R_s)``.
+
+Limits (4.17 / 5.34): ``i_max = min(SOC_min, V_min, thermal[, rating])``,
+``i_min = max(SOC_max, V_max, thermal[, rating])``; power (4.18-4.19 / 5.35-5.36):
+``P = i V_{k+N}`` with ``V_{k+N}`` from the (nonlinear) OCV at the predicted SOC, times the
+pack's ``n_s n_p``; reported as ``p_max_w = max(P_dch, 0)`` and ``p_min_w = min(P_chg, 0)``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
+from shevsim.battery.thermal import ThermalParams
+from shevsim.bms.thermal_estimators import TwoStateDiscretiser
+from shevsim.core.errors import ScenarioError
+
+__all__ = ["PowerCapabilityParams", "PowerLimits", "PowerCapability", "electrical_current_limits"]
+
+
+@dataclass(frozen=True)
+class PowerCapabilityParams:
+    """Constraints and horizon (seed Table A.1 limits, Sec. 4.4/5.4).
+
+    Attributes
+    ----------
+    horizon_steps : int
+        N (seed Ch. IV: 10 s at 10 Hz -> 100).
+    dt_s : float
+        BMS sample time [s].
+    soc_min_frac, soc_max_frac : float
+        SOC limits (Table A.1: 0.3, 0.7).
+    v_min_v, v_max_v : float
+        Cell voltage limits [V] (Table A.1: 2.0, 3.6).
+    t_core_max_c : float
+        Core temperature limit [degC] (Sec. 5.4: 45).
+    i_cell_max_a : float
+        Optional cell current rating [A] in both directions (default inf: not in the seed).
+    capacity_ah : float
+        Cell capacity [A.h].
+    n_series, n_parallel : int
+        Pack configuration for the pack power.
+    """
+
+    horizon_steps: int = 100
+    dt_s: float = 0.1
+    soc_min_frac: float = 0.3
+    soc_max_frac: float = 0.7
+    v_min_v: float = 2.0
+    v_max_v: float = 3.6
+    t_core_max_c: float = 45.0
+    i_cell_max_a: float = math.inf
+    capacity_ah: float = 2.3
+    n_series: int = 130
+    n_parallel: int = 10
+
+    def __post_init__(self) -> None:
+        if self.horizon_steps < 1 or not self.dt_s > 0.0:
+            raise ScenarioError("power capability: horizon_steps must be >= 1 and dt_s > 0")
+        if not (self.soc_min_frac < self.soc_max_frac and self.v_min_v < self.v_max_v):
+            raise ScenarioError("power capability: need soc_min < soc_max and v_min < v_max")
+
+
+class PowerLimits(NamedTuple):
+    """Result of one power-capability evaluation (cell currents [A], pack powers [W])."""
+
+    i_max_a: float          # cell discharge current limit (overall, 5.34a)
+    i_min_a: float          # cell charge current limit (overall, 5.34b)
+    p_max_w: float          # pack discharge power limit >= 0
+    p_min_w: float          # pack charge power limit <= 0
+    i_soc_min_a: float
+    i_soc_max_a: float
+    i_v_min_a: float
+    i_v_max_a: float
+    i_t_dch_a: float
+    i_t_chg_a: float
+    v_dch_v: float          # predicted cell voltage after N steps at i_max
+    v_chg_v: float          # predicted cell voltage after N steps at i_min
+
+
+def electrical_current_limits(soc: float, v1: float, rs: float, r1: float, c1: float, p: PowerCapabilityParams,
+                              tables: CellTables):
+    """``(i_soc_min, i_soc_max, i_v_min, i_v_max)`` [A], seed 5.28 (cell, + discharge)."""
+    n = p.horizon_steps
+    ndt = n * p.dt_s
+    q_as = 3600.0 * p.capacity_ah
+    i_soc_min = (soc - p.soc_min_frac) * q_as / ndt
+    i_soc_max = (soc - p.soc_max_frac) * q_as / ndt
+    aN = math.exp(-ndt / (r1 * c1))
+    gain = rs + r1 * (1.0 - aN) + tables.docv_dsoc(soc) * ndt / q_as
+    free = tables.ocv(soc) - aN * v1
+    return i_soc_min, i_soc_max, (free - p.v_min_v) / gain, (free - p.v_max_v) / gain
+
+
+class PowerCapability:
+    """Algebraic-Propagation power capability with electrical and thermal constraints.
+
+    Parameters
+    ----------
+    params : PowerCapabilityParams
+    thermal_params : ThermalParams
+        Cell thermal parameters of the two-state model.
+    tables : CellTables
+        OCV and entropy tables.
+
+    Notes
+    -----
+    :meth:`compute` keeps the last current limits (for the 5.31 polarisation-heat bound), so one
+    instance belongs to one BMS; ``last_i_max_a`` / ``last_i_min_a`` are part of its state.
+    """
+
+    def __init__(self, params: PowerCapabilityParams | None = None, thermal_params: ThermalParams | None = None,
+                 tables: CellTables | None = None):
+        self.params = params if params is not None else PowerCapabilityParams()
+        self.thermal_params = thermal_params if thermal_params is not None else ThermalParams()
+        self.tables = tables if tables is not None else default_tables()
+        p = self.params
+        self._discN = TwoStateDiscretiser(self.thermal_params, p.horizon_steps * p.dt_s, "zoh")
+        self._npack = float(p.n_series * p.n_parallel)
+        self.last_i_max_a = 0.0
+        self.last_i_min_a = 0.0
+
+    def thermal_current_limits(self, soc: float, v1: float, rs: float, r1: float, c1: float,
+                               t_mean_c: float, gamma: float, h_w_m2k: float, t_amb_c: float):
+        """``(i_t_dch, i_t_chg)`` [A] keeping the predicted core temperature <= T_c,max after N steps."""
+        p = self.params
+        ndt = p.horizon_steps * p.dt_s
+        a00, a01, a10, a11, b00, b01, b10, b11 = self._discN.ad_bd(h_w_m2k)
+        _, _, _, cc0, cc1, dc = self._discN.out(h_w_m2k)
+        # free response of the core temperature (mu = 0, no polarisation heat)
+        free = (cc0 * (a00 * t_mean_c + a01 * gamma + b01 * t_amb_c)
+                + cc1 * (a10 * t_mean_c + a11 * gamma + b11 * t_amb_c) + dc * t_amb_c)
+        gq = cc0 * b00 + cc1 * b10            # sum_i C A^i B_q  (> 0)
+        aN = math.exp(-ndt / (r1 * c1))
+        beta = (t_mean_c + 273.15) * self.tables.entropy_change(soc) / FARADAY_C_MOL
+        out = []
+        for i_prev in (self.last_i_max_a, self.last_i_min_a):
+            v1n = aN * v1 + r1 * (1.0 - aN) * i_prev
+            q_pol = max(v1 * v1, v1n * v1n) / r1          # 5.31
+            mu = (p.t_core_max_c - free - gq * q_pol) / gq
+            out.append(mu)
+        mu_d, mu_c = out
+        disc_d = beta * beta + 4.0 * rs * mu_d
+        disc_c = beta * beta + 4.0 * rs * mu_c
+        i_min_heat = beta / (2.0 * rs)
+        i_t_dch = (beta + math.sqrt(disc_d)) / (2.0 * rs) if disc_d >= 0.0 else i_min_heat
+        i_t_chg = (beta - math.sqrt(disc_c)) / (2.0 * rs) if disc_c >= 0.0 else i_min_heat
+        return i_t_dch, i_t_chg
+
+    def voltage_after(self, i_a: float, soc: float, v1: float, rs: float, r1: float, c1: float) -> float:
+        """Predicted cell terminal voltage after N steps at the held current (5.36) [V]."""
+        p = self.params
+        ndt = p.horizon_steps * p.dt_s
+        aN = math.exp(-ndt / (r1 * c1))
+        soc_n = soc - i_a * ndt / (3600.0 * p.capacity_ah)
+        return self.tables.ocv(soc_n) - i_a * rs - aN * v1 - i_a * r1 * (1.0 - aN)
+
+    def compute(self, soc: float, v1: float, rs: float, r1: float, c1: float, t_mean_c: float, gamma: float,
+                h_w_m2k: float, t_amb_c: float) -> PowerLimits:
+        """Current and power limits from the estimated states (SOC as a fraction, cell quantities)."""
+        p = self.params
+        i_smin, i_smax, i_vmin, i_vmax = electrical_current_limits(soc, v1, rs, r1, c1, p, self.tables)
+        i_td, i_tc = self.thermal_current_limits(soc, v1, rs, r1, c1, t_mean_c, gamma, h_w_m2k, t_amb_c)
+        i_max = min(i_smin, i_vmin, i_td, p.i_cell_max_a)
+        i_min = max(i_smax, i_vmax, i_tc, -p.i_cell_max_a)
+        v_d = self.voltage_after(i_max, soc, v1, rs, r1, c1)
+        v_c = self.voltage_after(i_min, soc, v1, rs, r1, c1)
+        p_max = i_max * v_d * self._npack
+        p_min = i_min * v_c * self._npack
+        self.last_i_max_a = i_max
+        self.last_i_min_a = i_min
+        return PowerLimits(i_max, i_min, p_max if p_max > 0.0 else 0.0, p_min if p_min < 0.0 else 0.0,
+                           i_smin, i_smax, i_vmin, i_vmax, i_td, i_tc, v_d, v_c)
