@@ -421,7 +421,7 @@ class FDThermal:
         self.params = params if params is not None else ThermalParams()
         self.n_nodes = int(n_nodes)
         self.scheme = scheme
-        fd_matrices(self.params, 1.0, self.n_nodes, scheme)  # validate early
+        self._w = fd_matrices(self.params, 1.0, self.n_nodes, scheme)[4]  # validates early; volume weights
         self._disc: dict = {}
         self._out: dict = {}
 
@@ -439,10 +439,9 @@ class FDThermal:
 
     def mean_temperature(self, x) -> float:
         """Volume-averaged temperature [degC] (weights from the discretisation)."""
-        w = fd_matrices(self.params, 1.0, self.n_nodes, self.scheme)[4] if self.scheme == "fv" else None
-        if w is None:
+        if self.scheme != "fv":
             raise SimulationError("FDThermal.mean_temperature: only defined exactly for scheme='fv'")
-        return float(w @ np.asarray(x))
+        return float(self._w @ np.asarray(x))
 
     def _coeffs(self, h: float, dt: float):
         key = (h, dt)

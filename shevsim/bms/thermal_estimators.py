@@ -344,16 +344,19 @@ class ThermalJEKF(_Base):
     """Joint EKF on the augmented state (T_mean, gamma, h) (seed 3.16-3.20, Table 3.2).
 
     Parameters as :class:`ThermalDKF`; seed defaults ``beta2 = 6e-3``, ``P(0) = diag(1, 1, 0.05)``.
+    The initial h variance is ``s0`` when given, else ``p0[2]`` (``p0`` may then have 2 entries).
     """
 
     def __init__(self, params: ThermalParams | None = None, h0_w_m2k: float = 56.2, dt_s: float = 1.0,
                  x0_c=(30.0, 0.0), sigma_c: float = 0.05, beta1: float = 5e-4, beta2: float = 6e-3,
-                 p0=(1.0, 1.0, 0.05), discretisation: str = "zoh", h_min: float = 0.5, h_max: float = 1000.0):
+                 p0=(1.0, 1.0, 0.05), discretisation: str = "zoh", h_min: float = 0.5, h_max: float = 1000.0,
+                 s0: float | None = None):
         super().__init__(params, dt_s, h0_w_m2k, x0_c, discretisation, sigma_c, beta1, p0[:2], h_min, h_max)
         self.qh = float(beta2) ** 2
         self.p02 = 0.0
         self.p12 = 0.0
-        self.p22 = float(p0[2])
+        # initial h variance: s0 if given (same keyword as the DKF), else the third entry of p0
+        self.p22 = float(s0) if s0 is not None else (float(p0[2]) if len(p0) > 2 else 0.05)
 
     def update(self, t_surface_meas_c: float, t_amb_c: float, q_w: float) -> ThermalEstimate:
         self._check(t_surface_meas_c, t_amb_c, q_w)

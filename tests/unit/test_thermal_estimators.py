@@ -157,6 +157,15 @@ def test_tuning_presets():
         tuning("9.9")
 
 
+def test_jekf_accepts_s0_like_the_dkf():
+    a = ThermalJEKF(P, 30.0, p0=(1.0, 1.0), s0=0.2)
+    b = ThermalJEKF(P, 30.0, p0=(1.0, 1.0, 0.2))
+    assert a.p22 == b.p22 == 0.2
+    for k in range(50):
+        ea, eb = a.update(30.0 + 0.01 * k, 27.0, 1.0), b.update(30.0 + 0.01 * k, 27.0, 1.0)
+    assert ea == eb
+
+
 def test_bad_inputs():
     with pytest.raises(SimulationError, match="t_surface_meas_c"):
         ThermalDKF().update(float("nan"), 25.0, 1.0)
