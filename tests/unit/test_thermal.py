@@ -126,6 +126,17 @@ def test_heat_input_responses_two_state_vs_analytical(fr):
         assert np.max(np.abs(e_deg)) < 1.0
 
 
+def test_heat_input_high_frequency_asymptote():
+    # s -> inf: uniform heating dominates, analytical H11 -> alpha/(k V s); the two-state model's
+    # H11 -> C[0,0] alpha/(k V s), so the ratio tends to (24k - 3Rh)/(24k + Rh) (-0.193 dB for h = 5)
+    p, h = P21, 5.0
+    s = np.array([2j * np.pi * 10.0])
+    A, B, C, D = two_state_matrices(p, h)
+    r = state_space_tf(A, B, C, D, s)[0, 0, 0] / analytical_tf(p, h, s)[0, 0, 0]
+    k, R = p.kt_w_mk, p.radius_m
+    assert abs(r) == pytest.approx((24 * k - 3 * R * h) / (24 * k + R * h), rel=2e-3)
+
+
 def test_ambient_responses_agree_at_low_frequency_and_diverge_above(fr):
     for i in (0, 1):
         Hp, Ha = fr["two_state"][:, i, 1], fr["analytical"][:, i, 1]
