@@ -124,14 +124,14 @@ def test_wang_severity_factor_limits():
 
 
 def test_current_histogram_counts():
-    cell = np.array([-61.0, -5.0, 0.0, 4.99, 5.0, 17.0, 24.9, 25.0, 60.0, 70.0])
+    cell = np.array([-121.0, -5.0, 0.0, 4.99, 5.0, 17.0, 24.9, 25.0, 120.0, 130.0])
     df = frame(np.arange(cell.size, dtype=float), battery__current_a=10.0 * cell)
     h = M.current_histogram(df, cells_parallel=10)
     edges = h["edges_a"]
     counts = dict(zip(edges[:-1], h["counts"]))
     assert h["below_count"] == 1 and h["above_count"] == 1
     assert counts[-5.0] == 1 and counts[0.0] == 2 and counts[5.0] == 1
-    assert counts[15.0] == 1 and counts[20.0] == 1 and counts[25.0] == 1 and counts[55.0] == 1
+    assert counts[15.0] == 1 and counts[20.0] == 1 and counts[25.0] == 1 and counts[115.0] == 1
     assert sum(h["counts"]) == 8
     assert h["fraction"][edges.index(0.0)] == pytest.approx(0.2)
     with pytest.raises(DataError, match="hist_edges_a"):
