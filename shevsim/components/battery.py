@@ -31,6 +31,8 @@ Inputs
     ``power_w`` [W]  pack power demand, + discharge.
     ``h_conv_w_m2k`` [W/(m2.K)]  cell convection coefficient (cooling fault input), start 20.
     ``t_ambient_c`` [degC]  coolant / ambient temperature, start 25.
+    ``current_cmd_a`` [A]  pack current, + discharge; used instead of ``power_w`` when the
+    parameter ``input_mode = "current"`` (cell tests, replay of measured current profiles).
 Outputs (at t + h; none is direct feedthrough)
     ``current_a`` [A] pack current, + discharge; ``voltage_v`` [V] pack terminal voltage;
     ``soc_pct`` [%]; ``ocv_v`` [V] pack open-circuit voltage; ``t_core_c``, ``t_surface_c`` [degC]
@@ -75,6 +77,8 @@ class BatteryPackParams:
         Initial SOC [%].
     t_init_c : float
         Initial uniform cell temperature [degC].
+    input_mode : str
+        ``"power"`` (default: ``power_w`` drives the pack) or ``"current"`` (``current_cmd_a``).
     thermal_model : str
         ``"two_state"`` (seed 2.24-2.25) or ``"fd30"`` (30-node control-volume radial model).
     entropic_heat : bool
@@ -97,6 +101,7 @@ class BatteryPackParams:
     soc_init_pct: float = 50.0
     t_init_c: float = 25.0
     thermal_model: str = "two_state"
+    input_mode: str = "power"
     entropic_heat: bool = True
     temperature_dependent: bool = True
     noise_seed: int = 0
@@ -123,6 +128,8 @@ class BatteryPackParams:
             raise ScenarioError(f"{where}: soc_init_pct must be in [0, 100], got {self.soc_init_pct!r}")
         if self.thermal_model not in ("two_state", "fd30"):
             raise ScenarioError(f"{where}: thermal_model must be 'two_state' or 'fd30', got {self.thermal_model!r}")
+        if self.input_mode not in ("power", "current"):
+            raise ScenarioError(f"{where}: input_mode must be 'power' or 'current', got {self.input_mode!r}")
         for f in ("sigma_current_a", "sigma_voltage_v", "sigma_temperature_c"):
             if getattr(self, f) < 0.0:
                 raise ScenarioError(f"{where}: {f} must be >= 0")
@@ -137,6 +144,7 @@ class BatteryPack(Component):
         inp("power_w", "W", 0.0, "pack power demand, + discharge"),
         inp("h_conv_w_m2k", "W/(m2.K)", 20.0, "convection coefficient at the cell surface"),
         inp("t_ambient_c", "degC", 25.0, "ambient / coolant temperature"),
+        inp("current_cmd_a", "A", 0.0, "pack current command, + discharge (input_mode 'current' only)"),
         out("current_a", "A", 0.0, "pack current, + discharge"),
         out("voltage_v", "V", 0.0, "pack terminal voltage"),
         out("soc_pct", "%", 50.0, "state of charge"),
@@ -235,18 +243,19 @@ class BatteryPack(Component):
 
     def do_step(self, t: float, h: float) -> None:
         u = self.u
-        p_pack = u["power_w"]
+        current_mode = self.params.input_mode == "current"
+        p_pack = u["current_cmd_a"] if current_mode else u["power_w"]
         h_conv = u["h_conv_w_m2k"]
         t_amb = u["t_ambient_c"]
         if not (math.isfinite(p_pack) and math.isfinite(h_conv) and math.isfinite(t_amb)):
             raise SimulationError(f"{self.name}: non-finite input at t={t:.6g} s "
-                                  f"(power_w={p_pack!r}, h_conv_w_m2k={h_conv!r}, t_ambient_c={t_amb!r})")
+                                  f"({'current_cmd_a' if current_mode else 'power_w'}={p_pack!r}, h_conv_w_m2k={h_conv!r}, t_ambient_c={t_amb!r})")
         tab = self.tables
         soc = self.soc
         v1 = self.v1
         v2 = self.v2
         q_as = self._q_as
-        p_cell = p_pack / self._npack
+        p_cell = (p_pack / self._np) if current_mode else (p_pack / self._npack)  # cell current or power
         t_mean = self._t_mean(self.x_th)
         t_look = t_mean if self.params.temperature_dependent else 25.0
         rs, r1, c1, r2, c2 = tab.params(soc, t_look, p_cell)
@@ -256,17 +265,20 @@ class BatteryPack(Component):
         g2 = tau2 * (1.0 - math.exp(-h / tau2))
         a = h * tab.ocv(soc) - v1 * g1 - v2 * g2
         b = h * rs + r1 * (h - g1) + r2 * (h - g2) + 0.5 * h * h * tab.docv_dsoc(soc) / q_as
-        ph = p_cell * h
-        disc = a * a - 4.0 * b * ph
-        if disc >= 0.0 and a > 0.0:
-            i = 2.0 * ph / (a + math.sqrt(disc))
+        if current_mode:
+            i = p_cell
         else:
-            i = 0.5 * a / b if a > 0.0 else 0.0
-            self.clamps += 1
+            ph = p_cell * h
+            disc = a * a - 4.0 * b * ph
+            if disc >= 0.0 and a > 0.0:
+                i = 2.0 * ph / (a + math.sqrt(disc))
+            else:
+                i = 0.5 * a / b if a > 0.0 else 0.0
+                self.clamps += 1
         soc_new = soc - i * h / q_as
         if not (0.0 <= soc_new <= 1.0):
             raise SimulationError(f"{self.name}: SOC left [0, 100] % at t={t + h:.6g} s "
-                                  f"(soc_pct={100.0 * soc_new:.4g}, power_w={p_pack:.6g})")
+                                  f"(soc_pct={100.0 * soc_new:.4g}, pack current {i * self._np:.6g} A)")
         v1n, iv1, iv1s = _cell.rc_integrals(v1, i, r1, c1, h)
         v2n, iv2, iv2s = _cell.rc_integrals(v2, i, r2, c2, h)
         e_chem = q_as * (tab.ocv_integral(soc) - tab.ocv_integral(soc_new))
