@@ -190,6 +190,38 @@ def fuel_economy_soc_sustained(df, cycle_duration_s: float, soc_tolerance_pct: f
     return out
 
 
+def per_cycle_summary(df, cycle_duration_s: float, density_kg_per_l: float = DIESEL_DENSITY_KG_PER_L,
+                      soc_col: str = "battery.soc_pct", fuel_col: str = "engine_generator.fuel_mass_g") -> list[dict]:
+    """Distance, fuel, km/L and SOC change of each complete repetition ``[k T, (k+1) T]`` of the cycle.
+
+    The simpler reading of SOC sustainability (use the cycle whose end SOC returns to its
+    start SOC) can be taken from here; the seed's A.1 figure is
+    :func:`fuel_economy_soc_sustained`.
+    """
+    t = _col(df, "time_s")
+    T = float(cycle_duration_s)
+    dist = cumulative_distance_m(df)
+    fuel = _col(df, fuel_col) if fuel_col in df.columns else None
+    soc = _col(df, soc_col) if soc_col in df.columns else None
+    out = []
+    k = 0
+    eps = 1e-9 * max(1.0, abs(t[-1]))
+    while t[0] + (k + 1) * T <= t[-1] + eps:
+        a, b = t[0] + k * T, min(t[0] + (k + 1) * T, t[-1])
+        row: dict[str, Any] = {"index": k, "start_s": a, "end_s": b,
+                               "distance_km": float(np.interp(b, t, dist) - np.interp(a, t, dist)) / 1000.0}
+        if fuel is not None:
+            fg = float(np.interp(b, t, fuel) - np.interp(a, t, fuel))
+            row["fuel_mass_g"] = fg
+            row["fuel_economy_kmpl"] = row["distance_km"] / (fg / 1000.0 / density_kg_per_l) if fg > 0 else None
+        if soc is not None:
+            row["soc_start_pct"] = float(np.interp(a, t, soc))
+            row["delta_soc_pct"] = float(np.interp(b, t, soc)) - row["soc_start_pct"]
+        out.append(row)
+        k += 1
+    return out
+
+
 def eg_energy_per_fuel_j_per_g(df, name: str = "engine_generator") -> float | None:
     """Average engine-generator electrical energy out per gram of fuel over the run (J/g)."""
     cols = [f"{name}.fuel_energy_j", f"{name}.engine_loss_energy_j", f"{name}.gen_loss_energy_j",
@@ -472,6 +504,9 @@ def compute_metrics(df, params: Mapping | None = None) -> dict:
     else:
         m["fuel_economy_soc_sustained_kmpl"] = None
         notes.append("A.1 fuel economy skipped: needs cycle duration, battery.soc_pct, engine_generator.fuel_mass_g")
+
+    if T is not None and m["distance_km"] is not None:
+        m["per_cycle"] = per_cycle_summary(df, T, density)
 
     if m["distance_km"] is not None and "engine_generator.fuel_mass_g" in df.columns:
         c = fuel_economy_dsoc_corrected(df, density, opts.get("pack_capacity_ah"), opts.get("pack_nominal_voltage_v"),

@@ -55,6 +55,18 @@ def test_windows_are_the_roots_and_economy_is_the_mean_of_ratios():
     assert abs(r["fuel_economy_kmpl"] - 2.0 / (0.440 / RHO)) > 1e-2
 
 
+def test_per_cycle_summary():
+    t = np.arange(0.0, 200.0 + 0.5, 0.5)
+    df = frame(t, vehicle__speed_mps=np.where(t < 100, 10.0, 5.0), engine_generator__fuel_mass_g=2.0 * t,
+               battery__soc_pct=60.0 - 0.01 * t)
+    rows = M.per_cycle_summary(df, 100.0)
+    assert len(rows) == 2
+    # first cycle: speed steps 10 -> 5 m/s at t = 100, trapezoid shares the step sample: 995 m + 2.5 m
+    assert rows[0]["distance_km"] == pytest.approx((99.5 * 10 + 0.5 * 7.5) / 1000.0)
+    assert rows[1]["fuel_mass_g"] == pytest.approx(200.0) and rows[1]["delta_soc_pct"] == pytest.approx(-1.0)
+    assert rows[1]["fuel_economy_kmpl"] == pytest.approx(rows[1]["distance_km"] / (0.2 / RHO))
+
+
 def test_no_sustainable_window_gives_none_and_a_note():
     t = np.arange(0.0, 200.0 + 1.0, 1.0)
     df = frame(t, vehicle__speed_mps=np.full_like(t, 10.0), engine_generator__fuel_mass_g=t,
