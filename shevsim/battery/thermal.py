@@ -524,23 +524,25 @@ def analytical_tf(p: ThermalParams, h_w_m2k: float, s) -> np.ndarray:
     sc = np.exp(-np.abs(z.real))
     hk = h / k
     den = zeta * i1 + hk * i0  # scaled by exp(-|Re z|)
-    g = a / (k * V * s)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = a / (k * V * s)
     out = np.empty((s.size, 2, 2), dtype=complex)
-    out[:, 0, 0] = g * (zeta * i1 + hk * (i0 - sc)) / den
-    out[:, 0, 1] = hk * sc / den
-    out[:, 1, 0] = g * zeta * i1 / den
-    out[:, 1, 1] = hk * i0 / den
-    # small |z|: series avoids cancellation in (I0 - 1) and zeta I1 / s
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out[:, 0, 0] = g * (zeta * i1 + hk * (i0 - sc)) / den
+        out[:, 0, 1] = hk * sc / den
+        out[:, 1, 0] = g * zeta * i1 / den
+        out[:, 1, 1] = hk * i0 / den
+    # small |z| (including s = 0): series with the 1/s cancelled analytically
     small = np.abs(z) < 1e-3
     if np.any(small):
-        zs = z[small]
-        z2 = zs * zs
+        z2 = s[small] * R * R / a                  # (zeta R)^2
         i0m1 = z2 / 4.0 + z2 * z2 / 64.0          # I0 - 1
         zi1 = (z2 / 2.0 + z2 * z2 / 16.0) / R     # zeta I1(zeta R)
         dens = zi1 + hk * (1.0 + i0m1)
-        gs = g[small]
-        out[small, 0, 0] = gs * (zi1 + hk * i0m1) / dens
+        g_zi1 = R / (k * V) * (0.5 + z2 / 16.0)           # alpha/(k V s) * zeta I1
+        g_i0m1 = R * R / (k * V) * (0.25 + z2 / 64.0)     # alpha/(k V s) * (I0 - 1)
+        out[small, 0, 0] = (g_zi1 + hk * g_i0m1) / dens
         out[small, 0, 1] = hk / dens
-        out[small, 1, 0] = gs * zi1 / dens
+        out[small, 1, 0] = g_zi1 / dens
         out[small, 1, 1] = hk * (1.0 + i0m1) / dens
     return out

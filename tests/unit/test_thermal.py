@@ -45,6 +45,13 @@ def test_analytical_static_gain_and_printed_j0_sign(h):
     p = P21
     H = analytical_tf(p, h, np.array([1e-14j]))[0]
     ss = steady_state(p, 1.0, 0.0, h)
+    H0 = analytical_tf(p, h, np.array([0.0]))[0]          # exactly s = 0
+    assert H0[0, 0].real == pytest.approx(ss["t_core_c"], rel=1e-12)
+    assert H0[1, 0].real == pytest.approx(ss["t_surface_c"], rel=1e-12)
+    # series branch and Bessel branch agree where they meet (|zeta R| ~ 1e-3)
+    s_edge = 1e-6 * p.alpha_m2_s / p.radius_m ** 2 * 1j      # |zeta R| = 1e-3
+    Hb = analytical_tf(p, h, np.array([s_edge * 0.99, s_edge * 1.01]))
+    assert np.allclose(Hb[0], Hb[1], rtol=1e-6)
     assert H[0, 0].real == pytest.approx(ss["t_core_c"], rel=1e-6)
     assert H[1, 0].real == pytest.approx(ss["t_surface_c"], rel=1e-6)
     assert H[0, 1].real == pytest.approx(1.0, rel=1e-6)
