@@ -1,9 +1,13 @@
 """slave.py - the runtime inside FMUs exported by :mod:`shevsim.fmu.export`.
 
 An exported FMU is a pythonfmu (FMI 2.0) or pythonfmu3 (FMI 3.0) FMU whose
-slave script is three lines: a subclass of :func:`fmi2_base` or
-:func:`fmi3_base` naming the native component class (``module:Class``)
-and the JSON file (in the FMU's ``resources/``) with its parameter values.
+slave script (:func:`slave_script`) defines one class deriving *directly and
+only* from ``Fmi2Slave``/``Fmi3Slave`` whose methods delegate to a
+:class:`Runtime` (pythonfmu's binary crashes on the second instantiation when
+the slave class inherits from a class defined in another module, so no
+shared base class is used). The runtime reads the component class
+(``module:Class``) and its parameter values from a JSON file in the FMU's
+``resources/``.
 The FMU therefore imports ``shevsim`` (and numpy/scipy as the component
 needs) from the Python that executes it: **shevsim must be installed in that
 Python** (pythonfmu FMUs always need a Python environment).
@@ -25,7 +29,6 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import json
-import math
 from pathlib import Path
 from typing import Any
 from xml.etree.ElementTree import Element, SubElement
@@ -54,213 +57,183 @@ def _numeric_params(params: Any) -> dict[str, float]:
     return out
 
 
-class _ShevsimRuntime:
-    """Shared logic of the FMI 2 and FMI 3 slaves (mixin; the pythonfmu base comes second)."""
+class Runtime:
+    """Native component behind a pythonfmu/pythonfmu3 slave (``fmi`` = 2 or 3)."""
 
-    COMPONENT: str = ""
-    PARAMS_FILE: str = PARAMS_JSON
-
-    def _setup_component(self) -> None:
-        resources = Path(self.resources) if self.resources else Path(".")
-        spec = json.loads((resources / self.PARAMS_FILE).read_text())
-        self._cls = import_class(spec.get("component", self.COMPONENT))
+    def __init__(self, slave, fmi: int):
+        self.slave = slave
+        self.fmi = fmi
+        resources = Path(slave.resources) if slave.resources else Path(".")
+        spec = json.loads((resources / PARAMS_JSON).read_text())
+        self.cls = import_class(spec["component"])
         values = dict(spec.get("params") or {})
         for key in spec.get("resource_files", []):   # *_file params shipped in resources/
             values[key] = str(resources / values[key])
-        self._param_values = values
-        self._param_overrides: dict[str, Any] = {}
-        self._t0 = 0.0
-        self._time = 0.0
-        self.comp = self._make_component()
-        self._numeric = _numeric_params(self.comp.params)
-        self._param_types = {f.name: type(getattr(self.comp.params, f.name))
-                             for f in dataclasses.fields(self.comp.params)} if self._numeric else {}
+        self.param_values = values
+        self.overrides: dict[str, Any] = {}
+        self.t0 = 0.0
+        self.time = 0.0
+        self.comp = self.make_component()
+        self.numeric = _numeric_params(self.comp.params)
+        self.param_types = ({f.name: type(getattr(self.comp.params, f.name))
+                             for f in dataclasses.fields(self.comp.params)} if self.numeric else {})
+        slave.description = f"shevsim native component {spec['component']}"
+        vs = self.comp.variables()
+        self.inputs = [v for v in vs if v.causality == "input"]
+        self.outputs = [v for v in vs if v.causality == "output"]
+        self.units = {v.name: canonical_unit(v.unit) for v in self.inputs + self.outputs
+                      if canonical_unit(v.unit) != "1"}
+        self._register()
 
-    def _make_component(self):
-        cls = self._cls
+    # -- component ------------------------------------------------------------------
+    def make_component(self):
+        cls = self.cls
         params = None
         if cls.Params is not None:
-            values = {**self._param_values, **self._param_overrides}
-            params = make_params(cls.Params, values, f"FMU {self.instance_name} parameters")
-        comp = cls(self.instance_name, params)
-        return comp
+            params = make_params(cls.Params, {**self.param_values, **self.overrides},
+                                 f"FMU {self.slave.instance_name} parameters")
+        return cls(self.slave.instance_name, params)
 
-    def _set_param(self, name: str, value: float) -> None:
-        typ = self._param_types.get(name, float)
-        if typ is bool:
-            value = bool(value)
-        elif typ is int:
-            value = int(round(value))
-        else:
-            value = float(value)
-        self._param_overrides[name] = value
-        self._numeric[name] = float(value)
+    def set_param(self, name: str, value: float) -> None:
+        typ = self.param_types.get(name, float)
+        value = bool(value) if typ is bool else int(round(value)) if typ is int else float(value)
+        self.overrides[name] = value
+        self.numeric[name] = float(value)
 
-    def _ports(self):
-        vs = self.comp.variables()
-        return ([v for v in vs if v.causality == "input"], [v for v in vs if v.causality == "output"])
+    def get_u(self, name):
+        return self.comp.u[name]
 
-    def _initialize(self) -> None:
-        u = dict(self.comp.u)
-        if self._param_overrides:
-            self.comp = self._make_component()
+    def set_u(self, name, value):
+        self.comp.u[name] = value
+
+    def get_y(self, name):
+        return self.comp.y[name]
+
+    # -- FMI entry points -------------------------------------------------------------
+    def setup_experiment(self, start_time) -> None:
+        self.t0 = float(start_time or 0.0)
+
+    def initialize(self) -> None:
+        if self.overrides:
+            u = dict(self.comp.u)
+            self.comp = self.make_component()
             self.comp.u.update(u)
-        self.comp.initialize(self._t0)
-        self._time = self._t0
+        self.comp.initialize(self.t0)
+        self.time = self.t0
 
-    # -- XML post-processing shared by both versions --------------------------------
-    def _units_and_vars(self):
-        units = {}
-        inputs, outputs = self._ports()
-        for v in inputs + outputs:
-            u = canonical_unit(v.unit)
-            if u != "1":
-                units[v.name] = u
-        return units
+    def do_step(self, t, h) -> bool:
+        self.comp.do_step(t, h)
+        self.time = t + h
+        return True
 
+    def terminate(self) -> None:
+        self.comp.terminate()
 
-def fmi2_base():
-    """The FMI 2.0 slave base class (pythonfmu ``Fmi2Slave`` + the shevsim runtime); set ``COMPONENT``."""
-    from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+    def get_state(self):
+        return {"component": self.comp.get_state(), "time": self.time}
 
-    class Slave2(_ShevsimRuntime, Fmi2Slave):
-        author = "shevsim"
+    def set_state(self, state) -> None:
+        self.comp.set_state(state["component"])
+        self.time = state["time"]
 
-        def __init__(self, **kwargs):
-            Fmi2Slave.__init__(self, **kwargs)
-            self._setup_component()
-            self.description = f"shevsim native component {self._cls.__module__}:{self._cls.__name__}"
-            for name, val in self._numeric.items():
-                self.register_variable(Real(name, causality=Fmi2Causality.parameter,
-                                            variability=Fmi2Variability.fixed,
-                                            getter=lambda n=name: self._numeric[n],
-                                            setter=lambda v, n=name: self._set_param(n, v)))
-            inputs, outputs = self._ports()
-            u, y = self.comp.u, self.comp.y
-            for v in inputs:
-                self.register_variable(Real(v.name, causality=Fmi2Causality.input, description=v.description,
-                                            getter=lambda n=v.name: self.comp.u[n],
-                                            setter=lambda x, n=v.name: self.comp.u.__setitem__(n, x)))
-            for v in outputs:
-                self.register_variable(Real(v.name, causality=Fmi2Causality.output, description=v.description,
-                                            getter=lambda n=v.name: self.comp.y[n]))
+    # -- variables --------------------------------------------------------------------
+    def _register(self) -> None:
+        sl = self.slave
+        if self.fmi == 2:
+            from pythonfmu import Fmi2Causality as C, Fmi2Variability as V, Real as F
+            kw = {}
+        else:
+            from pythonfmu3 import Fmi3Causality as C, Fmi3Variability as V, Float64 as F
+            from pythonfmu3.unit import Unit
+            sl.register_units([Unit(u) for u in sorted(set(self.units.values()) | {"s"})])
+            sl.register_variable(F("time", causality=C.independent, variability=V.continuous, unit="s",
+                                   getter=lambda: self.time))
+        for name in self.numeric:
+            sl.register_variable(F(name, causality=C.parameter, variability=V.fixed,
+                                   getter=lambda n=name: self.numeric[n],
+                                   setter=lambda v, n=name: self.set_param(n, v)))
 
-        def setup_experiment(self, start_time, stop_time=None, tolerance=None):
-            self._t0 = float(start_time or 0.0)
+        def unit(n):
+            return {} if self.fmi == 2 else {"unit": self.units.get(n)}
 
-        def exit_initialization_mode(self):
-            self._initialize()
+        for v in self.inputs:
+            sl.register_variable(F(v.name, causality=C.input, description=v.description, **unit(v.name),
+                                   getter=lambda n=v.name: self.get_u(n),
+                                   setter=lambda x, n=v.name: self.set_u(n, x)))
+        for v in self.outputs:
+            sl.register_variable(F(v.name, causality=C.output, description=v.description, **unit(v.name),
+                                   getter=lambda n=v.name: self.get_y(n)))
 
-        def do_step(self, current_time, step_size):
-            self.comp.do_step(current_time, step_size)
-            return True
-
-        def terminate(self):
-            self.comp.terminate()
-
-        def _get_fmu_state(self):
-            return {"component": self.comp.get_state(), "overrides": dict(self._param_overrides)}
-
-        def _set_fmu_state(self, state):
-            self.comp.set_state(state["component"])
-
-        def to_xml(self, model_options=dict()):
-            root = Fmi2Slave.to_xml(self, model_options)
-            units = self._units_and_vars()
-            # units: <UnitDefinitions> right after <CoSimulation>, unit attribute on <Real>
-            if units:
-                ud = Element("UnitDefinitions")
-                for name in sorted(set(units.values())):
-                    SubElement(ud, "Unit", attrib={"name": name})
-                root.insert(list(root).index(root.find("CoSimulation")) + 1, ud)
-            index = {}
-            for i, sv in enumerate(root.find("ModelVariables").findall("ScalarVariable"), start=1):
-                index[sv.get("name")] = i
-                if sv.get("name") in units:
-                    sv.find("Real").set("unit", units[sv.get("name")])
-            inputs, outputs = self._ports()
-            deps = {v.name: v.depends_on for v in outputs}
-            structure = root.find("ModelStructure")
-            out_node = structure.find("Outputs")
-            if out_node is not None:
-                names = {i: n for n, i in index.items()}
-                for unk in out_node.findall("Unknown"):
-                    name = names[int(unk.get("index"))]
-                    unk.set("dependencies", " ".join(str(index[d]) for d in deps.get(name, ())))
-                init = SubElement(structure, "InitialUnknowns")
-                for unk in out_node.findall("Unknown"):
-                    SubElement(init, "Unknown", attrib={"index": unk.get("index")})
-            return root
-
-    return Slave2
-
-
-def fmi3_base():
-    """The FMI 3.0 slave base class (pythonfmu3 ``Fmi3Slave`` + the shevsim runtime); set ``COMPONENT``."""
-    from pythonfmu3 import Fmi3Causality, Fmi3Slave, Fmi3Variability, Float64
-    from pythonfmu3.unit import Unit
-
-    class Slave3(_ShevsimRuntime, Fmi3Slave):
-        author = "shevsim"
-
-        def __init__(self, **kwargs):
-            Fmi3Slave.__init__(self, **kwargs)
-            self._setup_component()
-            self.description = f"shevsim native component {self._cls.__module__}:{self._cls.__name__}"
-            units = self._units_and_vars()
-            self.register_units([Unit(u) for u in sorted(set(units.values()) | {"s"})])
-            self.register_variable(Float64("time", causality=Fmi3Causality.independent,
-                                           variability=Fmi3Variability.continuous, unit="s",
-                                           getter=lambda: self._time))
-            for name, val in self._numeric.items():
-                self.register_variable(Float64(name, causality=Fmi3Causality.parameter,
-                                               variability=Fmi3Variability.fixed,
-                                               getter=lambda n=name: self._numeric[n],
-                                               setter=lambda v, n=name: self._set_param(n, v)))
-            inputs, outputs = self._ports()
-            for v in inputs:
-                self.register_variable(Float64(v.name, causality=Fmi3Causality.input, description=v.description,
-                                               unit=units.get(v.name),
-                                               getter=lambda n=v.name: self.comp.u[n],
-                                               setter=lambda x, n=v.name: self.comp.u.__setitem__(n, x)))
-            for v in outputs:
-                self.register_variable(Float64(v.name, causality=Fmi3Causality.output, description=v.description,
-                                               unit=units.get(v.name),
-                                               getter=lambda n=v.name: self.comp.y[n]))
-
-        def enter_initialization_mode(self):
-            pass
-
-        def setup_experiment(self, start_time, *args, **kwargs):
-            self._t0 = float(start_time or 0.0)
-
-        def exit_initialization_mode(self):
-            self._initialize()
-
-        def do_step(self, current_time, step_size):
-            self.comp.do_step(current_time, step_size)
-            self._time = current_time + step_size
-            return True
-
-        def terminate(self):
-            self.comp.terminate()
-
-        def _get_fmu_state(self):
-            return {"component": self.comp.get_state(), "time": self._time}
-
-        def _set_fmu_state(self, state):
-            self.comp.set_state(state["component"])
-            self._time = state["time"]
-
-        def to_xml(self, model_options=dict()):
-            root = Fmi3Slave.to_xml(self, model_options)
-            inputs, outputs = self._ports()
-            vr = {v.name: v.value_reference for v in self.vars.values()}
-            deps = {v.name: v.depends_on for v in outputs}
+    def fix_xml(self, root):
+        """Add what pythonfmu does not write: units (FMI 2), dependencies, InitialUnknowns (FMI 2)."""
+        deps = {v.name: v.depends_on for v in self.outputs}
+        structure = root.find("ModelStructure")
+        if self.fmi == 3:
+            vr = {v.name: v.value_reference for v in self.slave.vars.values()}
             names = {str(r): n for n, r in vr.items()}
-            for node in root.find("ModelStructure").findall("Output"):
-                name = names[node.get("valueReference")]
-                node.set("dependencies", " ".join(str(vr[d]) for d in deps.get(name, ())))
+            for node in structure.findall("Output"):
+                node.set("dependencies", " ".join(str(vr[d]) for d in deps.get(names[node.get("valueReference")], ())))
             return root
+        if self.units:
+            ud = Element("UnitDefinitions")
+            for name in sorted(set(self.units.values())):
+                SubElement(ud, "Unit", attrib={"name": name})
+            root.insert(list(root).index(root.find("CoSimulation")) + 1, ud)
+        index = {}
+        for i, sv in enumerate(root.find("ModelVariables").findall("ScalarVariable"), start=1):
+            index[sv.get("name")] = i
+            if sv.get("name") in self.units:
+                sv.find("Real").set("unit", self.units[sv.get("name")])
+        out_node = structure.find("Outputs")
+        if out_node is not None:
+            names = {i: n for n, i in index.items()}
+            for unk in out_node.findall("Unknown"):
+                unk.set("dependencies", " ".join(str(index[d]) for d in deps.get(names[int(unk.get("index"))], ())))
+            init = SubElement(structure, "InitialUnknowns")
+            for unk in out_node.findall("Unknown"):
+                SubElement(init, "Unknown", attrib={"index": unk.get("index")})
+        return root
 
-    return Slave3
+
+_TEMPLATE = '''"""FMU slave generated by shevsim.fmu.export for {target}.
+
+Runs the native shevsim component; needs shevsim installed in the executing Python.
+"""
+from {pkg} import {base}
+from shevsim.fmu.slave import Runtime
+
+
+class {model}({base}):
+    author = "shevsim"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self._rt = Runtime(self, {fmi})
+
+    def setup_experiment(self, start_time, *args, **kwargs):
+        self._rt.setup_experiment(start_time)
+
+    def exit_initialization_mode(self):
+        self._rt.initialize()
+
+    def do_step(self, current_time, step_size):
+        return self._rt.do_step(current_time, step_size)
+
+    def terminate(self):
+        self._rt.terminate()
+
+    def _get_fmu_state(self):
+        return self._rt.get_state()
+
+    def _set_fmu_state(self, state):
+        self._rt.set_state(state)
+
+    def to_xml(self, model_options=dict()):
+        return self._rt.fix_xml(super().to_xml(model_options))
+'''
+
+
+def slave_script(target: str, model: str, fmi: int) -> str:
+    """Source of the pythonfmu (``fmi=2``) / pythonfmu3 (``fmi=3``) slave script for ``target``."""
+    pkg, base = ("pythonfmu", "Fmi2Slave") if fmi == 2 else ("pythonfmu3", "Fmi3Slave")
+    return _TEMPLATE.format(target=target, model=model, fmi=fmi, pkg=pkg, base=base)
