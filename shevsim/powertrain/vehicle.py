@@ -20,9 +20,9 @@ constant over the step and its work is ``W_i = F_i (v0 + v1)/2 h``; then
     traction - brake - rolling - aero - grade = Delta KE
 
 closes to round-off on any step size. When the update would give ``v1 < 0`` the vehicle stops
-inside the step: ``v1 = 0`` and the dissipative forces (brake + rolling) are scaled down to the
-value that stops it exactly (if gravity alone stops it, the grade force is scaled instead), so
-the balance still closes.
+inside the step, at ``t_s = M v0 / R`` with ``R`` the net retarding force, after ``v0 t_s / 2``
+metres; each force works over that distance (``sum W = -M v0^2 / 2`` exactly), and it is then
+held at rest. The returned works are what the component uses for its distance too.
 """
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ G_MPS2 = 9.80665
 
 def step_vehicle(v0: float, f_prop: float, f_brk: float, grade_rad: float, h: float,
                  mass_kg: float, c_aero: float, f_roll_coeff: float,
-                 g: float = G_MPS2) -> tuple[float, float, float, float, float, float]:
+                 g: float = G_MPS2) -> tuple[float, float, float, float, float, float, float]:
     """Advance the point mass one step.
 
     Parameters
@@ -53,8 +53,8 @@ def step_vehicle(v0: float, f_prop: float, f_brk: float, grade_rad: float, h: fl
 
     Returns
     -------
-    v1, w_prop, w_brk, w_roll, w_aero, w_grade : float
-        End speed [m/s] and the work of each force over the step [J] (propulsion positive when
+    v1, dist, w_prop, w_brk, w_roll, w_aero, w_grade : float
+        End speed [m/s], distance covered [m] and the work of each force over the step [J] (propulsion positive when
         it accelerates; brake, rolling, aero, grade as energy taken from the vehicle).
     """
     f_brk = max(f_brk, 0.0)
@@ -64,26 +64,21 @@ def step_vehicle(v0: float, f_prop: float, f_brk: float, grade_rad: float, h: fl
         v0 = 0.0
         drive = f_prop - f_g
         if drive <= f_brk + f_rr:
-            return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+            return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
         v1 = h * (drive - f_brk - f_rr) / mass_kg
         f_a = 0.0
     else:
         v1 = (mass_kg * v0 + h * (f_prop - f_brk - f_rr - f_g)) / (mass_kg + h * c_aero * v0)
         f_a = c_aero * v0 * v1
         if v1 < 0.0:
-            v1 = 0.0
-            f_a = 0.0
-            need = mass_kg * v0 / h + f_prop - f_g       # retarding force that stops it exactly
-            diss = f_brk + f_rr
-            if need >= 0.0:
-                s = need / diss if diss > 0.0 else 0.0
-                f_brk *= s
-                f_rr *= s
-            else:                                          # gravity alone stops it: hold
-                f_brk = f_rr = 0.0
-                f_g = mass_kg * v0 / h + f_prop
+            # stops inside the step: net retarding force R > M v0 / h (aero neglected in this last
+            # fraction of a step); it stops after t_s = M v0 / R < h, having covered v0 t_s / 2,
+            # and is held at rest for the remainder (no work)
+            r = -(f_prop - f_brk - f_rr - f_g)
+            dist = 0.5 * v0 * (mass_kg * v0 / r)
+            return 0.0, dist, f_prop * dist, f_brk * dist, f_rr * dist, 0.0, f_g * dist
     dist = 0.5 * (v0 + v1) * h
-    return v1, f_prop * dist, f_brk * dist, f_rr * dist, f_a * dist, f_g * dist
+    return v1, dist, f_prop * dist, f_brk * dist, f_rr * dist, f_a * dist, f_g * dist
 
 
 def road_load_n(v: float, mass_kg: float, c_aero: float, f_roll_coeff: float, grade_rad: float = 0.0,
