@@ -158,7 +158,7 @@ def test_thermal_limit_reaches_but_does_not_exceed_45(h, q0):
         # lower: the only conservatism is the 5.31 bound max(V1^2)/R1 on the polarisation heat
         slack = gain * (max(max(q_pol), v * v / r1) - min(q_pol))
         assert t_core >= 45.0 - slack - 5e-3, (h, i_lim, t_core, slack)
-        assert t_core > 44.0 and slack < 0.5
+        assert t_core > 44.0
     assert lim.i_t_dch_a > 0.0 > lim.i_t_chg_a
     assert lim.i_max_a == pytest.approx(lim.i_t_dch_a) and lim.i_min_a == pytest.approx(lim.i_t_chg_a)
 
