@@ -1,0 +1,178 @@
+"""cli.py - ``shevsim study ...``: a dispatch table of study sub-commands.
+
+    shevsim study tradeoff SCENARIO --rates-kwps 30 25 19.3 15 10 [--workers N | --scheduler ADDR] [--out DIR]
+    shevsim study powerrate-map SCENARIO [--generations G --population P --seed S --workers N
+                                          --scheduler ADDR --out DIR --cache FILE --max-evaluations K]
+    shevsim study thermal [--out DIR]        # battery thermal-model verification
+    shevsim study bms ...                    # (not yet available)
+
+Add a study by adding ``name: (help, handler)`` to :data:`STUDIES`; a handler takes the remaining
+argv and returns an exit code. Options shared by the evaluation studies: ``--workers`` (0 = serial;
+default 2 = embedded Dask LocalCluster), ``--scheduler`` (existing Dask cluster), ``--cache``
+(SQLite evaluation cache, default ``OUT/cache.sqlite``: rerunning the same command resumes),
+``--stop-s`` (shorter runs), ``--set comp.param=value`` (applied to every run), ``--synthetic``
+(analytic surrogate instead of the scenario: a dry run of the machinery).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..core.errors import ShevsimError
+
+
+def _common(ap: argparse.ArgumentParser) -> None:
+    ap.add_argument("scenario", nargs="?", help="scenario TOML (its MPC supervisor component: --supervisor)")
+    ap.add_argument("--workers", type=int, default=2, help="Dask worker processes (0 = serial; default 2)")
+    ap.add_argument("--scheduler", help="address of an existing Dask scheduler (e.g. tcp://host:8786)")
+    ap.add_argument("--out", help="output folder")
+    ap.add_argument("--cache", help="SQLite evaluation cache (default OUT/cache.sqlite)")
+    ap.add_argument("--supervisor", default="supervisor", help="name of the supervisor component in the scenario")
+    ap.add_argument("--stop-s", type=float, help="override the scenario stop time (s)")
+    ap.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE",
+                    help="override applied to every run")
+    ap.add_argument("--edges-kw", type=float, nargs="+", help="power partition edges (kW), first 0, last P_max")
+    ap.add_argument("--max-evaluations", type=int, help="stop after this many new evaluations (resume later)")
+    ap.add_argument("--synthetic", action="store_true", help="use the analytic surrogate (no simulation)")
+    ap.add_argument("--no-plots", action="store_true")
+    ap.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _problem(a, name: str):
+    from .problem import ScenarioProblem, SyntheticProblem
+    if a.synthetic:
+        return SyntheticProblem(), Path(a.out or f"results/study_{name}_synthetic")
+    if not a.scenario:
+        raise ShevsimError(f"study {name}: a SCENARIO file is needed (or --synthetic)")
+    p = Path(a.scenario)
+    if not p.is_file():
+        raise ShevsimError(f"{p}: scenario file not found")
+    from ..core.scenario import parse_value
+    extra = {}
+    for s in a.set:
+        if "=" not in s or "." not in s.split("=", 1)[0]:
+            raise ShevsimError(f"--set '{s}': expected component.param=value")
+        k, v = s.split("=", 1)
+        extra[k.strip()] = parse_value(v.strip())
+    from .evaluate import _freeze
+    prob = ScenarioProblem(str(p.resolve()), a.supervisor, a.stop_s, tuple(sorted((k, _freeze(v)) for k, v in extra.items())))
+    prob.item((0.0, 1.0), None).key()          # fail early on a malformed scenario
+    return prob, Path(a.out or f"results/study_{name}_{p.stem}")
+
+
+def _runner(a, out: Path):
+    from .cache import EvaluationCache
+    from .parallel import StudyRunner
+    cache = EvaluationCache(a.cache or out / "cache.sqlite")
+    return cache, StudyRunner(cache, workers=a.workers, scheduler=a.scheduler, progress=not a.quiet,
+                              max_new_evaluations=a.max_evaluations)
+
+
+def _edges(a):
+    from .problem import DEFAULT_EDGES_W
+    return DEFAULT_EDGES_W if not a.edges_kw else tuple(1e3 * x for x in a.edges_kw)
+
+
+def cmd_tradeoff(argv) -> int:
+    from .tradeoff import run_tradeoff
+    ap = argparse.ArgumentParser(prog="shevsim study tradeoff",
+                                 description="fuel economy and soot vs a constant max engine power rate (seed Fig. A.2)")
+    _common(ap)
+    ap.add_argument("--rates-kwps", "--rates", type=float, nargs="+",
+                    default=[30, 27.5, 25, 22.5, 20, 19.3, 17.5, 15, 12.5, 10, 7.5, 5],
+                    help="constant max power rates to sweep (kW/s)")
+    ap.add_argument("--fe-loss-pct", type=float, default=0.5, help="fuel-economy loss accepted (%%, seed 0.5)")
+    a = ap.parse_args(argv)
+    problem, out = _problem(a, "tradeoff")
+    cache, runner = _runner(a, out)
+    with cache, runner:
+        run_tradeoff(problem, runner, [1e3 * r for r in a.rates_kwps], out, _edges(a),
+                     fe_loss_max_frac=a.fe_loss_pct / 100, plots=not a.no_plots)
+    return 0
+
+
+def cmd_powerrate_map(argv) -> int:
+    from .ga import GAConfig
+    from .powerrate_map import MapStudyConfig, run_powerrate_map
+    from .problem import DEFAULT_LEVELS_WPS
+    ap = argparse.ArgumentParser(prog="shevsim study powerrate-map",
+                                 description="power-rate constraint map: GA + narrowed exhaustive search (seed A.3)")
+    _common(ap)
+    ap.add_argument("--levels-kwps", type=float, nargs="+", help="discrete rate levels (kW/s)")
+    ap.add_argument("--generations", type=int, default=50)
+    ap.add_argument("--population", type=int, default=30)
+    ap.add_argument("--crossover", type=float, default=0.8, help="crossover probability")
+    ap.add_argument("--mutation", type=float, default=0.01, help="mutation probability per gene")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--fe-loss-pct", type=float, default=0.4, help="fuel-economy loss allowed (%%, seed 0.4)")
+    ap.add_argument("--top-k", type=int, default=10, help="best GA maps that set the narrowed bounds")
+    ap.add_argument("--max-cases", type=int, default=1000, help="cap on the exhaustive-search cases")
+    a = ap.parse_args(argv)
+    problem, out = _problem(a, "powerrate_map")
+    levels = DEFAULT_LEVELS_WPS if not a.levels_kwps else tuple(1e3 * x for x in a.levels_kwps)
+    cfg = MapStudyConfig(edges_w=_edges(a), levels_wps=levels, fe_loss_max_frac=a.fe_loss_pct / 100,
+                         ga=GAConfig(population=a.population, generations=a.generations,
+                                     crossover_prob=a.crossover, mutation_prob=a.mutation, seed=a.seed),
+                         top_k=a.top_k, max_cases=a.max_cases)
+    cache, runner = _runner(a, out)
+    with cache, runner:
+        run_powerrate_map(problem, runner, cfg, out, plots=not a.no_plots)
+    return 0
+
+
+def cmd_thermal(argv) -> int:
+    ap = argparse.ArgumentParser(prog="shevsim study thermal", description="battery thermal-model verification")
+    ap.add_argument("--out", default="results/study_thermal")
+    a = ap.parse_args(argv)
+    from ..battery.verification import run_thermal_verification
+    run_thermal_verification(Path(a.out))
+    print(f"thermal verification written to {a.out}")
+    return 0
+
+
+def cmd_bms(argv) -> int:
+    raise ShevsimError("study bms: not available yet (the BMS estimation studies register here when they land)")
+
+
+#: study name -> (one-line help, handler(argv) -> exit code). Extend here.
+STUDIES = {
+    "tradeoff": ("fuel/soot vs constant max engine power rate (Fig. A.2)", cmd_tradeoff),
+    "powerrate-map": ("power-rate constraint map optimisation, GA + exhaustive search (A.3)", cmd_powerrate_map),
+    "thermal": ("battery thermal-model verification (Ch. II)", cmd_thermal),
+    "bms": ("BMS estimation and power-capability studies (Ch. III-V)", cmd_bms),
+}
+
+
+def main_study(argv=None) -> int:
+    """Entry point of ``shevsim study NAME ...``; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print("usage: shevsim study {" + ",".join(STUDIES) + "} ...\n")
+        for k, (h, _) in STUDIES.items():
+            print(f"  {k:15s} {h}")
+        return 0 if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name not in STUDIES:
+        import difflib
+        best = difflib.get_close_matches(name, list(STUDIES), n=1)
+        print(f"shevsim study: unknown study '{name}'" + (f" (did you mean '{best[0]}'?)" if best else
+                                                          f" (known: {', '.join(STUDIES)})"), file=sys.stderr)
+        return 2
+    from .parallel import StudyInterrupted
+    try:
+        return STUDIES[name][1](rest)
+    except StudyInterrupted as exc:
+        print(f"shevsim study {name}: stopped: {exc}", file=sys.stderr)
+        return 3
+    except KeyboardInterrupt:
+        print(f"shevsim study {name}: interrupted; finished evaluations are in the cache - rerun to resume",
+              file=sys.stderr)
+        return 130
+    except (ShevsimError, ValueError) as exc:
+        print(f"shevsim study {name}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main_study())

@@ -1,0 +1,278 @@
+"""evaluate.py - one study evaluation: (scenario, parameter overrides) -> metrics, with a deterministic key.
+
+An *evaluation item* is a small, picklable object with three methods:
+
+``key() -> str``
+    A deterministic SHA-256 hex digest of everything that decides the result: for a scenario
+    evaluation the scenario file text, the contents of every parameter file it resolves (and of the
+    data files those name or sit beside, e.g. map CSVs and the cycle CSV), the overrides, the stop
+    time, the shevsim version and a hash of the shevsim package sources (:func:`code_version`).
+    Change any of them and the cache (``cache.py``) no longer matches, so a stale result is never
+    reused.
+``inputs() -> dict``
+    A JSON-serialisable description stored with the cached result.
+``run() -> dict``
+    Perform the evaluation and return a flat ``{name: float | str}`` dict of outputs. Outputs must
+    depend on the inputs only (no wall time in them), so a parallel run equals a serial one.
+
+:class:`Evaluation` is the real one: ``load_scenario`` + ``simulate`` + ``compute_run_metrics``
+(nothing saved, no plots). Its outputs are the scenario metrics (``fuel_economy_kmpl`` with the
+SOC-sustainable definition of seed A.1, ``soot_g_per_km``, ... as computed by
+``shevsim.metrics.compute_metrics``), ``termination`` and, on request, final values of signals
+(``final:component.port``). A failing run (:class:`~shevsim.core.errors.ShevsimError` or any other
+exception raised by the model) is returned as ``{"error": message}`` so one bad point does not end
+a campaign; studies treat it as infeasible. Because the code version is in the key, a failure
+caused by a bug is not reused once the code changes.
+
+Worker processes must not oversubscribe the 2 cores with BLAS threads: :func:`limit_threads` sets
+``OPENBLAS_NUM_THREADS``/``MKL_NUM_THREADS``/``OMP_NUM_THREADS``/... to 1 (the parallel runner also
+passes them in the worker environment, where they take effect before NumPy loads).
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import math
+import os
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+              "NUMEXPR_NUM_THREADS": "1", "VECLIB_MAXIMUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
+
+_PKG_ROOT = Path(__file__).resolve().parents[1]          # .../shevsim
+_MAX_HASH_BYTES = 64 * 1024 * 1024
+
+
+def limit_threads() -> None:
+    """Set the single-thread BLAS/OpenMP environment variables in this process (idempotent)."""
+    for k, v in THREAD_ENV.items():
+        os.environ[k] = v
+
+
+@functools.lru_cache(maxsize=1)
+def code_version() -> str:
+    """SHA-256 of the shevsim package's Python sources (sorted relative paths + contents)."""
+    h = hashlib.sha256()
+    for p in sorted(_PKG_ROOT.rglob("*.py")):
+        if "__pycache__" in p.parts:
+            continue
+        h.update(str(p.relative_to(_PKG_ROOT)).encode())
+        h.update(b"\0")
+        h.update(p.read_bytes())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def shevsim_version() -> str:
+    from .. import __version__
+    return __version__
+
+
+def _canonical(obj: Any) -> str:
+    """Canonical JSON (sorted keys, floats by repr, inf/nan allowed) used for hashing."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=True, default=str)
+
+
+def _hash_file(h, p: Path) -> None:
+    h.update(str(p.name).encode())
+    h.update(b"\0")
+    try:
+        if p.stat().st_size <= _MAX_HASH_BYTES:
+            h.update(p.read_bytes())
+        else:  # huge file: size and mtime stand in for the contents
+            st = p.stat()
+            h.update(f"{st.st_size}:{st.st_mtime_ns}".encode())
+    except OSError as exc:
+        h.update(f"unreadable:{exc}".encode())
+    h.update(b"\0")
+
+
+def _strings(obj) -> list[str]:
+    if isinstance(obj, str):
+        return [obj]
+    if isinstance(obj, dict):
+        return [s for v in obj.values() for s in _strings(v)]
+    if isinstance(obj, list):
+        return [s for v in obj for s in _strings(v)]
+    return []
+
+
+def _param_file_deps(pfile: Path) -> list[Path]:
+    """A parameter file, the files beside it (maps) and the files its string values name (cycle CSV...)."""
+    deps = {pfile.resolve()}
+    for sib in pfile.parent.iterdir():
+        if sib.is_file() and not sib.name.startswith(".") and sib.suffix.lower() in {".toml", ".csv", ".json", ".txt"}:
+            deps.add(sib.resolve())
+    try:
+        doc = tomllib.loads(pfile.read_text())
+    except (OSError, tomllib.TOMLDecodeError):
+        doc = {}
+    from ..core.scenario import PROJECT_ROOT
+    for s in _strings(doc):
+        if len(s) > 300 or "\n" in s or not any(c in s for c in "./"):
+            continue
+        for base in (pfile.parent, PROJECT_ROOT):
+            cand = (base / s)
+            try:
+                if cand.is_file():
+                    deps.add(cand.resolve())
+                    break
+            except OSError:
+                pass
+    return sorted(deps)
+
+
+@functools.lru_cache(maxsize=64)
+def _scenario_fingerprint_cached(path: str, mtime_ns: int) -> str:
+    from ..core.scenario import load_scenario
+    p = Path(path)
+    h = hashlib.sha256()
+    h.update(p.read_bytes())
+    sc = load_scenario(p)
+    files: set[Path] = set()
+    for spec in sc.components:
+        if spec.params_file is not None:
+            files.update(_param_file_deps(Path(spec.params_file)))
+        if spec.fmu is not None and Path(spec.fmu).is_file():
+            files.add(Path(spec.fmu).resolve())
+    for f in sorted(files):
+        _hash_file(h, f)
+    return h.hexdigest()
+
+
+def scenario_fingerprint(path: str | Path) -> str:
+    """SHA-256 of a scenario file and the parameter/data files it resolves (cached per file mtime)."""
+    p = Path(path).resolve()
+    return _scenario_fingerprint_cached(str(p), p.stat().st_mtime_ns)
+
+
+def toml_value(v: Any) -> str:
+    """Format a Python value as a TOML value for ``load_scenario``'s ``component.param=value`` overrides."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k} = {toml_value(x)}" for k, x in v.items()) + "}"
+    if hasattr(v, "item"):          # numpy scalar
+        return toml_value(v.item())
+    raise TypeError(f"override value {v!r} of type {type(v).__name__} cannot be written as TOML")
+
+
+def _freeze(v):
+    if isinstance(v, (list, tuple)):
+        return tuple(_freeze(x) for x in v)
+    if hasattr(v, "item") and not isinstance(v, (str, bytes)):
+        return v.item()
+    return v
+
+
+def _thaw(v):
+    return [_thaw(x) for x in v] if isinstance(v, tuple) else v
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One scenario run with parameter overrides.
+
+    Parameters
+    ----------
+    scenario : str
+        Path of the scenario TOML file.
+    overrides : tuple of (str, value)
+        ``("component.param", value)`` pairs, sorted (use :meth:`make` to build from a dict).
+    stop_s : float or None
+        Override of the scenario's stop time (s); None keeps the scenario's.
+    final_signals : tuple of str
+        Signals (``component.port``) whose final value is returned as ``final:component.port``.
+    """
+
+    scenario: str
+    overrides: tuple = ()
+    stop_s: float | None = None
+    final_signals: tuple = ()
+
+    @classmethod
+    def make(cls, scenario: str | Path, overrides: dict | None = None, stop_s: float | None = None,
+             final_signals=()) -> "Evaluation":
+        ov = tuple(sorted((str(k), _freeze(v)) for k, v in (overrides or {}).items()))
+        for k, _ in ov:
+            if "." not in k:
+                raise ValueError(f"override '{k}': expected 'component.param'")
+        return cls(str(Path(scenario).resolve()), ov, None if stop_s is None else float(stop_s),
+                   tuple(final_signals))
+
+    def overrides_dict(self) -> dict:
+        return {k: _thaw(v) for k, v in self.overrides}
+
+    def sets(self) -> list[str]:
+        """The overrides as ``load_scenario`` ``component.param=value`` strings (values in TOML)."""
+        return [f"{k}={toml_value(_thaw(v))}" for k, v in self.overrides]
+
+    def inputs(self) -> dict:
+        return {"kind": "scenario", "scenario": self.scenario, "overrides": self.overrides_dict(),
+                "stop_s": self.stop_s, "final_signals": list(self.final_signals)}
+
+    def key(self) -> str:
+        payload = {"inputs": {**self.inputs(), "scenario": Path(self.scenario).name},
+                   "scenario_sha256": scenario_fingerprint(self.scenario),
+                   "shevsim_version": shevsim_version(), "code_sha256": code_version()}
+        return hashlib.sha256(_canonical(payload).encode()).hexdigest()
+
+    def run(self) -> dict:
+        limit_threads()
+        from ..core.scenario import load_scenario
+        from ..run import compute_run_metrics, simulate
+        try:
+            sc = load_scenario(self.scenario, self.sets())
+            if self.stop_s is not None:
+                sc.stop_s = self.stop_s
+            res = simulate(sc, progress=False)
+            out: dict[str, Any] = {"termination": str(res.termination)}
+            for k, v in compute_run_metrics(res, sc).items():
+                if isinstance(v, bool):
+                    out[k] = float(v)
+                elif isinstance(v, (int, float)) or hasattr(v, "item") and getattr(v, "ndim", 0) == 0:
+                    out[k] = float(v)
+            for s in self.final_signals:
+                out[f"final:{s}"] = float(res[s][-1])
+            return out
+        except Exception as exc:  # noqa: BLE001 - a failing point is a result (infeasible), not a crash
+            return {"error": f"{type(exc).__name__}: {exc}"}
+
+
+def run_item(item) -> tuple[dict, float]:
+    """Worker entry point: run one evaluation item, return (outputs, wall time in s)."""
+    limit_threads()
+    t0 = time.perf_counter()
+    out = item.run()
+    return out, time.perf_counter() - t0
+
+
+def is_failed(outputs: dict, *keys: str) -> bool:
+    """True when an evaluation failed or lacks a finite value for one of ``keys``."""
+    if "error" in outputs:
+        return True
+    term = outputs.get("termination", "completed")
+    if term not in ("completed", None):
+        return True
+    for k in keys:
+        v = outputs.get(k)
+        if not isinstance(v, (int, float)) or not math.isfinite(v):
+            return True
+    return False

@@ -1,0 +1,228 @@
+"""parallel.py - evaluate batches of study items on Dask distributed (or serially), through the cache.
+
+:class:`StudyRunner` owns the compute resources of one study:
+
+* ``workers=0`` and no scheduler: serial, in this process (tests, debugging);
+* ``workers=N``: an embedded ``distributed.LocalCluster(n_workers=N, threads_per_worker=1,
+  processes=True)`` whose worker processes get ``OPENBLAS_NUM_THREADS=1`` and friends
+  (``evaluate.THREAD_ENV``) before NumPy loads;
+* ``scheduler="tcp://host:8786"``: a ``distributed.Client`` on an existing cluster (the runner
+  does not start or stop that cluster; it asks every worker to apply the single-thread settings).
+
+:meth:`StudyRunner.evaluate` takes a list of evaluation items (``evaluate.py``), drops duplicate
+keys, answers the cached ones from the SQLite cache, submits the rest as Dask futures, and, as each
+future completes (``distributed.as_completed``), writes its row to the cache (one committed row per
+finished evaluation - the client process is the single writer) and advances a tqdm bar showing done /
+total, elapsed and the ETA. Results are returned in input order, so a run on any number of workers
+returns exactly what the serial run returns (each evaluation is a deterministic function of its
+inputs). ``max_new_evaluations`` stops a study cleanly after that many new evaluations
+(:class:`StudyInterrupted`); a Ctrl-C does the same - finished rows stay committed and a rerun
+resumes from them.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+from ..core.errors import ShevsimError
+from .evaluate import THREAD_ENV, limit_threads, run_item
+
+log = logging.getLogger(__name__)
+
+
+class StudyInterrupted(ShevsimError):
+    """The study stopped before finishing (evaluation budget reached or interrupted); rerun to resume."""
+
+
+@dataclass
+class RunnerStats:
+    """Counters of a runner (cumulative over its batches)."""
+
+    requested: int = 0        # items asked for
+    unique: int = 0           # distinct keys among them (per batch, summed)
+    cached: int = 0           # answered from the cache
+    new: int = 0              # evaluated now
+    wall_s: float = 0.0       # wall time spent running new evaluations
+    busy_s: float = 0.0       # sum of the new evaluations' own wall times (in their workers)
+    slots: int = 1            # parallel slots (workers x threads), 1 when serial
+
+    @property
+    def evals_per_s(self) -> float:
+        return self.new / self.wall_s if self.wall_s > 0 else float("nan")
+
+    @property
+    def efficiency(self) -> float:
+        """Busy time / (slots x wall time): 1.0 = every slot always evaluating."""
+        return self.busy_s / (self.slots * self.wall_s) if self.wall_s > 0 else float("nan")
+
+    def as_dict(self) -> dict:
+        return {"requested": self.requested, "unique": self.unique, "cached": self.cached, "new": self.new,
+                "wall_s": self.wall_s, "busy_s": self.busy_s, "slots": self.slots,
+                "evals_per_s": self.evals_per_s, "parallel_efficiency": self.efficiency}
+
+
+class StudyRunner:
+    """Evaluate items serially or on Dask, through an optional :class:`~.cache.EvaluationCache`.
+
+    Parameters
+    ----------
+    cache : EvaluationCache or None
+        Finished evaluations are read from and written to it (None: no caching).
+    workers : int
+        0 = serial in this process; N > 0 = embedded LocalCluster with N single-thread processes.
+    scheduler : str or None
+        Address of an existing Dask scheduler (overrides ``workers``).
+    progress : bool
+        Show tqdm progress bars.
+    max_new_evaluations : int or None
+        Stop (raise :class:`StudyInterrupted`) once this many new evaluations have finished.
+
+    Use as a context manager so the embedded cluster is shut down::
+
+        with StudyRunner(cache, workers=2) as runner:
+            outputs = runner.evaluate(items)
+    """
+
+    def __init__(self, cache=None, workers: int = 0, scheduler: str | None = None, progress: bool = True,
+                 max_new_evaluations: int | None = None):
+        if workers < 0:
+            raise ValueError(f"workers must be >= 0, got {workers}")
+        self.cache = cache
+        self.workers = int(workers)
+        self.scheduler = scheduler
+        self.progress = progress
+        self.max_new = max_new_evaluations
+        self.stats = RunnerStats()
+        self._client = None
+        self._cluster = None
+
+    # -- lifecycle ---------------------------------------------------------------------------------
+    @property
+    def parallel(self) -> bool:
+        return self.scheduler is not None or self.workers > 0
+
+    def start(self) -> "StudyRunner":
+        if not self.parallel or self._client is not None:
+            return self
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError as exc:  # pragma: no cover
+            raise ShevsimError("parallel studies need dask distributed: pip install 'shevsim[studies]' "
+                               "(or use --workers 0)") from exc
+        if self.scheduler is not None:
+            try:
+                self._client = Client(self.scheduler, timeout="30s")
+            except OSError as exc:
+                raise ShevsimError(f"--scheduler {self.scheduler}: cannot connect to the Dask scheduler: {exc}") from exc
+            self._client.run(limit_threads)
+        else:
+            self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                         dashboard_address=None, env=dict(THREAD_ENV),
+                                         silence_logs=logging.WARNING)
+            self._client = Client(self._cluster)
+        nthreads = self._client.nthreads()
+        self.stats.slots = max(1, sum(nthreads.values()))
+        return self
+
+    def close(self) -> None:
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+        if self._cluster is not None:
+            self._cluster.close()
+            self._cluster = None
+
+    def __enter__(self) -> "StudyRunner":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def client(self):
+        return self._client
+
+    # -- evaluation --------------------------------------------------------------------------------
+    def evaluate(self, items: list, desc: str = "evaluations") -> list[dict]:
+        """Outputs of every item, in input order (duplicates evaluated once; cached ones not rerun)."""
+        items = list(items)
+        keys = [it.key() for it in items]
+        first: dict[str, object] = {}
+        for k, it in zip(keys, items):
+            first.setdefault(k, it)
+        self.stats.requested += len(items)
+        self.stats.unique += len(first)
+        results: dict[str, dict] = self.cache.get_many(first) if self.cache is not None else {}
+        self.stats.cached += len(results)
+        pending = [(k, it) for k, it in first.items() if k not in results]
+        if pending:
+            self._run_pending(pending, results, desc, n_cached=len(first) - len(pending))
+        return [results[k] for k in keys]
+
+    def _budget_left(self) -> int | None:
+        return None if self.max_new is None else self.max_new - self.stats.new
+
+    def _finish(self, key, item, out, wall, results, bar) -> None:
+        results[key] = out
+        if self.cache is not None:
+            self.cache.put(key, item.inputs(), out, wall)
+        self.stats.new += 1
+        self.stats.busy_s += wall
+        if bar is not None:
+            bar.update(1)
+
+    def _run_pending(self, pending, results, desc, n_cached) -> None:
+        budget = self._budget_left()
+        if budget is not None and budget <= 0:
+            raise StudyInterrupted(f"evaluation budget of {self.max_new} new evaluations reached; "
+                                   f"{len(pending)} left in '{desc}' - rerun to resume from the cache")
+        bar = None
+        if self.progress:
+            from tqdm.auto import tqdm
+            bar = tqdm(total=len(pending), desc=desc, unit="eval", dynamic_ncols=True,
+                       bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} done{postfix} "
+                                  "[{elapsed}<{remaining} ETA, {rate_fmt}]")
+            bar.set_postfix_str(f"{len(pending)} left, {n_cached} cached", refresh=False)
+        t0 = time.perf_counter()
+        try:
+            if not self.parallel:
+                for k, it in pending:
+                    if budget is not None and self.stats.new >= self.max_new:
+                        break
+                    out, wall = run_item(it)
+                    self._finish(k, it, out, wall, results, bar)
+                    if bar is not None:
+                        bar.set_postfix_str(f"{len(pending) - bar.n} left, {n_cached} cached", refresh=False)
+            else:
+                self._run_dask(pending, results, bar, n_cached)
+        finally:
+            self.stats.wall_s += time.perf_counter() - t0
+            if bar is not None:
+                bar.close()
+        missing = [k for k, _ in pending if k not in results]
+        if missing:
+            raise StudyInterrupted(f"stopped after the budget of {self.max_new} new evaluations; {len(missing)} "
+                                   f"left in '{desc}' - rerun to resume from the cache")
+
+    def _run_dask(self, pending, results, bar, n_cached) -> None:
+        from distributed import as_completed
+        self.start()
+        client = self._client
+        futures = {}
+        for k, it in pending:
+            fut = client.submit(run_item, it, pure=False, key=f"shevsim-eval-{k[:24]}-{time.monotonic_ns()}")
+            futures[fut] = (k, it)
+        try:
+            for fut in as_completed(list(futures)):
+                k, it = futures[fut]
+                out, wall = fut.result()
+                self._finish(k, it, out, wall, results, bar)
+                if bar is not None:
+                    bar.set_postfix_str(f"{len(pending) - bar.n} left, {n_cached} cached", refresh=False)
+                if self.max_new is not None and self.stats.new >= self.max_new:
+                    break
+        finally:
+            left = [f for f in futures if not f.done()]
+            if left:
+                client.cancel(left)
