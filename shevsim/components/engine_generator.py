@@ -17,7 +17,8 @@ Outputs (at t + h, no direct feedthrough: every output comes from the state or t
     electrical energy delivered); ``engine_power_w`` [W] crankshaft power (end of step);
     ``engine_speed_radps`` [rad/s]; ``engine_torque_nm`` [N m]; ``rack_frac`` [1] rack position
     zeta; ``fuel_rate_gps`` [g/s] and ``soot_rate_mgps`` [mg/s] means over the last step;
-    ``power_limited_w`` [W] the rate-limited command; cumulative ``fuel_mass_g``, ``fuel_energy_j``,
+    ``power_limited_w`` [W] the rate-limited command; ``elec_power_max_w`` [W] max steady
+    electrical output (constant, end of the optimal operating line); cumulative ``fuel_mass_g``, ``fuel_energy_j``,
     ``soot_mass_mg``, ``soot_transient_mg``, ``engine_loss_energy_j``, ``gen_loss_energy_j``,
     ``elec_energy_j``, ``shaft_kinetic_energy_j`` (change of 1/2 J w^2 since t0).
 
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.engine import EG_DIR, EngineGenMaps, EngineGenState, advance, steady_state
+from shevsim.powertrain.engine import EG_DIR, EngineGenMaps, advance, steady_state
 
 
 @dataclass(frozen=True)
@@ -110,6 +111,7 @@ class EngineGenerator(Component):
         out("fuel_rate_gps", "g/s", 0.0, "fuel rate (mean over the last step)"),
         out("soot_rate_mgps", "mg/s", 0.0, "engine-out soot rate (mean over the last step)"),
         out("power_limited_w", "W", 0.0, "rate-limited internal power command"),
+        out("elec_power_max_w", "W", 0.0, "max steady electrical output (end of the optimal line), constant"),
         out("fuel_mass_g", "g", 0.0, "cumulative fuel mass"),
         out("fuel_energy_j", "J", 0.0, "cumulative fuel energy (LHV)"),
         out("soot_mass_mg", "mg", 0.0, "cumulative soot mass"),
@@ -142,6 +144,7 @@ class EngineGenerator(Component):
         y["fuel_rate_gps"] = fuel_gps
         y["soot_rate_mgps"] = soot_mgps
         y["power_limited_w"] = st.p_lim
+        y["elec_power_max_w"] = self.maps.p_max_w
         y["fuel_mass_g"] = st.fuel_g
         y["fuel_energy_j"] = st.fuel_j
         y["soot_mass_mg"] = st.soot_mg

@@ -12,9 +12,9 @@ import pytest
 from shevsim.core.errors import DataError, ScenarioError, SimulationError
 from shevsim.core.params import load_params
 from shevsim.powertrain import build_maps
-from shevsim.powertrain.maps import RPM, Curve, Grid2D, load_curve_csv, read_columns
+from shevsim.powertrain.maps import RPM, Curve, Grid2D, read_columns
 from shevsim.powertrain.motor import heat_index_step, torque_limit
-from shevsim.powertrain.vehicle import (G_MPS2, coast_down_aero_only, coast_down_aero_rolling, step_vehicle)
+from shevsim.powertrain.vehicle import G_MPS2, coast_down_aero_only, coast_down_aero_rolling
 from shevsim.components.bus import PowerBus
 from shevsim.components.driver import Driver, DriverParams
 from shevsim.components.engine_generator import EngineGenerator, EngineGeneratorParams
@@ -31,6 +31,33 @@ def curve_peak_power(path, wcol, tcol):
     d = read_columns(path, (wcol, tcol))
     w = np.linspace(d[wcol][0], d[wcol][-1], 4001)
     return np.max(w * np.interp(w, d[wcol], d[tcol]))
+
+
+# ----------------------------------------------------------------------------- ports
+SIGNAL_TABLE = {   # docs/DEVELOPING.md, SHEV signal table
+    Driver: (("speed_ref_mps", "accel_ref_mps2", "speed_mps"), ("force_req_n",)),
+    Motor: (("force_req_n", "speed_mps"),
+            ("traction_force_n", "brake_force_n", "elec_power_w", "torque_nm", "speed_radps", "torque_max_nm",
+             "heat_index_frac", "loss_energy_j")),
+    Vehicle: (("traction_force_n", "brake_force_n", "grade_rad"),
+              ("speed_mps", "accel_mps2", "distance_m", "traction_energy_j", "aero_energy_j", "rolling_energy_j",
+               "brake_energy_j", "grade_energy_j", "kinetic_energy_j")),
+    PowerBus: (("motor_power_w", "gen_power_w", "aux_power_w"), ("battery_power_w", "demand_power_w", "aux_energy_j")),
+    EngineGenerator: (("power_cmd_w", "power_rate_max_wps"),
+                      ("elec_power_w", "engine_power_w", "engine_speed_radps", "engine_torque_nm", "rack_frac",
+                       "fuel_rate_gps", "soot_rate_mgps", "fuel_mass_g", "fuel_energy_j", "soot_mass_mg",
+                       "engine_loss_energy_j", "gen_loss_energy_j")),
+}
+
+
+@pytest.mark.parametrize("cls", list(SIGNAL_TABLE), ids=lambda c: c.TYPE)
+def test_ports_match_signal_table(cls):
+    ins, outs = SIGNAL_TABLE[cls]
+    assert tuple(v.name for v in cls.inputs()) == ins          # inputs exactly
+    assert set(outs) <= {v.name for v in cls.outputs()}       # outputs: may add, never rename
+    assert cls(cls.TYPE).variables()                          # default construction works
+    if cls is EngineGenerator:
+        assert {v.name: v.start for v in cls.inputs()}["power_rate_max_wps"] == 1e12
 
 
 # ----------------------------------------------------------------------------- maps
