@@ -1,0 +1,316 @@
+"""supervisors.py - power-split supervisors: MPC (TYPE ``mpc_supervisor``) and rule-based (TYPE ``rule_supervisor``).
+
+Both wrap :mod:`shevsim.supervisor` and share the ports of the SHEV signal table.
+
+Ports
+-----
+Inputs
+    ``demand_power_w`` [W] bus power demand (motor + aux, + drawn from the bus);
+    ``soc_pct`` [%] estimated SOC (BMS); ``gen_power_w`` [W] present engine-generator electrical
+    power (+ to the bus); ``power_max_w`` [W] pack discharge limit >= 0 (BMS);
+    ``power_min_w`` [W] pack charge limit <= 0 (BMS); ``ocv_v`` [V] pack open-circuit voltage (BMS);
+    ``rs_ohm`` [Ohm] pack series resistance (BMS).  The rule supervisor does not use ``ocv_v``/``rs_ohm``.
+Outputs (direct feedthrough: a sampled controller's command is a function of the inputs it samples)
+    ``power_cmd_w`` [W] engine-generator electrical power command (+ to the bus), held until the
+    next call; ``power_rate_max_wps`` [W/s] the power-rate map at the present engine power (wire it to
+    the engine-generator's ``power_rate_max_wps`` so the plant enforces the same limit);
+    ``battery_power_plan_w`` [W] the battery power the split implies (demand - command, + discharge).
+    MPC only: ``fallback_count`` [1] calls without a QP solution (cumulative); ``solve_time_us`` [us]
+    wall time of the last call (state -> QP -> first move; not deterministic, do not compare runs on it);
+    ``battery_slack_w`` [W], ``soc_slack_pct`` [%] the soft-constraint slacks of the last solution.
+    Rule only: ``engine_on_1`` [1] thermostat state.
+
+Timing: each ``do_step(t, h)`` is one supervisor call, sampling the inputs at ``t``; run the
+component with a step multiple so that ``h`` equals its ``sample_time_s`` (0.2 s: multiple 2 at a
+0.1 s communication step).  The MPC raises if ``h`` differs (the QP is discretised with that step).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from shevsim.core.component import Component
+from shevsim.core.errors import ScenarioError, SimulationError
+from shevsim.core.variables import inp, out
+from shevsim.supervisor.fuel_curve import SqrtFuelCurve
+from shevsim.supervisor.mpc import MPCSettings, MPCSupervisor as _MPC
+from shevsim.supervisor.rate_map import PowerRateMap
+from shevsim.supervisor.rule_based import RuleBasedSupervisor, RuleSettings
+
+DEFAULT_FUEL_CURVE = Path(__file__).resolve().parents[2] / "components" / "engine_generator" / "fuel_vs_power.csv"
+
+_IN = ("demand_power_w", "soc_pct", "gen_power_w", "power_max_w", "power_min_w", "ocv_v", "rs_ohm")
+_INPUTS = (
+    inp("demand_power_w", "W", 0.0, "bus power demand (motor + aux), + drawn from the bus"),
+    inp("soc_pct", "%", 50.0, "battery SOC estimate"),
+    inp("gen_power_w", "W", 0.0, "present engine-generator electrical power, + to the bus"),
+    inp("power_max_w", "W", 100e3, "pack discharge power limit (>= 0)"),
+    inp("power_min_w", "W", -100e3, "pack charge power limit (<= 0)"),
+    inp("ocv_v", "V", 429.0, "pack open-circuit voltage"),
+    inp("rs_ohm", "Ohm", 0.13, "pack series resistance"),
+)
+
+
+def _check_rate_map(p, where):
+    return PowerRateMap(p.rate_map_power_edges_w, p.rate_map_max_rate_wps, where=where)
+
+
+def _check_h(name, h, ts, t):
+    if abs(h - ts) > 1e-9 * max(1.0, ts):
+        raise SimulationError(f"{name}: supervisor called with step h={h:g} s at t={t:g} s but its sample_time_s "
+                              f"is {ts:g} s: set the component's step multiple so that it runs every {ts:g} s")
+
+
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class MPCSupervisorParams:
+    """Parameters of ``mpc_supervisor`` (defaults: seed Table 5.2 / A.1; see components/supervisor/mpc_default.toml).
+
+    Attributes
+    ----------
+    n_p, n_c : int
+        Prediction / control horizon (40 / 15).
+    sample_time_s : float
+        Sampling period [s] = the component's step (0.2).
+    eta1_1, eta2_1, eta3_1, eta4_1 : float
+        Cost weights (4.17, 1, 2.5e-5, 1.25e-6) on SOC fraction, sqrt(kg/s), kW per step, kW.
+    soc_ref_pct, soc_min_pct, soc_max_pct : float
+        SOC reference and soft window [%] (50, 30, 70).
+    power_gen_min_w, power_gen_max_w : float
+        Engine-generator electrical power limits [W].
+    power_rate_min_wps : float
+        Minimum power rate [W/s] (-60 kW/s).
+    rate_map_power_edges_w, rate_map_max_rate_wps : tuple of float
+        Power-rate constraint map: partition edges [W] and max rate per partition [W/s].
+    capacity_ah : float
+        Pack capacity [A.h] (10 x 2.3 Ah).
+    soc_slack_weight_1, soc_slack_weight_quad_1, battery_slack_weight_1, battery_slack_weight_quad_1 : float
+        Soft-constraint penalties (units of the cost, per % / %^2 SOC and per kW / kW^2).
+    battery_limits_soft : bool
+        Battery limits as exact-penalty soft constraints (True) or hard (infeasible -> fallback).
+    fuel_curve_file : str
+        CSV of the quasi-static fuel curve (columns elec_power_w, fuel_gps); empty: the powertrain's
+        ``components/engine_generator/fuel_vs_power.csv``.  Ignored when ``fuel_curve_w`` is given.
+    fuel_curve_w, fuel_rate_gps : tuple of float
+        The fuel curve inline [W], [g/s] (alternative to the file).
+    solver : str
+        ``'daqp'`` (default, fastest exact), ``'osqp'`` or ``'cvxpy'`` (reference).
+    fallback : str
+        ``'shift'`` (previous plan shifted) or ``'rule'`` (rule-based split).
+    """
+
+    n_p: int = 40
+    n_c: int = 15
+    sample_time_s: float = 0.2
+    eta1_1: float = 4.17
+    eta2_1: float = 1.0
+    eta3_1: float = 2.5e-5
+    eta4_1: float = 1.25e-6
+    soc_ref_pct: float = 50.0
+    soc_min_pct: float = 30.0
+    soc_max_pct: float = 70.0
+    power_gen_min_w: float = 0.0
+    power_gen_max_w: float = 200.6e3
+    power_rate_min_wps: float = -60e3
+    rate_map_power_edges_w: tuple[float, ...] = (0.0, 236e3)
+    rate_map_max_rate_wps: tuple[float, ...] = (30e3,)
+    capacity_ah: float = 23.0
+    soc_slack_weight_1: float = 5.0
+    soc_slack_weight_quad_1: float = 1.0
+    battery_slack_weight_1: float = 5.0
+    battery_slack_weight_quad_1: float = 0.1
+    battery_limits_soft: bool = True
+    fuel_curve_file: str = ""
+    fuel_curve_w: tuple[float, ...] = ()
+    fuel_rate_gps: tuple[float, ...] = ()
+    solver: str = "daqp"
+    cvxpy_solver: str = "CLARABEL"
+    fallback: str = "shift"
+
+    def settings(self) -> MPCSettings:
+        return MPCSettings(n_p=self.n_p, n_c=self.n_c, dt_s=self.sample_time_s, eta1_1=self.eta1_1,
+                           eta2_1=self.eta2_1, eta3_1=self.eta3_1, eta4_1=self.eta4_1, soc_ref_pct=self.soc_ref_pct,
+                           soc_min_pct=self.soc_min_pct, soc_max_pct=self.soc_max_pct,
+                           power_gen_min_w=self.power_gen_min_w, power_gen_max_w=self.power_gen_max_w,
+                           power_rate_min_wps=self.power_rate_min_wps, capacity_ah=self.capacity_ah,
+                           soc_slack_weight_1=self.soc_slack_weight_1,
+                           soc_slack_weight_quad_1=self.soc_slack_weight_quad_1,
+                           battery_slack_weight_1=self.battery_slack_weight_1,
+                           battery_slack_weight_quad_1=self.battery_slack_weight_quad_1,
+                           battery_limits_soft=self.battery_limits_soft, solver=self.solver,
+                           cvxpy_solver=self.cvxpy_solver, fallback=self.fallback)
+
+    def fuel_curve(self, where: str) -> SqrtFuelCurve:
+        if self.fuel_curve_w or self.fuel_rate_gps:
+            return SqrtFuelCurve(self.fuel_curve_w, self.fuel_rate_gps, where=f"{where}: fuel_curve_w/fuel_rate_gps")
+        return SqrtFuelCurve.from_csv(self.fuel_curve_file or DEFAULT_FUEL_CURVE)
+
+
+class MPCSupervisor(Component):
+    """Linear MPC power split (seed Sec. 5.2.2): TYPE ``mpc_supervisor``; ports in the module docstring."""
+
+    TYPE = "mpc_supervisor"
+    Params = MPCSupervisorParams
+    VARIABLES = _INPUTS + (
+        out("power_cmd_w", "W", 0.0, "engine-generator electrical power command, + to the bus", _IN),
+        out("power_rate_max_wps", "W/s", 30e3, "power-rate map at the present engine power", ("gen_power_w",)),
+        out("battery_power_plan_w", "W", 0.0, "demand - command (battery share), + discharge", _IN),
+        out("fallback_count", "1", 0.0, "cumulative supervisor calls without a QP solution", _IN),
+        out("solve_time_us", "us", 0.0, "wall time of the last call (not deterministic)", _IN),
+        out("battery_slack_w", "W", 0.0, "battery-limit slack of the last solution", _IN),
+        out("soc_slack_pct", "%", 0.0, "SOC-window slack of the last solution", _IN),
+    )
+    _static = ("name", "params", "mpc", "_rule")
+
+    def __init__(self, name: str = "mpc_supervisor", params: MPCSupervisorParams | None = None):
+        super().__init__(name, params)
+        p = self.params
+        where = f"mpc_supervisor '{name}'"
+        try:
+            settings = p.settings()
+        except ScenarioError as exc:
+            raise ScenarioError(f"{where}: {exc}") from exc
+        rate_map = _check_rate_map(p, where)
+        self._rule = RuleBasedSupervisor(RuleSettings(power_gen_min_w=p.power_gen_min_w,
+                                                      power_gen_max_w=p.power_gen_max_w,
+                                                      power_rate_min_wps=p.power_rate_min_wps,
+                                                      soc_min_pct=p.soc_min_pct, soc_max_pct=p.soc_max_pct,
+                                                      soc_ref_pct=p.soc_ref_pct,
+                                                      soc_on_pct=p.soc_ref_pct - 0.25 * (p.soc_ref_pct - p.soc_min_pct),
+                                                      soc_off_pct=p.soc_ref_pct + 0.25 * (p.soc_max_pct - p.soc_ref_pct)),
+                                         rate_map, p.sample_time_s)
+        self.mpc = _MPC(settings, p.fuel_curve(where), rate_map, rule=self._rule)
+        self.fallback_count = 0
+        self.plan = None
+
+    def initialize(self, t0: float) -> None:
+        self.mpc.reset()
+        self.mpc.fallback_count = 0
+        self.fallback_count = 0
+        self._write(self.u["gen_power_w"], 0.0)
+
+    def _write(self, cmd: float, dt_us: float) -> None:
+        y, u, last = self.y, self.u, self.mpc.last
+        cmd = float(cmd)
+        y["power_cmd_w"] = cmd
+        g = u["gen_power_w"]
+        y["power_rate_max_wps"] = self.mpc.rate_map(g) if math.isfinite(g) else self.mpc.rate_map.rates_wps[0]
+        y["battery_power_plan_w"] = float(u["demand_power_w"]) - cmd
+        y["fallback_count"] = float(self.fallback_count)
+        y["solve_time_us"] = dt_us
+        y["battery_slack_w"] = float(last.battery_slack_w)
+        y["soc_slack_pct"] = float(last.soc_slack_pct)
+
+    def do_step(self, t: float, h: float) -> None:
+        _check_h(self.name, h, self.params.sample_time_s, t)
+        u = self.u
+        t0 = time.perf_counter()
+        cmd = self.mpc.step(u["soc_pct"], u["demand_power_w"], u["gen_power_w"], u["power_max_w"],
+                            u["power_min_w"], u["ocv_v"], u["rs_ohm"])
+        dt_us = (time.perf_counter() - t0) * 1e6
+        self.fallback_count = self.mpc.fallback_count
+        self.plan = None if self.mpc._plan_kw is None else self.mpc._plan_kw.copy()
+        self._write(cmd, dt_us)
+
+    def get_state(self):
+        st = super().get_state()
+        st["_mpc_plan"] = (None if self.mpc._plan_kw is None else self.mpc._plan_kw.copy(), self.mpc._plan_age,
+                           self.mpc.fallback_count)
+        return st
+
+    def set_state(self, state) -> None:
+        state = dict(state)
+        plan, age, fb = state.pop("_mpc_plan", (None, 0, 0))
+        super().set_state(state)
+        self.mpc.reset()                      # solver warm start is not state: the optimum is unique
+        self.mpc._plan_kw = None if plan is None else plan.copy()
+        self.mpc._plan_age = age
+        self.mpc.fallback_count = fb
+
+
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RuleSupervisorParams:
+    """Parameters of ``rule_supervisor`` (see :class:`shevsim.supervisor.rule_based.RuleSettings`).
+
+    Attributes
+    ----------
+    sample_time_s : float
+        Sampling period [s] = the component's step.
+    soc_min_pct, soc_max_pct, soc_ref_pct, soc_on_pct, soc_off_pct : float
+        SOC window, target and thermostat thresholds [%].
+    charge_power_w, engine_on_min_power_w, engine_on_demand_w : float
+        Power-follower SOC correction, least running power, demand that forces the engine on [W].
+    power_gen_min_w, power_gen_max_w : float
+        Engine-generator electrical power limits [W].
+    power_rate_min_wps : float
+        Minimum power rate [W/s].
+    rate_map_power_edges_w, rate_map_max_rate_wps : tuple of float
+        Power-rate constraint map (same form as the MPC's).
+    """
+
+    sample_time_s: float = 0.2
+    soc_min_pct: float = 30.0
+    soc_max_pct: float = 70.0
+    soc_ref_pct: float = 50.0
+    soc_on_pct: float = 45.0
+    soc_off_pct: float = 55.0
+    charge_power_w: float = 30e3
+    engine_on_min_power_w: float = 25e3
+    engine_on_demand_w: float = 60e3
+    power_gen_min_w: float = 0.0
+    power_gen_max_w: float = 200.6e3
+    power_rate_min_wps: float = -60e3
+    rate_map_power_edges_w: tuple[float, ...] = (0.0, 236e3)
+    rate_map_max_rate_wps: tuple[float, ...] = (30e3,)
+
+
+class RuleSupervisor(Component):
+    """Thermostat / power-follower baseline: TYPE ``rule_supervisor``; ports in the module docstring."""
+
+    TYPE = "rule_supervisor"
+    Params = RuleSupervisorParams
+    VARIABLES = _INPUTS + (
+        out("power_cmd_w", "W", 0.0, "engine-generator electrical power command, + to the bus", _IN[:5]),
+        out("power_rate_max_wps", "W/s", 30e3, "power-rate map at the present engine power", ("gen_power_w",)),
+        out("battery_power_plan_w", "W", 0.0, "demand - command (battery share), + discharge", _IN[:5]),
+        out("engine_on_1", "1", 0.0, "thermostat state (1 = engine on)", _IN[:5]),
+    )
+    _static = ("name", "params", "rule")
+
+    def __init__(self, name: str = "rule_supervisor", params: RuleSupervisorParams | None = None):
+        super().__init__(name, params)
+        p = self.params
+        where = f"rule_supervisor '{name}'"
+        try:
+            settings = RuleSettings(**{k: getattr(p, k) for k in RuleSettings.__dataclass_fields__})
+        except ScenarioError as exc:
+            raise ScenarioError(f"{where}: {exc}") from exc
+        self.rule = RuleBasedSupervisor(settings, _check_rate_map(p, where), p.sample_time_s)
+        self.engine_on = False
+
+    def initialize(self, t0: float) -> None:
+        self.rule.engine_on = self.engine_on = False
+        self._write(self.u["gen_power_w"])
+
+    def _write(self, cmd: float) -> None:
+        y, u = self.y, self.u
+        cmd = float(cmd)
+        y["power_cmd_w"] = cmd
+        y["power_rate_max_wps"] = self.rule.rate_map(u["gen_power_w"])
+        y["battery_power_plan_w"] = u["demand_power_w"] - cmd
+        y["engine_on_1"] = 1.0 if self.engine_on else 0.0
+
+    def do_step(self, t: float, h: float) -> None:
+        _check_h(self.name, h, self.params.sample_time_s, t)
+        u = self.u
+        bad = [k for k in _IN[:5] if not math.isfinite(u[k])]
+        if bad:
+            raise SimulationError(f"{self.name}: non-finite input {bad[0]}={u[bad[0]]} at t={t:g} s")
+        self.rule.engine_on = self.engine_on
+        cmd = self.rule.step(u["soc_pct"], u["demand_power_w"], u["gen_power_w"], u["power_max_w"],
+                             u["power_min_w"])
+        self.engine_on = self.rule.engine_on
+        self._write(cmd)

@@ -1,0 +1,674 @@
+r"""mpc.py - linear MPC power split between engine-generator and battery (seed Sec. 5.2.2, App. C).
+
+Model (seed 5.1-5.7, with the sign typo of 5.1b corrected: battery power ``u`` and current ``I``
+positive = discharge)::
+
+    dSOC/dt = -I / (3600 C_b),   I = (V_oc - sqrt(V_oc^2 - 4 R_s u)) / (2 R_s)          (5.1)
+    v = P_d - u                                                                       (5.2)
+    y = [SOC, sqrt(m_f(v))]                                                           (5.3)
+
+linearised at the previous point (5.5-5.6): ``V_oc`` and ``R_s`` come from the BMS and are held,
+so ``A = 0`` (``A_d = 1``); ``B = dphi/du = -(dI/du)/(3600 C_b)`` with ``dI/du = 1/sqrt(V_oc^2 - 4R_s u)``
+at the linearisation power ``u_o``; ``H = d sqrt(m_f)/dv`` at the previous engine power ``v_o``
+(from the quasi-static curve, see :mod:`.fuel_curve`).  Discretised with ``dt`` (5.7).
+
+Decision variables.  The seed optimises the battery-power moves ``Delta u`` (5.9).  With the demand
+held over the horizon (5.10) the engine power is ``v_i = P_d - u_i``, so ``Delta v_i = -Delta u_i`` for
+``i >= 1`` and ``Delta v_0 = (P_d - u_{k-1} - v_{k-1}) - Delta u_0``: an affine one-to-one change of
+variables.  Here the engine-power moves ``z_j = Delta v_j`` (``j = 0..N_c-1``, held after ``N_c``) are
+optimised directly, which gives the same optimum and makes the rate constraint (5.8d) simple
+bounds.  The first move gives ``v_k = v_o + z_0`` (5.11).
+
+Cost 5.8a over the prediction horizon (stage ``i = 0..N_p-1`` applies ``u_i, v_i`` and reaches
+``SOC_{i+1}``)::
+
+    J = sum_i eta1 (SOC_{i+1} - SOC_ref)^2 + eta2 (sqrt m_f(v_i))^2 + eta4 u_i^2  +  sum_j eta3 z_j^2
+        + slack penalties
+
+Units of the weights (Tables 5.2/A.1 give numbers without units): SOC as a *fraction*
+(``y_1,ref = 0.5``), powers in *kW*, fuel rate in *kg/s*.  This is the only reading of the
+published values in which the four terms are of comparable size (with W or g/s one term outweighs
+the others by >= 10^3 and the split degenerates to "engine only" or "battery to its limit"); with
+it the unconstrained fuel/battery balance ``eta2 dm_f/dv = 2 eta4 u`` gives ~24 kW of battery assist.
+
+Constraints (5.8b-e) for ``j = 0..N_c-1`` (the input is held after ``N_c``), ``i = 1..N_p``:
+``P_b,min <= u_j <= P_b,max`` (BMS limits), ``P_g,min <= v_j <= P_g,max``,
+``Delta P_g,min dt <= z_j <= Delta P_g,max(v_o) dt`` (power-rate map at the present engine power,
+held over the horizon as C.13), ``SOC_min <= SOC_i <= SOC_max``.
+The SOC window is *soft*: one slack ``s_x >= 0`` [%] widens it, penalised ``rho1 s_x + rho2 s_x^2``
+(exact penalty: when the window can be met the slack is zero).  The battery limits are soft in the
+same way by default (``battery_limits_soft``), because when the demand exceeds what the rate-limited
+engine plus the battery can deliver, no split meets them; with the setting off they are hard and
+such a problem is infeasible -> fallback.  Engine limits and rates are always hard.
+
+Scaling: SOC in %, power in kW, cost multiplied by ``kappa = 1/(eta3 + eta4 N_p)`` (Hessian entries
+O(1)).  Because ``SOC_i`` is affine in ``i`` for ``i >= N_c`` (constant input), the SOC window
+needs to be imposed only at ``i = 1..N_c`` and ``i = N_p``: the production QP has ``N_c + 2``
+variables (moves, battery slack, SOC slack) and ``3 N_c + 2 (N_c + 1)`` rows.
+
+Solve paths
+-----------
+``'daqp'`` (default) builds ``H, f`` and the bounds with one compiled (numba) function into
+preallocated arrays and calls DAQP with its active set warm-started from the previous call;
+``'osqp'`` calls OSQP natively (eps 1e-6 + polish; measured 1-20 ms per call here and it can stop at its
+iteration limit when a soft constraint is far from satisfied - that call then falls back; not
+recommended, kept for comparison); ``'cvxpy'`` is the readable reference
+(full horizon, every SOC constraint, built once with ``cp.Parameter``).  The paths agree to solver
+precision (tests/unit/test_mpc.py); ``benchmarks/supervisor_call.py`` measures them.
+
+Failures (non-finite inputs, infeasible QP, solver error): the call falls back - previous plan
+shifted by one step (``fallback='shift'``) or the rule-based split (``'rule'``), projected onto the
+engine limits and rate limits and, as far as possible, the battery limits - and
+``fallback_count`` is incremented.  It never raises.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from shevsim.core.errors import ScenarioError
+
+from .fuel_curve import SqrtFuelCurve
+from .rate_map import PowerRateMap
+
+try:  # numba is a dependency; the pure-Python fallback keeps the module importable without it
+    from numba import njit as _njit
+except ImportError:  # pragma: no cover
+    def _njit(*args, **kwargs):
+        return lambda f: f
+
+INF = 1e30          # "no bound" for DAQP and OSQP
+SOLVERS = ("daqp", "osqp", "cvxpy")
+FALLBACKS = ("shift", "rule")
+
+
+@dataclass(frozen=True)
+class MPCSettings:
+    """Settings of the MPC supervisor (seed Table 5.2 / A.1 unless stated).
+
+    Attributes
+    ----------
+    n_p, n_c : int
+        Prediction and control horizons (Table 5.2: 40, 15).
+    dt_s : float
+        Sampling period [s] (Sec. 5.2.2: 0.2 s).
+    eta1_1, eta2_1, eta3_1, eta4_1 : float
+        Weights of (SOC fraction - ref)^2, (sqrt(kg/s))^2, (Delta v per step in kW)^2, (u in kW)^2
+        (Table 5.2: 4.17, 1, 2.5e-5, 1.25e-6; units: see the module docstring).
+    soc_ref_pct, soc_min_pct, soc_max_pct : float
+        SOC reference and window [%] (Table 5.2 y_1,ref = 0.5; Table A.1 SOC_min/max = 0.3/0.7).
+    power_gen_min_w, power_gen_max_w : float
+        Engine-generator electrical power limits [W].
+    power_rate_min_wps : float
+        Minimum (most negative) power rate [W/s] (Table 5.2: -60 kW/s).
+    capacity_ah : float
+        Pack capacity C_b [A.h] (10 parallel x 2.3 Ah, Table B.1).
+    soc_slack_weight_1, soc_slack_weight_quad_1 : float
+        Penalty of the SOC-window slack, per % and per %^2, in the units of J.
+    battery_slack_weight_1, battery_slack_weight_quad_1 : float
+        Penalty of the battery-limit slack, per kW and per kW^2, in the units of J.
+    battery_limits_soft : bool
+        Battery limits soft (exact penalty) or hard.
+    solver : {'daqp', 'osqp', 'cvxpy'}
+    cvxpy_solver : str
+        Solver cvxpy uses for the reference path (default CLARABEL, interior point, tight).
+    fallback : {'shift', 'rule'}
+    """
+
+    n_p: int = 40
+    n_c: int = 15
+    dt_s: float = 0.2
+    eta1_1: float = 4.17
+    eta2_1: float = 1.0
+    eta3_1: float = 2.5e-5
+    eta4_1: float = 1.25e-6
+    soc_ref_pct: float = 50.0
+    soc_min_pct: float = 30.0
+    soc_max_pct: float = 70.0
+    power_gen_min_w: float = 0.0
+    power_gen_max_w: float = 236e3
+    power_rate_min_wps: float = -60e3
+    capacity_ah: float = 23.0
+    soc_slack_weight_1: float = 5.0
+    soc_slack_weight_quad_1: float = 1.0
+    battery_slack_weight_1: float = 5.0
+    battery_slack_weight_quad_1: float = 0.1
+    battery_limits_soft: bool = True
+    solver: str = "daqp"
+    cvxpy_solver: str = "CLARABEL"
+    fallback: str = "shift"
+
+    def __post_init__(self) -> None:
+        w = "MPC settings"
+        if not (isinstance(self.n_c, int) and isinstance(self.n_p, int) and 1 <= self.n_c <= self.n_p):
+            raise ScenarioError(f"{w}: need integers 1 <= n_c <= n_p, got n_c={self.n_c}, n_p={self.n_p}")
+        for name in ("dt_s", "capacity_ah"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ScenarioError(f"{w}: {name} must be positive, got {v}")
+        for name in ("eta1_1", "eta2_1", "eta3_1", "eta4_1", "soc_slack_weight_1", "soc_slack_weight_quad_1",
+                     "battery_slack_weight_1", "battery_slack_weight_quad_1"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ScenarioError(f"{w}: {name} must be >= 0, got {v}")
+        if self.eta3_1 <= 0 and self.eta4_1 <= 0:
+            raise ScenarioError(f"{w}: eta3_1 or eta4_1 must be > 0 (strictly convex QP)")
+        if self.soc_slack_weight_quad_1 <= 0 or self.battery_slack_weight_quad_1 <= 0:
+            raise ScenarioError(f"{w}: the quadratic slack weights must be > 0 (strictly convex QP)")
+        if not self.soc_min_pct < self.soc_max_pct:
+            raise ScenarioError(f"{w}: soc_min_pct {self.soc_min_pct} must be < soc_max_pct {self.soc_max_pct}")
+        if not self.power_gen_min_w < self.power_gen_max_w:
+            raise ScenarioError(f"{w}: power_gen_min_w must be < power_gen_max_w")
+        if not (math.isfinite(self.power_rate_min_wps) and self.power_rate_min_wps < 0):
+            raise ScenarioError(f"{w}: power_rate_min_wps must be negative, got {self.power_rate_min_wps}")
+        if self.solver not in SOLVERS:
+            raise ScenarioError(f"{w}: solver must be one of {SOLVERS}, got {self.solver!r}")
+        if self.fallback not in FALLBACKS:
+            raise ScenarioError(f"{w}: fallback must be one of {FALLBACKS}, got {self.fallback!r}")
+
+
+# ---------------------------------------------------------------------------------------------
+# the per-call vector build (compiled): state -> H, f, bounds
+# ---------------------------------------------------------------------------------------------
+# layout of the constant vector ``c`` passed to _build
+_C_NAMES = ("dt", "cap_ah", "eta1f", "eta2", "eta3", "eta4", "kappa", "soc_ref", "soc_min", "soc_max",
+            "pg_min", "pg_max", "dv_min", "rb1", "rb2", "rx1", "rx2", "soft_b")
+_C = {n: i for i, n in enumerate(_C_NAMES)}
+# layout of the auxiliary output vector
+AUX_NAMES = ("beta", "d0", "u_lin", "hf", "s_o", "rate_up_dt", "phi_o", "b")
+
+
+_SIG = ("i8(f8, f8, f8, f8, f8, f8, f8, f8, f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], "
+        "f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1])")
+
+
+@_njit(_SIG, cache=True)
+def _build(soc, pd, vo, voc, rs, pbmax, pbmin, rate_up, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx,
+           H, f, bu, bl, aux):  # pragma: no cover - compiled; the same code runs uncompiled in tests
+    """Fill ``H, f, bu, bl`` of the scaled QP; return 0, or -1 for unusable inputs.
+
+    Units: soc [%], pd, vo, pbmax, pbmin [kW], voc [V], rs [Ohm], rate_up [kW/s].
+    """
+    if not (math.isfinite(soc) and math.isfinite(pd) and math.isfinite(vo) and math.isfinite(voc)
+            and math.isfinite(rs) and math.isfinite(pbmax) and math.isfinite(pbmin) and math.isfinite(rate_up)):
+        return -1
+    if voc <= 0.0 or rs <= 0.0 or pbmax < pbmin:
+        return -1
+    dt = c[0]
+    cap = c[1]
+    eta1f = c[2]
+    eta2 = c[3]
+    eta3 = c[4]
+    eta4 = c[5]
+    kap = c[6]
+    nc = Lt1.shape[0]
+    n = nc + 2
+    # --- SOC model linearisation (5.1, 5.6): at u_lin inside the BMS limits and below the
+    # maximum-power point of the OCV-R source
+    u_lin = pd - vo
+    if u_lin > pbmax:
+        u_lin = pbmax
+    if u_lin < pbmin:
+        u_lin = pbmin
+    u_mpp = 0.9 * voc * voc / (4.0 * rs) / 1000.0
+    if u_lin > u_mpp:
+        u_lin = u_mpp
+    sq = math.sqrt(voc * voc - 4.0 * rs * u_lin * 1000.0)
+    i_lin = (voc - sq) / (2.0 * rs)                  # A, + discharge
+    phi_o = -100.0 * i_lin / (3600.0 * cap)          # %/s
+    b = -100.0 * (1000.0 / sq) / (3600.0 * cap)      # %/s per kW (negative)
+    beta = -dt * b                                   # % per kW per step (positive)
+    d0 = dt * (phi_o + b * (pd - vo - u_lin))        # SOC change per step at held engine power
+    # --- fuel output (5.3, 5.6d): sqrt(m_f) at vo and its slope
+    m = fp.shape[0]
+    j = 0
+    lo = 0
+    hi = m - 1
+    while hi - lo > 1:                               # bisection: fp[lo] <= vo < fp[hi]
+        mid = (lo + hi) // 2
+        if fp[mid] <= vo:
+            lo = mid
+        else:
+            hi = mid
+    j = lo
+    hf = fsl[j]
+    s_o = fs[j] + hf * (vo - fp[j])
+    # --- Hessian and gradient (0.5 z'Hz + f'z), scaled by kappa
+    a1 = 2.0 * kap * eta1f * beta * beta
+    a2 = 2.0 * kap * (eta2 * hf * hf + eta4)
+    for r in range(nc):
+        for q in range(nc):
+            H[r, q] = a1 * MtM[r, q] + a2 * LtL[r, q]
+        H[r, r] += 2.0 * kap * eta3
+        H[r, nc] = 0.0
+        H[r, nc + 1] = 0.0
+        H[nc, r] = 0.0
+        H[nc + 1, r] = 0.0
+    H[nc, nc] = 2.0 * kap * c[14]
+    H[nc, nc + 1] = 0.0
+    H[nc + 1, nc] = 0.0
+    sig = beta                                       # s_x [%] = beta * sigma_x
+    H[nc + 1, nc + 1] = 2.0 * kap * c[16] * sig * sig
+    e0 = soc - c[7]
+    g1 = 2.0 * kap * eta1f * beta
+    g2 = 2.0 * kap * (eta2 * hf * s_o - eta4 * (pd - vo))
+    for r in range(nc):
+        f[r] = g1 * (e0 * Mt1[r] + d0 * Mtr[r]) + g2 * Lt1[r]
+    f[nc] = kap * c[13]
+    f[nc + 1] = kap * c[15] * sig
+    # --- simple bounds: moves (5.8d), slacks
+    rate_up_dt = rate_up * dt
+    dvmin = c[12]
+    for r in range(nc):
+        bl[r] = dvmin
+        bu[r] = rate_up_dt
+    bl[nc] = 0.0
+    bu[nc] = 1e30 if c[17] > 0.5 else 0.0
+    bl[nc + 1] = 0.0
+    bu[nc + 1] = 1e30
+    # --- rows: engine limits (5.8c), battery limits (5.8b), SOC window (5.8e)
+    o = n
+    for r in range(nc):
+        bl[o + r] = c[10] - vo
+        bu[o + r] = c[11] - vo
+    o += nc
+    for r in range(nc):
+        bl[o + r] = pd - pbmax - vo
+        bu[o + r] = 1e30
+    o += nc
+    for r in range(nc):
+        bl[o + r] = -1e30
+        bu[o + r] = pd - pbmin - vo
+    o += nc
+    ns = soc_idx.shape[0]
+    for r in range(ns):
+        i = soc_idx[r]
+        bl[o + r] = (c[8] - soc - i * d0) / beta
+        bu[o + r] = 1e30
+        bl[o + ns + r] = -1e30
+        bu[o + ns + r] = (c[9] - soc - i * d0) / beta
+    aux[0] = beta
+    aux[1] = d0
+    aux[2] = u_lin
+    aux[3] = hf
+    aux[4] = s_o
+    aux[5] = rate_up_dt
+    aux[6] = phi_o
+    aux[7] = b
+    return 0
+
+
+class MPCProblem:
+    """Constant matrices of the MPC QP and the per-call build.
+
+    Parameters
+    ----------
+    settings : MPCSettings
+    fuel_curve : SqrtFuelCurve
+    compiled : bool
+        Use the numba-compiled build (default) or the same code in Python.
+    """
+
+    def __init__(self, settings: MPCSettings, fuel_curve: SqrtFuelCurve, compiled: bool = True):
+        s = settings
+        self.settings = s
+        self.fuel_curve = fuel_curve
+        npred, nc = s.n_p, s.n_c
+        self.n = nc + 2
+        # L: engine-power change held after N_c (rows i = 0..N_p-1): v_i = v_o + (L z)_i
+        L = np.zeros((npred, nc))
+        for i in range(npred):
+            L[i, : min(i, nc - 1) + 1] = 1.0
+        M = np.cumsum(L, axis=0)                    # (M z)_{i-1}: sum over steps before SOC_i
+        self.L, self.M = L, M
+        idx = list(range(1, nc + 1))
+        if npred > nc:
+            idx.append(npred)
+        self.soc_idx = np.array(idx, dtype=np.float64)
+        ns = len(idx)
+        self.m = 3 * nc + 2 * ns
+        K2 = np.tril(np.ones((nc, nc)))
+        A = np.zeros((self.m, self.n))
+        A[0:nc, :nc] = K2
+        A[nc:2 * nc, :nc] = K2
+        A[nc:2 * nc, nc] = 1.0
+        A[2 * nc:3 * nc, :nc] = K2
+        A[2 * nc:3 * nc, nc] = -1.0
+        Ms = M[np.array(idx) - 1, :]
+        A[3 * nc:3 * nc + ns, :nc] = Ms
+        A[3 * nc:3 * nc + ns, nc + 1] = 1.0
+        A[3 * nc + ns:, :nc] = Ms
+        A[3 * nc + ns:, nc + 1] = -1.0
+        self.A = A
+        self.MtM = M.T @ M
+        self.LtL = L.T @ L
+        self.Mt1 = M.sum(axis=0)
+        self.Mtr = M.T @ np.arange(1.0, npred + 1)
+        self.Lt1 = L.sum(axis=0)
+        self.kappa = 1.0 / (s.eta3_1 + s.eta4_1 * npred)
+        self.c = np.zeros(len(_C_NAMES))
+        vals = dict(dt=s.dt_s, cap_ah=s.capacity_ah, eta1f=s.eta1_1 / 1e4, eta2=s.eta2_1, eta3=s.eta3_1,
+                    eta4=s.eta4_1, kappa=self.kappa, soc_ref=s.soc_ref_pct, soc_min=s.soc_min_pct,
+                    soc_max=s.soc_max_pct, pg_min=s.power_gen_min_w / 1e3, pg_max=s.power_gen_max_w / 1e3,
+                    dv_min=s.power_rate_min_wps / 1e3 * s.dt_s, rb1=s.battery_slack_weight_1,
+                    rb2=s.battery_slack_weight_quad_1, rx1=s.soc_slack_weight_1, rx2=s.soc_slack_weight_quad_1,
+                    soft_b=1.0 if s.battery_limits_soft else 0.0)
+        for k, v in vals.items():
+            self.c[_C[k]] = v
+        self.fp = np.ascontiguousarray(fuel_curve.p_kw)
+        self.fs = np.ascontiguousarray(fuel_curve.s)
+        self.fsl = np.ascontiguousarray(fuel_curve.slope)
+        # work arrays
+        self.H = np.zeros((self.n, self.n))
+        self.f = np.zeros(self.n)
+        self.bu = np.zeros(self.n + self.m)
+        self.bl = np.zeros(self.n + self.m)
+        self.aux = np.zeros(len(AUX_NAMES))
+        self._build = _build if compiled else getattr(_build, "py_func", _build)
+
+    def build(self, soc_pct, demand_kw, gen_kw, pbmax_kw, pbmin_kw, ocv_v, rs_ohm, rate_up_kwps) -> int:
+        """Fill ``self.H, self.f, self.bl, self.bu, self.aux``; 0 on success, -1 for unusable inputs."""
+        return self._build(soc_pct, demand_kw, gen_kw, ocv_v, rs_ohm, pbmax_kw, pbmin_kw, rate_up_kwps, self.c,
+                           self.fp, self.fs, self.fsl, self.MtM, self.LtL, self.Mt1, self.Mtr, self.Lt1,
+                           self.soc_idx, self.H, self.f, self.bu, self.bl, self.aux)
+
+    def aux_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in zip(AUX_NAMES, self.aux)}
+
+    def objective(self, z: np.ndarray) -> float:
+        """Scaled QP objective ``0.5 z'Hz + f'z`` of the last build."""
+        return float(0.5 * z @ self.H @ z + self.f @ z)
+
+
+# ---------------------------------------------------------------------------------------------
+# solvers
+# ---------------------------------------------------------------------------------------------
+class _DaqpSolver:
+    """DAQP with the active set kept between calls (warm start)."""
+
+    def __init__(self, prob: MPCProblem):
+        import daqp
+        self._daqp = daqp
+        self.prob = prob
+        self.model = None
+
+    def _setup(self) -> int:
+        p = self.prob
+        self.model = self._daqp.Model()
+        flag, _ = self.model.setup(p.H, p.f, p.A, p.bu, p.bl)
+        return flag
+
+    def solve(self):
+        """Return ``(z or None, status)``."""
+        p = self.prob
+        if self.model is None:
+            if self._setup() < 0:
+                self.model = None
+                return None, "setup failed"
+        else:
+            self.model.update(H=p.H, f=p.f, bupper=p.bu, blower=p.bl)
+        x, _, flag, _ = self.model.solve()
+        if flag < 1:
+            self.model = None            # start the next call from a clean workspace
+            return None, f"daqp exitflag {flag}"
+        return x, "optimal"
+
+
+class _OsqpSolver:
+    """OSQP called natively; ``P`` values updated each call (structure fixed)."""
+
+    def __init__(self, prob: MPCProblem, eps: float = 1e-6):
+        import osqp
+        from scipy import sparse
+        self.prob = prob
+        n = prob.n
+        iu = np.triu_indices(n)
+        order = np.lexsort((iu[0], iu[1]))              # column-major (CSC) order
+        self._pr, self._pc = iu[0][order], iu[1][order]
+        P = sparse.csc_matrix((prob.H[self._pr, self._pc] + 0.0, (self._pr, self._pc)), shape=(n, n))
+        P.data[:] = 1.0                                # fixed pattern; values set per call
+        self._P = P
+        # row scaling: the SOC rows are in kW-steps (divided by beta ~ 6e-4 %/kW-step); OSQP converges
+        # far better with them back in % (fixed nominal beta at 3.6 V/cell-ish pack values is enough)
+        beta0 = prob.settings.dt_s * 100.0 / (3600.0 * prob.settings.capacity_ah) * 1000.0 / 430.0
+        self._row = np.ones(n + prob.m)
+        self._row[n + 3 * prob.settings.n_c:] = beta0
+        self._A = sparse.csc_matrix(np.vstack([np.eye(n), prob.A]) * self._row[:, None])
+        self._osqp = osqp
+        self.eps = eps
+        self.solver = None
+
+    def _setup(self):
+        p = self.prob
+        P = self._P.copy()
+        P.data = p.H[self._pr, self._pc].copy()
+        self.solver = self._osqp.OSQP()
+        self.solver.setup(P, p.f.copy(), self._A, self._scaled(p.bl), self._scaled(p.bu), verbose=False,
+                          eps_abs=self.eps,
+                          eps_rel=self.eps, polishing=True, max_iter=50000, warm_starting=True)
+
+    def _scaled(self, b):
+        return np.clip(b * self._row, -INF, INF)
+
+    def solve(self):
+        p = self.prob
+        if self.solver is None:
+            self._setup()
+        else:
+            self.solver.update(Px=p.H[self._pr, self._pc], q=p.f, l=self._scaled(p.bl), u=self._scaled(p.bu))
+        res = self.solver.solve()
+        st = res.info.status
+        if st not in ("solved",) or res.x is None or not np.all(np.isfinite(res.x)):
+            self.solver = None
+            return None, f"osqp {st}"
+        return res.x, "optimal"
+
+
+class CvxpyReference:
+    """Readable reference QP in cvxpy, built once with ``cp.Parameter`` (full horizon, all constraints).
+
+    Variables: engine-power moves ``dv`` [kW] (``N_c``), battery slack ``s_b`` [kW], SOC slack ``s_x`` [%].
+    """
+
+    def __init__(self, prob: MPCProblem, solver: str = "CLARABEL"):
+        import cvxpy as cp
+        s = prob.settings
+        self.prob, self.solver, self.cp = prob, solver, cp
+        npred, nc = s.n_p, s.n_c
+        L = prob.L
+        self.soc0 = cp.Parameter(name="soc0_pct")
+        self.v_o = cp.Parameter(name="v_o_kw")
+        self.u_held = cp.Parameter(name="pd_minus_vo_kw")      # battery power if the engine held v_o
+        self.d0 = cp.Parameter(name="soc_drift_pct_per_step")   # SOC change per step at held engine power
+        self.beta = cp.Parameter(nonneg=True, name="beta_pct_per_kw_step")  # -dt*B
+        self.s_o = cp.Parameter(name="sqrt_mf_o")
+        self.hf = cp.Parameter(name="dsqrt_mf_dv")
+        self.rate_up = cp.Parameter(name="dv_max_kw_per_step")
+        self.pbmax = cp.Parameter(name="pb_max_kw")
+        self.pbmin = cp.Parameter(name="pb_min_kw")
+        self.dv = cp.Variable(nc, name="dv_kw")
+        self.s_b = cp.Variable(nonneg=True, name="battery_slack_kw")
+        self.s_x = cp.Variable(nonneg=True, name="soc_slack_pct")
+        dv = self.dv
+        v = self.v_o + L @ dv                                        # engine power over the horizon (C.5)
+        u = self.u_held - L @ dv                                     # battery power (5.2)
+        soc = self.soc0 + cp.cumsum(self.d0 + self.beta * (L @ dv))  # SOC_1..SOC_Np (5.7a)
+        y2 = self.s_o + self.hf * (L @ dv)                           # sqrt(m_f) (5.7b)
+        J = (s.eta1_1 / 1e4 * cp.sum_squares(soc - s.soc_ref_pct) + s.eta2_1 * cp.sum_squares(y2)
+             + s.eta3_1 * cp.sum_squares(dv) + s.eta4_1 * cp.sum_squares(u)
+             + s.soc_slack_weight_1 * self.s_x + s.soc_slack_weight_quad_1 * cp.square(self.s_x)
+             + s.battery_slack_weight_1 * self.s_b + s.battery_slack_weight_quad_1 * cp.square(self.s_b))
+        cons = [dv >= s.power_rate_min_wps / 1e3 * s.dt_s, dv <= self.rate_up,            # 5.8d
+                v[:nc] >= s.power_gen_min_w / 1e3, v[:nc] <= s.power_gen_max_w / 1e3,    # 5.8c
+                u[:nc] <= self.pbmax + self.s_b, u[:nc] >= self.pbmin - self.s_b,         # 5.8b
+                soc >= s.soc_min_pct - self.s_x, soc <= s.soc_max_pct + self.s_x]         # 5.8e
+        if not s.battery_limits_soft:
+            cons.append(self.s_b == 0)
+        self.problem = cp.Problem(cp.Minimize(prob.kappa * J), cons)
+        assert self.problem.is_dpp()
+
+    def set_from_build(self, soc_pct: float, demand_kw: float, gen_kw: float, pbmax_kw: float, pbmin_kw: float):
+        """Copy the linearisation of the last :meth:`MPCProblem.build` into the parameters."""
+        a = self.prob.aux_dict()
+        self.soc0.value = soc_pct
+        self.v_o.value = gen_kw
+        self.u_held.value = demand_kw - gen_kw
+        self.d0.value = a["d0"]
+        self.beta.value = a["beta"]
+        self.s_o.value = a["s_o"]
+        self.hf.value = a["hf"]
+        self.rate_up.value = a["rate_up_dt"]
+        self.pbmax.value = pbmax_kw
+        self.pbmin.value = pbmin_kw
+
+    def solve(self):
+        """Return ``(z or None, status)`` with ``z = [dv..., s_b, s_x / beta]`` (the fast path's variables)."""
+        cp = self.cp
+        try:
+            self.problem.solve(solver=self.solver, warm_start=True)
+        except (cp.error.SolverError, ValueError, ArithmeticError) as exc:
+            return None, f"cvxpy error: {exc}"
+        if self.problem.status not in (cp.OPTIMAL,) or self.dv.value is None:
+            return None, f"cvxpy {self.problem.status}"
+        z = np.concatenate([self.dv.value, [self.s_b.value, self.s_x.value / self.beta.value]])
+        return z, "optimal"
+
+
+# ---------------------------------------------------------------------------------------------
+# the supervisor
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class MPCResult:
+    """Details of the last call (for outputs and tests)."""
+
+    power_cmd_w: float = 0.0
+    ok: bool = False
+    status: str = ""
+    battery_slack_w: float = 0.0
+    soc_slack_pct: float = 0.0
+    rate_max_wps: float = 0.0
+    plan_w: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+class MPCSupervisor:
+    """Linear MPC power split (seed 5.1-5.11) with a fast and a reference solve path.
+
+    Parameters
+    ----------
+    settings : MPCSettings
+    fuel_curve : SqrtFuelCurve
+        Quasi-static fuel rate vs engine-generator electrical power.
+    rate_map : PowerRateMap
+        ``Delta P_g,max(P_g)`` [W/s]; evaluated at the present engine power.
+    rule : object, optional
+        A rule-based supervisor with ``split(...)`` used by ``fallback='rule'`` (and when no plan exists).
+
+    Notes
+    -----
+    :meth:`step` takes SI inputs (W, %, V, Ohm) and returns the engine-generator electrical power
+    command [W].  ``fallback_count`` counts calls that did not use a QP solution.
+    """
+
+    def __init__(self, settings: MPCSettings, fuel_curve: SqrtFuelCurve, rate_map: PowerRateMap,
+                 rule=None, compiled: bool = True):
+        self.settings = settings
+        self.rate_map = rate_map
+        self.prob = MPCProblem(settings, fuel_curve, compiled=compiled)
+        self.rule = rule
+        self._make_solver(settings.solver)
+        self.fallback_count = 0
+        self.last = MPCResult()
+        self._plan_kw = None          # absolute engine powers of the last optimal plan (N_c)
+        self._plan_age = 0
+        self._dv_min_kw = settings.power_rate_min_wps / 1e3 * settings.dt_s
+        self._pg_min_kw = settings.power_gen_min_w / 1e3
+        self._pg_max_kw = settings.power_gen_max_w / 1e3
+
+    def _make_solver(self, name: str) -> None:
+        self.solver_name = name
+        if name == "daqp":
+            self.solver = _DaqpSolver(self.prob)
+        elif name == "osqp":
+            self.solver = _OsqpSolver(self.prob)
+        else:
+            self.solver = CvxpyReference(self.prob, self.settings.cvxpy_solver)
+
+    def reset(self) -> None:
+        """Forget the previous plan and the solver's warm start (not the fallback count)."""
+        self._plan_kw = None
+        self._plan_age = 0
+        self._make_solver(self.solver_name)
+
+    def step(self, soc_pct: float, demand_w: float, gen_power_w: float, power_max_w: float,
+             power_min_w: float, ocv_v: float, rs_ohm: float) -> float:
+        """One supervisor call: state -> QP -> first move.  Returns the engine power command [W]."""
+        try:
+            rate = self.rate_map(gen_power_w)
+        except TypeError:
+            rate = float("nan")
+        vo = gen_power_w * 1e-3
+        st = self.prob.build(soc_pct, demand_w * 1e-3, vo, power_max_w * 1e-3, power_min_w * 1e-3, ocv_v,
+                             rs_ohm, rate * 1e-3)
+        res = self.last
+        res.rate_max_wps = rate
+        if st == 0:
+            if self.solver_name == "cvxpy":
+                self.solver.set_from_build(soc_pct, demand_w * 1e-3, vo, power_max_w * 1e-3, power_min_w * 1e-3)
+            try:
+                z, status = self.solver.solve()
+            except Exception as exc:  # a solver must never crash the run
+                z, status = None, f"solver exception: {exc!r}"
+        else:
+            z, status = None, "unusable inputs (non-finite, V_oc <= 0, R_s <= 0 or P_b,max < P_b,min)"
+        if z is not None:
+            nc = self.settings.n_c
+            v_cmd = vo + float(z[0])
+            if self._plan_kw is None:
+                self._plan_kw = np.empty(nc)
+            np.cumsum(z[:nc], out=self._plan_kw)
+            self._plan_kw += vo
+            self._plan_age = 0
+            res.ok = True
+            res.battery_slack_w = float(z[nc]) * 1e3
+            res.soc_slack_pct = float(z[nc + 1] * self.prob.aux[0])
+        else:
+            v_cmd = self._fallback(soc_pct, demand_w, gen_power_w, power_max_w, power_min_w, rate) * 1e-3
+            self.fallback_count += 1
+            res.ok = False
+            res.battery_slack_w = 0.0
+            res.soc_slack_pct = 0.0
+        res.status = status
+        res.power_cmd_w = v_cmd * 1e3
+        return res.power_cmd_w
+
+    # ----------------------------------------------------------------------------------------
+    def _fallback(self, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w, rate_wps) -> float:
+        """Engine power [W] when no QP solution is available (never raises)."""
+        s = self.settings
+        vo = gen_power_w if math.isfinite(gen_power_w) else 0.0
+        cand = None
+        if s.fallback == "shift" and self._plan_kw is not None and self._plan_age + 1 < s.n_c:
+            self._plan_age += 1
+            cand = float(self._plan_kw[self._plan_age]) * 1e3
+        elif self.rule is not None:
+            try:
+                cand = self.rule.split(soc_pct, demand_w, gen_power_w, power_max_w, power_min_w)
+            except Exception:
+                cand = None
+        if cand is None or not math.isfinite(cand):
+            cand = vo
+        # as far as possible inside the battery limits
+        if math.isfinite(demand_w) and math.isfinite(power_max_w) and math.isfinite(power_min_w) \
+                and power_min_w <= power_max_w:
+            cand = min(max(cand, demand_w - power_max_w), demand_w - power_min_w)
+        # engine limits, then the rate limits around the present power (hard)
+        cand = min(max(cand, s.power_gen_min_w), s.power_gen_max_w)
+        up = rate_wps if (math.isfinite(rate_wps) and rate_wps > 0) else 0.0
+        cand = min(max(cand, vo + s.power_rate_min_wps * s.dt_s), vo + up * s.dt_s)
+        return cand
+
+
+__all__ = ["MPCSettings", "MPCProblem", "MPCSupervisor", "CvxpyReference", "PowerRateMap", "SqrtFuelCurve",
+           "AUX_NAMES", "INF"]
