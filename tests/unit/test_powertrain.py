@@ -556,3 +556,25 @@ def test_closed_loop_hd_udds_tracking_and_whole_vehicle_energy_balance():
     # fuel economy of a 15.5 t series hybrid on HD-UDDS in a plausible range (seed UAC: 3.3 km/l)
     km_per_l = last("vehicle.distance_m") / 1e3 / (last("eg.fuel_mass_g") / 840.0)
     assert 2.0 < km_per_l < 5.0
+
+
+@pytest.mark.parametrize("cls,inputs", [
+    (Driver, dict(speed_ref_mps=10.0, accel_ref_mps2=0.5, speed_mps=9.0)),
+    (Motor, dict(force_req_n=30e3, speed_mps=12.0)),
+    (Vehicle, dict(traction_force_n=20e3, brake_force_n=0.0, grade_rad=0.01)),
+    (PowerBus, dict(motor_power_w=80e3, gen_power_w=50e3, aux_power_w=2e3)),
+], ids=lambda x: getattr(x, "TYPE", ""))
+def test_save_restore_reproduces_steps(cls, inputs):
+    c = cls(cls.TYPE)
+    c.initialize(0.0)
+    c.u.update(inputs)
+    for k in range(5):
+        c.do_step(0.1 * k, 0.1)
+    s = c.get_state()
+    c.do_step(0.5, 0.1)
+    c.do_step(0.6, 0.1)
+    a = dict(c.y)
+    c.set_state(s)
+    c.do_step(0.5, 0.1)
+    c.do_step(0.6, 0.1)
+    assert c.y == a
