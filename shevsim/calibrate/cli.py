@@ -1,0 +1,108 @@
+"""cli.py - ``shevsim calibrate MODEL DATA.csv --out DIR [--params PARAMS.toml] [--map canonical=column ...]
+[--holdout FRACTION]``.
+
+``--params`` TOML::
+
+    [meta]                      # free text, ignored
+    source = "..."
+    [params]                    # known parameters (e.g. capacity_ah, mass_kg) or starting values of
+    capacity_ah = 2.9           # declared ones (e.g. r0_ohm); unknown names fail with a suggestion
+    [ocv]                       # cell only: open-circuit voltage curve
+    soc_frac = [0.0, 0.1, ...]
+    ocv_v = [3.0, 3.4, ...]
+
+Exit status 0 on success, 2 on bad input (message names the file and column/row/field).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import tomllib
+from pathlib import Path
+
+from ..core.errors import DataError, ShevsimError
+from .data import CURRENT_SIGNS, POWER_SIGNS, load_measured, parse_mapping
+from .models import MODELS
+
+
+def load_params_toml(path) -> dict:
+    """Read a ``--params`` file into a flat dict of known/initial parameters."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: parameter file not found")
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise DataError(f"{path}: invalid TOML: {exc}") from exc
+    out = {}
+    for sec, body in doc.items():
+        if sec == "meta":
+            continue
+        if sec == "params":
+            out.update(body)
+        elif sec == "ocv":
+            for k in body:
+                if k not in ("soc_frac", "ocv_v"):
+                    raise DataError(f"{path}: [ocv] unknown key '{k}' (expected soc_frac, ocv_v)")
+            if "soc_frac" not in body or "ocv_v" not in body:
+                raise DataError(f"{path}: [ocv] needs both soc_frac and ocv_v")
+            out["ocv_soc_frac"] = tuple(float(x) for x in body["soc_frac"])
+            out["ocv_v"] = tuple(float(x) for x in body["ocv_v"])
+        else:
+            raise DataError(f"{path}: unknown table [{sec}] (expected [meta], [params], [ocv])")
+    return out
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="shevsim calibrate",
+                                 description="Fit a model to measured data, trace the residual to a missing "
+                                             "effect, add it and report the error before and after.")
+    ap.add_argument("model", choices=sorted(MODELS), help="calibration model")
+    ap.add_argument("data", help="measured CSV (or .csv.gz); '#' lines are comments")
+    ap.add_argument("--out", required=True, help="output directory (report.json, report.md, plots)")
+    ap.add_argument("--params", help="TOML with known parameters / starting values / OCV curve")
+    ap.add_argument("--map", action="append", default=[], metavar="CANONICAL=COLUMN",
+                    help="use file column COLUMN as canonical column CANONICAL (repeatable)")
+    ap.add_argument("--holdout", type=float, default=0.3, help="held-out fraction (default 0.3)")
+    ap.add_argument("--split", choices=("blocks", "tail"), default="blocks",
+                    help="held-out blocks spread over the record (default) or the final part")
+    ap.add_argument("--current-sign", choices=CURRENT_SIGNS, default="discharge-positive",
+                    help="sign convention of the current column in the file")
+    ap.add_argument("--power-sign", choices=POWER_SIGNS, default="drawn-positive",
+                    help="sign convention of the power column in the file")
+    ap.add_argument("--drop-duplicate-rows", action="store_true",
+                    help="drop rows identical to the previous one (logger repeats) instead of failing")
+    ap.add_argument("--effects", nargs="+", help="restrict the candidate effects to these names")
+    ap.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    ap.add_argument("-q", "--quiet", action="store_true")
+    return ap
+
+
+def main_calibrate(argv=None) -> int:
+    """Entry point of ``shevsim calibrate``; returns the exit status."""
+    from .workflow import run_workflow
+    args = build_parser().parse_args(argv)
+    log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
+    try:
+        known = load_params_toml(args.params) if args.params else {}
+        data = load_measured(args.data, args.model, parse_mapping(args.map), current_sign=args.current_sign,
+                             power_sign=args.power_sign, drop_duplicate_rows=args.drop_duplicate_rows)
+        for n in data.notes:
+            log(f"note: {n}")
+        rep = run_workflow(args.model, data, known, holdout=args.holdout, split=args.split, out_dir=args.out,
+                           effects=args.effects, plots=not args.no_plots,
+                           params_where=args.params or "<params>", log=log)
+    except ShevsimError as exc:
+        print(f"shevsim calibrate: error: {exc}", file=sys.stderr)
+        return 2
+    sel = ", ".join(rep["selected_effects"]) or "nothing found"
+    print(f"selected effects: {sel}")
+    for c, b in rep["rmse_before"].items():
+        a = rep["rmse_after"][c]
+        print(f"  {c}: held-out RMSE {b['holdout']:.4g} -> {a['holdout']:.4g} (train {b['train']:.4g} -> {a['train']:.4g})")
+    print(f"report: {Path(args.out) / 'report.md'} ({rep['elapsed_s']:.1f} s)")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main_calibrate())

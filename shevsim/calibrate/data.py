@@ -1,0 +1,259 @@
+"""data.py - load measured time series into canonical columns, with checks that name file, column and row.
+
+Canonical columns (SI, unit-suffixed; extra columns are kept as candidate explanatory signals):
+
+* ``cell``: ``time_s``, ``current_a`` (positive = discharge), ``voltage_v``, ``t_surface_c``,
+  ``t_ambient_c``; optional ``t_core_c``.
+* ``vehicle``: ``time_s``, ``speed_mps``, ``power_w`` (total electrical load on the bus, positive = drawn).
+
+File format: CSV with one header line; lines starting with ``#`` are comments; ``.csv.gz`` is read
+transparently.  ``mapping`` renames file columns to canonical names (``{"current_a": "Current"}``).
+Sign conventions: ``current_sign="charge-positive"`` negates the current column (e.g. battery testers
+that log charge as positive); ``power_sign="delivered-positive"`` negates the vehicle power.
+
+Checks (each raises :class:`shevsim.core.errors.DataError` naming the file and column/row; file row
+numbers count every line of the file, 1-based, including comments and header):
+missing columns (with the closest existing name), non-numeric values, NaN runs in a required column,
+non-increasing or duplicate time (identical duplicate rows may be dropped with
+``drop_duplicate_rows=True``), implausible units (temperature looking like kelvin, speed looking like
+km/h, power looking like kW, cell voltage outside 1-5.5 V), and a current sign that contradicts the
+measured voltage response (dV/dI must be negative for discharge-positive current).
+"""
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import pandas as pd
+
+from ..core.errors import DataError
+
+REQUIRED = {
+    "cell": ("time_s", "current_a", "voltage_v", "t_surface_c", "t_ambient_c"),
+    "vehicle": ("time_s", "speed_mps", "power_w"),
+}
+OPTIONAL = {"cell": ("t_core_c",), "vehicle": ()}
+CURRENT_SIGNS = ("discharge-positive", "charge-positive")
+POWER_SIGNS = ("drawn-positive", "delivered-positive")
+
+
+@dataclass
+class MeasuredData:
+    """Measured data in canonical columns: ``df`` (pandas), ``path``, ``model``, ``notes`` (what was changed)."""
+    df: pd.DataFrame
+    path: str
+    model: str
+    notes: list = field(default_factory=list)
+
+    @property
+    def extra_columns(self) -> list[str]:
+        canon = set(REQUIRED[self.model]) | set(OPTIONAL[self.model])
+        return [c for c in self.df.columns if c not in canon]
+
+
+def parse_mapping(items) -> dict:
+    """Parse ``["canonical=column", ...]`` into a dict (errors name the bad item)."""
+    out = {}
+    for it in items or ():
+        if "=" not in it:
+            raise DataError(f"--map '{it}': expected canonical=column")
+        k, v = it.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def _row_of(df_index: int, line_of: np.ndarray) -> int:
+    return int(line_of[df_index])
+
+
+def _file_lines(path: Path) -> np.ndarray:
+    """1-based file line number of each data row (skipping comment lines and the header)."""
+    import gzip
+    opener = gzip.open if str(path).endswith(".gz") else open
+    lines = []
+    header_seen = False
+    with opener(path, "rt", encoding="utf-8", errors="replace") as fh:
+        for ln, line in enumerate(fh, start=1):
+            s = line.strip()
+            if not s or s.startswith("#"):
+                continue
+            if not header_seen:
+                header_seen = True
+                continue
+            lines.append(ln)
+    return np.asarray(lines, dtype=np.int64)
+
+
+def _runs(mask: np.ndarray):
+    """Start/end indices (inclusive) of runs of True."""
+    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    d = np.diff(m)
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
+
+
+def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
+                  current_sign: str = "discharge-positive", power_sign: str = "drawn-positive",
+                  drop_duplicate_rows: bool = False, check_sign: bool = True) -> MeasuredData:
+    """Load and check a measured CSV for calibration model ``model`` (``cell`` or ``vehicle``).
+
+    Returns
+    -------
+    MeasuredData
+        canonical columns (SI, signs as documented in the module docstring) plus all extra numeric columns.
+    """
+    path = Path(path)
+    if model not in REQUIRED:
+        raise DataError(f"unknown model '{model}'; available: {', '.join(REQUIRED)}")
+    if current_sign not in CURRENT_SIGNS:
+        raise DataError(f"current sign '{current_sign}': expected one of {CURRENT_SIGNS}")
+    if power_sign not in POWER_SIGNS:
+        raise DataError(f"power sign '{power_sign}': expected one of {POWER_SIGNS}")
+    if not path.is_file():
+        raise DataError(f"{path}: file not found")
+    try:
+        raw = pd.read_csv(path, comment="#", skipinitialspace=True)
+    except Exception as exc:  # pandas parser errors carry the line
+        raise DataError(f"{path}: cannot parse CSV: {exc}") from exc
+    if raw.shape[0] < 3:
+        raise DataError(f"{path}: only {raw.shape[0]} data rows")
+    line_of = _file_lines(path)
+    if line_of.size != raw.shape[0]:  # blank lines inside etc.: fall back to header offset
+        line_of = np.arange(raw.shape[0]) + 2
+    raw.columns = [str(c).strip() for c in raw.columns]
+    mapping = dict(mapping or {})
+    canon_all = REQUIRED[model] + OPTIONAL[model]
+    for canon, col in mapping.items():
+        if canon not in canon_all:
+            raise DataError(f"--map {canon}={col}: '{canon}' is not a canonical column of model '{model}' "
+                            f"({', '.join(canon_all)})")
+        if col not in raw.columns:
+            best = difflib.get_close_matches(col, list(raw.columns), n=1)
+            hint = f" (did you mean '{best[0]}'?)" if best else ""
+            raise DataError(f"{path}: column '{col}' (mapped to {canon}) not found{hint}; "
+                            f"columns: {', '.join(raw.columns)}")
+    rename = {col: canon for canon, col in mapping.items()}
+    # a canonical name already present in the file and also mapped from another column: the mapped wins
+    df = raw.drop(columns=[c for c in raw.columns if c in mapping and c not in rename]).rename(columns=rename)
+    for col in REQUIRED[model]:
+        if col not in df.columns:
+            best = difflib.get_close_matches(col, list(df.columns), n=1, cutoff=0.3)
+            hint = f"; use --map {col}={best[0]} if that is it" if best else ""
+            raise DataError(f"{path}: missing required column '{col}' for model '{model}'{hint}; "
+                            f"columns: {', '.join(df.columns)}")
+    notes = []
+    # numeric check
+    for col in list(df.columns):
+        conv = pd.to_numeric(df[col], errors="coerce")
+        bad = conv.isna() & df[col].notna() & (df[col].astype(str).str.strip().str.lower() != "nan")
+        if bad.any():
+            k = int(np.flatnonzero(bad.to_numpy())[0])
+            if col in canon_all:
+                raise DataError(f"{path}: column '{col}', line {_row_of(k, line_of)}: non-numeric value "
+                                f"{df[col].iloc[k]!r}")
+            notes.append(f"extra column '{col}' is not numeric and was dropped")
+            df = df.drop(columns=[col])
+            continue
+        df[col] = conv.astype(float)
+    # NaN runs in required/optional canonical columns
+    for col in canon_all:
+        if col not in df.columns:
+            continue
+        nan = df[col].isna().to_numpy()
+        if nan.any():
+            runs = _runs(nan)
+            a, b = runs[0]
+            raise DataError(f"{path}: column '{col}' has {int(nan.sum())} NaN value(s) in {len(runs)} run(s); "
+                            f"first run lines {_row_of(a, line_of)}-{_row_of(b, line_of)} "
+                            f"({b - a + 1} samples)")
+    for col in list(df.columns):
+        if col not in canon_all and df[col].isna().any():
+            notes.append(f"extra column '{col}' has NaN values and was dropped from the candidate signals")
+            df = df.drop(columns=[col])
+    # time
+    t = df["time_s"].to_numpy()
+    dt = np.diff(t)
+    dup = np.flatnonzero(dt == 0)
+    if dup.size:
+        same = np.array([np.array_equal(df.iloc[k].to_numpy(), df.iloc[k + 1].to_numpy(), equal_nan=True)
+                         for k in dup[:1000]])
+        if drop_duplicate_rows and same.all() and dup.size <= 1000:
+            keep = np.ones(len(df), bool)
+            keep[dup + 1] = False
+            df = df[keep].reset_index(drop=True)
+            line_of = line_of[keep]
+            notes.append(f"dropped {dup.size} duplicate row(s) (identical in every column)")
+            t = df["time_s"].to_numpy()
+            dt = np.diff(t)
+        else:
+            k = int(dup[0])
+            kind = "identical rows" if same[0] else "different values"
+            hint = "; pass --drop-duplicate-rows to drop identical duplicates" if same[0] else ""
+            raise DataError(f"{path}: column 'time_s': duplicate time {t[k]} s at lines "
+                            f"{_row_of(k, line_of)} and {_row_of(k + 1, line_of)} ({kind}; {dup.size} "
+                            f"duplicate(s) in total){hint}")
+    back = np.flatnonzero(dt < 0)
+    if back.size:
+        k = int(back[0])
+        raise DataError(f"{path}: column 'time_s': time goes backwards at line {_row_of(k + 1, line_of)} "
+                        f"({t[k]} -> {t[k + 1]} s); time must increase strictly")
+    _check_units(df, model, path, line_of)
+    if model == "cell" and current_sign == "charge-positive":
+        df["current_a"] = -df["current_a"]
+        notes.append("current negated (file: charge positive -> canonical: discharge positive)")
+    if model == "vehicle" and power_sign == "delivered-positive":
+        df["power_w"] = -df["power_w"]
+        notes.append("power negated (file: delivered positive -> canonical: drawn positive)")
+    if model == "cell" and check_sign:
+        di = np.diff(df["current_a"].to_numpy())
+        dv = np.diff(df["voltage_v"].to_numpy())
+        big = np.abs(di) > 0.05 * max(np.abs(df["current_a"]).max(), 1e-9)
+        if big.sum() >= 10:
+            c = np.corrcoef(di[big], dv[big])[0, 1]
+            if c > 0.3:
+                other = [s for s in CURRENT_SIGNS if s != current_sign][0]
+                raise DataError(f"{path}: column 'current_a': voltage rises when current rises (corr(dI, dV) = "
+                                f"{c:+.2f}) - the current sign looks inverted for '{current_sign}'; "
+                                f"pass --current-sign {other}")
+    return MeasuredData(df=df, path=str(path), model=model, notes=notes)
+
+
+def _check_units(df, model, path, line_of):
+    def bad(col, msg, k):
+        raise DataError(f"{path}: column '{col}', line {_row_of(k, line_of)}: {msg}")
+
+    if model == "cell":
+        for col in ("t_surface_c", "t_ambient_c", "t_core_c"):
+            if col not in df:
+                continue
+            x = df[col].to_numpy()
+            if np.median(x) > 150.0:
+                bad(col, f"median {np.median(x):.1f} looks like kelvin, expected degC (subtract 273.15)",
+                    int(np.argmax(x > 150)))
+            k = np.flatnonzero((x < -60.0) | (x > 150.0))
+            if k.size:
+                bad(col, f"temperature {x[k[0]]} degC outside the plausible range [-60, 150]", int(k[0]))
+        v = df["voltage_v"].to_numpy()
+        if np.median(v) > 100:
+            bad("voltage_v", f"median {np.median(v):.0f} looks like millivolts, expected V", 0)
+        k = np.flatnonzero((v < 1.0) | (v > 5.5))
+        if k.size:
+            bad("voltage_v", f"cell voltage {v[k[0]]} V outside the plausible range [1, 5.5] V", int(k[0]))
+        i = df["current_a"].to_numpy()
+        k = np.flatnonzero(np.abs(i) > 1000.0)
+        if k.size:
+            bad("current_a", f"cell current {i[k[0]]} A implausible (> 1000 A; milliamps?)", int(k[0]))
+    else:
+        s = df["speed_mps"].to_numpy()
+        k = np.flatnonzero(s < -0.5)
+        if k.size:
+            bad("speed_mps", f"negative speed {s[k[0]]} m/s", int(k[0]))
+        if s.max() > 70.0:
+            bad("speed_mps", f"speed {s.max():.1f} m/s (> 70 m/s = 252 km/h) looks like km/h; divide by 3.6",
+                int(np.argmax(s)))
+        p = df["power_w"].to_numpy()
+        if np.abs(p).max() < 200.0 and np.abs(p).max() > 0:
+            bad("power_w", f"largest |power| is {np.abs(p).max():.3g} - looks like kW, expected W",
+                int(np.argmax(np.abs(p))))

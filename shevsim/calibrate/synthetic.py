@@ -1,0 +1,167 @@
+"""synthetic.py - "measured" data from a richer truth model with undeclared effects, for tests.
+
+The truth differs from the calibration library in ways a real plant would:
+
+* declared parameters are NOT at the library's defaults (``CELL_TRUTH``, ``VEHICLE_TRUTH``);
+* the cell truth runs at a finer time step (0.1 s) than the output samples, its cooling change is a hard
+  step (0.1 s wide instead of the library's 20 s sigmoid), sensors add Gaussian noise (current 10 mA,
+  voltage 2 mV, temperature 0.05 K) and the model only sees the noisy measured current;
+* the vehicle truth uses the exact acceleration of its speed profile (the library differentiates the
+  noisy measured speed), a smooth sinusoidal road grade (the library has a 6-knot piecewise-linear one),
+  and power noise 1 % + 300 W, speed noise 0.01 m/s (CAN wheel-speed resolution is ~0.003 m/s);
+  accelerations are jerk-limited (2 s moving average).
+
+Effects are given as ``{"name": {param: value}}`` (``{}`` = the default truth value in
+``CELL_EFFECTS`` / ``VEHICLE_EFFECTS``).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .data import MeasuredData
+from .models import CellModel, VehicleModel
+
+CELL_TRUTH = {"r0_ohm": 0.031, "r1_ohm": 0.022, "tau1_s": 38.0, "cc_j_k": 52.0, "cs_j_k": 3.5,
+              "rc_k_w": 2.8, "ru_k_w": 8.5}
+CELL_EFFECTS = {
+    "entropic_heat": {"dudt_v_k": -0.8e-3},
+    "arrhenius_resistance": {"ea_r_k": 4000.0},
+    "cooling_change": {"t_change_s": None, "h_factor": 0.25},   # None: at 40 % of the record
+    "ocv_hysteresis": {"m_hyst_v": 0.025, "gamma_hyst": 40.0},
+    "capacity_fade": {"capacity_scale": 0.8},
+    "current_offset": {"current_offset_a": 0.12},
+}
+VEHICLE_TRUTH = {"eta_drive_frac": 0.88}
+VEHICLE_EFFECTS = {
+    "road_grade": {"amplitude_frac": 0.02, "offset_frac": 0.004},
+    "aux_load": {"p_aux_extra_w": 6000.0},
+    "mass_error": {"mass_scale": 1.25},
+    "rolling_error": {"crr_scale": 1.8},
+    "aero_error": {"cda_scale": 1.6},
+    "regen_limit": {"p_regen_max_w": 50000.0},
+}
+
+
+def _cell_current(duration_s: float, dt: float, rng, quantum_s: float) -> np.ndarray:
+    """Drive-like current [A, + discharge]: random pulses (mean ~1.4 A, regen down to -4 A) and rests.
+
+    Segment boundaries fall on multiples of ``quantum_s`` (the logger's sample period)."""
+    n = int(round(duration_s / dt)) + 1
+    q = max(1, int(round(quantum_s / dt)))
+    i = np.zeros(n)
+    k = int(60 / dt)  # initial rest
+    while k < n:
+        if rng.random() < 0.2:
+            k += q * int(rng.uniform(60, 240) / quantum_s)  # rest
+            continue
+        seg = q * max(1, int(rng.uniform(3, 25) / quantum_s))
+        val = rng.choice([rng.uniform(0.5, 8.0), rng.uniform(-4.0, -0.5), rng.uniform(1.0, 3.0)], p=[0.5, 0.25, 0.25])
+        i[k:k + seg] = val
+        k += seg
+    return i
+
+
+def synth_cell(effects: dict | None = None, duration_s: float = 2400.0, dt_s: float = 1.0,
+               ambient: str = "constant", seed: int = 0, truth: dict | None = None):
+    """Synthetic cell record (DataFrame with canonical columns) and the truth used.
+
+    ``ambient``: ``"constant"`` (25 degC) or ``"warmup"`` (chamber from -10 to +25 degC, like the
+    Panasonic -20 degC warm-up runs).
+    """
+    rng = np.random.default_rng(seed)
+    fine = 0.1
+    i_true = _cell_current(duration_s, fine, rng, dt_s)
+    n = i_true.size
+    t = np.arange(n) * fine
+    if ambient == "constant":
+        ta = np.full(n, 25.0)
+    elif ambient == "warmup":
+        ta = -10.0 + 35.0 * np.clip(t / (0.8 * t[-1]), 0, 1)
+    else:
+        raise ValueError(ambient)
+    vals = dict(CELL_TRUTH, **(truth or {}))
+    for name, over in (effects or {}).items():
+        e = dict(CELL_EFFECTS[name], **(over or {}))
+        if name == "cooling_change" and e.get("t_change_s") is None:
+            e["t_change_s"] = 0.4 * t[-1]
+        vals.update(e)
+    off = vals.get("current_offset_a", 0.0)
+    model = CellModel({"soc0_frac": 0.95, "change_width_s": 0.1})
+    df_true = pd.DataFrame({"time_s": t, "current_a": i_true + off, "voltage_v": 4.0,
+                            "t_surface_c": ta[0], "t_ambient_c": ta})
+    # truth: the current the cell sees is i_true; the kernel subtracts the offset from the "measured" one
+    ctx = model.prepare(MeasuredData(df_true, "<truth>", "cell"))
+    ctx["tc0"] = ctx["ts0"] = float(ta[0])
+    out = model.simulate(ctx, vals)
+    step = int(round(dt_s / fine))
+    sl = slice(None, None, step)
+    m = t[sl].size
+    df = pd.DataFrame({
+        "time_s": t[sl],
+        "current_a": (i_true + off)[sl] + rng.normal(0, 0.01, m),
+        "voltage_v": out["voltage_v"][sl] + rng.normal(0, 0.002, m),
+        "t_surface_c": out["t_surface_c"][sl] + rng.normal(0, 0.05, m),
+        "t_ambient_c": ta[sl] + rng.normal(0, 0.1, m),
+    })
+    return df, vals
+
+
+def _speed_profile(duration_s: float, dt: float, rng):
+    """Stop-and-go plus faster stretches: exact speed [m/s] and acceleration [m/s^2]."""
+    n = int(round(duration_s / dt)) + 1
+    a = np.zeros(n)
+    v = np.zeros(n)
+    k = int(10 / dt)
+    cur = 0.0
+    while k < n - 1:
+        target = rng.choice([0.0, rng.uniform(5, 12), rng.uniform(12, 25)], p=[0.3, 0.4, 0.3])
+        acc = rng.uniform(0.4, 1.2) if target > cur else -rng.uniform(0.5, 1.5)
+        steps = int(abs(target - cur) / abs(acc) / dt) if target != cur else 0
+        a[k:k + steps] = acc
+        k += steps
+        cur = target if steps else cur
+        hold = int(rng.uniform(5, 60 if target > 0 else 25) / dt)
+        k += hold
+    # jerk-limited: smooth the acceleration steps over 2 s (a moving average keeps the speed targets)
+    w = max(1, int(round(2.0 / dt)))
+    a = np.convolve(a[:n], np.ones(w) / w, mode="full")[:n]
+    v = np.concatenate([[0.0], np.cumsum(a[:-1] * dt)])
+    v = np.maximum(v, 0.0)
+    return v, a
+
+
+def synth_vehicle(effects: dict | None = None, duration_s: float = 1800.0, dt_s: float = 1.0,
+                  seed: int = 0, truth: dict | None = None):
+    """Synthetic vehicle record (``time_s``, ``speed_mps``, ``power_w``) and the truth used."""
+    rng = np.random.default_rng(seed)
+    dt = 0.1
+    v, a = _speed_profile(duration_s, dt, rng)
+    t = np.arange(v.size) * dt
+    k = dict(VehicleModel.known_defaults)
+    vals = {"mass_scale": 1.0, "crr_scale": 1.0, "cda_scale": 1.0, "p_aux_extra_w": 0.0, "p_regen_max_w": 1e12,
+            "amplitude_frac": 0.0, "offset_frac": 0.0}
+    vals.update(VEHICLE_TRUTH)
+    vals.update(truth or {})
+    for name, over in (effects or {}).items():
+        vals.update(dict(VEHICLE_EFFECTS[name], **(over or {})))
+    d = np.concatenate([[0.0], np.cumsum(v[:-1] * dt)])
+    grade = vals["offset_frac"] + vals["amplitude_frac"] * np.sin(2 * np.pi * d / max(d[-1], 1.0) + 0.7)
+    m = k["mass_kg"] * vals["mass_scale"]
+    f = (m * (1 + k["rot_inertia_frac"]) * a + 0.5 * k["rho_kg_m3"] * k["cd_a_m2"] * vals["cda_scale"] * v * v
+         + m * k["g_mps2"] * (k["crr"] * vals["crr_scale"] * (v > 0.05) + np.sin(np.arctan(grade))))
+    pw = f * v
+    pe = np.where(pw > 0, pw / vals["eta_drive_frac"], pw * vals["eta_drive_frac"] * k["regen_frac"])
+    pe = np.maximum(pe, -vals["p_regen_max_w"]) + k["p_aux_w"] + vals["p_aux_extra_w"]
+    step = int(round(dt_s / dt))
+    sl = slice(None, None, step)
+    nn = t[sl].size
+    df = pd.DataFrame({"time_s": t[sl],
+                       "speed_mps": np.maximum(v[sl] + rng.normal(0, 0.01, nn), 0.0),
+                       "power_w": pe[sl] * (1 + rng.normal(0, 0.01, nn)) + rng.normal(0, 300.0, nn)})
+    return df, vals
+
+
+def as_measured(df: pd.DataFrame, model: str) -> MeasuredData:
+    """Wrap a synthetic DataFrame as loaded data (skips the file checks)."""
+    return MeasuredData(df=df.reset_index(drop=True), path="<synthetic>", model=model)

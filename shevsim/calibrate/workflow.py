@@ -1,0 +1,561 @@
+"""workflow.py - fit, diagnose the residual, test candidate effects, select, refit, report.
+
+Steps (:func:`run_workflow`):
+
+1. **Split** the record into a training and a held-out part. Default ``blocks``: the time span is cut into
+   10 equal blocks and ``round(10 * holdout)`` of them, evenly spread, are held out (so slowly varying
+   effects are seen in both parts); ``tail`` holds out the last fraction.  The model is always simulated
+   over the whole record (its inputs are measured everywhere); only training samples enter the fit.
+2. **Fit** the declared parameters with ``scipy.optimize.least_squares`` (trust-region reflective,
+   bounded; parameters mapped to [0, 1] between their bounds, log-scaled where declared).  Channels are
+   weighted by 1 / (baseline training RMSE of the channel): the baseline is fitted once with weights
+   1 / std(measured), reweighted and refitted; all later fits use those fixed weights.  The model is
+   simulated at every sample, but the loss uses at most ``MAX_FIT_SAMPLES`` = 4000 training samples per
+   channel (uniform stride); RMSE, BIC and diagnostics use all samples.  Effects with several starting
+   points are screened by cost and optimised from the best ``N_STARTS_KEPT`` = 2.
+3. **Diagnose** residuals per channel on both parts: bias, RMSE, drift slope, autocorrelation at lags
+   1..10 and a Ljung-Box statistic, a high-frequency noise-floor estimate (robust std of first
+   differences / sqrt 2), correlation with the model's candidate regressors and with measured columns the
+   model does not use.
+4. **Test** every candidate effect: fit model + effect (declared + effect parameters, multi-start where
+   the effect declares starts) on the training part; evaluate held-out RMSE per channel, the combined
+   held-out score ``sqrt(mean_c (rmse_c / rmse_c,baseline)^2)`` (baseline = 1.0) and an
+   autocorrelation-corrected BIC on the training residuals:
+   ``BIC = sum_c n_eff,c ln(SSE_c / n_c) + k ln(n_eff)``, ``n_eff,c = n_c (1 - rho1_c) / (1 + rho1_c)``
+   with rho1_c the lag-1 autocorrelation of the current model's training residual (correlated residuals
+   carry less information than their sample count; the plain BIC would accept any parameter).
+5. **Select** greedily: a candidate passes when, relative to the current model,
+   (a) its combined held-out score falls by at least ``MIN_GAIN`` = 10 %,
+   (b) no channel's held-out RMSE rises by more than ``MAX_WORSEN`` = 10 %, and
+   (c) its BIC falls by at least ``MIN_DBIC`` = 10 ("very strong" on the Kass-Raftery scale).
+   Among passing candidates the lowest held-out score wins, except that a candidate within ``TIE`` = 2 %
+   of it with a lower BIC is preferred (parsimony).  The winner is added, the remaining candidates are
+   re-tested on top of it; this repeats until none passes ("nothing found" when none passes at first).
+6. **Refit and report**: ``report.json``, ``report.md`` and PNG plots in the output directory, all
+   written atomically (temp file + ``os.replace``).  Channels whose final held-out residual still exceeds
+   3x the noise floor with a significant correlation are listed under ``unexplained``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import optimize, stats
+
+from ..core.errors import DataError
+from .models import CalibrationModel, Param, get_model
+
+MIN_GAIN = 0.10
+MAX_WORSEN = 0.10
+MIN_DBIC = 10.0
+TIE = 0.02
+N_BLOCKS = 10
+ACF_LAGS = 10
+MAX_ROUNDS = 3
+MAX_FIT_SAMPLES = 4000
+N_STARTS_KEPT = 2
+
+
+# ------------------------------------------------------------------------------------------ helpers
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (temp file in the same directory + os.replace)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix="." + path.name + ".", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def make_split(t: np.ndarray, holdout: float, method: str = "blocks"):
+    """Training / held-out boolean masks and a JSON-able description of the split."""
+    if not (0.0 < holdout < 0.9):
+        raise DataError(f"--holdout {holdout}: must be in (0, 0.9)")
+    t0, t1 = float(t[0]), float(t[-1])
+    if method == "tail":
+        tc = t1 - holdout * (t1 - t0)
+        hold = t > tc
+        intervals = [[tc, t1]]
+    elif method == "blocks":
+        m = max(1, int(round(holdout * N_BLOCKS)))
+        idx = sorted({min(N_BLOCKS - 1, int((j + 0.5) * N_BLOCKS / m)) for j in range(m)})
+        edges = np.linspace(t0, t1, N_BLOCKS + 1)
+        blk = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, N_BLOCKS - 1)
+        hold = np.isin(blk, idx)
+        intervals = [[float(edges[b]), float(edges[b + 1])] for b in idx]
+    else:
+        raise DataError(f"split method '{method}': expected 'blocks' or 'tail'")
+    train = ~hold
+    if train.sum() < 10 or hold.sum() < 10:
+        raise DataError(f"split leaves too few samples (train {train.sum()}, holdout {hold.sum()})")
+    return train, hold, {"method": method, "holdout_fraction": holdout, "holdout_intervals_s": intervals,
+                         "n_train": int(train.sum()), "n_holdout": int(hold.sum()),
+                         "n_blocks": N_BLOCKS if method == "blocks" else None}
+
+
+def _acf(r: np.ndarray, lags: int) -> np.ndarray:
+    r = r - r.mean()
+    d = float(np.dot(r, r))
+    if d <= 0 or r.size <= lags + 1:
+        return np.zeros(lags)
+    return np.array([float(np.dot(r[:-k], r[k:])) / d for k in range(1, lags + 1)])
+
+
+def noise_floor(r: np.ndarray) -> float:
+    """High-frequency noise estimate: robust std of first differences / sqrt(2)."""
+    d = np.diff(r)
+    if d.size < 3:
+        return float("nan")
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
+
+
+def diagnose(r: np.ndarray, t: np.ndarray, regs: dict) -> dict:
+    """Residual diagnostics of one channel on one part (see module docstring)."""
+    n = r.size
+    acf = _acf(r, ACF_LAGS)
+    q = n * (n + 2) * float(np.sum(acf ** 2 / (n - np.arange(1, ACF_LAGS + 1))))
+    slope = float(np.polyfit(t - t[0], r, 1)[0]) * 3600.0 if n > 2 and t[-1] > t[0] else 0.0
+    corr = []
+    for name, x in regs.items():
+        if x.size != n or np.std(x) == 0 or np.std(r) == 0:
+            continue
+        corr.append((name, float(np.corrcoef(x, r)[0, 1])))
+    corr.sort(key=lambda c: -abs(c[1]))
+    return {"n": n, "bias": float(r.mean()), "rmse": float(np.sqrt(np.mean(r * r))),
+            "drift_per_hour": slope, "acf": [round(float(a), 4) for a in acf],
+            "ljung_box_q": q, "ljung_box_p": float(stats.chi2.sf(q, ACF_LAGS)),
+            "white": bool(stats.chi2.sf(q, ACF_LAGS) > 0.01), "noise_floor": noise_floor(r),
+            "correlations": [{"signal": a, "r": round(b, 4)} for a, b in corr[:6]]}
+
+
+# ------------------------------------------------------------------------------------------ fitting
+
+@dataclass
+class FitResult:
+    effects: tuple
+    params: dict
+    pred: dict
+    rmse: dict               # channel -> {"train", "holdout"}
+    sse_train: dict
+    n_train: dict
+    k: int
+    cost: float
+    nfev: int
+    score: float = float("nan")
+    bic: float = float("nan")
+    dbic: float = float("nan")
+    gain: float = float("nan")
+    worsen: float = float("nan")
+    passed: bool = False
+    reason: str = ""
+
+
+class Fitter:
+    """Least-squares fits of a model (+ effects) on the training part of one data set."""
+
+    def __init__(self, model: CalibrationModel, data, train: np.ndarray, hold: np.ndarray):
+        self.model = model
+        self.ctx = model.prepare(data)
+        df = data.df
+        self.channels = [c for c in model.channels + model.optional_channels if c in df.columns]
+        self.meas = {c: df[c].to_numpy(float) for c in self.channels}
+        self.train, self.hold = train, hold
+        self.weights = {c: 1.0 / max(float(np.std(self.meas[c])), 1e-12) for c in self.channels}
+        self.bounds_override = model.param_bounds(self.ctx)
+        self.nsim = 0
+        # the loss uses at most MAX_FIT_SAMPLES training samples per channel (uniform stride; the model is
+        # still simulated at every sample): keeps the least-squares linear algebra small on long records
+        tr_idx = np.flatnonzero(train)
+        self.fit_idx = tr_idx[::max(1, int(math.ceil(tr_idx.size / MAX_FIT_SAMPLES)))]
+
+    def _params_for(self, effects) -> list[Param]:
+        ps = list(self.model.declared)
+        for e in effects:
+            ps += list(self.model.effects[e].params)
+        return ps
+
+    def _bounds(self, p: Param):
+        lo, hi = self.bounds_override.get(p.name, (p.lo, p.hi))
+        if p.log:
+            return math.log(lo), math.log(hi)
+        return lo, hi
+
+    def _to_x(self, ps, values):
+        x = np.empty(len(ps))
+        for j, p in enumerate(ps):
+            lo, hi = self._bounds(p)
+            v = values[p.name]
+            v = math.log(max(v, 1e-300)) if p.log else v
+            x[j] = min(max((v - lo) / (hi - lo), 1e-6), 1 - 1e-6)
+        return x
+
+    def _to_values(self, ps, x):
+        out = {}
+        for j, p in enumerate(ps):
+            lo, hi = self._bounds(p)
+            v = lo + x[j] * (hi - lo)
+            out[p.name] = math.exp(v) if p.log else v
+        return out
+
+    def simulate(self, values):
+        self.nsim += 1
+        return self.model.simulate(self.ctx, values)
+
+    def _resid(self, values):
+        pred = self.simulate(values)
+        parts = []
+        for c in self.channels:
+            r = (pred[c][self.fit_idx] - self.meas[c][self.fit_idx]) * self.weights[c]
+            parts.append(r)
+        r = np.concatenate(parts)
+        if not np.all(np.isfinite(r)):
+            r = np.where(np.isfinite(r), r, 1e6)
+        return r
+
+    def fit(self, effects=(), start: dict | None = None, max_nfev: int = 200) -> FitResult:
+        ps = self._params_for(effects)
+        base = self.model.defaults()
+        for e in effects:
+            base.update({p.name: p.default for p in self.model.effects[e].params})
+        if start:
+            base.update({k: v for k, v in start.items() if k in {p.name for p in ps}})
+        starts = [base]
+        for e in effects:
+            fn = self.model.effects[e].starts
+            if fn is not None and not (start and all(p.name in start for p in self.model.effects[e].params)):
+                extra = fn(self.ctx)
+                starts = [dict(s, **x) for s in starts for x in extra] or starts
+        if len(starts) > N_STARTS_KEPT:
+            # screen the starting points by their cost, optimise from the best few
+            costs = [float(np.sum(self._resid(self._to_values(ps, self._to_x(ps, s0))) ** 2)) for s0 in starts]
+            starts = [starts[j] for j in np.argsort(costs)[:N_STARTS_KEPT]]
+        best = None
+        for s0 in starts:
+            x0 = self._to_x(ps, s0)
+            sol = optimize.least_squares(lambda x: self._resid(self._to_values(ps, x)), x0, bounds=(0.0, 1.0),
+                                         method="trf", x_scale=1.0, diff_step=1e-5, max_nfev=max_nfev,
+                                         ftol=1e-7, xtol=1e-7, gtol=1e-9)
+            if best is None or sol.cost < best.cost:
+                best = sol
+        values = self._to_values(ps, best.x)
+        return self.evaluate(effects, values, len(ps), float(best.cost), int(best.nfev))
+
+    def evaluate(self, effects, values, k, cost=float("nan"), nfev=0) -> FitResult:
+        pred = self.simulate(values)
+        rmse, sse, ntr = {}, {}, {}
+        for c in self.channels:
+            r = pred[c] - self.meas[c]
+            rt, rh = r[self.train], r[self.hold]
+            rmse[c] = {"train": float(np.sqrt(np.mean(rt * rt))), "holdout": float(np.sqrt(np.mean(rh * rh)))}
+            sse[c] = float(np.sum(rt * rt))
+            ntr[c] = int(rt.size)
+        full = self.model.full_values(values)
+        shown = {p.name: full[p.name] for p in self._params_for(effects)}
+        return FitResult(tuple(effects), shown, pred, rmse, sse, ntr, k, cost, nfev)
+
+    def residual(self, fr: FitResult, c: str) -> np.ndarray:
+        return fr.pred[c] - self.meas[c]
+
+
+def _score(fr: FitResult, ref: dict) -> float:
+    return float(np.sqrt(np.mean([(fr.rmse[c]["holdout"] / max(ref[c], 1e-300)) ** 2 for c in ref])))
+
+
+def _bic(fr: FitResult, rho: dict) -> float:
+    total, neff_all = 0.0, 0.0
+    for c, sse in fr.sse_train.items():
+        n = fr.n_train[c]
+        ne = n * (1 - rho[c]) / (1 + rho[c])
+        ne = min(max(ne, 2.0), float(n))
+        total += ne * math.log(max(sse / n, 1e-300))
+        neff_all += ne
+    return total + fr.k * math.log(max(neff_all, 2.0))
+
+
+# ----------------------------------------------------------------------------------------- workflow
+
+def run_workflow(model_name: str, data, known: dict | None = None, holdout: float = 0.3,
+                 split: str = "blocks", out_dir=None, effects=None, plots: bool = True,
+                 params_where: str = "<params>", log=None) -> dict:
+    """Run the whole calibration loop on ``data`` (:class:`~shevsim.calibrate.data.MeasuredData`).
+
+    Returns the report dictionary (also written to ``out_dir/report.json`` with ``report.md`` and plots
+    when ``out_dir`` is given).
+    """
+    t_start = time.perf_counter()
+    say = log or (lambda msg: None)
+    model = get_model(model_name, known, params_where)
+    if data.model != model_name:
+        raise DataError(f"{data.path}: loaded for model '{data.model}', not '{model_name}'")
+    t = data.df["time_s"].to_numpy(float)
+    train, hold, split_info = make_split(t, holdout, split)
+    fitter = Fitter(model, data, train, hold)
+    names = list(model.effects) if effects is None else list(effects)
+    for e in names:
+        if e not in model.effects:
+            raise DataError(f"unknown effect '{e}' for model '{model_name}'; available: {', '.join(model.effects)}")
+
+    # baseline: fit, reweight by training RMSE, refit
+    base = fitter.fit(())
+    fitter.weights = {c: 1.0 / max(base.rmse[c]["train"], 1e-12) for c in fitter.channels}
+    base = fitter.fit((), start=base.params)
+    say(f"baseline fitted ({fitter.nsim} simulations)")
+    ref = {c: base.rmse[c]["holdout"] for c in fitter.channels}
+    regs = model.regressors(fitter.ctx)
+    for col in data.extra_columns:
+        regs["measured:" + col] = data.df[col].to_numpy(float)
+
+    def rho_of(fr):
+        return {c: float(np.clip(_acf(fitter.residual(fr, c)[train], 1)[0], 0.0, 0.999)) for c in fitter.channels}
+
+    def diag(fr):
+        out = {}
+        for c in fitter.channels:
+            r = fitter.residual(fr, c)
+            out[c] = {part: diagnose(r[m], t[m], {k: v[m] for k, v in regs.items()})
+                      for part, m in (("train", train), ("holdout", hold))}
+        return out
+
+    base.score = 1.0
+    current = base
+    selected: list[str] = []
+    rounds = []
+    first_round = []
+    remaining = list(names)
+    for rnd in range(MAX_ROUNDS):
+        if not remaining:
+            break
+        rho = rho_of(current)
+        current.bic = _bic(current, rho)
+        cur_score = _score(current, ref)
+        results = []
+        for e in remaining:
+            fr = fitter.fit(tuple(selected) + (e,), start=current.params)
+            fr.score = _score(fr, ref)
+            fr.bic = _bic(fr, rho)
+            fr.dbic = fr.bic - current.bic
+            fr.gain = 1.0 - fr.score / cur_score
+            fr.worsen = max(fr.rmse[c]["holdout"] / max(current.rmse[c]["holdout"], 1e-300) - 1.0
+                            for c in fitter.channels)
+            why = []
+            if fr.gain < MIN_GAIN:
+                why.append(f"held-out score gain {fr.gain:.1%} < {MIN_GAIN:.0%}")
+            if fr.worsen > MAX_WORSEN:
+                why.append(f"a channel's held-out RMSE rises {fr.worsen:.1%}")
+            if fr.dbic > -MIN_DBIC:
+                why.append(f"dBIC {fr.dbic:+.1f} > -{MIN_DBIC:g}")
+            fr.passed = not why
+            fr.reason = "; ".join(why) if why else "passes"
+            results.append((e, fr))
+            say(f"round {rnd + 1}: {e}: score {fr.score:.3f} gain {fr.gain:+.1%} dBIC {fr.dbic:+.1f} "
+                f"{'PASS' if fr.passed else ''}")
+        rounds.append({"round": rnd + 1, "on_top_of": list(selected), "current_score": cur_score,
+                       "candidates": [_cand_json(e, fr, fitter.channels) for e, fr in results]})
+        if rnd == 0:
+            first_round = rounds[0]["candidates"]
+        ok = [(e, fr) for e, fr in results if fr.passed]
+        if not ok:
+            break
+        best_score = min(fr.score for _, fr in ok)
+        near = [(e, fr) for e, fr in ok if fr.score <= best_score * (1 + TIE)]
+        e, fr = min(near, key=lambda x: x[1].bic)
+        selected.append(e)
+        rounds[-1]["selected"] = e
+        current = fr
+        remaining.remove(e)
+    final = current
+    if selected:
+        final = fitter.fit(tuple(selected), start=current.params)
+        final.score = _score(final, ref)
+
+    diag_before, diag_after = diag(base), diag(final)
+    unexplained = []
+    for c in fitter.channels:
+        dh = diag_after[c]["holdout"]
+        nf = dh["noise_floor"]
+        top = dh["correlations"][0] if dh["correlations"] else None
+        if nf > 0 and dh["rmse"] > 3.0 * nf and (not dh["white"]):
+            unexplained.append({"channel": c, "holdout_rmse": dh["rmse"], "noise_floor": nf,
+                                "bias": dh["bias"], "drift_per_hour": dh["drift_per_hour"],
+                                "top_correlation": top,
+                                "note": "residual well above the noise floor and not white: structure the "
+                                        "selected model does not explain"})
+    elapsed = time.perf_counter() - t_start
+    report = {
+        "model": model_name,
+        "data": {"path": data.path, "n_samples": int(t.size), "duration_s": float(t[-1] - t[0]),
+                 "channels": fitter.channels, "notes": data.notes,
+                 "extra_columns": data.extra_columns},
+        "known_parameters": {k: (list(v) if isinstance(v, tuple) else v) for k, v in model.known.items()},
+        "split": split_info,
+        "selection_rule": {"min_holdout_gain": MIN_GAIN, "max_channel_worsening": MAX_WORSEN,
+                           "min_bic_drop": MIN_DBIC, "tie_fraction": TIE, "bic": "autocorrelation-corrected"},
+        "baseline_parameters": base.params,
+        "selected_effects": selected,
+        "final_parameters": final.params,
+        "candidates": first_round,
+        "rounds": rounds,
+        "rmse_before": base.rmse,
+        "rmse_after": final.rmse,
+        "score_after": final.score,
+        "diagnostics_before": diag_before,
+        "diagnostics_after": diag_after,
+        "unexplained": unexplained,
+        "nothing_found": not selected,
+        "n_simulations": fitter.nsim,
+        "elapsed_s": elapsed,
+    }
+    if out_dir is not None:
+        write_report(Path(out_dir), report, fitter, base, final, t, plots)
+    return report
+
+
+def _cand_json(name, fr: FitResult, channels) -> dict:
+    return {"name": name, "effects": list(fr.effects),
+            "parameters": {k: float(v) for k, v in fr.params.items()},
+            "holdout_rmse": {c: fr.rmse[c]["holdout"] for c in channels},
+            "train_rmse": {c: fr.rmse[c]["train"] for c in channels},
+            "score": fr.score, "gain": fr.gain, "bic": fr.bic, "delta_bic": fr.dbic,
+            "max_channel_worsening": fr.worsen, "passed": fr.passed, "reason": fr.reason}
+
+
+# ------------------------------------------------------------------------------------------ report
+
+def _savefig(fig, path: Path):
+    import io
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def write_report(out: Path, rep: dict, fitter: Fitter, base: FitResult, final: FitResult, t, plots=True):
+    out.mkdir(parents=True, exist_ok=True)
+    pngs = []
+    if plots:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        step = max(1, t.size // 4000)
+        ts = t[::step]
+        chans = fitter.channels
+        hold_iv = rep["split"]["holdout_intervals_s"]
+        for kind in ("fit", "residuals"):
+            fig, axes = plt.subplots(len(chans), 1, figsize=(10, 2.8 * len(chans)), sharex=True, squeeze=False)
+            for ax, c in zip(axes[:, 0], chans):
+                for a, b in hold_iv:
+                    ax.axvspan(a, b, color="0.9", lw=0)
+                if kind == "fit":
+                    ax.plot(ts, fitter.meas[c][::step], "k", lw=0.8, label="measured")
+                    ax.plot(ts, base.pred[c][::step], "C0", lw=0.8, label="model before")
+                    ax.plot(ts, final.pred[c][::step], "C3", lw=0.8, ls="--", label="model after")
+                else:
+                    ax.plot(ts, fitter.residual(base, c)[::step], "C0", lw=0.6, label="residual before")
+                    ax.plot(ts, fitter.residual(final, c)[::step], "C3", lw=0.6, label="residual after")
+                    ax.axhline(0, color="k", lw=0.5)
+                ax.set_ylabel(c)
+                ax.legend(loc="best", fontsize=7)
+            axes[-1, 0].set_xlabel("time_s (grey: held-out blocks)")
+            fig.suptitle(f"{rep['model']}: {kind} before / after (selected: {', '.join(rep['selected_effects']) or 'none'})")
+            fig.tight_layout()
+            name = f"{kind}_before_after.png"
+            _savefig(fig, out / name)
+            plt.close(fig)
+            pngs.append(name)
+        cands = rep["candidates"]
+        if cands:
+            fig, ax = plt.subplots(figsize=(8, 0.45 * len(cands) + 1.2))
+            names = [c["name"] for c in cands]
+            sc = [c["score"] for c in cands]
+            ax.barh(names, sc, color=["C2" if c["passed"] else "C7" for c in cands])
+            ax.axvline(1.0, color="k", lw=0.8, label="baseline")
+            ax.axvline(1.0 - MIN_GAIN, color="C3", ls="--", lw=0.8, label=f"-{MIN_GAIN:.0%} threshold")
+            ax.set_xlabel("combined held-out score (baseline = 1; lower is better)")
+            ax.legend(fontsize=7)
+            fig.tight_layout()
+            _savefig(fig, out / "evidence.png")
+            plt.close(fig)
+            pngs.append("evidence.png")
+    rep["plots"] = pngs
+    atomic_write_text(out / "report.json", json.dumps(rep, indent=2, default=float))
+    atomic_write_text(out / "report.md", render_markdown(rep))
+
+
+def _g(x):
+    return f"{x:.4g}" if isinstance(x, (int, float)) and math.isfinite(x) else str(x)
+
+
+def render_markdown(rep: dict) -> str:
+    L = [f"# Calibration report: model `{rep['model']}`", "",
+         f"Data: `{rep['data']['path']}` ({rep['data']['n_samples']} samples, {rep['data']['duration_s']:.0f} s); "
+         f"channels: {', '.join(rep['data']['channels'])}."]
+    for n in rep["data"]["notes"]:
+        L.append(f"- note: {n}")
+    sp = rep["split"]
+    L += ["", f"Split: `{sp['method']}`, held-out fraction {sp['holdout_fraction']}, held-out intervals (s): "
+          + ", ".join(f"{a:.0f}-{b:.0f}" for a, b in sp["holdout_intervals_s"])
+          + f" ({sp['n_train']} training / {sp['n_holdout']} held-out samples).", ""]
+    sel = rep["selected_effects"]
+    L.append("## Result")
+    L.append("")
+    L.append(f"**Selected effects: {', '.join(sel)}**" if sel else
+             "**Nothing found**: no candidate effect passed the selection rule.")
+    L += ["", "| channel | RMSE before train | before held-out | after train | after held-out | held-out change |",
+          "|---|---|---|---|---|---|"]
+    for c, b in rep["rmse_before"].items():
+        a = rep["rmse_after"][c]
+        ch = a["holdout"] / b["holdout"] - 1 if b["holdout"] > 0 else float("nan")
+        L.append(f"| {c} | {_g(b['train'])} | {_g(b['holdout'])} | {_g(a['train'])} | {_g(a['holdout'])} | {ch:+.1%} |")
+    if rep["unexplained"]:
+        L += ["", "Not explained by the selected model:"]
+        for u in rep["unexplained"]:
+            tc = u["top_correlation"]
+            L.append(f"- `{u['channel']}`: held-out RMSE {_g(u['holdout_rmse'])} vs noise floor {_g(u['noise_floor'])}, "
+                     f"bias {_g(u['bias'])}, drift {_g(u['drift_per_hour'])}/h"
+                     + (f", most correlated with `{tc['signal']}` (r = {tc['r']:+.2f})" if tc else ""))
+    r = rep["selection_rule"]
+    L += ["", "## Evidence", "",
+          f"Rule: held-out score gain >= {r['min_holdout_gain']:.0%}, no channel worse by > {r['max_channel_worsening']:.0%}, "
+          f"autocorrelation-corrected BIC drop >= {r['min_bic_drop']:g}.", ""]
+    for rd in rep["rounds"]:
+        L += [f"Round {rd['round']} (on top of: {', '.join(rd['on_top_of']) or 'baseline'}; current score "
+              f"{rd['current_score']:.3f}; selected: {rd.get('selected', 'none')})", "",
+              "| effect | held-out score | gain | dBIC | held-out RMSE | parameters | verdict |", "|---|---|---|---|---|---|---|"]
+        for c in sorted(rd["candidates"], key=lambda c: c["score"]):
+            hr = ", ".join(f"{k} {_g(v)}" for k, v in c["holdout_rmse"].items())
+            own = {k: v for k, v in c["parameters"].items() if k not in rep["baseline_parameters"]}
+            pr = ", ".join(f"{k}={_g(v)}" for k, v in own.items())
+            L.append(f"| {c['name']} | {c['score']:.3f} | {c['gain']:+.1%} | {c['delta_bic']:+.1f} | {hr} | {pr} | {c['reason']} |")
+        L.append("")
+    L += ["## Parameters", "", "| parameter | baseline | final |", "|---|---|---|"]
+    for k, v in rep["final_parameters"].items():
+        L.append(f"| {k} | {_g(rep['baseline_parameters'].get(k, float('nan')))} | {_g(v)} |")
+    L += ["", "## Residual diagnostics (held-out part)", "",
+          "| channel | when | bias | RMSE | drift /h | acf lag 1 | Ljung-Box p | noise floor | top correlations |",
+          "|---|---|---|---|---|---|---|---|---|"]
+    for c in rep["diagnostics_before"]:
+        for when, d in (("before", rep["diagnostics_before"][c]["holdout"]), ("after", rep["diagnostics_after"][c]["holdout"])):
+            cr = ", ".join(f"{x['signal']} {x['r']:+.2f}" for x in d["correlations"][:3])
+            L.append(f"| {c} | {when} | {_g(d['bias'])} | {_g(d['rmse'])} | {_g(d['drift_per_hour'])} | {d['acf'][0]:.3f} | "
+                     f"{d['ljung_box_p']:.2g} | {_g(d['noise_floor'])} | {cr} |")
+    if rep.get("plots"):
+        L += ["", "## Plots", ""]
+        for p in rep["plots"]:
+            L.append(f"![{p}]({p})")
+    L += ["", f"Run time {rep['elapsed_s']:.1f} s, {rep['n_simulations']} model simulations.", ""]
+    return "\n".join(L)
