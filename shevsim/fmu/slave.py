@@ -45,6 +45,22 @@ def import_class(target: str):
     return getattr(importlib.import_module(mod), cls)
 
 
+# unit of a parameter from its name suffix (DEVELOPING.md conventions); longest suffix first
+_SUFFIX_UNITS = (("_w_m2k", "W/(m2.K)"), ("_j_kgk", "J/(kg.K)"), ("_w_mk", "W/(m.K)"), ("_kg_m3", "kg/m3"),
+                 ("_mps2", "m/s2"), ("_radps", "rad/s"), ("_mgps", "mg/s"), ("_gps", "g/s"), ("_wps", "W/s"),
+                 ("_mps", "m/s"), ("_ohm", "Ohm"), ("_pct", "%"), ("_ah", "A.h"), ("_kg", "kg"), ("_nm", "N.m"),
+                 ("_w", "W"), ("_j", "J"), ("_a", "A"), ("_v", "V"), ("_f", "F"), ("_c", "degC"), ("_k", "K"),
+                 ("_s", "s"), ("_m", "m"), ("_n", "N"), ("_g", "g"))
+
+
+def suffix_unit(name: str) -> str | None:
+    """Unit implied by a unit-suffixed name (``capacity_ah`` -> ``A.h``), else None."""
+    for suffix, unit in _SUFFIX_UNITS:
+        if name.endswith(suffix):
+            return unit
+    return None
+
+
 def _numeric_params(params: Any) -> dict[str, float]:
     """Float/int/bool fields of a Params dataclass (those become FMU parameters)."""
     if params is None or not dataclasses.is_dataclass(params):
@@ -83,6 +99,9 @@ class Runtime:
         self.outputs = [v for v in vs if v.causality == "output"]
         self.units = {v.name: canonical_unit(v.unit) for v in self.inputs + self.outputs
                       if canonical_unit(v.unit) != "1"}
+        for name in self.numeric:
+            if suffix_unit(name):
+                self.units[name] = suffix_unit(name)
         self._register()
 
     # -- component ------------------------------------------------------------------
@@ -139,6 +158,10 @@ class Runtime:
     # -- variables --------------------------------------------------------------------
     def _register(self) -> None:
         sl = self.slave
+
+        def unit(n):
+            return {} if self.fmi == 2 else {"unit": self.units.get(n)}
+
         if self.fmi == 2:
             from pythonfmu import Fmi2Causality as C, Fmi2Variability as V, Real as F
             kw = {}
@@ -149,12 +172,9 @@ class Runtime:
             sl.register_variable(F("time", causality=C.independent, variability=V.continuous, unit="s",
                                    getter=lambda: self.time))
         for name in self.numeric:
-            sl.register_variable(F(name, causality=C.parameter, variability=V.fixed,
+            sl.register_variable(F(name, causality=C.parameter, variability=V.fixed, **unit(name),
                                    getter=lambda n=name: self.numeric[n],
                                    setter=lambda v, n=name: self.set_param(n, v)))
-
-        def unit(n):
-            return {} if self.fmi == 2 else {"unit": self.units.get(n)}
 
         for v in self.inputs:
             sl.register_variable(F(v.name, causality=C.input, description=v.description, **unit(v.name),
