@@ -35,6 +35,10 @@ def _common(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--edges-kw", type=float, nargs="+", help="power partition edges (kW), first 0, last P_max")
     ap.add_argument("--max-evaluations", type=int, help="stop after this many new evaluations (resume later)")
     ap.add_argument("--synthetic", action="store_true", help="use the analytic surrogate (no simulation)")
+    ap.add_argument("--fe-metric", default=None,
+                    help="fuel-economy metric key (default fuel_economy_soc_sustained_kmpl, seed A.1; for runs "
+                         "shorter than two cycles use fuel_economy_dsoc_corrected_kmpl)")
+    ap.add_argument("--soot-metric", default=None, help="soot metric key (default soot_g_per_km)")
     ap.add_argument("--no-plots", action="store_true")
     ap.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -69,6 +73,15 @@ def _runner(a, out: Path):
                               max_new_evaluations=a.max_evaluations)
 
 
+def _metric_keys(a) -> dict:
+    d = {}
+    if a.fe_metric:
+        d["fe_key"] = a.fe_metric
+    if a.soot_metric:
+        d["soot_key"] = a.soot_metric
+    return d
+
+
 def _edges(a):
     from .problem import DEFAULT_EDGES_W
     return DEFAULT_EDGES_W if not a.edges_kw else tuple(1e3 * x for x in a.edges_kw)
@@ -88,7 +101,7 @@ def cmd_tradeoff(argv) -> int:
     cache, runner = _runner(a, out)
     with cache, runner:
         run_tradeoff(problem, runner, [1e3 * r for r in a.rates_kwps], out, _edges(a),
-                     fe_loss_max_frac=a.fe_loss_pct / 100, plots=not a.no_plots)
+                     fe_loss_max_frac=a.fe_loss_pct / 100, plots=not a.no_plots, **_metric_keys(a))
     return 0
 
 
@@ -108,13 +121,17 @@ def cmd_powerrate_map(argv) -> int:
     ap.add_argument("--fe-loss-pct", type=float, default=0.4, help="fuel-economy loss allowed (%%, seed 0.4)")
     ap.add_argument("--top-k", type=int, default=10, help="best GA maps that set the narrowed bounds")
     ap.add_argument("--max-cases", type=int, default=1000, help="cap on the exhaustive-search cases")
+    ap.add_argument("--allow-duplicates", action="store_true",
+                    help="plain GA: do not re-mutate offspring that duplicate a population member (fewer "
+                         "distinct evaluations, more premature convergence)")
     a = ap.parse_args(argv)
     problem, out = _problem(a, "powerrate_map")
     levels = DEFAULT_LEVELS_WPS if not a.levels_kwps else tuple(1e3 * x for x in a.levels_kwps)
     cfg = MapStudyConfig(edges_w=_edges(a), levels_wps=levels, fe_loss_max_frac=a.fe_loss_pct / 100,
                          ga=GAConfig(population=a.population, generations=a.generations,
-                                     crossover_prob=a.crossover, mutation_prob=a.mutation, seed=a.seed),
-                         top_k=a.top_k, max_cases=a.max_cases)
+                                     crossover_prob=a.crossover, mutation_prob=a.mutation, seed=a.seed,
+                                     unique_population=not a.allow_duplicates),
+                         top_k=a.top_k, max_cases=a.max_cases, **_metric_keys(a))
     cache, runner = _runner(a, out)
     with cache, runner:
         run_powerrate_map(problem, runner, cfg, out, plots=not a.no_plots)

@@ -16,7 +16,7 @@ An *evaluation item* is a small, picklable object with three methods:
     depend on the inputs only (no wall time in them), so a parallel run equals a serial one.
 
 :class:`Evaluation` is the real one: ``load_scenario`` + ``simulate`` + ``compute_run_metrics``
-(nothing saved, no plots). Its outputs are the scenario metrics (``fuel_economy_kmpl`` with the
+(nothing saved, no plots). Its outputs are the scalar scenario metrics (``fuel_economy_soc_sustained_kmpl``, the
 SOC-sustainable definition of seed A.1, ``soot_g_per_km``, ... as computed by
 ``shevsim.metrics.compute_metrics``), ``termination`` and, on request, final values of signals
 (``final:component.port``). A failing run (:class:`~shevsim.core.errors.ShevsimError` or any other

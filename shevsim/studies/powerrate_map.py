@@ -33,7 +33,7 @@ from pathlib import Path
 from ..core.errors import ShevsimError
 from .evaluate import is_failed
 from .ga import GAConfig, exhaustive_genomes, narrow_bounds, rank_key, run_ga, space_size
-from .problem import DEFAULT_EDGES_W, DEFAULT_LEVELS_WPS, check_map
+from .problem import DEFAULT_EDGES_W, DEFAULT_LEVELS_WPS, FE_KEY, SOOT_KEY, check_map
 
 
 @dataclass
@@ -48,8 +48,8 @@ class MapStudyConfig:
     max_cases: int = 1000                    # step 2: cap on the exhaustive space
     n_top: int = 8                           # solutions in the top table (seed Fig. A.3: best + 7)
     seed_constants: bool = True              # put feasible constant maps in the first GA population
-    fe_key: str = "fuel_economy_kmpl"
-    soot_key: str = "soot_g_per_km"
+    fe_key: str = FE_KEY
+    soot_key: str = SOOT_KEY
 
     def check(self) -> None:
         check_map(self.edges_w, None)

@@ -16,12 +16,12 @@ from pathlib import Path
 
 from ..core.errors import ShevsimError
 from .evaluate import is_failed
-from .problem import DEFAULT_EDGES_W
+from .problem import DEFAULT_EDGES_W, FE_KEY, SOOT_KEY
 
 
 def run_tradeoff(problem, runner, rates_wps, out_dir: str | Path | None = None, edges_w=DEFAULT_EDGES_W,
-                 fe_loss_max_frac: float = 0.005, fe_key: str = "fuel_economy_kmpl",
-                 soot_key: str = "soot_g_per_km", plots: bool = True, log=print) -> dict:
+                 fe_loss_max_frac: float = 0.005, fe_key: str = FE_KEY,
+                 soot_key: str = SOOT_KEY, plots: bool = True, log=print) -> dict:
     """Sweep constant maximum power rates; returns (and writes) the summary with the table rows."""
     rates = sorted({float(r) for r in rates_wps}, reverse=True)
     if not rates or any(not (r > 0) or math.isinf(r) for r in rates):
