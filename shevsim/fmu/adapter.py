@@ -490,9 +490,10 @@ class FMUComponent(Component):
             self._pick_in = None
         self._has_slow = bool(self._int_in or self._bool_in or self._int_out or self._bool_out)
 
-    def _call_failed(self, t: float, status: int, function: str, detail: str = "") -> FMUStepError:
+    def _call_failed(self, t: float, status: int, function: str, detail: str = "",
+                     h: float | None = None) -> FMUStepError:
         self._failed = True
-        return FMUStepError(self.name, t, status, function, (detail + self._log_tail()).lstrip(" |"))
+        return FMUStepError(self.name, t, status, function, (detail + self._log_tail()).lstrip(" |"), h)
 
     def _set_value(self, vname: str, value: Any) -> None:
         fmu = self.fmu
@@ -610,17 +611,17 @@ class FMUComponent(Component):
         if self._is3:
             st = self._c_do_step(self._inst, t, h, True, *self._step_refs)
             if st > 1:
-                raise self._call_failed(t, st, "fmi3DoStep")
+                raise self._call_failed(t, st, "fmi3DoStep", h=h)
             if self._b_term.value:
-                raise self._call_failed(t, st, "fmi3DoStep", "the FMU requested terminateSimulation")
+                raise self._call_failed(t, st, "fmi3DoStep", "the FMU requested terminateSimulation", h)
             if self._b_early.value:
                 raise self._call_failed(t, st, "fmi3DoStep",
-                                        f"early return at t = {self._d_last.value:.6g} s")
+                                        f"early return at t = {self._d_last.value:.6g} s", h)
         else:
             st = self._c_do_step(self._inst, t, h, 1)
             if st > 1:
                 raise self._call_failed(t, st, "fmi2DoStep",
-                                        "step not completed (discard)" if st == 2 else "")
+                                        "step not completed (discard)" if st == 2 else "", h)
         if self._n_out:
             if self._is3:
                 st = self._c_get_real(self._inst, self._vr_out, self._n_out, self._val_out, self._n_out)

@@ -54,12 +54,14 @@ class FMUStepError(FMUError, SimulationError):
     """
 
     def __init__(self, component: str, time: float, status: int, function: str = "doStep",
-                 detail: str = ""):
+                 detail: str = "", step: float | None = None):
         self.component = component
         self.time = time
         self.status = status
         self.function = function
-        msg = (f"FMU component '{component}': {function} failed at t = {time:.6g} s "
+        self.step = step
+        where = f"t = {time:.6g} s" + (f" (step to {time + step:.6g} s)" if step is not None else "")
+        msg = (f"FMU component '{component}': {function} failed at {where} "
                f"with FMI status {status} ({status_name(status)})")
         if detail:
             msg += f": {detail}"

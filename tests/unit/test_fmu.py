@@ -366,7 +366,7 @@ def test_do_step_failure_reports_component_time_status(c_fmu):
         k += 1
     assert err.time == k * h
     msg = str(err)
-    assert "hot_node" in msg and "status 3 (error)" in msg and f"t = {t:g} s" in msg
+    assert "hot_node" in msg and "status 3 (error)" in msg and f"t = {t:g} s (step to {t + h:g} s)" in msg
     assert "exceeds t_max_c" in msg          # the FMU's own log message is included
     comp.terminate()                          # frees without fmi2Terminate after the error
     assert not unzipdir.exists() and comp.fmu is None
@@ -585,3 +585,21 @@ def test_scenario_swap_native_for_exported_fmu(fmu_dir, fmi_version):
         assert len(a) == len(b) > 400
         assert np.max(np.abs(a - b)) <= 1e-12, sig
     assert np.ptp(runs["native"]["body1.position_m"]) > 1.0   # it oscillates
+
+
+def test_fmi3_step_refused_reports_discard(py3_fmu):
+    """py_cell3 refuses (fmi3Discard) a step that would take soc below 0 %."""
+    comp = FMUComponent("cell", py3_fmu, parameters={"capacity_ah": 1.0, "soc0_pct": 10.0})
+    try:
+        comp.u["current_a"] = 36.0          # 1 %/s at 1 A.h: 10 % lasts exactly 10 s
+        comp.initialize(0.0)
+        t = 0.0
+        with pytest.raises(FMUStepError) as info:
+            for _ in range(20):
+                comp.do_step(t, 0.75)
+                t += 0.75
+        assert info.value.status == 2 and info.value.function == "fmi3DoStep"
+        assert info.value.time == t == 9.75    # the step 9.75 -> 10.5 s would reach -0.5 %
+        assert "cell empty" in str(info.value)
+    finally:
+        comp.terminate()

@@ -3,13 +3,15 @@
     d soc_pct / dt = -100 * current_a / (3600 * capacity_ah)       (current + discharge)
     voltage_v      = ocv_0_v + ocv_slope_v_pct * soc_pct - r0_ohm * current_a
 
-soc is exact over a step with the current held (it is linear in time).
+soc is exact over a step with the current held (it is linear in time). A step
+that would take soc below 0 % is refused (``do_step`` returns False, which
+pythonfmu3 reports as ``fmi3Discard``).
 ``voltage_v`` depends directly on ``current_a`` (feedthrough) and ``soc_pct``
 does not; the model description says so in ``<ModelStructure>`` (added in
 ``to_xml``, pythonfmu3 itself writes no dependencies).
 Built by shevsim.fmu.build.build_python_fmu (fmi_version=3); used by tests/unit/test_fmu.py.
 """
-from pythonfmu3 import Fmi3Causality, Fmi3Slave, Fmi3Variability, Float64
+from pythonfmu3 import Fmi3Causality, Fmi3Slave, Fmi3Status, Fmi3Variability, Float64
 from pythonfmu3.unit import Unit
 
 
@@ -59,7 +61,13 @@ class PyCell3(Fmi3Slave):
         self._outputs()
 
     def do_step(self, current_time, step_size):
-        self.soc_pct -= 100.0 * self.current_a * step_size / (3600.0 * self.capacity_ah)
+        soc = self.soc_pct - 100.0 * self.current_a * step_size / (3600.0 * self.capacity_ah)
+        if soc < 0.0:
+            # cannot complete the step: the cell would be over-discharged (-> fmi3Discard)
+            self.log(f"cell empty: soc would reach {soc:.4g} % at t = {current_time + step_size:g} s",
+                     Fmi3Status.warning)
+            return False
+        self.soc_pct = soc
         self.time = current_time + step_size
         self._outputs()
         return True
