@@ -269,3 +269,20 @@ def test_bad_input_names_component_port_and_time():
     with pytest.raises(SimulationError, match="SOC left"):
         for k in range(1000):
             b.do_step(k * 0.1, 0.1)
+
+
+@pytest.mark.slow
+def test_cell_model_matches_pybamm_thevenin_2rc():
+    """Independent reference: PyBaMM's Thevenin ECM (2 RC) with the same tables, isothermal."""
+    import importlib.util
+    from pathlib import Path
+
+    pytest.importorskip("pybamm")
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "pybamm_thevenin_check.py"
+    spec = importlib.util.spec_from_file_location("pybamm_thevenin_check", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    r = mod.compare(900.0)
+    # well below the voltage sensor's sigma (1 mV) over a ~1.1 V swing
+    assert r["max_abs_v"] < 1e-3
+    assert r["rms_v"] < 1e-4
