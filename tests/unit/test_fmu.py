@@ -603,3 +603,29 @@ def test_fmi3_step_refused_reports_discard(py3_fmu):
         assert "cell empty" in str(info.value)
     finally:
         comp.terminate()
+
+
+def test_missing_platform_binary_is_reported_and_cleaned(tmp_path, c_fmu):
+    """An FMU without a binary for this platform: clear error, extracted files removed."""
+    import tempfile
+    src = zipfile.ZipFile(c_fmu)
+    p = tmp_path / "nobin.fmu"
+    with zipfile.ZipFile(p, "w") as zf:
+        for item in src.namelist():
+            if not item.startswith("binaries/"):
+                zf.writestr(item, src.read(item))
+    src.close()
+    with pytest.raises(FMULoadError, match=f"no binary for platform '{fmpy.platform}'"):
+        FMUComponent("nobin_probe", p)
+    assert not list(Path(tempfile.gettempdir()).glob("shevsim_fmu_nobin_probe_*"))
+
+
+def test_unterminated_component_is_freed_by_finalizer(c_fmu):
+    import gc
+    comp = FMUComponent("finalizer_probe", c_fmu)
+    comp.initialize(0.0)
+    d = Path(comp._unzipdir)
+    assert d.is_dir()
+    del comp
+    gc.collect()
+    assert not d.exists()
