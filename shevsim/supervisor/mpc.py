@@ -64,7 +64,7 @@ engine limits and rate limits and, as far as possible, the battery limits - and
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -549,7 +549,6 @@ class MPCResult:
     battery_slack_w: float = 0.0
     soc_slack_pct: float = 0.0
     rate_max_wps: float = 0.0
-    plan_w: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 class MPCSupervisor:
@@ -624,7 +623,8 @@ class MPCSupervisor:
             z, status = None, "unusable inputs (non-finite, V_oc <= 0, R_s <= 0 or P_b,max < P_b,min)"
         if z is not None:
             nc = self.settings.n_c
-            v_cmd = vo + float(z[0])
+            # solver tolerance (~1e-9 kW) may put the move a hair outside the engine limits
+            v_cmd = min(max(vo + float(z[0]), self._pg_min_kw), self._pg_max_kw)
             if self._plan_kw is None:
                 self._plan_kw = np.empty(nc)
             np.cumsum(z[:nc], out=self._plan_kw)
