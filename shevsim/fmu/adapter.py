@@ -45,7 +45,7 @@ from xml.etree import ElementTree
 from ..core.component import Component
 from ..core.variables import Variable, canonical_unit, units_compatible
 from .errors import (FMUError, FMULoadError, FMUMappingError, FMUStateError, FMUStepError,
-                     FMUUnitError, FMUUnsupportedError, status_name)
+                     FMUUnitError, FMUUnsupportedError)
 
 __all__ = ["FMUComponent", "read_fmi_version", "load_model_description", "expected_units_of"]
 
@@ -411,7 +411,7 @@ class FMUComponent(Component):
                 raise FMULoadError(f"{self.path}: no binary for platform '{platform}' "
                                    f"(the FMU has: {', '.join(have) or 'no binaries'})")
             if self._is3:
-                from fmpy.fmi3 import FMU3Slave, fmi3LogMessageCallback
+                from fmpy.fmi3 import FMU3Slave
                 fmu = FMU3Slave(guid=md.instantiationToken, unzipDirectory=self._unzipdir,
                                 modelIdentifier=ident, instanceName=name)
                 fmu.instantiate(logMessage=_make_logger(self._log, fmi3=True))

@@ -164,7 +164,6 @@ class Runtime:
 
         if self.fmi == 2:
             from pythonfmu import Fmi2Causality as C, Fmi2Variability as V, Real as F
-            kw = {}
         else:
             from pythonfmu3 import Fmi3Causality as C, Fmi3Variability as V, Float64 as F
             from pythonfmu3.unit import Unit
