@@ -69,6 +69,8 @@ class BMSParams:
         sigma = 0.0158 degC, Sigma_r = 9e-4 -> beta2 = 0.03, P(0) = I, S(0) = 1e-2).
     horizon_steps, soc_min_pct, soc_max_pct, v_min_v, v_max_v, t_core_max_c, i_cell_max_a :
         Power-capability horizon and limits (Table A.1, Sec. 5.4).
+    polarisation_heat : str
+        ``"exact"`` (V1 trajectory over the horizon, default) or ``"seed"`` (the 5.31 bound).
     radius_m, length_m, density_kg_m3, cp_j_kgk, kt_w_mk : float
         Cell thermal parameters (Table 3.1).
     ocv_file, entropy_file : str
@@ -108,6 +110,7 @@ class BMSParams:
     v_max_v: float = 3.6
     t_core_max_c: float = 45.0
     i_cell_max_a: float = math.inf
+    polarisation_heat: str = "exact"
     radius_m: float = 12.93e-3
     length_m: float = 65.15e-3
     density_kg_m3: float = 2047.0
@@ -197,6 +200,7 @@ class BMS(Component):
             horizon_steps=p.horizon_steps, dt_s=dt, soc_min_frac=p.soc_min_pct / 100.0,
             soc_max_frac=p.soc_max_pct / 100.0, v_min_v=p.v_min_v, v_max_v=p.v_max_v,
             t_core_max_c=p.t_core_max_c, i_cell_max_a=p.i_cell_max_a, capacity_ah=p.capacity_ah,
+            polarisation_heat=p.polarisation_heat,
             n_series=p.n_series, n_parallel=p.n_parallel), self.thermal_params, self.tables)
 
     def initialize(self, t0: float) -> None:
