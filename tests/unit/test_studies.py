@@ -185,6 +185,11 @@ def test_synthetic_tradeoff_table(tmp_path):
     assert (tmp_path / "tradeoff.csv").read_text().count("\n") == 5 and (tmp_path / "fig_a2_tradeoff.png").exists()
 
 
+def _thread_env():
+    import os
+    return tuple(os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS"))
+
+
 def test_dask_two_workers_identical_to_serial():
     pytest.importorskip("distributed")
     cfg = MapStudyConfig(ga=GAConfig(population=8, generations=4, seed=2), top_k=3, max_cases=40)
@@ -194,6 +199,12 @@ def test_dask_two_workers_identical_to_serial():
         par = run_powerrate_map(SyntheticProblem(), runner, cfg, log=lambda *_: None)
         items = [SyntheticProblem().item(DEFAULT_EDGES_W, [r] * 8) for r in (5e3, 9e3, 5e3, 30e3)]
         assert runner.evaluate(items) == StudyRunner(None, progress=False).evaluate(items)
+        # workers run single-threaded BLAS/OpenMP
+        env = runner.client.run(_thread_env)
+        assert len(env) == 2 and all(v == ("1", "1", "1") for v in env.values())
+        # --scheduler path: a second runner on the same (existing) cluster
+        with StudyRunner(None, scheduler=runner.client.scheduler.address, progress=False) as ext:
+            assert ext.stats.slots == 2 and ext.evaluate(items[::-1]) == runner.evaluate(items)[::-1]
     ser.pop("performance"), par.pop("performance")
     assert par == ser
 
