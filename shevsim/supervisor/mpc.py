@@ -9,8 +9,11 @@ positive = discharge)::
 
 linearised at the previous point (5.5-5.6): ``V_oc`` and ``R_s`` come from the BMS and are held,
 so ``A = 0`` (``A_d = 1``); ``B = dphi/du = -(dI/du)/(3600 C_b)`` with ``dI/du = 1/sqrt(V_oc^2 - 4R_s u)``
-at the linearisation power ``u_o``; ``H = d sqrt(m_f)/dv`` at the previous engine power ``v_o``
-(from the quasi-static curve, see :mod:`.fuel_curve`).  Discretised with ``dt`` (5.7).
+at the linearisation power ``u_o = P_d,k - v_o`` (the battery power if the engine held its present
+power ``v_o``), clipped to the BMS limits and to 90 % of the source's maximum-power point
+``V_oc^2/(4 R_s)`` so the square root stays real; ``G_1`` follows from 5.6e.  ``H = d sqrt(m_f)/dv``
+at the present engine power ``v_o`` (from the quasi-static curve, see :mod:`.fuel_curve`).
+Discretised with ``dt`` (5.7).
 
 Decision variables.  The seed optimises the battery-power moves ``Delta u`` (5.9).  With the demand
 held over the horizon (5.10) the engine power is ``v_i = P_d - u_i``, so ``Delta v_i = -Delta u_i`` for
@@ -598,7 +601,10 @@ class MPCSupervisor:
         """Forget the previous plan and the solver's warm start (not the fallback count)."""
         self._plan_kw = None
         self._plan_age = 0
-        self._make_solver(self.solver_name)
+        if self.solver_name == "daqp":
+            self.solver.model = None          # next call sets DAQP up from scratch
+        elif self.solver_name == "osqp":
+            self.solver.solver = None
 
     def step(self, soc_pct: float, demand_w: float, gen_power_w: float, power_max_w: float,
              power_min_w: float, ocv_v: float, rs_ohm: float) -> float:

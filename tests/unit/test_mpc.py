@@ -181,6 +181,31 @@ def test_solution_respects_rate_map_engine_and_battery_limits():
     assert 50 < n_hard < 220
 
 
+def test_kkt_conditions_of_the_daqp_solution():
+    """Stationarity, primal feasibility, dual sign and complementarity of the production QP, from the
+    multipliers DAQP returns (bounds first, then rows): an optimality check independent of cvxpy."""
+    import daqp
+    p = MPCProblem(MPCSettings(), placeholder_fuel_curve())
+    Afull = np.vstack([np.eye(p.n), p.A])
+    n_active = 0
+    for soc, d, g, pmax, pmin, ocv, rs in problem_sequence(80, seed=21):
+        assert p.build(soc, d / 1e3, g / 1e3, pmax / 1e3, pmin / 1e3, ocv, rs, MAP(g) / 1e3) == 0
+        x, _, flag, info = daqp.solve(p.H, p.f, p.A, p.bu, p.bl)
+        if flag < 1:
+            continue
+        lam = np.asarray(info["lam"])
+        r = Afull @ x
+        scale = max(1.0, np.abs(p.f).max(), np.abs(p.H @ x).max())
+        assert np.abs(p.H @ x + p.f + Afull.T @ lam).max() <= 1e-7 * scale          # stationarity
+        assert np.all(r <= p.bu + 1e-6) and np.all(r >= p.bl - 1e-6)               # primal feasibility
+        up = lam > 1e-9
+        lo = lam < -1e-9
+        assert np.allclose(r[up], p.bu[up], atol=1e-6)                               # complementarity
+        assert np.allclose(r[lo], p.bl[lo], atol=1e-6)
+        n_active += int(up.sum() + lo.sum())
+    assert n_active > 80
+
+
 def test_brute_force_optimum_tiny_horizon():
     """N_c = 1, N_p = 3: minimise the cost (linearised model simulated step by step, minimal slacks)
     over the single move by bounded scalar search and compare with the QP's first move."""
@@ -270,7 +295,9 @@ def test_closed_loop_charge_sustaining_and_rate_limited():
         gen = v
         fuel += placeholder_fuel_curve().fuel_rate_gps_at(v) * s.dt_s
     assert sup.fallback_count == 0
-    assert 40.0 <= soc <= 55.0            # charged up from 40 % and held near the 50 % reference
+    # charged up from 40 % and held a few % below the 50 % reference: the fuel term balances the SOC
+    # term there (eta2 dm_f/dv ~ 6e-5 per kW vs 2 eta1 N_p beta dSOC: equal at ~3-7 % below reference)
+    assert 43.0 <= soc <= 50.0
     assert fuel > 0
 
 
