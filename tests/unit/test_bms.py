@@ -279,3 +279,20 @@ def test_bms_rejects_nan_measurement():
     m.u["cell_voltage_meas_v"] = float("nan")
     with pytest.raises(SimulationError, match=r"bms.*t=0\.1.*voltage nan"):
         m.do_step(0.0, DT)
+
+
+def test_parameter_files_match_code_defaults():
+    from pathlib import Path
+
+    from shevsim.core.params import load_params
+
+    root = Path(__file__).resolve().parents[2] / "components"
+    assert load_params(BMSParams, root / "bms" / "default.toml") == BMSParams()
+    assert load_params(BMSParams, root / "bms" / "retuned.toml") == BMSParams.retuned()
+    p = load_params(BatteryPackParams, root / "battery" / "default.toml")
+    a, b = BatteryPack("a", p), BatteryPack("b")
+    for k in range(20):
+        for x in (a, b):
+            x.u["power_w"] = 30e3
+            x.do_step(k * DT, DT)
+    assert a.y == b.y
