@@ -168,19 +168,18 @@ class MPCSupervisor(Component):
         super().__init__(name, params)
         p = self.params
         where = f"mpc_supervisor '{name}'"
+        rate_map = _check_rate_map(p, where)
         try:
             settings = p.settings()
+            # the rule-based split used by fallback='rule' (thermostat band: a quarter of the window)
+            rule_settings = RuleSettings(power_gen_min_w=p.power_gen_min_w, power_gen_max_w=p.power_gen_max_w,
+                                         power_rate_min_wps=p.power_rate_min_wps, soc_min_pct=p.soc_min_pct,
+                                         soc_max_pct=p.soc_max_pct, soc_ref_pct=p.soc_ref_pct,
+                                         soc_on_pct=p.soc_ref_pct - 0.25 * (p.soc_ref_pct - p.soc_min_pct),
+                                         soc_off_pct=p.soc_ref_pct + 0.25 * (p.soc_max_pct - p.soc_ref_pct))
         except ScenarioError as exc:
             raise ScenarioError(f"{where}: {exc}") from exc
-        rate_map = _check_rate_map(p, where)
-        self._rule = RuleBasedSupervisor(RuleSettings(power_gen_min_w=p.power_gen_min_w,
-                                                      power_gen_max_w=p.power_gen_max_w,
-                                                      power_rate_min_wps=p.power_rate_min_wps,
-                                                      soc_min_pct=p.soc_min_pct, soc_max_pct=p.soc_max_pct,
-                                                      soc_ref_pct=p.soc_ref_pct,
-                                                      soc_on_pct=p.soc_ref_pct - 0.25 * (p.soc_ref_pct - p.soc_min_pct),
-                                                      soc_off_pct=p.soc_ref_pct + 0.25 * (p.soc_max_pct - p.soc_ref_pct)),
-                                         rate_map, p.sample_time_s)
+        self._rule = RuleBasedSupervisor(rule_settings, rate_map, p.sample_time_s)
         self.mpc = _MPC(settings, p.fuel_curve(where), rate_map, rule=self._rule)
         self.fallback_count = 0
         self.plan = None

@@ -160,8 +160,9 @@ class MPCSettings:
             raise ScenarioError(f"{w}: eta3_1 or eta4_1 must be > 0 (strictly convex QP)")
         if self.soc_slack_weight_quad_1 <= 0 or self.battery_slack_weight_quad_1 <= 0:
             raise ScenarioError(f"{w}: the quadratic slack weights must be > 0 (strictly convex QP)")
-        if not self.soc_min_pct < self.soc_max_pct:
-            raise ScenarioError(f"{w}: soc_min_pct {self.soc_min_pct} must be < soc_max_pct {self.soc_max_pct}")
+        if not self.soc_min_pct < self.soc_ref_pct < self.soc_max_pct:
+            raise ScenarioError(f"{w}: need soc_min_pct < soc_ref_pct < soc_max_pct, got {self.soc_min_pct}, "
+                                f"{self.soc_ref_pct}, {self.soc_max_pct}")
         if not self.power_gen_min_w < self.power_gen_max_w:
             raise ScenarioError(f"{w}: power_gen_min_w must be < power_gen_max_w")
         if not (math.isfinite(self.power_rate_min_wps) and self.power_rate_min_wps < 0):
