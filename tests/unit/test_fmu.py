@@ -184,10 +184,14 @@ def test_pythonfmu2_mass_drag_closed_form(py2_fmu):
         assert ports["speed_mps"].unit == "m/s" and ports["traction_force_n"].unit == "N"
         # no dependencies attribute in ModelStructure -> FMI says: depends on all inputs
         assert ports["speed_mps"].depends_on == ("traction_force_n",)
-        forces = [1200.0] * 50 + [-300.0] * 50
-        res = run(comp, {"traction_force_n": forces}, 0.2, ["speed_mps", "distance_m"])
+        forces = [1200.0] * 50 + [-3000.0] * 50
+        res = run(comp, {"traction_force_n": forces}, 0.2, ["speed_mps", "distance_m", "steps_taken", "reversing"])
     finally:
         comp.terminate()
+    # Integer and Boolean outputs come through as floats
+    assert res["steps_taken"] == [float(i + 1) for i in range(100)]
+    assert res["reversing"] == [1.0 if v < 0 else 0.0 for v in res["speed_mps"]]
+    assert 0 < sum(res["reversing"]) < 50
     # closed form: v(t) = F/b + (v0 - F/b) exp(-b t / m); x from integrating it
     tau = m / b
     v, x = v0, 0.0

@@ -8,13 +8,14 @@ Integrated exactly over each communication step with the force held
     v(t+h) = v_inf + (v - v_inf) exp(-h / tau)
     x(t+h) = x + v_inf h + (v - v_inf) tau (1 - exp(-h / tau))
 
-pythonfmu 0.7 writes no units, so the ports are unit-less in the model
+Also an Integer output ``steps_taken`` (doStep calls) and a Boolean output
+``reversing`` (speed < 0). pythonfmu 0.7 writes no units, so the ports are unit-less in the model
 description (the shevsim adapter then adopts the units of the port it maps to).
 Built by shevsim.fmu.build.build_python_fmu (fmi_version=2); used by tests/unit/test_fmu.py.
 """
 import math
 
-from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 
 
 class PyMassDrag(Fmi2Slave):
@@ -35,6 +36,13 @@ class PyMassDrag(Fmi2Slave):
         self.register_variable(Real("force_n", causality=Fmi2Causality.input))
         self.register_variable(Real("speed_mps", causality=Fmi2Causality.output))
         self.register_variable(Real("distance_m", causality=Fmi2Causality.output))
+        # non-Real outputs (exercise the adapter's Integer/Boolean path)
+        self.steps_taken = 0
+        self.reversing = False
+        self.register_variable(Integer("steps_taken", causality=Fmi2Causality.output,
+                                       variability=Fmi2Variability.discrete))
+        self.register_variable(Boolean("reversing", causality=Fmi2Causality.output,
+                                       variability=Fmi2Variability.discrete))
 
     def to_xml(self, model_options=dict()):
         # pythonfmu 0.7 omits <InitialUnknowns>; FMI 2.0 requires the calculated outputs there.
@@ -59,4 +67,6 @@ class PyMassDrag(Fmi2Slave):
         dv = self.speed_mps - v_inf
         self.distance_m += v_inf * step_size + dv * tau * (1.0 - e)
         self.speed_mps = v_inf + dv * e
+        self.steps_taken += 1
+        self.reversing = self.speed_mps < 0.0
         return True
