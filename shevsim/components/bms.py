@@ -67,8 +67,9 @@ class BMSParams:
     thermal_beta1, thermal_sigma_c, thermal_beta2, thermal_p0, thermal_s0 : float
         Thermal filter tuning (Table 5.4: Sigma_w = 2.5e-7 -> beta1 = 5e-4, Sigma_v = 2.5e-4 ->
         sigma = 0.0158 degC, Sigma_r = 9e-4 -> beta2 = 0.03, P(0) = I, S(0) = 1e-2).
-    horizon_steps, soc_min_pct, soc_max_pct, v_min_v, v_max_v, t_core_max_c, i_cell_max_a :
-        Power-capability horizon and limits (Table A.1, Sec. 5.4).
+    horizon_s, soc_min_pct, soc_max_pct, v_min_v, v_max_v, t_core_max_c, i_cell_max_a :
+        Power-capability horizon [s] (N = horizon_s / step; seed Sec. 4.5: 10 s at 10 Hz) and limits
+        (Table A.1, Sec. 5.4).
     polarisation_heat : str
         ``"exact"`` (V1 trajectory over the horizon, default) or ``"seed"`` (the 5.31 bound).
     radius_m, length_m, density_kg_m3, cp_j_kgk, kt_w_mk : float
@@ -103,7 +104,7 @@ class BMSParams:
     thermal_beta2: float = 0.03
     thermal_p0: float = 1.0
     thermal_s0: float = 1e-2
-    horizon_steps: int = 100
+    horizon_s: float = 10.0
     soc_min_pct: float = 30.0
     soc_max_pct: float = 70.0
     v_min_v: float = 2.0
@@ -123,6 +124,8 @@ class BMSParams:
         if self.thermal_estimator not in ("dkf", "jekf", "kf"):
             raise ScenarioError(f"bms parameters: thermal_estimator must be 'dkf', 'jekf' or 'kf', "
                                 f"got {self.thermal_estimator!r}")
+        if not self.horizon_s > 0.0:
+            raise ScenarioError(f"bms parameters: horizon_s must be > 0, got {self.horizon_s!r}")
         if not 0.0 <= self.soc0_pct <= 100.0:
             raise ScenarioError(f"bms parameters: soc0_pct must be in [0, 100], got {self.soc0_pct!r}")
 
@@ -197,7 +200,7 @@ class BMS(Component):
                                      sigma_c=p.thermal_sigma_c, beta1=p.thermal_beta1,
                                      p0=(p.thermal_p0, p.thermal_p0))
         self.pc = PowerCapability(PowerCapabilityParams(
-            horizon_steps=p.horizon_steps, dt_s=dt, soc_min_frac=p.soc_min_pct / 100.0,
+            horizon_steps=max(1, int(round(p.horizon_s / dt))), dt_s=dt, soc_min_frac=p.soc_min_pct / 100.0,
             soc_max_frac=p.soc_max_pct / 100.0, v_min_v=p.v_min_v, v_max_v=p.v_max_v,
             t_core_max_c=p.t_core_max_c, i_cell_max_a=p.i_cell_max_a, capacity_ah=p.capacity_ah,
             polarisation_heat=p.polarisation_heat,

@@ -296,3 +296,10 @@ def test_parameter_files_match_code_defaults():
             x.u["power_w"] = 30e3
             x.do_step(k * DT, DT)
     assert a.y == b.y
+
+
+def test_bms_horizon_in_seconds_follows_its_step():
+    m = BMS("bms")
+    assert m.pc.params.horizon_steps == 100 and m.pc.params.dt_s == 0.1
+    m.do_step(0.0, 0.2)
+    assert m.pc.params.horizon_steps == 50 and m.pc.params.dt_s == 0.2 and m.thermal.dt_s == 0.2
