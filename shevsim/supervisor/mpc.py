@@ -454,7 +454,10 @@ class _OsqpSolver:
                           eps_rel=self.eps, polishing=True, max_iter=50000, warm_starting=True)
 
     def _scaled(self, b):
-        return np.clip(b * self._row, -INF, INF)
+        out = b * self._row
+        out[b >= INF] = INF                  # keep "no bound" infinite for OSQP (1e30 x 6e-4 is finite)
+        out[b <= -INF] = -INF
+        return out
 
     def solve(self):
         p = self.prob
