@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from shevsim.components.battery import BatteryPack, BatteryPackParams
 from shevsim.components.bms import BMS, BMSParams
