@@ -85,7 +85,7 @@ class BatteryPackParams:
         Include the reversible heat ``-i T Delta S / F`` (seed 5.16).
     temperature_dependent : bool
         Look up the ECM parameters at the cell mean temperature (False: at 25 degC).
-    noise_seed : int
+    seed : int
         Seed of the measurement-noise generator.
     sigma_current_a, sigma_voltage_v, sigma_temperature_c : float
         Measurement noise standard deviations (seed Sec. 5.4).
@@ -104,7 +104,7 @@ class BatteryPackParams:
     input_mode: str = "power"
     entropic_heat: bool = True
     temperature_dependent: bool = True
-    noise_seed: int = 0
+    seed: int = 0
     sigma_current_a: float = 0.003
     sigma_voltage_v: float = 0.001
     sigma_temperature_c: float = 0.016
@@ -232,7 +232,7 @@ class BatteryPack(Component):
         self.ah = 0.0       # per cell [A.h]
         self.clamps = 0
         self.i_cell = 0.0
-        self.rng = np.random.default_rng(p.noise_seed)
+        self.rng = np.random.default_rng(p.seed)
         self._buf = self.rng.standard_normal(_NOISE_BLOCK).tolist()
         self._k = 0
         rs = self.tables.params(self.soc, self._t_lookup(), 1.0)[0]

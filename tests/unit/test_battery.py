@@ -210,7 +210,7 @@ def test_power_to_current_in_plant_and_clamp():
 
 
 def test_measurement_noise_statistics():
-    b = _pack(noise_seed=7)
+    b = _pack(seed=7)
     n = 20000
     e = np.empty((n, 4))
     for k in range(n):
