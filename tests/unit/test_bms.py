@@ -38,7 +38,7 @@ def plant_run():
     """2000 s of the OCV-R-RC-RC plant (true SOC 60 %) with noisy measurements."""
     n = 20000
     prof = drive_profile(n, DT)
-    b = BatteryPack("battery", BatteryPackParams(soc_init_pct=60.0, noise_seed=3))
+    b = BatteryPack("battery", BatteryPackParams(soc_init_pct=60.0, seed=3))
     rows = []
     for k in range(n):
         b.u["power_w"] = prof[k]
