@@ -307,8 +307,8 @@ def test_parameter_files_match_code_defaults():
     from shevsim.core.params import load_params
 
     root = Path(__file__).resolve().parents[2] / "components"
-    assert load_params(BMSParams, root / "bms" / "default.toml") == BMSParams()
-    assert load_params(BMSParams, root / "bms" / "retuned.toml") == BMSParams.retuned()
+    assert load_params(BMSParams, root / "bms" / "table_5_4.toml") == BMSParams()
+    assert load_params(BMSParams, root / "bms" / "default.toml") == BMSParams.retuned()
     p = load_params(BatteryPackParams, root / "battery" / "default.toml")
     a, b = BatteryPack("a", p), BatteryPack("b")
     for k in range(20):
