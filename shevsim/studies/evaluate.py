@@ -264,15 +264,20 @@ def run_item(item) -> tuple[dict, float]:
     return out, time.perf_counter() - t0
 
 
-def is_failed(outputs: dict, *keys: str) -> bool:
-    """True when an evaluation failed or lacks a finite value for one of ``keys``."""
+def failure_reason(outputs: dict, *keys: str) -> str:
+    """Why an evaluation is unusable ("" when it is fine): its error, its termination, or a missing metric."""
     if "error" in outputs:
-        return True
+        return str(outputs["error"])
     term = outputs.get("termination", "completed")
     if term not in ("completed", None):
-        return True
+        return f"run ended: {term}"
     for k in keys:
         v = outputs.get(k)
         if not isinstance(v, (int, float)) or not math.isfinite(v):
-            return True
-    return False
+            return f"metric '{k}' missing or not finite ({v!r})"
+    return ""
+
+
+def is_failed(outputs: dict, *keys: str) -> bool:
+    """True when an evaluation failed or lacks a finite value for one of ``keys``."""
+    return bool(failure_reason(outputs, *keys))

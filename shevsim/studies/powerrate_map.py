@@ -31,7 +31,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from ..core.errors import ShevsimError
-from .evaluate import is_failed
+from .evaluate import failure_reason, is_failed
 from .ga import GAConfig, exhaustive_genomes, narrow_bounds, rank_key, run_ga, space_size
 from .problem import DEFAULT_EDGES_W, DEFAULT_LEVELS_WPS, FE_KEY, SOOT_KEY, check_map
 
@@ -121,7 +121,8 @@ def run_powerrate_map(problem, runner, cfg: MapStudyConfig | None = None, out_di
     constants = []
     for j, out in enumerate(const_outs):
         o, v = obj(out)
-        constants.append({"rate_wps": levels[j], "feasible": v <= 0.0, **obj.changes(out)})
+        constants.append({"rate_wps": levels[j], "feasible": v <= 0.0, **obj.changes(out),
+                          "error": failure_reason(out, cfg.fe_key, cfg.soot_key)})
     feas_const = [(c, g) for c, g in zip(constants, const_genomes) if c["feasible"]]
     best_const = min(feas_const, key=lambda cg: (cg[0]["soot_g_per_km"], cg[1]))[0] if feas_const else None
 
@@ -212,7 +213,8 @@ def _write_outputs(out: Path, summary: dict, es_scored, obj: Objective, levels, 
                               **{k: v for k, v in row.items() if k not in ("rates_wps", "genome")}} for row in rows])
 
     _csv_atomic(frame(summary["top_solutions"]), out / "top_solutions.csv")
-    es_rows = [{"rates_wps": [levels[i] for i in g], "feasible": v <= 0, **obj.changes(o)} for g, _, v, o in es_scored]
+    es_rows = [{"rates_wps": [levels[i] for i in g], "feasible": v <= 0, **obj.changes(o),
+                "error": failure_reason(o, obj.cfg.fe_key, obj.cfg.soot_key)} for g, _, v, o in es_scored]
     _csv_atomic(frame(es_rows), out / "exhaustive.csv")
     _csv_atomic(pd.DataFrame(summary["ga"]["history"]), out / "ga_history.csv")
     _csv_atomic(pd.DataFrame(summary["constant_limits"]), out / "constant_limits.csv")

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from ..core.errors import ShevsimError
-from .evaluate import is_failed
+from .evaluate import failure_reason, is_failed
 from .problem import DEFAULT_EDGES_W, FE_KEY, SOOT_KEY
 
 
@@ -36,12 +36,13 @@ def run_tradeoff(problem, runner, rates_wps, out_dir: str | Path | None = None, 
     fe0, s0 = base[fe_key], base[soot_key]
     rows = []
     for r, out in zip(rates, outs[1:]):
-        failed = is_failed(out, fe_key, soot_key)
+        reason = failure_reason(out, fe_key, soot_key)
+        failed = bool(reason)
         fe = math.nan if failed else out[fe_key]
         soot = math.nan if failed else out[soot_key]
         rows.append({"rate_wps": r, "fuel_economy_kmpl": fe, "soot_g_per_km": soot,
                      "fe_change_pct": 100 * (fe / fe0 - 1), "soot_change_pct": 100 * (soot / s0 - 1),
-                     "error": out.get("error", "") if failed else ""})
+                     "error": reason})
     ok = [row for row in rows if not row["error"] and row["fe_change_pct"] >= -100 * fe_loss_max_frac - 1e-9]
     best = min(ok, key=lambda row: (row["soot_g_per_km"], -row["rate_wps"])) if ok else None
     wall = time.perf_counter() - t0

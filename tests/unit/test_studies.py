@@ -9,6 +9,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import os
 import shutil
 from pathlib import Path
 
@@ -26,7 +27,7 @@ from shevsim.studies.problem import DEFAULT_EDGES_W, FE_KEY, SyntheticProblem, s
 from shevsim.studies.tradeoff import run_tradeoff
 
 TWO_BODY = PROJECT_ROOT / "scenarios" / "verification" / "two_body.toml"
-UAC_MPC = PROJECT_ROOT / "scenarios" / "uac_proxy_mpc.toml"
+UAC_MPC = Path(os.environ.get("SHEVSIM_STUDY_SCENARIO", PROJECT_ROOT / "scenarios" / "uac_proxy_mpc.toml"))
 
 
 # -- a known discrete problem: weighted distance to a target, with a sum constraint -----------------
