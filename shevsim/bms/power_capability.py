@@ -175,6 +175,9 @@ class PowerCapability:
         """``(i_t_dch, i_t_chg)`` [A] keeping the predicted core temperature <= T_c,max after N steps."""
         p = self.params
         ndt = p.horizon_steps * p.dt_s
+        # the estimated h changes a little every step: evaluate the thermal matrices at h rounded to
+        # 1e-3 W/m^2/K (closed-form ZOH is cached on its last h; the effect on T_core is ~1e-5 K)
+        h_w_m2k = round(h_w_m2k, 3)
         a00, a01, a10, a11, b00, b01, b10, b11 = self._discN.ad_bd(h_w_m2k)
         _, _, _, cc0, cc1, dc = self._discN.out(h_w_m2k)
         # free response of the core temperature (mu = 0, no polarisation heat)
