@@ -210,7 +210,7 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
         di = np.diff(df["current_a"].to_numpy())
         dv = np.diff(df["voltage_v"].to_numpy())
         big = np.abs(di) > 0.05 * max(np.abs(df["current_a"]).max(), 1e-9)
-        if big.sum() >= 10:
+        if big.sum() >= 5:
             c = np.corrcoef(di[big], dv[big])[0, 1]
             if c > 0.3:
                 other = [s for s in CURRENT_SIGNS if s != current_sign][0]
@@ -254,6 +254,8 @@ def _check_units(df, model, path, line_of):
             bad("speed_mps", f"speed {s.max():.1f} m/s (> 70 m/s = 252 km/h) looks like km/h; divide by 3.6",
                 int(np.argmax(s)))
         p = df["power_w"].to_numpy()
-        if np.abs(p).max() < 200.0 and np.abs(p).max() > 0:
-            bad("power_w", f"largest |power| is {np.abs(p).max():.3g} - looks like kW, expected W",
-                int(np.argmax(np.abs(p))))
+        moving = s > 5.0
+        if moving.sum() >= 5 and np.median(np.abs(p[moving])) < 500.0:
+            # any road vehicle above 5 m/s draws (or regenerates) well over 500 W
+            bad("power_w", f"median |power| while moving faster than 5 m/s is {np.median(np.abs(p[moving])):.3g}"
+                " - looks like kW, expected W", int(np.argmax(moving)))

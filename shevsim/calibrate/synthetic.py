@@ -44,7 +44,7 @@ VEHICLE_EFFECTS = {
 
 
 def _cell_current(duration_s: float, dt: float, rng, quantum_s: float) -> np.ndarray:
-    """Drive-like current [A, + discharge]: random pulses (mean ~1.4 A, regen down to -4 A) and rests.
+    """Drive-like current [A, + discharge]: random pulses (up to 12 A = 4C, regen down to -6 A) and rests.
 
     Segment boundaries fall on multiples of ``quantum_s`` (the logger's sample period)."""
     n = int(round(duration_s / dt)) + 1
@@ -56,7 +56,7 @@ def _cell_current(duration_s: float, dt: float, rng, quantum_s: float) -> np.nda
             k += q * int(rng.uniform(60, 240) / quantum_s)  # rest
             continue
         seg = q * max(1, int(rng.uniform(3, 25) / quantum_s))
-        val = rng.choice([rng.uniform(0.5, 8.0), rng.uniform(-4.0, -0.5), rng.uniform(1.0, 3.0)], p=[0.5, 0.25, 0.25])
+        val = rng.choice([rng.uniform(1.0, 12.0), rng.uniform(-6.0, -0.5), rng.uniform(1.0, 4.0)], p=[0.5, 0.25, 0.25])
         i[k:k + seg] = val
         k += seg
     return i
