@@ -18,7 +18,10 @@ Ports
 Inputs
     ``cell_current_meas_a`` [A] measured cell current, + discharge; ``cell_voltage_meas_v`` [V];
     ``t_surface_meas_c``, ``t_ambient_meas_c`` [degC].
-Outputs (at t + h, estimates after the measurement at t + h; all depend directly on the inputs)
+Outputs (estimates after processing the measurement held over the step; declared *without*
+    direct feedthrough: a BMS is a sampled estimator whose limits the vehicle uses one sample later,
+    which also keeps the loop battery -> BMS -> power limits -> motor -> bus -> battery free of an
+    algebraic loop)
     ``soc_pct`` [%]; pack-equivalent ECM of n_s x n_p identical cells: ``ocv_v`` = n_s V_oc,
     ``v1_v`` = n_s V1, ``rs_ohm`` = R_s n_s/n_p, ``r1_ohm`` = R1 n_s/n_p, ``c1_f`` = C1 n_p/n_s
     (so a supervisor can use ``P = ocv i - rs i^2`` with the pack current and power directly);
@@ -151,22 +154,22 @@ class BMS(Component):
         inp("cell_voltage_meas_v", "V", 3.3, "measured cell terminal voltage"),
         inp("t_surface_meas_c", "degC", 25.0, "measured cell surface temperature"),
         inp("t_ambient_meas_c", "degC", 25.0, "measured ambient temperature"),
-        out("soc_pct", "%", 50.0, "estimated SOC", _IN),
-        out("v1_v", "V", 0.0, "estimated polarisation voltage, pack (n_s V1)", _IN),
-        out("rs_ohm", "Ohm", 0.0, "estimated series resistance, pack (R_s n_s / n_p)", _IN),
-        out("r1_ohm", "Ohm", 0.0, "estimated polarisation resistance, pack", _IN),
-        out("c1_f", "F", 0.0, "estimated polarisation capacitance, pack (C1 n_p / n_s)", _IN),
-        out("t_avg_c", "degC", 25.0, "estimated cell volume-averaged temperature", _IN),
-        out("gamma_c", "K/m", 0.0, "estimated cell mean radial temperature gradient", _IN),
-        out("t_core_c", "degC", 25.0, "estimated cell core temperature", _IN),
-        out("h_w_m2k", "W/(m2.K)", 20.0, "estimated convection coefficient", _IN),
-        out("heat_w", "W", 0.0, "estimated heat generation per cell (5.16)", _IN),
-        out("ocv_v", "V", 0.0, "estimated pack open-circuit voltage", _IN),
-        out("power_max_w", "W", 0.0, "pack discharge power limit (>= 0)", _IN),
-        out("power_min_w", "W", 0.0, "pack charge power limit (<= 0)", _IN),
-        out("i_max_a", "A", 0.0, "cell discharge current limit", _IN),
-        out("i_min_a", "A", 0.0, "cell charge current limit", _IN),
-        out("cell_rs_ohm", "Ohm", 0.0, "estimated cell series resistance", _IN),
+        out("soc_pct", "%", 50.0, "estimated SOC"),
+        out("v1_v", "V", 0.0, "estimated polarisation voltage, pack (n_s V1)"),
+        out("rs_ohm", "Ohm", 0.0, "estimated series resistance, pack (R_s n_s / n_p)"),
+        out("r1_ohm", "Ohm", 0.0, "estimated polarisation resistance, pack"),
+        out("c1_f", "F", 0.0, "estimated polarisation capacitance, pack (C1 n_p / n_s)"),
+        out("t_avg_c", "degC", 25.0, "estimated cell volume-averaged temperature"),
+        out("gamma_c", "K/m", 0.0, "estimated cell mean radial temperature gradient"),
+        out("t_core_c", "degC", 25.0, "estimated cell core temperature"),
+        out("h_w_m2k", "W/(m2.K)", 20.0, "estimated convection coefficient"),
+        out("heat_w", "W", 0.0, "estimated heat generation per cell (5.16)"),
+        out("ocv_v", "V", 0.0, "estimated pack open-circuit voltage"),
+        out("power_max_w", "W", 0.0, "pack discharge power limit (>= 0)"),
+        out("power_min_w", "W", 0.0, "pack charge power limit (<= 0)"),
+        out("i_max_a", "A", 0.0, "cell discharge current limit"),
+        out("i_min_a", "A", 0.0, "cell charge current limit"),
+        out("cell_rs_ohm", "Ohm", 0.0, "estimated cell series resistance"),
     )
     _static = ("name", "params", "tables", "thermal_params", "_ns", "_np")
 

@@ -11,11 +11,19 @@ Ports
 Inputs
     ``motor_power_w`` [W] (+ drawn by the motors), ``gen_power_w`` [W] (+ delivered by the
     generator), ``aux_power_w`` [W] (+ drawn by auxiliaries, start 0).
+    ``battery_power_max_w`` [W] (>= 0) and ``battery_power_min_w`` [W] (<= 0): the battery power
+    capability (from the BMS), start +-1e12 (no limit).
 Outputs (direct feedthrough of the inputs they use)
+    ``motor_power_max_w`` = gen + battery_power_max - aux and ``motor_power_min_w`` =
+    gen + battery_power_min - aux [W]: what the motors may draw / return so that the battery stays
+    inside its power capability (the vehicle controller's traction derating). With the parameter
+    ``enforce_battery_limits = false`` they are +-1e12 (the counterfactual without limits).
     ``battery_power_w`` [W] + discharge; ``demand_power_w`` [W] = motor + aux;
     cumulative ``aux_energy_j``, ``motor_energy_j``, ``gen_energy_j``, ``battery_energy_j`` [J].
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
@@ -24,15 +32,35 @@ from shevsim.core.variables import inp, out
 _ALL = ("motor_power_w", "gen_power_w", "aux_power_w")
 
 
+@dataclass(frozen=True, slots=True)
+class BusParams:
+    """Bus parameters.
+
+    Attributes
+    ----------
+    enforce_battery_limits : bool
+        Derive motor power limits from the battery power capability (default true).
+    """
+
+    enforce_battery_limits: bool = True
+
+
+_LIM = ("gen_power_w", "aux_power_w", "battery_power_max_w", "battery_power_min_w")
+
+
 class PowerBus(Component):
     """Lossless power balance (see module docstring for ports)."""
 
     TYPE = "bus"
-    Params = None
+    Params = BusParams
     VARIABLES = (
         inp("motor_power_w", "W", 0.0, "motor electrical power, + drawn from the bus"),
         inp("gen_power_w", "W", 0.0, "generator electrical power, + delivered to the bus"),
         inp("aux_power_w", "W", 0.0, "auxiliary load, + drawn from the bus"),
+        inp("battery_power_max_w", "W", 1e12, "battery discharge power capability (>= 0)"),
+        inp("battery_power_min_w", "W", -1e12, "battery charge power capability (<= 0)"),
+        out("motor_power_max_w", "W", 1e12, "most power the motors may draw", _LIM),
+        out("motor_power_min_w", "W", -1e12, "most power the motors may return (<= 0)", _LIM),
         out("battery_power_w", "W", 0.0, "battery power, + discharge", _ALL),
         out("demand_power_w", "W", 0.0, "motor + auxiliary power", ("motor_power_w", "aux_power_w")),
         out("aux_energy_j", "J", 0.0, "cumulative auxiliary energy", ("aux_power_w",)),
@@ -41,8 +69,19 @@ class PowerBus(Component):
         out("battery_energy_j", "J", 0.0, "cumulative battery energy, + discharged", _ALL),
     )
 
+    def _limits(self) -> None:
+        u, y = self.u, self.y
+        if self.params.enforce_battery_limits:
+            base = u["gen_power_w"] - u["aux_power_w"]
+            y["motor_power_max_w"] = max(base + u["battery_power_max_w"], 0.0)
+            y["motor_power_min_w"] = min(base + u["battery_power_min_w"], 0.0)
+        else:
+            y["motor_power_max_w"] = 1e12
+            y["motor_power_min_w"] = -1e12
+
     def initialize(self, t0: float) -> None:
         self.e = [0.0, 0.0, 0.0, 0.0]
+        self._limits()
         u, y = self.u, self.y
         y["demand_power_w"] = u["motor_power_w"] + u["aux_power_w"]
         y["battery_power_w"] = y["demand_power_w"] - u["gen_power_w"]
@@ -67,3 +106,4 @@ class PowerBus(Component):
         y["motor_energy_j"] = e[1]
         y["gen_energy_j"] = e[2]
         y["battery_energy_j"] = e[3]
+        self._limits()

@@ -25,8 +25,12 @@ co-simulation input extrapolation). The remaining motor/vehicle mismatch is seco
 Ports
 -----
 Inputs
-    ``force_req_n`` [N] signed wheel force demand (+ propel, - brake); ``speed_mps`` [m/s].
-Outputs (all direct feedthrough of both inputs)
+    ``force_req_n`` [N] signed wheel force demand (+ propel, - brake); ``speed_mps`` [m/s];
+    ``elec_power_max_w`` [W] (>= 0) and ``elec_power_min_w`` [W] (<= 0): the electrical power the
+    bus can supply / absorb (battery power capability from the BMS plus generator output, see
+    :mod:`shevsim.components.bus`); unconnected they are +-1e12 (no limit). The torque is scaled
+    so the electrical power stays inside them (braking beyond goes to the friction brakes).
+Outputs (all direct feedthrough of the inputs)
     ``traction_force_n`` [N] signed force delivered by the motors at the wheels;
     ``brake_force_n`` [N] friction brake force (>= 0); ``elec_power_w`` [W] + drawn from the bus;
     ``torque_nm`` [N m] total motor torque; ``speed_radps`` [rad/s] motor speed;
@@ -95,10 +99,12 @@ class Motor(Component):
 
     TYPE = "motor"
     Params = MotorParams
-    _FT = ("force_req_n", "speed_mps")
+    _FT = ("force_req_n", "speed_mps", "elec_power_max_w", "elec_power_min_w")
     VARIABLES = (
         inp("force_req_n", "N", 0.0, "signed wheel force demand, + propel / - brake"),
         inp("speed_mps", "m/s", 0.0, "vehicle speed"),
+        inp("elec_power_max_w", "W", 1e12, "most electrical power the bus can supply to the motors (>= 0)"),
+        inp("elec_power_min_w", "W", -1e12, "most regenerative power the bus can absorb (<= 0)"),
         out("traction_force_n", "N", 0.0, "signed force delivered at the wheels by the motors", _FT),
         out("brake_force_n", "N", 0.0, "friction brake force, >= 0", _FT),
         out("elec_power_w", "W", 0.0, "electrical power, + drawn from the bus", _FT),
@@ -161,6 +167,27 @@ class Motor(Component):
                 tau = -t_regen
             brake = -(f_req - tau / self._k_tau)
         p_el = electrical_power(tau, w_mid, maps.eff(w_mid, tau))
+        # bus power limits (battery power capability + generator output, from the bus):
+        # scale the torque down until the electrical power fits; the rest of a braking
+        # demand goes to the friction brakes, the rest of a propulsion demand is not delivered
+        p_hi = self.u["elec_power_max_w"]
+        p_lo = self.u["elec_power_min_w"]
+        if p_hi < 0.0:
+            p_hi = 0.0
+        if p_lo > 0.0:
+            p_lo = 0.0
+        if p_el > p_hi or p_el < p_lo:
+            target = p_hi if p_el > p_hi else p_lo
+            for _ in range(4):  # fixed point on tau: eta changes slowly with torque
+                tau *= target / p_el if p_el != 0.0 else 0.0
+                p_el = electrical_power(tau, w_mid, maps.eff(w_mid, tau))
+                if p_el == 0.0 or abs(p_el - target) <= 1e-6 * abs(target) + 1e-3:
+                    break
+            if p_el > p_hi or p_el < p_lo:   # guard: never exceed the limit
+                tau *= 0.999 * target / p_el if p_el != 0.0 else 0.0
+                p_el = electrical_power(tau, w_mid, maps.eff(w_mid, tau))
+            if f_req < 0.0:
+                brake = -(f_req - tau / self._k_tau)
         p_m = tau * w_mid
         self.e_elec += p_el * h
         self.e_mech += p_m * h

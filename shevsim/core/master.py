@@ -16,7 +16,12 @@ direct-feedthrough edges are mandatory: a component whose output depends
 directly on an input must run after that input's source. A cycle made only of
 feedthrough edges is an algebraic loop and is reported with every
 ``component.port`` in it. Other cycles (through a state) are broken where the
-declaration order puts them.
+declaration order puts them. A cycle of components that is not a cycle of ports
+(A's output feeds B's feedthrough input and B's output feeds another of A's
+feedthrough inputs) cannot be stepped in one Gauss-Seidel pass either: it is broken
+at the component with the fewest unplaced feedthrough predecessors (ties: the
+scenario's declaration order) and the connections that then carry the previous
+step's value are listed in :attr:`Master.delayed` and by ``shevsim info``.
 """
 from __future__ import annotations
 
@@ -111,12 +116,16 @@ class Master:
     step_multiples : dict, optional
         ``{name: k}``: the component steps every ``k`` communication steps.
     faults : sequence of :class:`Fault`, optional
+    order : sequence of str, optional
+        Explicit Gauss-Seidel order (every component once). Connections into
+        feedthrough inputs that then run against the order are reported in
+        :attr:`delayed` (they carry the previous step's value).
     """
 
     def __init__(self, components: Sequence, connections: Iterable[Connection],
                  settings: MasterSettings | None = None,
                  step_multiples: dict[str, int] | None = None,
-                 faults: Iterable[Fault] = ()):
+                 faults: Iterable[Fault] = (), order: Sequence[str] | None = None):
         self.settings = settings or MasterSettings()
         self.settings.check()
         self.components = {}
@@ -137,7 +146,7 @@ class Master:
         self._check_connections()
         for f in self.faults:
             self._port(f.component, f.port, "input", f"fault at {f.at_s} s")
-        self.order = self._execution_order()
+        self.order = self._execution_order(order)
         self._build_links()
         self.step_index = 0
         self.time_s = 0.0
@@ -179,7 +188,7 @@ class Master:
                 raise ConnectionError_(f"{ctx}: unit mismatch, output {c.src}.{c.src_port} is in '{so.unit}' "
                                        f"but input {c.dst}.{c.dst_port} expects '{di.unit}'")
 
-    def _execution_order(self) -> list[str]:
+    def _execution_order(self, given: Sequence[str] | None = None) -> list[str]:
         names = list(self.components)
         # port-level feedthrough graph: output node -> input node (connection), input -> output (depends_on)
         succ: dict[tuple, list[tuple]] = {}
@@ -208,14 +217,32 @@ class Master:
         order: list[str] = []
         placed: set[str] = set()
         remaining = list(names)
+        if given is not None:
+            given = list(given)
+            unknown = [n for n in given if n not in self.components]
+            if unknown:
+                raise ScenarioError(f"execution order names unknown component(s) {unknown}")
+            if sorted(given) != sorted(names):
+                missing = [n for n in names if n not in given]
+                raise ScenarioError(f"execution order must list every component exactly once (missing: {missing})")
+            order, remaining = given, []
         while remaining:
-            # prefer a component whose all predecessors are placed; else whose hard ones are
+            # prefer a component whose predecessors are all placed; else one whose feedthrough
+            # predecessors are; else (a cycle of components without a cycle of ports) the one with
+            # the fewest unplaced feedthrough predecessors, ties in declaration order
             pick = next((n for n in remaining if (hard[n] | soft[n]) <= placed), None)
             if pick is None:
-                pick = next(n for n in remaining if hard[n] <= placed)
+                pick = next((n for n in remaining if hard[n] <= placed), None)
+            if pick is None:
+                pick = min(remaining, key=lambda n: (len(hard[n] - placed), names.index(n)))
             order.append(pick)
             placed.add(pick)
             remaining.remove(pick)
+        # connections into a feedthrough input whose source runs later: they carry the value of the
+        # previous communication step (reported by describe())
+        pos = {n: i for i, n in enumerate(order)}
+        self.delayed = [c for c in self.connections
+                        if c.dst_port in ft_inputs[c.dst] and c.src != c.dst and pos[c.src] > pos[c.dst]]
         return order
 
     def _build_links(self) -> None:
@@ -405,8 +432,10 @@ class Master:
                     dep = f"  (feedthrough from {', '.join(v.depends_on)})" if v.depends_on else ""
                     lines.append(f"      {v.causality:6s} {v.name:28s} [{v.unit}]  {v.description}{dep}")
         lines.append("connections:")
+        delayed = set(self.delayed)
         for c in self.connections:
-            lines.append(f"  {c}")
+            note = "   (one-step delay: component cycle broken here)" if c in delayed else ""
+            lines.append(f"  {c}{note}")
         unconnected = [f"{n}.{v.name}" for n, vs in self._vars.items() for v in vs.values()
                        if v.causality == "input" and not any(c.dst == n and c.dst_port == v.name for c in self.connections)]
         if unconnected:

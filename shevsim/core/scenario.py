@@ -6,6 +6,7 @@ Example::
     name = "hd_udds_rule"
     step_s = 0.1                 # communication step
     method = "gauss-seidel"      # or "jacobi"
+    # order = ["cycle", ...]     # optional explicit Gauss-Seidel order (default: from the graph)
     seed = 1                     # noise seeds of every component derive from it
     # stop_s = 1060              # default: the cycle's length
 
@@ -51,7 +52,7 @@ from .params import load_params
 PROJECT_ROOT = Path(__file__).resolve().parents[2]
 
 _TOP = {"scenario", "components", "connections", "faults", "record", "metrics"}
-_SCEN = {"name", "description", "step_s", "stop_s", "t0_s", "method", "seed"}
+_SCEN = {"name", "description", "step_s", "stop_s", "t0_s", "method", "seed", "order"}
 _COMP = {"type", "params", "set", "start", "step_multiple", "fmu", "map"}
 _FAULT = {"at_s", "port", "value"}
 _RECORD = {"signals"}
@@ -122,6 +123,7 @@ class Scenario:
     faults: list[Fault]
     record: list[str] | None
     metrics: dict[str, Any]
+    order: list[str] | None = None
 
     def resolved(self) -> dict:
         """A plain-dict view of what will run (saved with results)."""
@@ -243,9 +245,19 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
     elif not (isinstance(signals, list) and all(isinstance(x, str) for x in signals)):
         raise ScenarioError(f"{where}: [record] field 'signals' must be \"all\" or a list of 'component.port'")
     seed = num(sc, "seed", 0, f"{where}: [scenario]", int)
+    order = sc.get("order")
+    if order is not None:
+        if not (isinstance(order, list) and all(isinstance(x, str) for x in order)):
+            raise ScenarioError(f"{where}: [scenario] field 'order' must be a list of component names")
+        for n in order:
+            if n not in names:
+                raise ScenarioError(f"{where}: [scenario] field 'order': unknown component '{n}'{_hint(n, names)}")
+        if sorted(order) != sorted(names):
+            raise ScenarioError(f"{where}: [scenario] field 'order' must list every component exactly once "
+                                f"(missing: {sorted(names - set(order))})")
     return Scenario(spath, text, name, str(sc.get("description", "")), settings,
                     num(sc, "stop_s", None, f"{where}: [scenario]"), num(sc, "t0_s", 0.0, f"{where}: [scenario]"),
-                    seed, specs, conns, faults, signals, dict(doc.get("metrics", {})))
+                    seed, specs, conns, faults, signals, dict(doc.get("metrics", {})), order)
 
 
 def component_seed(scenario_seed: int, name: str) -> int:
@@ -296,7 +308,7 @@ def build_master(scenario: Scenario) -> Master:
     comps = [instantiate(s, scenario) for s in scenario.components]
     try:
         return Master(comps, scenario.connections, scenario.settings,
-                      {s.name: s.step_multiple for s in scenario.components}, scenario.faults)
+                      {s.name: s.step_multiple for s in scenario.components}, scenario.faults, scenario.order)
     except ShevsimError as exc:
         raise type(exc)(f"{scenario.path or '<scenario>'}: {exc}") from None
 

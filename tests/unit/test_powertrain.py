@@ -36,13 +36,14 @@ def curve_peak_power(path, wcol, tcol):
 # ----------------------------------------------------------------------------- ports
 SIGNAL_TABLE = {   # docs/DEVELOPING.md, SHEV signal table
     Driver: (("speed_ref_mps", "accel_ref_mps2", "speed_mps"), ("force_req_n",)),
-    Motor: (("force_req_n", "speed_mps"),
+    Motor: (("force_req_n", "speed_mps", "elec_power_max_w", "elec_power_min_w"),
             ("traction_force_n", "brake_force_n", "elec_power_w", "torque_nm", "speed_radps", "torque_max_nm",
              "heat_index_frac", "loss_energy_j")),
     Vehicle: (("traction_force_n", "brake_force_n", "grade_rad"),
               ("speed_mps", "accel_mps2", "distance_m", "traction_energy_j", "aero_energy_j", "rolling_energy_j",
                "brake_energy_j", "grade_energy_j", "kinetic_energy_j")),
-    PowerBus: (("motor_power_w", "gen_power_w", "aux_power_w"), ("battery_power_w", "demand_power_w", "aux_energy_j")),
+    PowerBus: (("motor_power_w", "gen_power_w", "aux_power_w", "battery_power_max_w", "battery_power_min_w"),
+               ("battery_power_w", "demand_power_w", "aux_energy_j", "motor_power_max_w", "motor_power_min_w")),
     EngineGenerator: (("power_cmd_w", "power_rate_max_wps"),
                       ("elec_power_w", "engine_power_w", "engine_speed_radps", "engine_torque_nm", "rack_frac",
                        "fuel_rate_gps", "soot_rate_mgps", "fuel_mass_g", "fuel_energy_j", "soot_mass_mg",
@@ -578,3 +579,36 @@ def test_save_restore_reproduces_steps(cls, inputs):
     c.do_step(0.5, 0.1)
     c.do_step(0.6, 0.1)
     assert c.y == a
+
+
+# ------------------------------------------------------------------ bus power limits -> motor
+def test_motor_respects_bus_power_limits_and_brakes_the_rest():
+    m = Motor("motor")
+    m.u["speed_mps"] = 10.0
+    m.initialize(0.0)
+    m.u["force_req_n"] = 60e3                      # ~600 kW at the wheels: far above any limit
+    m.u["elec_power_max_w"] = 50e3
+    m.do_step(0.0, 0.1)
+    assert 49e3 < m.y["elec_power_w"] <= 50e3 + 1e-6
+    assert m.y["traction_force_n"] < 60e3 and m.y["brake_force_n"] == 0.0
+    m.u["force_req_n"] = -60e3                     # hard braking, regen limited to 20 kW
+    m.u["elec_power_min_w"] = -20e3
+    m.do_step(0.1, 0.1)
+    assert -20e3 - 1e-6 <= m.y["elec_power_w"] < -19e3
+    # the wheels still get the whole braking force: regen + friction
+    assert m.y["traction_force_n"] - m.y["brake_force_n"] == pytest.approx(-60e3, rel=1e-9)
+    m.u["elec_power_min_w"] = -1e12                # no limit: more regen than with the limit
+    m.do_step(0.2, 0.1)
+    assert m.y["elec_power_w"] < -20e3
+
+
+def test_bus_motor_limits_follow_battery_capability():
+    b = PowerBus("bus")
+    b.u.update(gen_power_w=80e3, aux_power_w=5e3, battery_power_max_w=30e3, battery_power_min_w=-40e3)
+    b.initialize(0.0)
+    b.do_step(0.0, 0.1)
+    assert b.y["motor_power_max_w"] == pytest.approx(80e3 - 5e3 + 30e3)
+    assert b.y["motor_power_min_w"] == pytest.approx(min(80e3 - 5e3 - 40e3, 0.0))
+    off = PowerBus("bus", type(b.params)(enforce_battery_limits=False))
+    off.initialize(0.0)
+    assert off.y["motor_power_max_w"] >= 1e12
