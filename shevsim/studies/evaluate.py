@@ -128,12 +128,11 @@ def _param_file_deps(pfile: Path) -> list[Path]:
 
 
 @functools.lru_cache(maxsize=64)
-def _scenario_fingerprint_cached(path: str, mtime_ns: int) -> str:
+def _scenario_fingerprint_cached(path: str, text: str, mtimes: tuple) -> str:
     from ..core.scenario import load_scenario
-    p = Path(path)
     h = hashlib.sha256()
-    h.update(p.read_bytes())
-    sc = load_scenario(p)
+    h.update(text.encode())
+    sc = load_scenario(Path(path), text=text)
     files: set[Path] = set()
     for spec in sc.components:
         if spec.params_file is not None:
@@ -145,10 +144,34 @@ def _scenario_fingerprint_cached(path: str, mtime_ns: int) -> str:
     return h.hexdigest()
 
 
-def scenario_fingerprint(path: str | Path) -> str:
-    """SHA-256 of a scenario file and the parameter/data files it resolves (cached per file mtime)."""
+def _dir_mtimes(path: Path, text: str) -> tuple:
+    """Modification times of the component parameter folders (invalidate the fingerprint memo)."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        return ()
+    from ..core.scenario import resolve_path
+    out = []
+    for cd in (doc.get("components") or {}).values():
+        if isinstance(cd, dict) and isinstance(cd.get("params"), str):
+            d = resolve_path(cd["params"], path).parent
+            try:
+                out.append((str(d), d.stat().st_mtime_ns, max((f.stat().st_mtime_ns for f in d.iterdir()), default=0)))
+            except OSError:
+                out.append((str(d), 0, 0))
+    return tuple(out)
+
+
+def scenario_fingerprint(path: str | Path, text: str | None = None) -> str:
+    """SHA-256 of a scenario's text and of the parameter/data files it resolves.
+
+    ``text`` defaults to the file's contents. Memoised per (path, text, parameter-folder mtimes).
+    Raises :class:`~shevsim.core.errors.ScenarioError` for a malformed scenario.
+    """
     p = Path(path).resolve()
-    return _scenario_fingerprint_cached(str(p), p.stat().st_mtime_ns)
+    if text is None:
+        text = p.read_text()
+    return _scenario_fingerprint_cached(str(p), text, _dir_mtimes(p, text))
 
 
 def toml_value(v: Any) -> str:
@@ -200,12 +223,16 @@ class Evaluation:
         Override of the scenario's stop time (s); None keeps the scenario's.
     final_signals : tuple of str
         Signals (``component.port``) whose final value is returned as ``final:component.port``.
+    text : str
+        The scenario file's text, read once by :meth:`make`: the key hashes it and the run parses
+        it, so editing the file during a study cannot make a cached result disagree with its key.
     """
 
     scenario: str
     overrides: tuple = ()
     stop_s: float | None = None
     final_signals: tuple = ()
+    text: str = field(default="", repr=False, compare=False)   # scenario text captured by make()
 
     @classmethod
     def make(cls, scenario: str | Path, overrides: dict | None = None, stop_s: float | None = None,
@@ -214,8 +241,13 @@ class Evaluation:
         for k, _ in ov:
             if "." not in k:
                 raise ValueError(f"override '{k}': expected 'component.param'")
-        return cls(str(Path(scenario).resolve()), ov, None if stop_s is None else float(stop_s),
-                   tuple(final_signals))
+        path = Path(scenario).resolve()
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            from ..core.errors import ScenarioError
+            raise ScenarioError(f"{scenario}: scenario file not readable: {exc}") from exc
+        return cls(str(path), ov, None if stop_s is None else float(stop_s), tuple(final_signals), text)
 
     def overrides_dict(self) -> dict:
         return {k: _thaw(v) for k, v in self.overrides}
@@ -230,7 +262,7 @@ class Evaluation:
 
     def key(self) -> str:
         payload = {"inputs": {**self.inputs(), "scenario": Path(self.scenario).name},
-                   "scenario_sha256": scenario_fingerprint(self.scenario),
+                   "scenario_sha256": scenario_fingerprint(self.scenario, self.text or None),
                    "shevsim_version": shevsim_version(), "code_sha256": code_version()}
         return hashlib.sha256(_canonical(payload).encode()).hexdigest()
 
@@ -239,7 +271,7 @@ class Evaluation:
         from ..core.scenario import load_scenario
         from ..run import compute_run_metrics, simulate
         try:
-            sc = load_scenario(self.scenario, self.sets())
+            sc = load_scenario(self.scenario, self.sets(), text=self.text or None)
             if self.stop_s is not None:
                 sc.stop_s = self.stop_s
             res = simulate(sc, progress=False)
