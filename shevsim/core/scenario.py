@@ -21,6 +21,7 @@ Example::
     type = "fmu"
     fmu = "fmus/battery.fmu"
     map = { "power" = "power_w" }                # FMU variable -> port name
+    replaces = "battery"                         # check ports/units against the native TYPE
 
     [connections]                                # input = output
     "driver.speed_ref_mps" = "cycle.speed_ref_mps"
@@ -53,7 +54,7 @@ PROJECT_ROOT = Path(__file__).resolve().parents[2]
 
 _TOP = {"scenario", "components", "connections", "faults", "record", "metrics"}
 _SCEN = {"name", "description", "step_s", "stop_s", "t0_s", "method", "seed", "order"}
-_COMP = {"type", "params", "set", "start", "step_multiple", "fmu", "map"}
+_COMP = {"type", "params", "set", "start", "step_multiple", "fmu", "map", "replaces"}
 _FAULT = {"at_s", "port", "value"}
 _RECORD = {"signals"}
 
@@ -104,6 +105,7 @@ class ComponentSpec:
     step_multiple: int = 1
     fmu: Path | None = None
     mapping: dict[str, str] = field(default_factory=dict)
+    replaces: str | None = None
 
 
 @dataclass
@@ -196,8 +198,11 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
         for tbl in ("set", "start", "map"):
             if tbl in cd and not isinstance(cd[tbl], dict):
                 raise ScenarioError(f"{w}: field '{tbl}' must be a table")
+        rep = cd.get("replaces")
+        if rep is not None and (cd["type"] != "fmu" or not isinstance(rep, str)):
+            raise ScenarioError(f"{w}: field 'replaces' (a native component TYPE) is only for type = \"fmu\"")
         specs.append(ComponentSpec(cname, cd["type"], pf, dict(cd.get("set", {})), dict(cd.get("start", {})),
-                                   k, fmu, dict(cd.get("map", {}))))
+                                   k, fmu, dict(cd.get("map", {})), rep))
     names = {s.name for s in specs}
     for s in sets:
         if "=" not in s or "." not in s.split("=", 1)[0]:
@@ -269,9 +274,22 @@ def instantiate(spec: ComponentSpec, scenario: Scenario):
     """Create one component from its spec."""
     where = f"{scenario.path or '<scenario>'}: [components.{spec.name}]"
     if spec.type == "fmu":
-        from ..fmu.adapter import FMUComponent
+        from ..fmu.adapter import FMUComponent, load_model_description
+        if not spec.fmu.is_file():
+            raise ScenarioError(f"{where}: field 'fmu': file '{spec.fmu}' not found (an exported native component "
+                                f"is built with: shevsim fmu export TYPE --params FILE -o {spec.fmu})")
+        expected = None
+        if spec.replaces is not None:
+            from ..components import get_component_class
+            expected = get_component_class(spec.replaces, where)
+        params = dict(spec.overrides)
         try:
-            comp = FMUComponent(spec.name, spec.fmu, mapping=spec.mapping, parameters=spec.overrides)
+            md = load_model_description(spec.fmu)
+            names = {v.name for v in md.modelVariables if v.causality == "parameter"}
+            if "seed" in names and "seed" not in params:   # same noise seed as the native component
+                params["seed"] = component_seed(scenario.seed, spec.name)
+            comp = FMUComponent(spec.name, spec.fmu, mapping=spec.mapping, parameters=params,
+                                expected_units=expected)
         except ShevsimError as exc:
             raise ScenarioError(f"{where}: {exc}") from exc
     else:
