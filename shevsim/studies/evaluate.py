@@ -288,12 +288,16 @@ class Evaluation:
             return {"error": f"{type(exc).__name__}: {exc}"}
 
 
-def run_item(item) -> tuple[dict, float]:
-    """Worker entry point: run one evaluation item, return (outputs, wall time in s)."""
+def run_item(item) -> tuple[dict, float, str]:
+    """Worker entry point: run one evaluation item; return (outputs, wall time in s, worker code version).
+
+    The code version lets the client refuse to cache a result computed by a worker whose shevsim
+    sources differ from the ones the key was made with (e.g. files edited while a study runs).
+    """
     limit_threads()
     t0 = time.perf_counter()
     out = item.run()
-    return out, time.perf_counter() - t0
+    return out, time.perf_counter() - t0, code_version()
 
 
 def failure_reason(outputs: dict, *keys: str) -> str:

@@ -17,7 +17,9 @@ total, elapsed and the ETA. Results are returned in input order, so a run on any
 returns exactly what the serial run returns (each evaluation is a deterministic function of its
 inputs). ``max_new_evaluations`` stops a study cleanly after that many new evaluations
 (:class:`StudyInterrupted`); a Ctrl-C does the same - finished rows stay committed and a rerun
-resumes from them.
+resumes from them. Each worker reports the hash of the shevsim sources it runs; a result from a
+worker whose sources differ from the client's (files edited while the study runs) is used but not
+cached, with a warning, so the cache never holds a result under a key it does not match.
 """
 from __future__ import annotations
 
@@ -26,7 +28,7 @@ import time
 from dataclasses import dataclass
 
 from ..core.errors import ShevsimError
-from .evaluate import THREAD_ENV, limit_threads, run_item
+from .evaluate import THREAD_ENV, code_version, limit_threads, run_item
 
 log = logging.getLogger(__name__)
 
@@ -46,6 +48,7 @@ class RunnerStats:
     wall_s: float = 0.0       # wall time spent running new evaluations
     busy_s: float = 0.0       # sum of the new evaluations' own wall times (in their workers)
     slots: int = 1            # parallel slots (workers x threads), 1 when serial
+    not_cached: int = 0       # results not cached: the worker's code version differed from the key's
 
     @property
     def evals_per_s(self) -> float:
@@ -59,7 +62,8 @@ class RunnerStats:
     def as_dict(self) -> dict:
         return {"requested": self.requested, "unique": self.unique, "cached": self.cached, "new": self.new,
                 "wall_s": self.wall_s, "busy_s": self.busy_s, "slots": self.slots,
-                "evals_per_s": self.evals_per_s, "parallel_efficiency": self.efficiency}
+                "evals_per_s": self.evals_per_s, "parallel_efficiency": self.efficiency,
+                "not_cached_code_mismatch": self.not_cached}
 
 
 class StudyRunner:
@@ -163,9 +167,14 @@ class StudyRunner:
     def _budget_left(self) -> int | None:
         return None if self.max_new is None else self.max_new - self.stats.new
 
-    def _finish(self, key, item, out, wall, results, bar) -> None:
+    def _finish(self, key, item, out, wall, results, bar, worker_code=None) -> None:
         results[key] = out
-        if self.cache is not None:
+        if worker_code is not None and worker_code != code_version():
+            self.stats.not_cached += 1
+            if self.stats.not_cached == 1:
+                log.warning("a worker runs different shevsim sources than this process (edited during the study?): "
+                            "its results are used but not cached; restart the study for consistent results")
+        elif self.cache is not None:
             self.cache.put(key, item.inputs(), out, wall)
         self.stats.new += 1
         self.stats.busy_s += wall
@@ -190,7 +199,7 @@ class StudyRunner:
                 for k, it in pending:
                     if budget is not None and self.stats.new >= self.max_new:
                         break
-                    out, wall = run_item(it)
+                    out, wall, _ = run_item(it)
                     self._finish(k, it, out, wall, results, bar)
                     if bar is not None:
                         bar.set_postfix_str(f"{len(pending) - bar.n} left, {n_cached} cached", refresh=False)
@@ -216,8 +225,8 @@ class StudyRunner:
         try:
             for fut in as_completed(list(futures)):
                 k, it = futures[fut]
-                out, wall = fut.result()
-                self._finish(k, it, out, wall, results, bar)
+                out, wall, wcode = fut.result()
+                self._finish(k, it, out, wall, results, bar, wcode)
                 if bar is not None:
                     bar.set_postfix_str(f"{len(pending) - bar.n} left, {n_cached} cached", refresh=False)
                 if self.max_new is not None and self.stats.new >= self.max_new:
