@@ -155,7 +155,7 @@ class MPCSupervisor(Component):
     Params = MPCSupervisorParams
     VARIABLES = _INPUTS + (
         out("power_cmd_w", "W", 0.0, "engine-generator electrical power command, + to the bus", _IN),
-        out("power_rate_max_wps", "W/s", 30e3, "power-rate map at the present engine power", ("gen_power_w",)),
+        out("power_rate_max_wps", "W/s", 30e3, "power-rate map at the previous command (the ramp's start)"),
         out("battery_power_plan_w", "W", 0.0, "demand - command (battery share), + discharge", _IN),
         out("fallback_count", "1", 0.0, "cumulative supervisor calls without a QP solution", _IN),
         out("solve_time_us", "us", 0.0, "wall time of the last call (not deterministic)", _IN),
@@ -188,14 +188,17 @@ class MPCSupervisor(Component):
         self.mpc.reset()
         self.mpc.fallback_count = 0
         self.fallback_count = 0
-        self._write(self.u["gen_power_w"], 0.0)
+        g = self.u["gen_power_w"]
+        self.prev_cmd = float(g) if math.isfinite(g) else 0.0
+        self._write(self.prev_cmd, 0.0)
 
     def _write(self, cmd: float, dt_us: float) -> None:
         y, u, last = self.y, self.u, self.mpc.last
         cmd = float(cmd)
         y["power_cmd_w"] = cmd
-        g = u["gen_power_w"]
-        y["power_rate_max_wps"] = self.mpc.rate_map(g) if math.isfinite(g) else self.mpc.rate_map.rates_wps[0]
+        # the engine-generator ramps from the previous command to this one: the map is evaluated
+        # where the ramp starts, as in the MPC's constraint dP <= dP_max(P(k-1)) dt
+        y["power_rate_max_wps"] = self.mpc.rate_map(self.prev_cmd)
         y["battery_power_plan_w"] = float(u["demand_power_w"]) - cmd
         y["fallback_count"] = float(self.fallback_count)
         y["solve_time_us"] = dt_us
@@ -206,12 +209,15 @@ class MPCSupervisor(Component):
         _check_h(self.name, h, self.params.sample_time_s, t)
         u = self.u
         t0 = time.perf_counter()
-        cmd = self.mpc.step(u["soc_pct"], u["demand_power_w"], u["gen_power_w"], u["power_max_w"],
+        # the previous point of the linearisation and of the rate constraint is the previous
+        # command u(k-1) (seed 5.5-5.8), not the measured output, which lags it by the turbo lag
+        cmd = self.mpc.step(u["soc_pct"], u["demand_power_w"], self.prev_cmd, u["power_max_w"],
                             u["power_min_w"], u["ocv_v"], u["rs_ohm"])
         dt_us = (time.perf_counter() - t0) * 1e6
         self.fallback_count = self.mpc.fallback_count
         self.plan = None if self.mpc._plan_kw is None else self.mpc._plan_kw.copy()
         self._write(cmd, dt_us)
+        self.prev_cmd = float(cmd)
 
     def get_state(self):
         st = super().get_state()
@@ -273,7 +279,7 @@ class RuleSupervisor(Component):
     Params = RuleSupervisorParams
     VARIABLES = _INPUTS + (
         out("power_cmd_w", "W", 0.0, "engine-generator electrical power command, + to the bus", _IN[:5]),
-        out("power_rate_max_wps", "W/s", 30e3, "power-rate map at the present engine power", ("gen_power_w",)),
+        out("power_rate_max_wps", "W/s", 30e3, "power-rate map at the previous command (the ramp's start)"),
         out("battery_power_plan_w", "W", 0.0, "demand - command (battery share), + discharge", _IN[:5]),
         out("engine_on_1", "1", 0.0, "thermostat state (1 = engine on)", _IN[:5]),
     )
@@ -292,13 +298,15 @@ class RuleSupervisor(Component):
 
     def initialize(self, t0: float) -> None:
         self.rule.engine_on = self.engine_on = False
-        self._write(self.u["gen_power_w"])
+        g = self.u["gen_power_w"]
+        self.prev_cmd = float(g) if math.isfinite(g) else 0.0
+        self._write(self.prev_cmd)
 
     def _write(self, cmd: float) -> None:
         y, u = self.y, self.u
         cmd = float(cmd)
         y["power_cmd_w"] = cmd
-        y["power_rate_max_wps"] = self.rule.rate_map(u["gen_power_w"])
+        y["power_rate_max_wps"] = self.rule.rate_map(self.prev_cmd)   # map at the ramp's start
         y["battery_power_plan_w"] = u["demand_power_w"] - cmd
         y["engine_on_1"] = 1.0 if self.engine_on else 0.0
 
@@ -309,7 +317,8 @@ class RuleSupervisor(Component):
         if bad:
             raise SimulationError(f"{self.name}: non-finite input {bad[0]}={u[bad[0]]} at t={t:g} s")
         self.rule.engine_on = self.engine_on
-        cmd = self.rule.step(u["soc_pct"], u["demand_power_w"], u["gen_power_w"], u["power_max_w"],
+        cmd = self.rule.step(u["soc_pct"], u["demand_power_w"], self.prev_cmd, u["power_max_w"],
                              u["power_min_w"])
         self.engine_on = self.rule.engine_on
         self._write(cmd)
+        self.prev_cmd = float(cmd)

@@ -308,9 +308,9 @@ def test_component_defaults_step_state_and_errors():
     assert p.fuel_curve_file.endswith("fuel_vs_power.csv")
     c = Comp("mpc", p)
     Comp("x")                               # defaults work
-    c.initialize(0.0)
     c.u.update(demand_power_w=80e3, soc_pct=48.0, gen_power_w=40e3, power_max_w=150e3, power_min_w=-120e3,
                ocv_v=V_OC, rs_ohm=R_S)
+    c.initialize(0.0)      # the previous command starts at the engine's present output
     c.do_step(0.0, 0.2)
     assert all(type(v) is float for v in c.y.values())
     assert 40e3 < c.y["power_cmd_w"] <= 40e3 + 30e3 * 0.2 + 1e-6
@@ -320,6 +320,8 @@ def test_component_defaults_step_state_and_errors():
     c.do_step(0.2, 0.2)
     y1 = dict(c.y)
     c.set_state(st)
+    assert c.u["demand_power_w"] == 80e3     # inputs are part of the saved state
+    c.u["demand_power_w"] = 120e3
     c.do_step(0.2, 0.2)
     assert c.y["power_cmd_w"] == pytest.approx(y1["power_cmd_w"], abs=1e-6)
     with pytest.raises(SimulationError, match="step multiple"):
