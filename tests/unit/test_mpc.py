@@ -339,8 +339,8 @@ def test_component_defaults_step_state_and_errors():
         Comp("bad", MPCSupervisorParams(fuel_curve_file="/nonexistent/fuel.csv"))
     # the fallback='rule' path: an infeasible problem gets the rule-based split, counted
     c2 = Comp("r", MPCSupervisorParams(fallback="rule", battery_limits_soft=False))
-    c2.initialize(0.0)
     c2.u.update(demand_power_w=30e3, soc_pct=50.0, gen_power_w=260e3, power_max_w=150e3, power_min_w=-120e3,
                 ocv_v=V_OC, rs_ohm=R_S)
+    c2.initialize(0.0)
     c2.do_step(0.0, 0.2)
     assert c2.y["fallback_count"] == 1.0 and c2.y["power_cmd_w"] == pytest.approx(260e3 - 60e3 * 0.2)

@@ -112,8 +112,8 @@ def test_component():
     p = load_params(RuleSupervisorParams, "components/supervisor/rule_default.toml")
     c = RuleSupervisor("r", p)
     RuleSupervisor("x")
-    c.initialize(0.0)
     c.u.update(demand_power_w=80e3, soc_pct=50.0, gen_power_w=40e3, power_max_w=150e3, power_min_w=-120e3)
+    c.initialize(0.0)      # the previous command starts at the engine's present output
     c.do_step(0.0, 0.2)
     assert c.y["engine_on_1"] == 1.0
     assert c.y["power_cmd_w"] == pytest.approx(40e3 + 30e3 * 0.2)      # following 80 kW at 30 kW/s
