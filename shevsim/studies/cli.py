@@ -149,7 +149,8 @@ def cmd_thermal(argv) -> int:
 
 
 def cmd_bms(argv) -> int:
-    raise ShevsimError("study bms: not available yet (the BMS estimation studies register here when they land)")
+    from .bms_study import main as bms_main    # shevsim study bms OUT [--seed S] [--quick] [--only ...]
+    return bms_main(argv)
 
 
 #: study name -> (one-line help, handler(argv) -> exit code). Extend here.

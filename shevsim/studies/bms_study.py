@@ -1,0 +1,537 @@
+"""bms_study.py - ``shevsim study bms``: the BMS evidence of issue 3 (seed Ch. III-V).
+
+Three studies, each writing PNG figures and CSV/JSON tables atomically (temporary file +
+``os.replace``) into an output folder and returning a dict of headline numbers:
+
+:func:`dekf_study`
+    seed Fig. 5.11-5.12 analogue. The pack power of a run of ``scenarios/uac_proxy_mpc.toml``
+    (full SHEV, UAC proxy, MPC supervisor, BMS in the loop) is replayed open loop into the same
+    battery plant (OCV-R-RC-RC, two-state thermal, measurement noise; same parameter files and
+    seed as the scenario) feeding a BMS whose initial SOC estimate is 10 % below the plant's.
+    The replay gives every plant truth the estimates are compared with: SOC, the polarisation
+    voltage ``V_1 + V_2`` (the 1-RC estimate's counterpart), the series resistance ``R_s`` the plant
+    used over each step (discharge or charge table at the plant's SOC and mean temperature) and the
+    plant's step-averaged heat generation. The replayed plant SOC is checked against the
+    closed-loop run's (``replay_soc_max_diff_pct``).
+:func:`thermal_table`
+    seed Table 3.3 analogue: :func:`shevsim.bms.thermal_estimators.table_3_3` (KF, DKF, JEKF on a
+    30-node plant, stages I-III).
+:func:`power_capability_study`
+    seed Fig. 5.15 analogue: ``scenarios/uac_proxy_mpc_cooling_fault.toml`` (h 20 -> 3 W/m2K at
+    300 s) with the BMS power limits enforced (motors derated through ``bus.motor_power_max_w`` /
+    ``min_w`` and the MPC's constraints) and the counterfactual ``bus.enforce_battery_limits =
+    false``, same seed.
+
+Command line::
+
+    shevsim study bms OUT [--seed S] [--quick] [--only dekf,thermal,power]
+
+``--quick`` shortens every study (DEKF run 900 s, cooling fault 1300 s, Table 3.3 stages 1200 s).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import ShevsimError
+from ..core.results import write_json_atomic
+from ..core.scenario import PROJECT_ROOT, build_master, load_scenario
+
+BASE_SCENARIO = PROJECT_ROOT / "scenarios" / "uac_proxy_mpc.toml"
+FAULT_SCENARIO = PROJECT_ROOT / "scenarios" / "uac_proxy_mpc_cooling_fault.toml"
+_MEAS = ("cell_current_meas_a", "cell_voltage_meas_v", "t_surface_meas_c", "t_ambient_meas_c")
+
+QUICK = {"dekf_stop_s": 900.0, "power_stop_s": 1300.0, "thermal_duration_s": 1200.0}
+
+
+# -- atomic writers ------------------------------------------------------------------------------
+def _atomic(path: Path, write) -> Path:
+    """Call ``write(tmp_path)`` then move the temporary file onto ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix + ".tmp")
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def _write_text(path: Path, text: str) -> Path:
+    def w(tmp):
+        with open(tmp, "w") as f:
+            f.write(text)
+    return _atomic(path, w)
+
+
+def _write_csv(path: Path, df, header: str = "") -> Path:
+    body = df.to_csv(index=False, float_format="%.6g")
+    return _write_text(path, (f"# {header}\n" if header else "") + body)
+
+
+def _save_fig(fig, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+    try:
+        return _atomic(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    finally:
+        plt.close(fig)
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _scenario(path, seed: int | None, stop_s: float | None, sets=()):
+    sc = load_scenario(path, list(sets))
+    if seed is not None:
+        sc.seed = int(seed)
+    if stop_s is not None:
+        sc.stop_s = float(stop_s)
+    return sc
+
+
+def _finite(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+# -- 1. DEKF --------------------------------------------------------------------------------------
+def dekf_replay(scenario_path=BASE_SCENARIO, seed: int = 1, stop_s: float | None = None,
+                soc_offset_pct: float = -10.0, bms_sets=()) -> dict:
+    """Run the scenario, then replay its pack power into its battery plant + a BMS started off in SOC.
+
+    Parameters
+    ----------
+    scenario_path : path
+        SHEV scenario with components ``battery``, ``bms`` and ``bus``.
+    seed : int
+        Scenario seed (noise of the plant's measurements, per component).
+    stop_s : float, optional
+        Shorter run (default: the scenario's length).
+    soc_offset_pct : float
+        Initial BMS SOC estimate minus the plant's initial SOC [%].
+    bms_sets : sequence of str
+        Extra ``bms.param=value`` overrides for the replayed BMS (e.g. ``bms.q_soc=6e-3``).
+
+    Returns
+    -------
+    dict of 1-D arrays
+        ``t_s``; plant truths ``soc_pct``, ``v_pol_v`` (cell V1 + V2), ``rs_ohm`` (cell, used over
+        the step), ``heat_w`` (per cell, step average), ``t_core_c``, ``current_a`` (cell),
+        ``pol_heat_w`` / ``v_pol_sq_v2`` (oracle inputs: V1^2/R1 + V2^2/R2 and (V1+V2)^2);
+        estimates ``soc_est_pct``, ``v1_est_v``, ``rs_est_ohm``, ``heat_est_w``, ``t_core_est_c``;
+        ``run_soc_pct`` (the closed-loop run's plant SOC) and the scalar ``meta``.
+    """
+    from ..components.bms import BMS
+    from ..run import simulate
+
+    sc = _scenario(scenario_path, seed, stop_s)
+    res = simulate(sc)
+    if res.termination != "completed":
+        raise ShevsimError(f"dekf study: run of {scenario_path} ended with '{res.termination}'")
+    m = build_master(_scenario(scenario_path, seed, stop_s, list(bms_sets)))
+    try:
+        bat = m.components["battery"]
+        bms0 = m.components["bms"]
+    except KeyError as exc:
+        raise ShevsimError(f"dekf study: {scenario_path} has no component {exc}") from None
+    soc0 = bat.params.soc_init_pct + soc_offset_pct
+    if not 0.0 <= soc0 <= 100.0:
+        raise ShevsimError(f"dekf study: initial BMS SOC {soc0} % outside [0, 100] (soc_offset_pct={soc_offset_pct})")
+    bms = BMS("bms", dataclasses.replace(bms0.params, soc0_pct=soc0))
+    m.terminate()
+    bat.initialize(0.0)
+    t_all = res.time_s
+    p_pack = res["bus.battery_power_w"]
+    dt = float(sc.settings.step_s)
+    n = len(t_all) - 1
+    faults = [f for f in sc.faults if f.component == "battery"]
+    npack = bat.params.n_series * bat.params.n_parallel
+    ns = bat.params.n_series
+    tab = bat.tables
+    temp_dep = bat.params.temperature_dependent
+    cols = {k: np.empty(n + 1) for k in ("soc_pct", "v_pol_v", "rs_ohm", "heat_w", "t_core_c", "current_a",
+                                         "pol_heat_w", "v_pol_sq_v2", "soc_est_pct", "v1_est_v", "rs_est_ohm",
+                                         "heat_est_w", "t_core_est_c")}
+
+    def record(k, rs_true, pol_heat):
+        y, z = bat.y, bms.y
+        cols["soc_pct"][k] = y["soc_pct"]
+        cols["v_pol_v"][k] = bat.v1 + bat.v2
+        cols["rs_ohm"][k] = rs_true
+        cols["heat_w"][k] = y["heat_w"]
+        cols["t_core_c"][k] = y["t_core_c"]
+        cols["current_a"][k] = y["current_a"] / bat.params.n_parallel
+        cols["pol_heat_w"][k] = pol_heat
+        cols["v_pol_sq_v2"][k] = (bat.v1 + bat.v2) ** 2
+        cols["soc_est_pct"][k] = z["soc_pct"]
+        cols["v1_est_v"][k] = z["v1_v"] / ns
+        cols["rs_est_ohm"][k] = z["cell_rs_ohm"]
+        cols["heat_est_w"][k] = z["heat_w"]
+        cols["t_core_est_c"][k] = z["t_core_c"]
+
+    rs0 = tab.params(bat.soc, bat.y["t_mean_c"] if temp_dep else 25.0, 1.0)[0]
+    record(0, rs0, 0.0)
+    for k in range(n):
+        t = float(t_all[k])
+        for f in faults:
+            if t >= f.at_s - 1e-9:
+                bat.u[f.port] = f.value
+        p = float(p_pack[k + 1])           # the bus output the battery used over [t_k, t_k+1]
+        bat.u["power_w"] = p
+        t_look = bat.y["t_mean_c"] if temp_dep else 25.0
+        rs_true, r1, _, r2, _ = tab.params(bat.soc, t_look, p / npack)
+        bat.do_step(t, dt)
+        for port in _MEAS:
+            bms.u[port] = bat.y[port]
+        bms.do_step(t, dt)
+        record(k + 1, rs_true, bat.v1 ** 2 / r1 + bat.v2 ** 2 / r2)
+    cols["t_s"] = np.asarray(t_all, dtype=float)
+    cols["run_soc_pct"] = np.asarray(res["battery.soc_pct"], dtype=float)
+    cols["meta"] = {"scenario": str(scenario_path), "seed": seed, "step_s": dt, "stop_s": float(t_all[-1]),
+                    "plant_soc0_pct": bat.params.soc_init_pct, "bms_soc0_pct": soc0,
+                    "bms_params": dataclasses.asdict(bms.params)}
+    return cols
+
+
+def dekf_metrics(d: dict, settle_s: float = 600.0, soc_tol_pct: float = 2.0) -> dict:
+    """Headline numbers of a :func:`dekf_replay` (estimates after ``settle_s`` unless stated)."""
+    t = d["t_s"]
+    err = d["soc_est_pct"] - d["soc_pct"]
+    bad = np.flatnonzero(np.abs(err) >= soc_tol_pct)
+    if bad.size == 0:
+        t_conv = 0.0
+    elif bad[-1] == len(t) - 1:
+        t_conv = math.nan                   # still outside the tolerance at the end
+    else:
+        t_conv = float(t[bad[-1] + 1])
+    w = t >= settle_s
+    if not w.any():
+        raise ShevsimError(f"dekf study: run ({t[-1]:g} s) shorter than the settling window {settle_s:g} s")
+    rs_rel = d["rs_est_ohm"][w] / d["rs_ohm"][w] - 1.0
+    q, qe = d["heat_w"][w], d["heat_est_w"][w]
+    q_mean = float(np.mean(q))
+    v2, pol = d["v_pol_sq_v2"][w], d["pol_heat_w"][w]
+    r_best = float(np.sum(v2 * v2) / np.sum(v2 * pol)) if np.sum(v2 * pol) > 0 else math.inf
+    floor = float(np.sqrt(np.mean((v2 / r_best - pol) ** 2)))
+    return {
+        "stop_s": float(t[-1]), "settle_s": settle_s,
+        "soc_err_initial_pct": float(err[0]),
+        "soc_time_below_2pct_s": _finite(t_conv),
+        "soc_err_max_after_settle_pct": float(np.max(np.abs(err[w]))),
+        "soc_err_rms_after_settle_pct": float(np.sqrt(np.mean(err[w] ** 2))),
+        "soc_err_final_pct": float(err[-1]),
+        "rs_rel_err_max_after_settle": float(np.max(np.abs(rs_rel))),
+        "rs_rel_err_rms_after_settle": float(np.sqrt(np.mean(rs_rel ** 2))),
+        "rs_rel_err_p95_after_settle": float(np.percentile(np.abs(rs_rel), 95)),
+        "v1_rmse_after_settle_mv": 1e3 * float(np.sqrt(np.mean((d["v1_est_v"][w] - d["v_pol_v"][w]) ** 2))),
+        "heat_mean_w": q_mean,
+        "heat_rmse_w": float(np.sqrt(np.mean((qe - q) ** 2))),
+        "heat_rmse_rel_mean": float(np.sqrt(np.mean((qe - q) ** 2)) / q_mean),
+        "heat_mean_rel_err": float(np.mean(qe) / q_mean - 1.0),
+        "heat_floor_rel_mean": floor / q_mean,
+        "t_core_rmse_after_settle_c": float(np.sqrt(np.mean((d["t_core_est_c"][w] - d["t_core_c"][w]) ** 2))),
+        "replay_soc_max_diff_pct": float(np.max(np.abs(d["soc_pct"] - d["run_soc_pct"]))),
+    }
+
+
+def dekf_study(out_dir, seed: int = 1, stop_s: float | None = None, settle_s: float = 600.0,
+               soc_offset_pct: float = -10.0, scenario=BASE_SCENARIO) -> dict:
+    """Seed Fig. 5.11-5.12 analogue: DEKF tracking of SOC, V1, R_s and heat on the UAC proxy.
+
+    Writes ``dekf_tracking.png``, ``dekf_timeseries.csv`` (1 s samples) and ``dekf_summary.json`` /
+    ``.csv`` into ``out_dir``; returns :func:`dekf_metrics` plus the file paths.
+    """
+    out = Path(out_dir)
+    d = dekf_replay(scenario, seed, stop_s, soc_offset_pct)
+    met = dekf_metrics(d, settle_s)
+    met.update({"scenario": Path(str(scenario)).name, "seed": seed, "bms_soc0_pct": d["meta"]["bms_soc0_pct"],
+                "plant_soc0_pct": d["meta"]["plant_soc0_pct"]})
+    import pandas as pd
+    t = d["t_s"]
+    every = max(1, int(round(1.0 / d["meta"]["step_s"])))
+    sel = slice(None, None, every)
+    df = pd.DataFrame({"time_s": t[sel], "soc_true_pct": d["soc_pct"][sel], "soc_est_pct": d["soc_est_pct"][sel],
+                       "v_pol_true_v": d["v_pol_v"][sel], "v1_est_v": d["v1_est_v"][sel],
+                       "rs_true_ohm": d["rs_ohm"][sel], "rs_est_ohm": d["rs_est_ohm"][sel],
+                       "heat_true_w": d["heat_w"][sel], "heat_est_w": d["heat_est_w"][sel],
+                       "t_core_true_c": d["t_core_c"][sel], "t_core_est_c": d["t_core_est_c"][sel],
+                       "current_cell_a": d["current_a"][sel]})
+    _write_csv(out / "dekf_timeseries.csv", df,
+               f"DEKF on the UAC proxy (replayed pack power of {met['scenario']}, seed {seed}); cell quantities; "
+               "v_pol_true = plant V1+V2; rs_true = plant R_s used over the step; 1 s samples of a 0.1 s run")
+    plt = _plt()
+    fig, ax = plt.subplots(5, 1, figsize=(10, 12), sharex=True)
+    ax[0].plot(t, d["soc_pct"], "k-", lw=1.2, label="plant")
+    ax[0].plot(t, d["soc_est_pct"], "C1-", lw=0.9, label="DEKF")
+    ax[0].set_ylabel("SOC [%]")
+    ax[1].plot(t, d["soc_est_pct"] - d["soc_pct"], "C1-", lw=0.8)
+    for s in (-2, 2):
+        ax[1].axhline(s, color="r", ls="--", lw=0.8)
+    ax[1].set_ylabel("SOC error [%]")
+    ax[1].set_ylim(max(-12, ax[1].get_ylim()[0]), min(12, ax[1].get_ylim()[1]))
+    ax[2].plot(t, 1e3 * d["v_pol_v"], "k-", lw=0.8, label="plant V1+V2")
+    ax[2].plot(t, 1e3 * d["v1_est_v"], "C1-", lw=0.7, label="DEKF V1")
+    ax[2].set_ylabel("polarisation [mV]")
+    ax[3].plot(t, 1e3 * d["rs_ohm"], "k-", lw=0.8, label="plant R_s")
+    ax[3].plot(t, 1e3 * d["rs_est_ohm"], "C1-", lw=1.0, label="DEKF R_s")
+    ax[3].set_ylabel("R_s [mOhm]")
+    ax[4].plot(t, d["heat_w"], "k-", lw=0.6, label="plant heat")
+    ax[4].plot(t, d["heat_est_w"], "C1-", lw=0.5, label="estimate (5.16)")
+    ax[4].set_ylabel("heat per cell [W]")
+    ax[4].set_xlabel("time [s]")
+    for a in ax:
+        a.grid(alpha=0.3)
+        if a.get_legend_handles_labels()[0]:
+            a.legend(fontsize=7, loc="upper right")
+    ax[0].set_title(f"DEKF on the UAC proxy, BMS started {met['bms_soc0_pct'] - met['plant_soc0_pct']:+.0f} % "
+                    f"off in SOC: after {settle_s:.0f} s max |SOC err| {met['soc_err_max_after_settle_pct']:.2f} %, "
+                    f"max |R_s err| {100 * met['rs_rel_err_max_after_settle']:.1f} %, "
+                    f"heat RMSE {100 * met['heat_rmse_rel_mean']:.1f} % of mean", fontsize=9)
+    fig.tight_layout()
+    met["figure"] = str(_save_fig(fig, out / "dekf_tracking.png"))
+    met["timeseries_csv"] = str(out / "dekf_timeseries.csv")
+    _write_csv(out / "dekf_summary.csv", pd.DataFrame([{k: v for k, v in met.items() if not isinstance(v, str)}]))
+    write_json_atomic(out / "dekf_summary.json", met)
+    return met
+
+
+# -- 2. Table 3.3 --------------------------------------------------------------------------------
+def thermal_table(out_dir, seed: int = 0, duration_s: float = 3600.0) -> dict:
+    """Seed Table 3.3 analogue via :func:`shevsim.bms.thermal_estimators.table_3_3`.
+
+    Writes ``table_3_3.csv``, ``table_3_3.json``, ``table_3_3.png`` into ``out_dir`` (generated in a
+    temporary folder, then each moved into place). Returns per stage and filter the core RMSE,
+    final h and its settling, plus the ratios the issue asks about.
+    """
+    from ..bms.thermal_estimators import H_STAR_W_M2K, table_3_3
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out, prefix=".table_3_3.tmp-"))
+    try:
+        res = table_3_3(tmp, seed=seed, duration_s=duration_s)
+        for name in ("table_3_3.csv", "table_3_3.json", "table_3_3.png"):
+            os.replace(tmp / name, out / name)
+    finally:
+        import shutil
+        shutil.rmtree(tmp, ignore_errors=True)
+    f = {s: r["filters"] for s, r in res.items()}
+    rm = {s: {k: v["rmse_core_c"] for k, v in fs.items()} for s, fs in f.items()}
+    h_true_final = {"I": H_STAR_W_M2K, "II": 90.0, "III": H_STAR_W_M2K}
+    met = {"seed": seed, "duration_s": duration_s, "rmse_core_c": rm,
+           "h_final_w_m2k": {s: {k: v["h_final_w_m2k"] for k, v in fs.items() if k != "KF"} for s, fs in f.items()},
+           "h_final_rel_err": {s: {k: abs(v["h_final_w_m2k"] / h_true_final[s] - 1.0) for k, v in fs.items() if k != "KF"}
+                               for s, fs in f.items()},
+           "h_settle_10pct_s": {s: {k: v["h_settle_10pct_s"] for k, v in fs.items() if k != "KF"} for s, fs in f.items()},
+           "stage_I_dkf_over_kf": rm["I"]["DKF"] / rm["I"]["KF"], "stage_I_jekf_over_kf": rm["I"]["JEKF"] / rm["I"]["KF"],
+           "stage_III_kf_over_dkf": rm["III"]["KF"] / rm["III"]["DKF"],
+           "stage_III_kf_over_jekf": rm["III"]["KF"] / rm["III"]["JEKF"],
+           "figure": str(out / "table_3_3.png"), "table_csv": str(out / "table_3_3.csv")}
+    write_json_atomic(out / "table_3_3_summary.json", met)
+    return met
+
+
+# -- 3. power capability under the cooling fault ---------------------------------------------------
+def _run_metrics(res, ref_dist_m: float) -> dict:
+    bms_p = res.parameters.get("bms", {})
+    bat_p = res.parameters.get("battery", {})
+    ns = float(bat_p.get("n_series", 130))
+    v_lo, v_hi = float(bms_p.get("v_min_v", 2.0)), float(bms_p.get("v_max_v", 3.6))
+    s_lo, s_hi = float(bms_p.get("soc_min_pct", 30.0)), float(bms_p.get("soc_max_pct", 70.0))
+    t_max = float(bms_p.get("t_core_max_c", 45.0))
+    t = res.time_s
+    dt = float(np.median(np.diff(t)))
+    tc = res["battery.t_core_c"]
+    cv = res["battery.voltage_v"] / ns
+    soc = res["battery.soc_pct"]
+    pb = res["bus.battery_power_w"]
+    pmax, pmin = res["bms.power_max_w"], res["bms.power_min_w"]
+    spd, ref = res["vehicle.speed_mps"], res["cycle.speed_ref_mps"]
+    # the battery power of step k is judged against the limits published before it (one-step delay)
+    over = (pb[1:] > pmax[:-1] + 1e3) | (pb[1:] < pmin[:-1] - 1e3)
+    m = {"t_core_max_c": float(tc.max()), "t_core_max_time_s": float(t[int(np.argmax(tc))]),
+         "time_above_t_max_s": float(dt * np.count_nonzero(tc > t_max)),
+         "time_above_t_max_plus_0p5_s": float(dt * np.count_nonzero(tc > t_max + 0.5)),
+         "bms_t_core_max_c": float(res["bms.t_core_c"].max()),
+         "bms_t_core_rmse_c": float(np.sqrt(np.mean((res["bms.t_core_c"] - tc) ** 2))),
+         "cell_voltage_min_v": float(cv.min()), "cell_voltage_max_v": float(cv.max()),
+         "time_voltage_out_of_bounds_s": float(dt * np.count_nonzero((cv < v_lo) | (cv > v_hi))),
+         "voltage_in_bounds": bool(cv.min() >= v_lo and cv.max() <= v_hi),
+         "soc_min_pct": float(soc.min()), "soc_max_pct": float(soc.max()),
+         "soc_in_bounds": bool(soc.min() >= s_lo and soc.max() <= s_hi),
+         "bms_soc_err_max_pct": float(np.max(np.abs(res["bms.soc_pct"] - soc))),
+         "time_battery_power_beyond_limits_s": float(dt * np.count_nonzero(over)),
+         "speed_rmse_mps": float(np.sqrt(np.mean((spd - ref) ** 2))),
+         "speed_shortfall_max_mps": float(np.max(ref - spd)),
+         "time_speed_err_gt_1mps_s": float(dt * np.count_nonzero(np.abs(spd - ref) > 1.0)),
+         "distance_m": float(res["vehicle.distance_m"][-1]),
+         "distance_shortfall_pct": float(100.0 * (1.0 - res["vehicle.distance_m"][-1] / ref_dist_m)),
+         "bounds": {"v_min_v": v_lo, "v_max_v": v_hi, "soc_min_pct": s_lo, "soc_max_pct": s_hi, "t_core_max_c": t_max}}
+    if "engine_generator.fuel_mass_g" in res:
+        m["fuel_mass_g"] = float(res["engine_generator.fuel_mass_g"][-1])
+    return m
+
+
+def power_capability_study(out_dir, seed: int = 1, stop_s: float | None = None, scenario=FAULT_SCENARIO) -> dict:
+    """Seed Fig. 5.15 analogue: cooling fault with and without the BMS power limits (same seed).
+
+    Writes ``power_capability.png``, ``power_capability.csv`` (one row per run),
+    ``power_capability_timeseries.csv`` (1 s samples) and ``power_capability.json``.
+    """
+    from ..run import simulate
+    out = Path(out_dir)
+    runs = {}
+    for label, enforce in (("limited", True), ("unlimited", False)):
+        sc = _scenario(scenario, seed, stop_s, [f"bus.enforce_battery_limits={'true' if enforce else 'false'}"])
+        res = simulate(sc)
+        if res.termination != "completed":
+            raise ShevsimError(f"power capability study: {label} run of {scenario} ended with '{res.termination}'")
+        runs[label] = res
+    a, b = runs["limited"], runs["unlimited"]
+    t = a.time_s
+    ref_dist = float(np.sum(0.5 * (a["cycle.speed_ref_mps"][1:] + a["cycle.speed_ref_mps"][:-1]) * np.diff(t)))
+    met = {"scenario": Path(str(scenario)).name, "seed": seed, "stop_s": float(t[-1]), "reference_distance_m": ref_dist,
+           "limited": _run_metrics(a, ref_dist), "unlimited": _run_metrics(b, ref_dist)}
+    la, un = met["limited"], met["unlimited"]
+    t_max = la["bounds"]["t_core_max_c"]
+    met["verdict"] = {"limited_core_le_t_max_plus_0p5": la["t_core_max_c"] <= t_max + 0.5,
+                      "unlimited_core_exceeds_t_max": un["t_core_max_c"] > t_max,
+                      "limited_voltage_in_bounds": la["voltage_in_bounds"], "limited_soc_in_bounds": la["soc_in_bounds"]}
+    met["speed_penalty"] = {"speed_rmse_mps": la["speed_rmse_mps"] - un["speed_rmse_mps"],
+                            "distance_lost_m": un["distance_m"] - la["distance_m"],
+                            "distance_lost_pct": 100.0 * (un["distance_m"] - la["distance_m"]) / un["distance_m"],
+                            "time_speed_err_gt_1mps_s": la["time_speed_err_gt_1mps_s"]}
+    import pandas as pd
+    rows = []
+    for lab in ("limited", "unlimited"):
+        r = {"run": lab, **{k: v for k, v in met[lab].items() if k != "bounds"}}
+        rows.append(r)
+    _write_csv(out / "power_capability.csv", pd.DataFrame(rows),
+               f"{met['scenario']} seed {seed}, {met['stop_s']:.0f} s; limited = BMS limits enforced, "
+               "unlimited = bus.enforce_battery_limits=false; bounds " + str(la["bounds"]))
+    ns = float(a.parameters.get("battery", {}).get("n_series", 130))
+    every = max(1, int(round(1.0 / float(np.median(np.diff(t))))))
+    sel = slice(None, None, every)
+    ts = pd.DataFrame({"time_s": t[sel], "speed_ref_mps": a["cycle.speed_ref_mps"][sel]})
+    for lab, r in runs.items():
+        for col, sig in (("t_core_c", "battery.t_core_c"), ("bms_t_core_c", "bms.t_core_c"),
+                         ("battery_power_w", "bus.battery_power_w"), ("power_max_w", "bms.power_max_w"),
+                         ("power_min_w", "bms.power_min_w"), ("soc_pct", "battery.soc_pct"),
+                         ("bms_soc_pct", "bms.soc_pct"), ("speed_mps", "vehicle.speed_mps")):
+            ts[f"{lab}_{col}"] = r[sig][sel]
+        ts[f"{lab}_cell_voltage_v"] = r["battery.voltage_v"][sel] / ns
+    _write_csv(out / "power_capability_timeseries.csv", ts, "1 s samples of the two runs (0.1 s step)")
+    plt = _plt()
+    fig, ax = plt.subplots(5, 1, figsize=(10, 13), sharex=True)
+    ax[0].plot(t, a["battery.t_core_c"], "C0-", label="core, limits enforced")
+    ax[0].plot(t, a["bms.t_core_c"], "C0:", lw=0.8, label="BMS estimate (enforced)")
+    ax[0].plot(t, b["battery.t_core_c"], "C3-", label="core, no limits")
+    ax[0].axhline(t_max, color="k", ls="--", lw=0.8, label=f"{t_max:g} degC")
+    ax[0].axvline(300.0, color="gray", ls=":", lw=0.8)
+    ax[0].set_ylabel("T_core [degC]")
+    ax[1].plot(t, 1e-3 * a["bus.battery_power_w"], "C0-", lw=0.5, label="P_b enforced")
+    ax[1].plot(t, 1e-3 * b["bus.battery_power_w"], "C3-", lw=0.4, alpha=0.5, label="P_b no limits")
+    ax[1].plot(t, 1e-3 * a["bms.power_max_w"], "k-", lw=0.9, label="P_b,max / P_b,min (enforced run)")
+    ax[1].plot(t, 1e-3 * a["bms.power_min_w"], "k-", lw=0.9)
+    ax[1].set_ylabel("battery power [kW]")
+    ax[2].plot(t, a["battery.voltage_v"] / ns, "C0-", lw=0.5, label="enforced")
+    ax[2].plot(t, b["battery.voltage_v"] / ns, "C3-", lw=0.4, alpha=0.6, label="no limits")
+    for v in (la["bounds"]["v_min_v"], la["bounds"]["v_max_v"]):
+        ax[2].axhline(v, color="k", ls="--", lw=0.8)
+    ax[2].set_ylabel("cell voltage [V]")
+    ax[3].plot(t, a["battery.soc_pct"], "C0-", label="enforced (plant)")
+    ax[3].plot(t, a["bms.soc_pct"], "C0:", lw=0.8, label="enforced (BMS)")
+    ax[3].plot(t, b["battery.soc_pct"], "C3-", label="no limits (plant)")
+    for s in (la["bounds"]["soc_min_pct"], la["bounds"]["soc_max_pct"]):
+        ax[3].axhline(s, color="k", ls="--", lw=0.8)
+    ax[3].set_ylabel("SOC [%]")
+    ax[4].plot(t, a["cycle.speed_ref_mps"], "k-", lw=1.2, label="reference")
+    ax[4].plot(t, a["vehicle.speed_mps"], "C0-", lw=0.8, label="enforced")
+    ax[4].plot(t, b["vehicle.speed_mps"], "C3--", lw=0.6, label="no limits")
+    ax[4].set_ylabel("speed [m/s]")
+    ax[4].set_xlabel("time [s]")
+    for x in ax:
+        x.grid(alpha=0.3)
+        x.legend(fontsize=7, loc="upper left")
+    ax[0].set_title(f"UAC proxy, cooling fault h 20 -> 3 W/m2K at 300 s (seed {seed}): max core "
+                    f"{la['t_core_max_c']:.2f} degC with limits, {un['t_core_max_c']:.2f} degC without", fontsize=9)
+    fig.tight_layout()
+    met["figure"] = str(_save_fig(fig, out / "power_capability.png"))
+    met["table_csv"] = str(out / "power_capability.csv")
+    write_json_atomic(out / "power_capability.json", met)
+    return met
+
+
+# -- command line -----------------------------------------------------------------------------------
+def run_all(out_dir, seed: int = 1, quick: bool = False, only=("dekf", "thermal", "power")) -> dict:
+    """Run the selected studies into ``out_dir`` and write ``summary.json``."""
+    out = Path(out_dir)
+    q = QUICK if quick else {}
+    summary = {"seed": seed, "quick": quick}
+    if "dekf" in only:
+        summary["dekf"] = dekf_study(out, seed=seed, stop_s=q.get("dekf_stop_s"),
+                                     settle_s=300.0 if quick else 600.0)
+    if "thermal" in only:
+        summary["thermal"] = thermal_table(out, seed=seed, duration_s=q.get("thermal_duration_s", 3600.0))
+    if "power" in only:
+        summary["power"] = power_capability_study(out, seed=seed, stop_s=q.get("power_stop_s"))
+    from ..core.results import git_commit
+    summary["git_commit"] = git_commit()
+    write_json_atomic(out / "summary.json", summary)
+    return summary
+
+
+def main(argv=None) -> int:
+    """``shevsim study bms OUT [--seed S] [--quick] [--only ...]``; returns the exit code."""
+    ap = argparse.ArgumentParser(prog="shevsim study bms",
+                                 description="BMS studies: DEKF tracking (Fig. 5.11-5.12), Table 3.3, "
+                                             "power capability under the cooling fault (Fig. 5.15)")
+    ap.add_argument("out", nargs="?", default="results/study_bms", help="output folder")
+    ap.add_argument("--out", dest="out_opt", help=argparse.SUPPRESS)
+    ap.add_argument("--seed", type=int, default=1, help="scenario / noise seed (default 1)")
+    ap.add_argument("--quick", action="store_true", help="shortened runs (900 s DEKF, 1300 s fault, 1200 s stages)")
+    ap.add_argument("--only", default="dekf,thermal,power", help="comma list of dekf,thermal,power")
+    a = ap.parse_args(argv)
+    only = tuple(s.strip() for s in a.only.split(",") if s.strip())
+    unknown = set(only) - {"dekf", "thermal", "power"}
+    if unknown:
+        raise ShevsimError(f"study bms: --only: unknown {sorted(unknown)} (known: dekf, thermal, power)")
+    out = a.out_opt or a.out
+    s = run_all(out, seed=a.seed, quick=a.quick, only=only)
+    if "dekf" in s:
+        d = s["dekf"]
+        print(f"DEKF: SOC |err| < 2 % from {d['soc_time_below_2pct_s']} s; after {d['settle_s']:.0f} s max |SOC err| "
+              f"{d['soc_err_max_after_settle_pct']:.2f} %, max |R_s err| {100 * d['rs_rel_err_max_after_settle']:.2f} %, "
+              f"heat RMSE {100 * d['heat_rmse_rel_mean']:.2f} % of mean (OCV-R-RC floor "
+              f"{100 * d['heat_floor_rel_mean']:.2f} %)")
+    if "thermal" in s:
+        r = s["thermal"]["rmse_core_c"]
+        for st in ("I", "II", "III"):
+            print(f"Table 3.3 stage {st}: core RMSE KF {r[st]['KF']:.3f}, DKF {r[st]['DKF']:.3f}, "
+                  f"JEKF {r[st]['JEKF']:.3f} degC")
+    if "power" in s:
+        p = s["power"]
+        print(f"cooling fault: max core {p['limited']['t_core_max_c']:.2f} degC with limits, "
+              f"{p['unlimited']['t_core_max_c']:.2f} degC without; voltage in bounds "
+              f"{p['limited']['voltage_in_bounds']}, SOC in bounds {p['limited']['soc_in_bounds']}; "
+              f"distance lost {p['speed_penalty']['distance_lost_pct']:.1f} %")
+    print(f"BMS studies written to {out}")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import sys
+    sys.exit(main())
