@@ -18,14 +18,15 @@ returns exactly what the serial run returns (each evaluation is a deterministic 
 inputs). ``max_new_evaluations`` stops a study cleanly after that many new evaluations
 (:class:`StudyInterrupted`); a Ctrl-C does the same - finished rows stay committed and a rerun
 resumes from them. Each worker reports the hash of the shevsim sources it runs; a result from a
-worker whose sources differ from the client's (files edited while the study runs) is used but not
-cached, with a warning, so the cache never holds a result under a key it does not match.
+worker whose sources differ from the key's (files edited while the study runs) is stored under the
+key recomputed with the current sources when they match the worker's, otherwise used but not
+cached - with a warning either way - so the cache never holds a result under a key it does not match.
 """
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ..core.errors import ShevsimError
 from .evaluate import THREAD_ENV, code_version, limit_threads, run_item
@@ -49,6 +50,7 @@ class RunnerStats:
     busy_s: float = 0.0       # sum of the new evaluations' own wall times (in their workers)
     slots: int = 1            # parallel slots (workers x threads), 1 when serial
     not_cached: int = 0       # results not cached: the worker's code version differed from the key's
+    code_versions: set = field(default_factory=set)   # code versions seen when the sources changed mid-study
 
     @property
     def evals_per_s(self) -> float:
@@ -63,7 +65,8 @@ class RunnerStats:
         return {"requested": self.requested, "unique": self.unique, "cached": self.cached, "new": self.new,
                 "wall_s": self.wall_s, "busy_s": self.busy_s, "slots": self.slots,
                 "evals_per_s": self.evals_per_s, "parallel_efficiency": self.efficiency,
-                "not_cached_code_mismatch": self.not_cached}
+                "not_cached_code_mismatch": self.not_cached,
+                "code_changed_mid_study": bool(self.code_versions)}
 
 
 class StudyRunner:
@@ -122,7 +125,7 @@ class StudyRunner:
             self._client.run(limit_threads)
         else:
             self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                         dashboard_address=None, env=dict(THREAD_ENV),
+                                         dashboard_address=":0", env=dict(THREAD_ENV),
                                          silence_logs=logging.WARNING)
             self._client = Client(self._cluster)
         nthreads = self._client.nthreads()
@@ -170,15 +173,23 @@ class StudyRunner:
     def _finish(self, key, item, out, wall, results, bar, worker_code=None) -> None:
         results[key] = out
         if worker_code is not None and worker_code != code_version():
-            self.stats.not_cached += 1
-            if self.stats.not_cached == 1:
-                log.warning("a worker runs different shevsim sources than this process (edited during the study?): "
-                            "its results are used but not cached; restart the study for consistent results")
-        elif self.cache is not None:
+            code_version.cache_clear()          # the sources changed since the key was made: rehash them
+            if worker_code == code_version():
+                log.warning("shevsim sources changed during the study: results from now on are keyed with the "
+                            "new code version (earlier results of this study came from the old sources)")
+                self.stats.code_versions.add(worker_code)
+                key = item.key()
+            else:
+                self.stats.not_cached += 1
+                log.warning("a worker runs different shevsim sources than this process: its result is used but "
+                            "not cached; restart the study for consistent results")
+                key = None
+        if key is not None and self.cache is not None:
             self.cache.put(key, item.inputs(), out, wall)
         self.stats.new += 1
         self.stats.busy_s += wall
         if bar is not None:
+            bar.set_postfix_str(f"{bar.total - bar.n - 1} left, {self._n_cached} cached", refresh=False)
             bar.update(1)
 
     def _run_pending(self, pending, results, desc, n_cached) -> None:
@@ -187,6 +198,7 @@ class StudyRunner:
             raise StudyInterrupted(f"evaluation budget of {self.max_new} new evaluations reached; "
                                    f"{len(pending)} left in '{desc}' - rerun to resume from the cache")
         bar = None
+        self._n_cached = n_cached
         if self.progress:
             from tqdm.auto import tqdm
             bar = tqdm(total=len(pending), desc=desc, unit="eval", dynamic_ncols=True,
@@ -201,8 +213,6 @@ class StudyRunner:
                         break
                     out, wall, _ = run_item(it)
                     self._finish(k, it, out, wall, results, bar)
-                    if bar is not None:
-                        bar.set_postfix_str(f"{len(pending) - bar.n} left, {n_cached} cached", refresh=False)
             else:
                 self._run_dask(pending, results, bar, n_cached)
         finally:
@@ -227,8 +237,6 @@ class StudyRunner:
                 k, it = futures[fut]
                 out, wall, wcode = fut.result()
                 self._finish(k, it, out, wall, results, bar, wcode)
-                if bar is not None:
-                    bar.set_postfix_str(f"{len(pending) - bar.n} left, {n_cached} cached", refresh=False)
                 if self.max_new is not None and self.stats.new >= self.max_new:
                     break
         finally:

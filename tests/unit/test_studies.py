@@ -307,3 +307,15 @@ def test_real_powerrate_map_small(tmp_path):
     # the answer is the lowest-soot feasible map among the 2 x 2 evaluated ones (all cached)
     cands = [c for c in res["constant_limits"] if c["feasible"]] + res["top_solutions"]
     assert b["soot_g_per_km"] <= min(c["soot_g_per_km"] for c in cands)
+
+
+def test_results_from_workers_with_other_sources_are_not_cached(tmp_path):
+    from shevsim.studies.evaluate import code_version
+    item = SyntheticProblem().item(DEFAULT_EDGES_W, [10e3] * 8)
+    with EvaluationCache(tmp_path / "c.sqlite") as cache:
+        runner = StudyRunner(cache, progress=False)
+        res = {}
+        runner._finish(item.key(), item, {"x": 1.0}, 0.1, res, None, worker_code="0" * 64)
+        assert len(cache) == 0 and runner.stats.not_cached == 1 and res[item.key()] == {"x": 1.0}
+        runner._finish(item.key(), item, {"x": 1.0}, 0.1, res, None, worker_code=code_version())
+        assert cache.get(item.key()) == {"x": 1.0}
