@@ -27,10 +27,13 @@ Current ``i`` positive = discharge, SI units, zero-order hold between samples (e
   (integrated backward-Euler with Q explicit).  Lumped: ``C dT/dt = Q + (T_amb - T)/R_u``, T_s = T_c = T.
 
 Cell effects: ``entropic_heat`` (dUdT != 0), ``arrhenius_resistance``
-(``s(T) = exp(Ea/R (1/T_core - 1/T_ref))``), ``cooling_change`` (convection coefficient multiplied by
+(``s(T) = exp(Ea/R (1/T - 1/T_ref))`` with the core temperature anchored to the measurement,
+``T = T_s,measured + (T_c - T_s)_model``, so that errors of the thermal model do not enter the
+resistance), ``cooling_change`` (convection coefficient multiplied by
 ``h_factor`` after an unknown time, smooth 20 s step: ``R_u -> R_u / (1 + (h_factor-1) sigmoid)``),
 ``ocv_hysteresis`` (one-state Plett: ``h[n+1] = e^{-g|i|dt/Q} h[n] - (1-e^{-g|i|dt/Q}) sign(i)``),
-``capacity_fade`` (``capacity_scale``), ``current_offset`` (true current = measured - offset).
+``capacity_fade`` (``capacity_scale``), ``current_offset`` (true current = measured - offset),
+``low_soc_resistance`` (all resistances x ``1 + g exp(-SOC/s)``).
 
 Vehicle model (road load, electrical power drawn from the bus)
 -------------------------------------------------------------
@@ -79,15 +82,16 @@ class Param:
 class Effect:
     """A named model extension with its own parameters.
 
-    ``neutral`` holds the parameter values that make the effect vanish; ``starts`` lists extra starting
-    points (dicts of parameter values, may be callables of the prepared context) for multi-start fits.
+    ``neutral`` holds the parameter values that make the effect vanish; ``starts(ctx, base)`` returns extra
+    starting points (dicts of parameter values; they may also move declared parameters, e.g. rescale R0
+    so that a temperature law starts at the fitted mean resistance) for multi-start fits.
     """
     name: str
     description: str
     params: tuple[Param, ...]
     neutral: Mapping[str, float]
     channels: tuple[str, ...]
-    starts: Any = None  # callable(ctx) -> list[dict] or None
+    starts: Any = None  # callable(ctx, base_values) -> list[dict] or None
 
 
 # ----------------------------------------------------------------------------------------------- cell
@@ -99,10 +103,10 @@ OCV_GRID_N = 401
 
 
 @njit(cache=True)
-def _cell_kernel(t, i_meas, t_amb, ocv_tab, soc0, tc0, ts0, cap_as, lumped,
+def _cell_kernel(t, i_meas, t_amb, ts_meas, ocv_tab, soc0, tc0, ts0, cap_as, lumped,
                  r0, r1, tau1, r2, tau2, cc, cs, rc, ru,
                  dudt, ea_r, t_ref_k, t_chg, h_fac, chg_w, m_hyst, g_hyst, cap_scale, i_off,
-                 out_v, out_tc, out_ts):  # pragma: no cover - compiled
+                 ls_gain, ls_scale, anchor, out_v, out_tc, out_ts):  # pragma: no cover - compiled
     n = t.shape[0]
     ng = ocv_tab.shape[0]
     soc = soc0
@@ -127,9 +131,15 @@ def _cell_kernel(t, i_meas, t_amb, ocv_tab, soc0, tc0, ts0, cap_as, lumped,
         ocv += dudt * (tc - t_ref_c)
         tck = tc + 273.15
         if ea_r != 0.0:
-            sr = math.exp(ea_r * (1.0 / tck - 1.0 / t_ref_k))
+            # core temperature anchored to the measured surface: T_s,meas + (T_c - T_s)_model
+            tak = (ts_meas[k] + (tc - ts) + 273.15) if anchor else tck
+            if tak < 200.0:
+                tak = 200.0
+            sr = math.exp(ea_r * (1.0 / tak - 1.0 / t_ref_k))
         else:
             sr = 1.0
+        if ls_gain != 0.0:
+            sr *= 1.0 + ls_gain * math.exp(-soc / ls_scale)
         v = ocv - r0 * sr * i - v1 - v2 + m_hyst * h
         out_v[k] = v
         out_tc[k] = tc
@@ -265,6 +275,7 @@ class CellModel(CalibrationModel):
         "thermal": "two-state",      # or "lumped"
         "rc_pairs": 1,               # 1 or 2
         "change_width_s": 20.0,      # time scale of the smooth cooling_change step [s]
+        "arrhenius_anchor": True,    # Arrhenius temperature = measured surface + modelled core-surface gradient
         "ocv_soc_frac": DEFAULT_OCV_SOC,
         "ocv_v": DEFAULT_OCV_V,
     }
@@ -287,12 +298,27 @@ class CellModel(CalibrationModel):
         return tuple(ps)
 
     def _make_effects(self):
-        def chg_starts(ctx):
+        def arr_starts(ctx, base):
+            # keep the mean resistance of the current fit: R_ref = R_fit / s(T_mean)
+            tm = float(np.mean(ctx["df"]["t_surface_c"].to_numpy(float))) + T0_K
+            tr = float(self.known["t_ref_c"]) + T0_K
+            out = []
+            for ea in (1500.0, 4000.0, 8000.0):
+                sc = math.exp(ea * (1.0 / tm - 1.0 / tr))
+                st = {"ea_r_k": ea}
+                for name in ("r0_ohm", "r1_ohm", "r2_ohm"):
+                    if name in base:
+                        p = next(q for q in self.declared if q.name == name)
+                        st[name] = min(max(base[name] / sc, p.lo * 1.01), p.hi * 0.99)
+                out.append(st)
+            return out
+
+        def chg_starts(ctx, base):
             t = ctx["t"]
             return [{"t_change_s": t[0] + f * (t[-1] - t[0]), "h_factor": hf}
                     for f in (0.15, 0.35, 0.55, 0.75) for hf in (0.4, 2.5)]
 
-        def hyst_starts(ctx):
+        def hyst_starts(ctx, base):
             return [{"m_hyst_v": 0.01, "gamma_hyst": g} for g in (3.0, 30.0, 300.0)]
 
         effs = [
@@ -301,7 +327,7 @@ class CellModel(CalibrationModel):
                    {"dudt_v_k": 0.0}, ("t_surface_c", "voltage_v")),
             Effect("arrhenius_resistance", "R0, R1, R2 scale with exp(Ea/R (1/T - 1/T_ref)) of core temperature",
                    (Param("ea_r_k", "K", 0.0, 12000.0, 3000.0, "activation energy over gas constant"),),
-                   {"ea_r_k": 0.0}, ("voltage_v", "t_surface_c")),
+                   {"ea_r_k": 0.0}, ("voltage_v", "t_surface_c"), arr_starts),
             Effect("cooling_change", "convection coefficient h multiplied by h_factor after an unknown time "
                    "(cooling fault or airflow change)",
                    (Param("t_change_s", "s", -1e12, 1e12, 0.0, "time of the change"),
@@ -317,6 +343,11 @@ class CellModel(CalibrationModel):
             Effect("current_offset", "current sensor offset: true current = measured - offset",
                    (Param("current_offset_a", "A", -1.0, 1.0, 0.0, "sensor offset"),),
                    {"current_offset_a": 0.0}, ("voltage_v",)),
+            Effect("low_soc_resistance", "resistances rise at low SOC: R x (1 + g exp(-SOC / s)) "
+                   "(electrode depletion / diffusion limitation near the end of discharge)",
+                   (Param("r_lowsoc_gain", "-", 0.0, 50.0, 1.0, "gain g"),
+                    Param("r_lowsoc_scale_frac", "-", 0.02, 0.3, 0.08, "SOC scale s")),
+                   {"r_lowsoc_gain": 0.0, "r_lowsoc_scale_frac": 0.1}, ("voltage_v",)),
         ]
         return {e.name: e for e in effs}
 
@@ -347,7 +378,7 @@ class CellModel(CalibrationModel):
             v0 = float(np.mean(df["voltage_v"].to_numpy(float)[:n0])) + float(np.mean(i[:n0])) * 0.02
             soc0 = float(np.interp(v0, ocv_tab, grid)) if np.all(np.diff(ocv_tab) > 0) else 0.5
         ts0 = float(df["t_surface_c"].iloc[0])
-        return {"t": t, "i": i, "ta": ta, "ocv_tab": ocv_tab, "soc0": soc0, "ts0": ts0,
+        return {"t": t, "i": i, "ta": ta, "ts_meas": df["t_surface_c"].to_numpy(float), "ocv_tab": ocv_tab, "soc0": soc0, "ts0": ts0,
                 "tc0": float(df["t_core_c"].iloc[0]) if "t_core_c" in df else ts0,
                 "has_core": "t_core_c" in df, "cap_as": float(self.known["capacity_ah"]) * 3600.0,
                 "n": t.size, "df": df}
@@ -358,13 +389,14 @@ class CellModel(CalibrationModel):
         ov, otc, ots = np.empty(n), np.empty(n), np.empty(n)
         lumped = self.known.get("thermal", "two-state") == "lumped"
         two = int(self.known.get("rc_pairs", 1)) == 2
-        _cell_kernel(ctx["t"], ctx["i"], ctx["ta"], ctx["ocv_tab"], ctx["soc0"], ctx["tc0"], ctx["ts0"],
+        _cell_kernel(ctx["t"], ctx["i"], ctx["ta"], ctx["ts_meas"], ctx["ocv_tab"], ctx["soc0"], ctx["tc0"], ctx["ts0"],
                      ctx["cap_as"], lumped,
                      p["r0_ohm"], p["r1_ohm"], p["tau1_s"], p["r2_ohm"] if two else 0.0,
                      p["tau2_s"] if two else 1.0, p["cc_j_k"], p.get("cs_j_k", 1.0), p.get("rc_k_w", 1.0),
                      p["ru_k_w"], p["dudt_v_k"], p["ea_r_k"], float(self.known["t_ref_c"]) + T0_K,
                      p["t_change_s"], p["h_factor"], float(self.known["change_width_s"]), p["m_hyst_v"], p["gamma_hyst"],
-                     p["capacity_scale"], p["current_offset_a"], ov, otc, ots)
+                     p["capacity_scale"], p["current_offset_a"], p["r_lowsoc_gain"], p["r_lowsoc_scale_frac"],
+                     bool(self.known["arrhenius_anchor"]), ov, otc, ots)
         out = {"voltage_v": ov, "t_surface_c": ots}
         if ctx["has_core"]:
             out["t_core_c"] = otc
@@ -413,7 +445,7 @@ class VehicleModel(CalibrationModel):
         g = tuple(Param(f"grade_{k}_frac", "-", -0.15, 0.15, 0.0, f"road grade at distance knot {k}")
                   for k in range(self.N_GRADE))
 
-        def regen_starts(ctx):
+        def regen_starts(ctx, base):
             pm = ctx["power_meas"]
             neg = -pm[pm < 0]
             if neg.size < 10:

@@ -87,7 +87,7 @@ def synth_cell(effects: dict | None = None, duration_s: float = 2400.0, dt_s: fl
             e["t_change_s"] = 0.4 * t[-1]
         vals.update(e)
     off = vals.get("current_offset_a", 0.0)
-    model = CellModel({"soc0_frac": 0.95, "change_width_s": 0.1})
+    model = CellModel({"soc0_frac": 0.95, "change_width_s": 0.1, "arrhenius_anchor": False})
     df_true = pd.DataFrame({"time_s": t, "current_a": i_true + off, "voltage_v": 4.0,
                             "t_surface_c": ta[0], "t_ambient_c": ta})
     # truth: the current the cell sees is i_true; the kernel subtracts the offset from the "measured" one

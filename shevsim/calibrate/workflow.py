@@ -32,6 +32,9 @@ Steps (:func:`run_workflow`):
    Among passing candidates the lowest held-out score wins, except that a candidate within ``TIE`` = 2 %
    of it with a lower BIC is preferred (parsimony).  The winner is added, the remaining candidates are
    re-tested on top of it; this repeats until none passes ("nothing found" when none passes at first).
+   When no single effect passes in the first round, the pairs among the ``PAIR_TOP`` = 3 candidates with the best training
+   BIC are fitted together and judged by the same rule (two effects can each fix one part of the record
+   and spoil another, e.g. a temperature law and a low-SOC law in a cold discharge).
 6. **Refit and report**: ``report.json``, ``report.md`` and PNG plots in the output directory, all
    written atomically (temp file + ``os.replace``).  Channels whose final held-out residual still exceeds
    3x the noise floor with a significant correlation are listed under ``unexplained``.
@@ -62,6 +65,7 @@ MAX_ROUNDS = 3
 MAX_FIT_SAMPLES = 4000
 N_STARTS_KEPT = 2
 PRE_NFEV = 8
+PAIR_TOP = 3
 
 
 # ------------------------------------------------------------------------------------------ helpers
@@ -241,11 +245,10 @@ class Fitter:
         for e in effects:
             fn = self.model.effects[e].starts
             if fn is not None and not (start and all(p.name in start for p in self.model.effects[e].params)):
-                extra = fn(self.ctx)
                 # multi-start: from the current fit and from the declared defaults (the current fit may
                 # have bent its declared parameters to mimic the effect)
                 bases = starts + ([dict(base, **self.model.defaults())] if start else [])
-                starts = [dict(s, **x) for s in bases for x in extra] or starts
+                starts = [dict(s, **x) for s in bases for x in fn(self.ctx, s)] or starts
         x_starts = [self._to_x(ps, s0) for s0 in starts]
         if len(x_starts) > N_STARTS_KEPT:
             # screen the starting points with short fits, finish the best few
@@ -352,9 +355,8 @@ def run_workflow(model_name: str, data, known: dict | None = None, holdout: floa
         rho = rho_of(current)
         current.bic = _bic(current, rho)
         cur_score = _score(current, ref)
-        results = []
-        for e in remaining:
-            fr = fitter.fit(tuple(selected) + (e,), start=current.params)
+        def assess(effs, start):
+            fr = fitter.fit(tuple(selected) + tuple(effs), start=start)
             fr.score = _score(fr, ref)
             fr.bic = _bic(fr, rho)
             fr.dbic = fr.bic - current.bic
@@ -370,23 +372,41 @@ def run_workflow(model_name: str, data, known: dict | None = None, holdout: floa
                 why.append(f"dBIC {fr.dbic:+.1f} > -{MIN_DBIC:g}")
             fr.passed = not why
             fr.reason = "; ".join(why) if why else "passes"
-            results.append((e, fr))
-            say(f"round {rnd + 1}: {e}: score {fr.score:.3f} gain {fr.gain:+.1%} dBIC {fr.dbic:+.1f} "
+            say(f"round {rnd + 1}: {'+'.join(effs)}: score {fr.score:.3f} gain {fr.gain:+.1%} dBIC {fr.dbic:+.1f} "
                 f"{'PASS' if fr.passed else ''}")
+            return fr
+
+        results = [(e, assess((e,), current.params)) for e in remaining]
         rounds.append({"round": rnd + 1, "on_top_of": list(selected), "current_score": cur_score,
                        "candidates": [_cand_json(e, fr, fitter.channels) for e, fr in results]})
         if rnd == 0:
             first_round = rounds[0]["candidates"]
-        ok = [(e, fr) for e, fr in results if fr.passed]
+        ok = [((e,), fr) for e, fr in results if fr.passed]
+        if not ok and not selected and len(remaining) >= 2:
+            # no single effect passes: two effects may each fix part of the residual while spoiling
+            # another part; test pairs of the PAIR_TOP candidates with the best training BIC
+            top = [e for e, fr in sorted(results, key=lambda x: x[1].dbic) if fr.dbic < 0][:PAIR_TOP]
+            single = dict(results)
+            pairs = []
+            for a_i in range(len(top)):
+                for b_i in range(a_i + 1, len(top)):
+                    a, b = top[a_i], top[b_i]
+                    st = dict(current.params)
+                    for e in (a, b):
+                        st.update({p.name: single[e].params[p.name] for p in model.effects[e].params})
+                    pairs.append(((a, b), assess((a, b), st)))
+            rounds[-1]["pairs"] = [_cand_json("+".join(k), fr, fitter.channels) for k, fr in pairs]
+            ok = [(k, fr) for k, fr in pairs if fr.passed]
         if not ok:
             break
         best_score = min(fr.score for _, fr in ok)
-        near = [(e, fr) for e, fr in ok if fr.score <= best_score * (1 + TIE)]
-        e, fr = min(near, key=lambda x: x[1].bic)
-        selected.append(e)
-        rounds[-1]["selected"] = e
+        near = [(k, fr) for k, fr in ok if fr.score <= best_score * (1 + TIE)]
+        k, fr = min(near, key=lambda x: (len(x[0]), x[1].bic))
+        selected.extend(k)
+        rounds[-1]["selected"] = "+".join(k)
         current = fr
-        remaining.remove(e)
+        for e in k:
+            remaining.remove(e)
     final = current
     if selected:
         final = fitter.fit(tuple(selected), start=current.params)
@@ -544,7 +564,7 @@ def render_markdown(rep: dict) -> str:
         L += [f"Round {rd['round']} (on top of: {', '.join(rd['on_top_of']) or 'baseline'}; current score "
               f"{rd['current_score']:.3f}; selected: {rd.get('selected', 'none')})", "",
               "| effect | held-out score | gain | dBIC | held-out RMSE | parameters | verdict |", "|---|---|---|---|---|---|---|"]
-        for c in sorted(rd["candidates"], key=lambda c: c["score"]):
+        for c in sorted(rd["candidates"], key=lambda c: c["score"]) + rd.get("pairs", []):
             hr = ", ".join(f"{k} {_g(v)}" for k, v in c["holdout_rmse"].items())
             own = {k: v for k, v in c["parameters"].items() if k not in rep["baseline_parameters"]}
             pr = ", ".join(f"{k}={_g(v)}" for k, v in own.items())
