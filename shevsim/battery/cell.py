@@ -128,7 +128,7 @@ class _Grid2:
         w01 = ws * (1.0 - wt)
         w10 = (1.0 - ws) * wt
         w11 = ws * wt
-        return tuple(w00 * a[k] + w01 * b[k] + w10 * c[k] + w11 * d[k] for k in range(self.nq))
+        return tuple([w00 * ak + w01 * bk + w10 * ck + w11 * dk for ak, bk, ck, dk in zip(a, b, c, d)])
 
 
 class _Table1:

@@ -140,6 +140,27 @@ def electrical_current_limits(soc: float, v1: float, rs: float, r1: float, c1: f
     return i_soc_min, i_soc_max, (free - p.v_min_v) / gain, (free - p.v_max_v) / gain
 
 
+_CACHE_MAX = 16384
+_CACHES: dict = {}
+
+
+class _SharedCache(dict):
+    """A memo of a pure function: shared, never copied with the owner's state."""
+
+    def __deepcopy__(self, memo):
+        return self
+
+    def __copy__(self):
+        return self
+
+
+def _coeff_cache(key) -> _SharedCache:
+    c = _CACHES.get(key)
+    if c is None:
+        c = _CACHES[key] = _SharedCache()
+    return c
+
+
 class PowerCapability:
     """Algebraic-Propagation power capability with electrical and thermal constraints.
 
@@ -165,10 +186,25 @@ class PowerCapability:
         p = self.params
         self._discN = TwoStateDiscretiser(self.thermal_params, p.horizon_steps * p.dt_s, "zoh")
         self._disc1 = TwoStateDiscretiser(self.thermal_params, p.dt_s, "zoh")
+        # thermal coefficients per (rounded) h: a pure function of h and the constants, shared by
+        # every instance with the same constants and not part of the state (not deep-copied)
+        self._hcache = _coeff_cache((self.thermal_params, p.horizon_steps, p.dt_s))
         self._exact = p.polarisation_heat == "exact"
         self._npack = float(p.n_series * p.n_parallel)
         self.last_i_max_a = 0.0
         self.last_i_min_a = 0.0
+
+    def _thermal_coeffs(self, h_w_m2k: float) -> tuple:
+        """``ZOH(N dt) (8), C_core/D_core (3), ZOH(dt) A and B_q (6)`` at ``h_w_m2k`` (cached)."""
+        c = self._hcache.get(h_w_m2k)
+        if c is None:
+            _, _, _, cc0, cc1, dc = self._discN.out(h_w_m2k)
+            e00, e01, e10, e11, bq0, _, bq1, _ = self._disc1._zoh(h_w_m2k)
+            c = self._discN._zoh(h_w_m2k) + (cc0, cc1, dc, e00, e01, e10, e11, bq0, bq1)
+            if len(self._hcache) >= _CACHE_MAX:
+                self._hcache.clear()
+            self._hcache[h_w_m2k] = c
+        return c
 
     def thermal_current_limits(self, soc: float, v1: float, rs: float, r1: float, c1: float,
                                t_mean_c: float, gamma: float, h_w_m2k: float, t_amb_c: float):
@@ -176,19 +212,19 @@ class PowerCapability:
         p = self.params
         ndt = p.horizon_steps * p.dt_s
         # the estimated h changes a little every step: evaluate the thermal matrices at h rounded to
-        # 1e-3 W/m^2/K (closed-form ZOH is cached on its last h; the effect on T_core is ~1e-5 K)
+        # 1e-3 W/m^2/K (closed-form ZOH, cached per rounded h; the effect on T_core is ~1e-5 K)
         h_w_m2k = round(h_w_m2k, 3)
-        a00, a01, a10, a11, b00, b01, b10, b11 = self._discN.ad_bd(h_w_m2k)
-        _, _, _, cc0, cc1, dc = self._discN.out(h_w_m2k)
+        a00, a01, a10, a11, b00, b01, b10, b11, cc0, cc1, dc, e00, e01, e10, e11, bq0, bq1 = \
+            self._thermal_coeffs(h_w_m2k)
         # free response of the core temperature (mu = 0, no polarisation heat)
         free = (cc0 * (a00 * t_mean_c + a01 * gamma + b01 * t_amb_c)
                 + cc1 * (a10 * t_mean_c + a11 * gamma + b11 * t_amb_c) + dc * t_amb_c)
         gq = cc0 * b00 + cc1 * b10            # sum_i C A^i B_q  (> 0)
-        aN = math.exp(-ndt / (r1 * c1))
         beta = (t_mean_c + 273.15) * self.tables.entropy_change(soc) / FARADAY_C_MOL
         if self._exact:
             return self._exact_limits(v1, rs, r1, c1, beta, free, gq, h_w_m2k,
-                                      (a00, a01, a10, a11), (cc0, cc1))
+                                      (a00, a01, a10, a11), (cc0, cc1), (e00, e01, e10, e11, bq0, bq1))
+        aN = math.exp(-ndt / (r1 * c1))
         out = []
         for i_prev in (self.last_i_max_a, self.last_i_min_a):
             v1n = aN * v1 + r1 * (1.0 - aN) * i_prev
@@ -203,29 +239,37 @@ class PowerCapability:
         i_t_chg = (beta - math.sqrt(disc_c)) / (2.0 * rs) if disc_c >= 0.0 else i_min_heat
         return i_t_dch, i_t_chg
 
-    def _exact_limits(self, v1, rs, r1, c1, beta, free, g, h_w_m2k, an, cc):
+    def _exact_limits(self, v1, rs, r1, c1, beta, free, g, h_w_m2k, an, cc, e1=None):
         p = self.params
         n = p.horizon_steps
-        e00, e01, e10, e11, bq0, _, bq1, _ = self._disc1.ad_bd(h_w_m2k)
+        e00, e01, e10, e11, bq0, bq1 = e1 if e1 is not None else self._thermal_coeffs(h_w_m2k)[11:]
         n00, n01, n10, n11 = an
         cc0, cc1 = cc
         a = math.exp(-p.dt_s / (r1 * c1))
-
-        def s_of(rho: float) -> float:
-            # C_c (A^N - rho^N I) (A - rho I)^{-1} B_q; removable singularity at rho = eig(A)
+        # S(rho) = C_c (A^N - rho^N I) (A - rho I)^{-1} B_q for rho = a and a^2; removable
+        # singularity at rho = eig(A) (written out twice: this runs every BMS step)
+        rho = a
+        d00, d11 = e00 - rho, e11 - rho
+        det = d00 * d11 - e01 * e10
+        if abs(det) < 1e-13:
+            rho *= 1.0 - 1e-6
             d00, d11 = e00 - rho, e11 - rho
             det = d00 * d11 - e01 * e10
-            if abs(det) < 1e-13:
-                rho *= 1.0 - 1e-6
-                d00, d11 = e00 - rho, e11 - rho
-                det = d00 * d11 - e01 * e10
-            v0 = (d11 * bq0 - e01 * bq1) / det
-            v1_ = (-e10 * bq0 + d00 * bq1) / det
-            rn = rho ** n
-            return (cc0 * (n00 * v0 + n01 * v1_ - rn * v0) + cc1 * (n10 * v0 + n11 * v1_ - rn * v1_))
-
-        s1 = s_of(a)
-        s2 = s_of(a * a)
+        v0 = (d11 * bq0 - e01 * bq1) / det
+        v1_ = (-e10 * bq0 + d00 * bq1) / det
+        rn = rho ** n
+        s1 = (cc0 * (n00 * v0 + n01 * v1_ - rn * v0) + cc1 * (n10 * v0 + n11 * v1_ - rn * v1_))
+        rho = a * a
+        d00, d11 = e00 - rho, e11 - rho
+        det = d00 * d11 - e01 * e10
+        if abs(det) < 1e-13:
+            rho *= 1.0 - 1e-6
+            d00, d11 = e00 - rho, e11 - rho
+            det = d00 * d11 - e01 * e10
+        v0 = (d11 * bq0 - e01 * bq1) / det
+        v1_ = (-e10 * bq0 + d00 * bq1) / det
+        rn = rho ** n
+        s2 = (cc0 * (n00 * v0 + n01 * v1_ - rn * v0) + cc1 * (n10 * v0 + n11 * v1_ - rn * v1_))
         qa = g * rs + r1 * (g - 2.0 * s1 + s2)
         qb = -g * beta + 2.0 * v1 * (s1 - s2)
         qc = free + v1 * v1 * s2 / r1 - p.t_core_max_c

@@ -101,6 +101,9 @@ class TwoStateDiscretiser:
         self._bq = self._a / (self._k * params.volume_m3)   # 1/(rho c_p V)
         self._last_h = None
         self._last = None
+        k, a, R = self._k, self._a, self._R
+        # h-independent factors of a_mat, grouped as Python evaluates them (left to right)
+        self._consts = (-48.0 * a, -15.0 * a, -320.0 * a, -120.0 * a, 24.0 * k, 4.0 * k, R * R)
 
     def a_mat(self, h: float):
         R, k, a = self._R, self._k, self._a
@@ -111,59 +114,77 @@ class TwoStateDiscretiser:
         a11 = -120.0 * a * (4.0 * k + R * h) / (R * R * den)
         return a00, a01, a10, a11
 
+    def _zoh(self, h: float):
+        """Closed-form ZOH of the two-state model at ``h`` (the arithmetic of :meth:`a_mat` and the
+        2x2 matrix exponential written out with the h-independent factors hoisted; bit-identical to
+        evaluating them step by step)."""
+        R, k, dt = self._R, self._k, self.dt
+        c48, c15, c320, c120, k24, k4, rr = self._consts
+        den = k24 + R * h
+        a00 = c48 * h / (R * den)
+        a01 = c15 * h / den
+        a10 = c320 * h / (rr * den)
+        a11 = c120 * (k4 + R * h) / (rr * den)
+        bq = self._bq
+        tr = a00 + a11
+        det = a00 * a11 - a01 * a10
+        disc = 0.25 * tr * tr - det
+        sq = math.sqrt(disc if disc > 0.0 else 0.0)
+        l1 = 0.5 * tr + sq
+        l2 = 0.5 * tr - sq
+        l1dt = l1 * dt
+        l2dt = l2 * dt
+        e1 = math.exp(l1dt)
+        e2 = math.exp(l2dt)
+        f1 = (math.expm1(l1dt) / l1) if abs(l1dt) > 1e-12 else dt * (1.0 + 0.5 * l1dt)
+        f2 = (math.expm1(l2dt) / l2) if abs(l2dt) > 1e-12 else dt * (1.0 + 0.5 * l2dt)
+        dl = l1 - l2
+        if dl > 1e-12 * (abs(l1) + abs(l2) + 1e-300):
+            c1 = (e1 - e2) / dl
+            c0 = (l1 * e2 - l2 * e1) / dl
+            d1 = (f1 - f2) / dl
+            d0 = (l1 * f2 - l2 * f1) / dl
+        else:  # repeated eigenvalue (does not occur for h >= 0; kept for safety)
+            c1 = dt * e1
+            c0 = e1 - l1 * c1
+            d1 = (dt * e1 - f1) / l1 if l1 != 0.0 else 0.5 * dt * dt
+            d0 = f1 - l1 * d1
+        # Ad = c0 I + c1 A;  G = d0 I + d1 A;  Bd = G B with B = [[bq, -a00], [0, -a10]]
+        g00 = d0 + d1 * a00
+        g01 = d1 * a01
+        g10 = d1 * a10
+        g11 = d0 + d1 * a11
+        return (c0 + c1 * a00, c1 * a01, c1 * a10, c0 + c1 * a11,
+                g00 * bq, -(g00 * a00 + g01 * a10),
+                g10 * bq, -(g10 * a00 + g11 * a10))
+
     def ad_bd(self, h: float):
         if h == self._last_h:
             return self._last
-        a00, a01, a10, a11 = self.a_mat(h)
-        bq = self._bq
-        # B = [[bq, -a00], [0, -a10]]  (uniform T = T_amb is an equilibrium)
-        dt = self.dt
         if self.method == "euler":
+            a00, a01, a10, a11 = self.a_mat(h)
+            bq = self._bq
+            # B = [[bq, -a00], [0, -a10]]  (uniform T = T_amb is an equilibrium)
+            dt = self.dt
             r = (1.0 + a00 * dt, a01 * dt, a10 * dt, 1.0 + a11 * dt, bq * dt, -a00 * dt, 0.0, -a10 * dt)
         else:
-            tr = a00 + a11
-            det = a00 * a11 - a01 * a10
-            disc = 0.25 * tr * tr - det
-            sq = math.sqrt(disc if disc > 0.0 else 0.0)
-            l1 = 0.5 * tr + sq
-            l2 = 0.5 * tr - sq
-            e1 = math.exp(l1 * dt)
-            e2 = math.exp(l2 * dt)
-            f1 = (math.expm1(l1 * dt) / l1) if abs(l1 * dt) > 1e-12 else dt * (1.0 + 0.5 * l1 * dt)
-            f2 = (math.expm1(l2 * dt) / l2) if abs(l2 * dt) > 1e-12 else dt * (1.0 + 0.5 * l2 * dt)
-            dl = l1 - l2
-            if dl > 1e-12 * (abs(l1) + abs(l2) + 1e-300):
-                c1 = (e1 - e2) / dl
-                c0 = (l1 * e2 - l2 * e1) / dl
-                d1 = (f1 - f2) / dl
-                d0 = (l1 * f2 - l2 * f1) / dl
-            else:  # repeated eigenvalue (does not occur for h >= 0; kept for safety)
-                c1 = dt * e1
-                c0 = e1 - l1 * c1
-                d1 = (dt * e1 - f1) / l1 if l1 != 0.0 else 0.5 * dt * dt
-                d0 = f1 - l1 * d1
-            ad00 = c0 + c1 * a00
-            ad01 = c1 * a01
-            ad10 = c1 * a10
-            ad11 = c0 + c1 * a11
-            # G = d0 I + d1 A;  Bd = G B
-            g00 = d0 + d1 * a00
-            g01 = d1 * a01
-            g10 = d1 * a10
-            g11 = d0 + d1 * a11
-            r = (ad00, ad01, ad10, ad11,
-                 g00 * bq, -(g00 * a00 + g01 * a10),
-                 g10 * bq, -(g10 * a00 + g11 * a10))
+            r = self._zoh(h)
         self._last_h = h
         self._last = r
         return r
 
     def d_ad_bd(self, h: float):
+        """Central-difference h-derivative of :meth:`ad_bd` (step ``1e-5 (|h| + 1)``, one-sided at 0)."""
         dh = 1e-5 * (abs(h) + 1.0)
-        hp = self.ad_bd(h + dh)
-        hm = self.ad_bd(h - dh if h - dh > 0.0 else 0.0)
+        if self.method == "euler":
+            hp = self.ad_bd(h + dh)
+            hm = self.ad_bd(h - dh if h - dh > 0.0 else 0.0)
+        else:   # not through the one-entry cache of ad_bd (it would evict h)
+            hp = self._zoh(h + dh)
+            hm = self._zoh(h - dh if h - dh > 0.0 else 0.0)
         span = dh + (dh if h - dh > 0.0 else h)
-        return tuple((a - b) / span for a, b in zip(hp, hm))
+        return ((hp[0] - hm[0]) / span, (hp[1] - hm[1]) / span, (hp[2] - hm[2]) / span, (hp[3] - hm[3]) / span,
+                (hp[4] - hm[4]) / span, (hp[5] - hm[5]) / span, (hp[6] - hm[6]) / span, (hp[7] - hm[7]) / span)
 
     def out(self, h: float):
         R, k = self._R, self._k

@@ -197,12 +197,23 @@ class BatteryPack(Component):
         self._k = k + 1
         return self._buf[k]
 
+    def _noise4(self):
+        """The next four draws of :meth:`_noise` (the same sequence, one slice when possible)."""
+        k = self._k
+        if k + 4 <= _NOISE_BLOCK:
+            self._k = k + 4
+            return self._buf[k:k + 4]
+        return [self._noise(), self._noise(), self._noise(), self._noise()]
+
     def _write_outputs(self, i: float, rs: float, q: float) -> None:
         y = self.y
         p = self.params
+        u = self.u
         voc = self.tables.ocv(self.soc)
         v = voc - rs * i - self.v1 - self.v2
-        tc, ts = self.thermal.outputs(self.x_th, q, self.u["t_ambient_c"], self.u["h_conv_w_m2k"])
+        t_amb = u["t_ambient_c"]
+        tc, ts = self.thermal.outputs(self.x_th, q, t_amb, u["h_conv_w_m2k"])
+        n0, n1, n2, n3 = self._noise4()
         y["current_a"] = i * self._np
         y["voltage_v"] = v * self._ns
         y["soc_pct"] = 100.0 * self.soc
@@ -211,10 +222,10 @@ class BatteryPack(Component):
         y["t_surface_c"] = ts
         y["t_mean_c"] = self._t_mean(self.x_th)
         y["heat_w"] = q
-        y["cell_current_meas_a"] = i + p.sigma_current_a * self._noise()
-        y["cell_voltage_meas_v"] = v + p.sigma_voltage_v * self._noise()
-        y["t_surface_meas_c"] = ts + p.sigma_temperature_c * self._noise()
-        y["t_ambient_meas_c"] = self.u["t_ambient_c"] + p.sigma_temperature_c * self._noise()
+        y["cell_current_meas_a"] = i + p.sigma_current_a * n0
+        y["cell_voltage_meas_v"] = v + p.sigma_voltage_v * n1
+        y["t_surface_meas_c"] = ts + p.sigma_temperature_c * n2
+        y["t_ambient_meas_c"] = t_amb + p.sigma_temperature_c * n3
         y["loss_energy_j"] = self.e_loss * self._npack
         y["chem_energy_j"] = self.e_chem * self._npack
         y["ah_throughput_ah"] = self.ah * self._np
@@ -243,7 +254,8 @@ class BatteryPack(Component):
 
     def do_step(self, t: float, h: float) -> None:
         u = self.u
-        current_mode = self.params.input_mode == "current"
+        prm = self.params
+        current_mode = prm.input_mode == "current"
         p_pack = u["current_cmd_a"] if current_mode else u["power_w"]
         h_conv = u["h_conv_w_m2k"]
         t_amb = u["t_ambient_c"]
@@ -256,13 +268,15 @@ class BatteryPack(Component):
         v2 = self.v2
         q_as = self._q_as
         p_cell = (p_pack / self._np) if current_mode else (p_pack / self._npack)  # cell current or power
-        t_mean = self._t_mean(self.x_th)
-        t_look = t_mean if self.params.temperature_dependent else 25.0
+        t_mean = self.x_th[0] if self._fd_w is None else self._t_mean(self.x_th)
+        t_look = t_mean if prm.temperature_dependent else 25.0
         rs, r1, c1, r2, c2 = tab.params(soc, t_look, p_cell)
         tau1 = r1 * c1
         tau2 = r2 * c2
-        g1 = tau1 * (1.0 - math.exp(-h / tau1))
-        g2 = tau2 * (1.0 - math.exp(-h / tau2))
+        ex1 = math.exp(-h / tau1)
+        ex2 = math.exp(-h / tau2)
+        g1 = tau1 * (1.0 - ex1)
+        g2 = tau2 * (1.0 - ex2)
         a = h * tab.ocv(soc) - v1 * g1 - v2 * g2
         b = h * rs + r1 * (h - g1) + r2 * (h - g2) + 0.5 * h * h * tab.docv_dsoc(soc) / q_as
         if current_mode:
@@ -279,12 +293,21 @@ class BatteryPack(Component):
         if not (0.0 <= soc_new <= 1.0):
             raise SimulationError(f"{self.name}: SOC left [0, 100] % at t={t + h:.6g} s "
                                   f"(soc_pct={100.0 * soc_new:.4g}, pack current {i * self._np:.6g} A)")
-        v1n, iv1, iv1s = _cell.rc_integrals(v1, i, r1, c1, h)
-        v2n, iv2, iv2s = _cell.rc_integrals(v2, i, r2, c2, h)
+        # exact RC-branch integrals over the step (cell.rc_integrals written out, reusing e^{-h/tau})
+        vinf = r1 * i
+        d = v1 - vinf
+        v1n = vinf + d * ex1
+        iv1 = vinf * h + d * g1
+        iv1s = vinf * vinf * h + 2.0 * vinf * d * g1 + d * d * 0.5 * tau1 * (1.0 - ex1 * ex1)
+        vinf = r2 * i
+        d = v2 - vinf
+        v2n = vinf + d * ex2
+        iv2 = vinf * h + d * g2
+        iv2s = vinf * vinf * h + 2.0 * vinf * d * g2 + d * d * 0.5 * tau2 * (1.0 - ex2 * ex2)
         e_chem = q_as * (tab.ocv_integral(soc) - tab.ocv_integral(soc_new))
         e_loss = i * i * rs * h + i * (iv1 + iv2)
         q = i * i * rs + (iv1s / r1 + iv2s / r2) / h
-        if self.params.entropic_heat:
+        if prm.entropic_heat:
             ds = tab.entropy_change(0.5 * (soc + soc_new))
             q -= i * (t_mean + 273.15) * ds / _cell.FARADAY_C_MOL
         self.x_th = self.thermal.step(self.x_th, q, t_amb, h_conv, h)

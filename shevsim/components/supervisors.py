@@ -15,9 +15,11 @@ Outputs (direct feedthrough: a sampled controller's command is a function of the
     next call; ``power_rate_max_wps`` [W/s] the power-rate map at the present engine power (wire it to
     the engine-generator's ``power_rate_max_wps`` so the plant enforces the same limit);
     ``battery_power_plan_w`` [W] the battery power the split implies (demand - command, + discharge).
-    MPC only: ``fallback_count`` [1] calls without a QP solution (cumulative); ``solve_time_us`` [us]
-    wall time of the last call (state -> QP -> first move; not deterministic, do not compare runs on it);
+    MPC only: ``fallback_count`` [1] calls without a QP solution (cumulative);
     ``battery_slack_w`` [W], ``soc_slack_pct`` [%] the soft-constraint slacks of the last solution.
+    The wall time of a call is *not* an output (it would make identical runs differ): the MPC component
+    keeps it in the attribute ``last_call_us`` and, when ``call_times_us`` is set to a list, appends
+    every call's time to it (``benchmarks/cycle_speed.py``).
     Rule only: ``engine_on_1`` [1] thermostat state.
 
 Timing: each ``do_step(t, h)`` is one supervisor call, sampling the inputs at ``t``; run the
@@ -158,11 +160,10 @@ class MPCSupervisor(Component):
         out("power_rate_max_wps", "W/s", 30e3, "power-rate map at the previous command (the ramp's start)"),
         out("battery_power_plan_w", "W", 0.0, "demand - command (battery share), + discharge", _IN),
         out("fallback_count", "1", 0.0, "cumulative supervisor calls without a QP solution", _IN),
-        out("solve_time_us", "us", 0.0, "wall time of the last call (not deterministic)", _IN),
         out("battery_slack_w", "W", 0.0, "battery-limit slack of the last solution", _IN),
         out("soc_slack_pct", "%", 0.0, "SOC-window slack of the last solution", _IN),
     )
-    _static = ("name", "params", "mpc", "_rule")
+    _static = ("name", "params", "mpc", "_rule", "last_call_us", "call_times_us")
 
     def __init__(self, name: str = "mpc_supervisor", params: MPCSupervisorParams | None = None):
         super().__init__(name, params)
@@ -183,6 +184,8 @@ class MPCSupervisor(Component):
         self.mpc = _MPC(settings, p.fuel_curve(where), rate_map, rule=self._rule)
         self.fallback_count = 0
         self.plan = None
+        self.last_call_us = 0.0      # wall time of the last call (state -> QP -> first move) [us]
+        self.call_times_us = None    # set to a list to collect every call's wall time [us]
 
     def initialize(self, t0: float) -> None:
         self.mpc.reset()
@@ -190,9 +193,9 @@ class MPCSupervisor(Component):
         self.fallback_count = 0
         g = self.u["gen_power_w"]
         self.prev_cmd = float(g) if math.isfinite(g) else 0.0
-        self._write(self.prev_cmd, 0.0)
+        self._write(self.prev_cmd)
 
-    def _write(self, cmd: float, dt_us: float) -> None:
+    def _write(self, cmd: float) -> None:
         y, u, last = self.y, self.u, self.mpc.last
         cmd = float(cmd)
         y["power_cmd_w"] = cmd
@@ -201,7 +204,6 @@ class MPCSupervisor(Component):
         y["power_rate_max_wps"] = self.mpc.rate_map(self.prev_cmd)
         y["battery_power_plan_w"] = float(u["demand_power_w"]) - cmd
         y["fallback_count"] = float(self.fallback_count)
-        y["solve_time_us"] = dt_us
         y["battery_slack_w"] = float(last.battery_slack_w)
         y["soc_slack_pct"] = float(last.soc_slack_pct)
 
@@ -214,9 +216,12 @@ class MPCSupervisor(Component):
         cmd = self.mpc.step(u["soc_pct"], u["demand_power_w"], self.prev_cmd, u["power_max_w"],
                             u["power_min_w"], u["ocv_v"], u["rs_ohm"])
         dt_us = (time.perf_counter() - t0) * 1e6
+        self.last_call_us = dt_us
+        if self.call_times_us is not None:
+            self.call_times_us.append(dt_us)
         self.fallback_count = self.mpc.fallback_count
         self.plan = None if self.mpc._plan_kw is None else self.mpc._plan_kw.copy()
-        self._write(cmd, dt_us)
+        self._write(cmd)
         self.prev_cmd = float(cmd)
 
     def get_state(self):

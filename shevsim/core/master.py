@@ -27,7 +27,9 @@ from __future__ import annotations
 
 import math
 import time as _time
+from array import array
 from dataclasses import dataclass, field
+from operator import itemgetter
 from typing import Any, Iterable, Sequence
 
 import numpy as np
@@ -151,7 +153,7 @@ class Master:
         self.step_index = 0
         self.time_s = 0.0
         self.t0 = 0.0
-        self._rows: list[list[float]] = []
+        self._buf = array("d")           # recorded rows, flat (row-major, len(_signal_names) per row)
         self._times: list[float] = []
         self._forced: dict[tuple[str, str], float] = {}
         self._faults_done = 0
@@ -252,13 +254,21 @@ class Master:
         self._signal_names: list[str] = []
         self._signal_units: list[str] = []
         self._signal_src: list[tuple[dict, str]] = []
+        # recording: one C-level getter per component returning its outputs as a tuple
+        self._rec: list[tuple[dict, Any]] = []
         for n in self.order:
             comp = self.components[n]
+            keys = []
             for v in self._vars[n].values():
                 if v.causality == "output":
                     self._signal_names.append(f"{n}.{v.name}")
                     self._signal_units.append(v.unit)
                     self._signal_src.append((comp.y, v.name))
+                    keys.append(v.name)
+            if len(keys) > 1:
+                self._rec.append((comp.y, itemgetter(*keys)))
+            elif keys:
+                self._rec.append((comp.y, lambda y, _k=keys[0]: (y[_k],)))
         self._sched = [(self.components[n], self._links[n], self.step_multiples[n]) for n in self.order]
 
     # ----------------------------------------------------------------- running
@@ -275,7 +285,7 @@ class Master:
                 comp.initialize(self.t0)
             except Exception as exc:
                 raise SimulationError(f"component '{comp.name}' failed to initialise at t={self.t0} s: {exc}") from exc
-        self._rows = []
+        self._buf = array("d")
         self._times = []
         self._record()
         self._initialized = True
@@ -297,23 +307,40 @@ class Master:
             self._faults_done += 1
 
     def _record(self) -> None:
-        row = [y[k] for y, k in self._signal_src]
-        self._times.append(self.time_s)
-        self._rows.append(row)
+        buf = self._buf
+        n0 = len(buf)
+        s = 0.0
         try:
-            s = math.fsum(row)
+            for y, get in self._rec:
+                vals = get(y)
+                buf.extend(vals)
+                s += sum(vals)
         except (TypeError, OverflowError):
-            s = float("nan")
+            del buf[n0:]
+            self._record_checked()
+            return
+        self._times.append(self.time_s)
         if not math.isfinite(s):
-            for (name, val) in zip(self._signal_names, row):
-                try:
-                    ok = math.isfinite(val)
-                except TypeError:
-                    ok = False
-                if not ok:
-                    comp, port = name.split(".", 1)
-                    raise SimulationError(f"component '{comp}' output '{port}' is {val!r} at t={self.time_s:.6g} s "
-                                          f"(step {self.step_index})")
+            self._check_row([y[k] for y, k in self._signal_src])
+
+    def _record_checked(self) -> None:
+        """Slow path of :meth:`_record` for rows with values that are not plain numbers."""
+        row = [y[k] for y, k in self._signal_src]
+        self._check_row(row)
+        self._buf.extend([float(v) for v in row])
+        self._times.append(self.time_s)
+
+    def _check_row(self, row) -> None:
+        """Raise :class:`SimulationError` naming the first non-finite (or non-numeric) output."""
+        for (name, val) in zip(self._signal_names, row):
+            try:
+                ok = math.isfinite(val)
+            except TypeError:
+                ok = False
+            if not ok:
+                comp, port = name.split(".", 1)
+                raise SimulationError(f"component '{comp}' output '{port}' is {val!r} at t={self.time_s:.6g} s "
+                                      f"(step {self.step_index})")
 
     def step(self) -> None:
         """Advance the whole system by one communication step."""
@@ -332,11 +359,18 @@ class Master:
                 if k % m == 0:
                     self._do_step(comp, t, m * h)
         else:
-            for comp, links, m in self._sched:
-                if k % m == 0:
-                    for du, dk, sy, sk in links:
-                        du[dk] = sy[sk]
-                    self._do_step(comp, t, m * h)
+            comp = None
+            try:
+                for comp, links, m in self._sched:
+                    if m == 1 or k % m == 0:
+                        for du, dk, sy, sk in links:
+                            du[dk] = sy[sk]
+                        comp.do_step(t, m * h)
+            except SimulationError:
+                raise
+            except Exception as exc:      # same message as _do_step
+                raise SimulationError(f"component '{comp.name}' failed in do_step at t={t:.6g} s "
+                                      f"(step {self.step_index}): {type(exc).__name__}: {exc}") from exc
         self.step_index = k + 1
         self.time_s = self.t0 + self.step_index * h
         self._record()
@@ -381,7 +415,9 @@ class Master:
         return self.result(termination)
 
     def result(self, termination: str = "completed") -> Result:
-        data = np.array(self._rows, dtype=float) if self._rows else np.zeros((0, len(self._signal_names)))
+        nsig = len(self._signal_names)
+        data = np.frombuffer(self._buf, dtype=np.float64).copy().reshape(-1, nsig) if nsig else \
+            np.zeros((len(self._times), 0))
         signals = {name: data[:, j] for j, name in enumerate(self._signal_names)}
         units = dict(zip(self._signal_names, self._signal_units))
         params = {}
@@ -403,7 +439,7 @@ class Master:
         """Snapshot of the whole system (components, time, recorded length, faults)."""
         return MasterState(self.step_index, self.time_s,
                            {n: c.get_state() for n, c in self.components.items()},
-                           len(self._rows), dict(self._forced), self._faults_done)
+                           len(self._times), dict(self._forced), self._faults_done)
 
     def restore_state(self, s: MasterState) -> None:
         """Return to a snapshot made by :meth:`save_state`; later records are dropped."""
@@ -411,7 +447,7 @@ class Master:
             c.set_state(s.components[n])
         self.step_index = s.step_index
         self.time_s = s.time_s
-        del self._rows[s.n_rows:]
+        del self._buf[s.n_rows * len(self._signal_names):]
         del self._times[s.n_rows:]
         self._forced = dict(s.forced)
         self._faults_done = s.faults_done

@@ -137,75 +137,86 @@ def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_u
     a_up = math.exp(-dt / prm.turbo_lag_s)
     a_dn = math.exp(-dt / prm.fuel_fall_s)
     lhv, c_tr, s_qs = prm.fuel_lhv_j_per_g, prm.transient_soot_mg_per_g, prm.soot_scale_frac
+    tf_up, tf_dn = prm.turbo_lag_s, prm.fuel_fall_s
+    # the maps' plain-function forms (same values as calling the map objects)
+    ool_speed, ool_shaft, tmax, fmax = maps.ool_speed.fn, maps.ool_shaft.fn, maps.tmax.fn, maps.fmax.fn
+    torque, geff, soot_map = maps.torque.fn, maps.geff.fn, maps.soot.fn
+    # the state in locals (written back once; the same arithmetic in the same order)
+    p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd = st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e, st.fuel_cmd
+    fuel_g, fuel_j, eng_loss_j, shaft_j, ke_j = st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j
+    gen_loss_j, elec_j, soot_mg, soot_tr_mg = st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg
     e_el = fuel = soot = 0.0
     for _ in range(n):
         # 1. rate limit
-        dp = target - st.p_lim
-        st.p_lim += r_up if dp > r_up else (-r_dn if dp < -r_dn else dp)
+        dp = target - p_lim
+        p_lim += r_up if dp > r_up else (-r_dn if dp < -r_dn else dp)
         # 2-3. speed set point and speed response
-        w0 = st.w
-        w_set = maps.ool_speed(st.p_lim)
+        w0 = w
+        w_set = ool_speed(p_lim)
         w1 = w_set + (w0 - w_set) * a_w
         if w1 - w0 > dw_max:
             w1 = w0 + dw_max
         elif w0 - w1 > dw_max:
             w1 = w0 - dw_max
         # 4. torque demand
-        tau_ref = maps.ool_shaft(st.p_lim) / w0
-        tl = maps.tmax(w0)
+        tau_ref = ool_shaft(p_lim) / w0
+        tl = tmax(w0)
         if tau_ref > tl:
             tau_ref = tl
         # 5. PI rack with conditional integration
-        e = tau_ref - st.tau_e
-        integ = st.integ + ki * e * dt
+        e = tau_ref - tau_e
+        integ = integ0 + ki * e * dt
         rack = kp * e + integ
         if rack > 1.0:
             rack = 1.0
             if e > 0.0:
-                integ = st.integ
+                integ = integ0
         elif rack < 0.0:
             rack = 0.0
             if e < 0.0:
-                integ = st.integ
-        st.integ, st.rack = integ, rack
+                integ = integ0
+        integ0 = integ
         # 6. fuel command and turbo lag (exact)
-        fl = maps.fmax(w1)
+        fl = fmax(w1)
         m_c = rack * fl
-        m0 = st.m_f
+        m0 = m_f
         if m_c > m0:
-            a, tf = a_up, prm.turbo_lag_s
+            a, tf = a_up, tf_up
         else:
-            a, tf = a_dn, prm.fuel_fall_s
+            a, tf = a_dn, tf_dn
         m1 = m_c + (m0 - m_c) * a
         dm = m_c * dt + (m0 - m_c) * tf * (1.0 - a)          # fuel mass over the sub-step [g]
         # 7. engine torque
-        tau1 = maps.torque(w1, m1)
+        tau1 = torque(w1, m1)
         w_avg = 0.5 * (w0 + w1)
-        tau_avg = 0.5 * (st.tau_e + tau1)
+        tau_avg = 0.5 * (tau_e + tau1)
         w_e = tau_avg * w_avg * dt
         dke = 0.5 * J * (w1 * w1 - w0 * w0)
         w_g = w_e - dke
         tau_g = w_g / (w_avg * dt)
-        eta = maps.geff(w_avg, abs(tau_g))
+        eta = geff(w_avg, abs(tau_g))
         el = w_g * eta if w_g >= 0.0 else w_g / eta
         # 8. soot: quasi-static + transient (deficit of burnt fuel against the rack's command)
-        s = s_qs * maps.soot(w_avg, tau_avg) * dt if tau_avg > 0.0 else 0.0
+        s = s_qs * soot_map(w_avg, tau_avg) * dt if tau_avg > 0.0 else 0.0
         deficit = m_c * dt - dm                              # int (m_c - m_f) dt over the sub-step [g]
         s_tr = c_tr * deficit * deficit / (dt * fl) if deficit > 0.0 else 0.0
         # bookkeeping
-        st.w, st.m_f, st.tau_e, st.fuel_cmd = w1, m1, tau1, m_c
-        st.fuel_g += dm
-        st.fuel_j += dm * lhv
-        st.eng_loss_j += dm * lhv - w_e
-        st.shaft_j += w_g
-        st.ke_j += dke
-        st.gen_loss_j += w_g - el
-        st.elec_j += el
-        st.soot_mg += s + s_tr
-        st.soot_tr_mg += s_tr
+        w, m_f, tau_e, fuel_cmd = w1, m1, tau1, m_c
+        fuel_g += dm
+        fuel_j += dm * lhv
+        eng_loss_j += dm * lhv - w_e
+        shaft_j += w_g
+        ke_j += dke
+        gen_loss_j += w_g - el
+        elec_j += el
+        soot_mg += s + s_tr
+        soot_tr_mg += s_tr
         e_el += el
         fuel += dm
         soot += s + s_tr
+    st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e, st.fuel_cmd = p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd
+    st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j = fuel_g, fuel_j, eng_loss_j, shaft_j, ke_j
+    st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg = gen_loss_j, elec_j, soot_mg, soot_tr_mg
     return e_el, fuel, soot
 
 

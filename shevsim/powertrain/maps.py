@@ -84,9 +84,44 @@ class Curve:
             raise ValueError(f"{name}: extrapolation must be one of {_MODES}")
         self.x, self.y, self.mode, self.name = x, y, extrapolation, name
         self._xl, self._yl = x.tolist(), y.tolist()
+        self.fn = self._scalar_fn()
+
+    def _scalar_fn(self):
+        """A plain function ``fn(x)`` equal to ``self(x)`` (a closure: cheaper to call on hot paths)."""
+        xl, yl, slow = self._xl, self._yl, self._slow
+        x_lo, x_hi = xl[0], xl[-1]
+
+        def fn(x: float) -> float:
+            if x_lo < x < x_hi:
+                i = bisect_right(xl, x) - 1
+                x0 = xl[i]
+                y0 = yl[i]
+                return y0 + (x - x0) / (xl[i + 1] - x0) * (yl[i + 1] - y0)
+            return slow(x)
+        return fn
+
+    def _slow(self, x: float) -> float:
+        i, f = _locate(self._xl, x, self.mode, self.name)
+        return self._yl[i] + f * (self._yl[i + 1] - self._yl[i])
+
+    def __getstate__(self):
+        d = self.__dict__.copy()
+        d.pop("fn", None)
+        return d
+
+    def __setstate__(self, d):
+        self.__dict__.update(d)
+        self.fn = self._scalar_fn()
 
     def __call__(self, x: float) -> float:
-        i, f = _locate(self._xl, x, self.mode, self.name)
+        xl = self._xl
+        if xl[0] < x < xl[-1]:          # interior (hot path): same arithmetic as _locate
+            i = bisect_right(xl, x) - 1
+            x0 = xl[i]
+            yl = self._yl
+            y0 = yl[i]
+            return y0 + (x - x0) / (xl[i + 1] - x0) * (yl[i + 1] - y0)
+        i, f = _locate(xl, x, self.mode, self.name)
         return self._yl[i] + f * (self._yl[i + 1] - self._yl[i])
 
     def eval_array(self, x) -> np.ndarray:
@@ -135,10 +170,52 @@ class Grid2D:
         self.x, self.y, self.z, self.name = x, y, z, name
         self.mode_x, self.mode_y = mx, my
         self._xl, self._yl, self._zl = x.tolist(), y.tolist(), z.tolist()
+        self.fn = self._scalar_fn()
+
+    def _scalar_fn(self):
+        """A plain function ``fn(x, y)`` equal to ``self(x, y)`` (a closure: cheaper on hot paths)."""
+        xl, yl, zl, slow = self._xl, self._yl, self._zl, self.__call__
+        x_lo, x_hi, y_lo, y_hi = xl[0], xl[-1], yl[0], yl[-1]
+
+        def fn(x: float, y: float) -> float:
+            if x_lo < x < x_hi and y_lo < y < y_hi:
+                i = bisect_right(xl, x) - 1
+                x0 = xl[i]
+                fx = (x - x0) / (xl[i + 1] - x0)
+                j = bisect_right(yl, y) - 1
+                y0 = yl[j]
+                fy = (y - y0) / (yl[j + 1] - y0)
+                r0 = zl[i]
+                r1 = zl[i + 1]
+                a = r0[j] + fy * (r0[j + 1] - r0[j])
+                b = r1[j] + fy * (r1[j + 1] - r1[j])
+                return a + fx * (b - a)
+            return slow(x, y)
+        return fn
+
+    def __getstate__(self):
+        d = self.__dict__.copy()
+        d.pop("fn", None)
+        return d
+
+    def __setstate__(self, d):
+        self.__dict__.update(d)
+        self.fn = self._scalar_fn()
 
     def __call__(self, x: float, y: float) -> float:
-        i, fx = _locate(self._xl, x, self.mode_x, self.name)
-        j, fy = _locate(self._yl, y, self.mode_y, self.name)
+        xl, yl = self._xl, self._yl
+        if xl[0] < x < xl[-1]:          # interior (hot path): same arithmetic as _locate
+            i = bisect_right(xl, x) - 1
+            x0 = xl[i]
+            fx = (x - x0) / (xl[i + 1] - x0)
+        else:
+            i, fx = _locate(xl, x, self.mode_x, self.name)
+        if yl[0] < y < yl[-1]:
+            j = bisect_right(yl, y) - 1
+            y0 = yl[j]
+            fy = (y - y0) / (yl[j + 1] - y0)
+        else:
+            j, fy = _locate(yl, y, self.mode_y, self.name)
         r0 = self._zl[i]
         r1 = self._zl[i + 1]
         a = r0[j] + fy * (r0[j + 1] - r0[j])
