@@ -59,6 +59,9 @@ def _atomic(path: Path, write) -> Path:
     os.close(fd)
     try:
         write(tmp)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)          # mkstemp creates 0600; give the usual permissions
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -282,7 +285,7 @@ def dekf_study(out_dir, seed: int = 1, stop_s: float | None = None, settle_s: fl
                soc_offset_pct: float = -10.0, scenario=BASE_SCENARIO) -> dict:
     """Seed Fig. 5.11-5.12 analogue: DEKF tracking of SOC, V1, R_s and heat on the UAC proxy.
 
-    Writes ``dekf_tracking.png``, ``dekf_timeseries.csv`` (1 s samples) and ``dekf_summary.json`` /
+    Writes ``dekf_tracking.png``, ``dekf_heat.png``, ``dekf_timeseries.csv`` (1 s samples) and ``dekf_summary.json`` /
     ``.csv`` into ``out_dir``; returns :func:`dekf_metrics` plus the file paths.
     """
     out = Path(out_dir)
@@ -334,6 +337,27 @@ def dekf_study(out_dir, seed: int = 1, stop_s: float | None = None, settle_s: fl
                     f"heat RMSE {100 * met['heat_rmse_rel_mean']:.1f} % of mean", fontsize=9)
     fig.tight_layout()
     met["figure"] = str(_save_fig(fig, out / "dekf_tracking.png"))
+    # heat generation in detail (seed Fig. 5.12): a 200 s window of the evaluation window + scatter
+    w = t >= met["settle_s"]
+    t0 = float(t[w][0])
+    z = (t >= t0) & (t <= t0 + 200.0)
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4), gridspec_kw={"width_ratios": [2.2, 1]})
+    ax[0].plot(t[z], d["heat_w"][z], "k-", lw=1.0, label="plant (OCV-R-RC-RC, step average)")
+    ax[0].plot(t[z], d["heat_est_w"][z], "C1--", lw=1.0, label="BMS estimate (5.16, OCV-R-RC)")
+    ax[0].set_xlabel("time [s]")
+    ax[0].set_ylabel("heat per cell [W]")
+    ax[0].legend(fontsize=8)
+    ax[1].plot(d["heat_w"][w], d["heat_est_w"][w], ".", ms=1.0, alpha=0.4)
+    hi = float(max(d["heat_w"][w].max(), d["heat_est_w"][w].max()))
+    ax[1].plot([0, hi], [0, hi], "k-", lw=0.8)
+    ax[1].set_xlabel("plant heat [W]")
+    ax[1].set_ylabel("estimate [W]")
+    ax[1].set_title(f"t >= {met['settle_s']:.0f} s: RMSE {100 * met['heat_rmse_rel_mean']:.1f} % of mean, "
+                    f"mean {100 * met['heat_mean_rel_err']:+.1f} %", fontsize=9)
+    for a_ in ax:
+        a_.grid(alpha=0.3)
+    fig.tight_layout()
+    met["figure_heat"] = str(_save_fig(fig, out / "dekf_heat.png"))
     met["timeseries_csv"] = str(out / "dekf_timeseries.csv")
     _write_csv(out / "dekf_summary.csv", pd.DataFrame([{k: v for k, v in met.items() if not isinstance(v, str)}]))
     write_json_atomic(out / "dekf_summary.json", met)
@@ -587,7 +611,8 @@ def main(argv=None) -> int:
     s = run_all(out, seed=a.seed, quick=a.quick, only=only)
     if "dekf" in s:
         d = s["dekf"]
-        print(f"DEKF: SOC |err| < 2 % from {d['soc_time_below_2pct_s']} s; after {d['settle_s']:.0f} s max |SOC err| "
+        tc = d["soc_time_below_2pct_s"]
+        print(f"DEKF: SOC |err| < 2 % from {'never' if tc is None else f'{tc:.1f} s'}; after {d['settle_s']:.0f} s max |SOC err| "
               f"{d['soc_err_max_after_settle_pct']:.2f} %, max |R_s err| {100 * d['rs_rel_err_max_after_settle']:.2f} %, "
               f"heat RMSE {100 * d['heat_rmse_rel_mean']:.2f} % of mean (OCV-R-RC floor "
               f"{100 * d['heat_floor_rel_mean']:.2f} %)")
