@@ -49,7 +49,7 @@ def main(argv=None) -> int:
     ap.add_argument("--generations", type=int, default=50)
     ap.add_argument("--population", type=int, default=30)
     ap.add_argument("--max-cases", type=int, default=1000, help="cap on the exhaustive-search cases")
-    ap.add_argument("--allow-duplicates", action="store_true", help="plain GA (no duplicate elimination)")
+    ap.add_argument("--unique-population", action="store_true", help="GA with duplicate elimination (ga.py)")
     ap.add_argument("--out", default=str(PROJECT_ROOT / "results" / "study_campaign"))
     a = ap.parse_args(argv)
 
@@ -83,7 +83,7 @@ def main(argv=None) -> int:
         trade = run_tradeoff(problem, runner, [30e3, 27.5e3, 25e3, 22.5e3, 20e3, 19.3e3, 17.5e3, 15e3, 12.5e3,
                                                10e3, 7.5e3, 5e3], out / "tradeoff")
         cfg = MapStudyConfig(ga=GAConfig(population=a.population, generations=a.generations, seed=0,
-                                         unique_population=not a.allow_duplicates), max_cases=a.max_cases)
+                                         unique_population=a.unique_population), max_cases=a.max_cases)
         summ = run_powerrate_map(problem, runner, cfg, out / "powerrate_map")
         st = runner.stats
     wall = time.perf_counter() - t0

@@ -18,12 +18,15 @@ generations, crossover probability 0.8, mutation probability 0.01 per gene):
 * mutation: each gene independently, with probability ``mutation_prob``, takes a different level
   drawn uniformly;
 * elitism: the ``elitism`` best solutions of a generation enter the next one unchanged;
-* duplicate elimination (``unique_population``, default on): an offspring identical to a member
-  already in the new population gets extra single-gene mutations until it is new (as pymoo's
-  ``eliminate_duplicates``). With Table A.2's low mutation rate the plain GA collapses onto a few
-  genomes within ~20 generations (on the 6-gene test problem it then misses the optimum for 4 of
-  8 seeds and evaluates ~180 distinct genomes); with elimination it finds it for 15 of 16
-  seed/crossover runs at ~650 distinct evaluations. Turn it off to trade quality for evaluations.
+* duplicate elimination (``unique_population``, off by default = the seed's plain GA): an
+  offspring identical to a member already in the new population gets extra single-gene mutations
+  until it is new (as pymoo's ``eliminate_duplicates``). With Table A.2's low mutation rate the
+  plain GA collapses onto a few genomes within ~20 generations: on the 6-gene test problem it
+  misses the optimum for 4 of 8 seeds (~180 distinct evaluations), and on the 8 x 8 synthetic map
+  problem GA + narrowed ES ends 0.2-0.3 soot-% points short (~250-450 evaluations). With
+  elimination the GA alone finds the test optimum for 15 of 16 seed/crossover runs and GA + ES
+  the synthetic optimum, at ~2.5x the distinct evaluations (~650-1000). The plain GA is the
+  default because the full campaign must fit ~15 minutes on 2 cores.
 
 Evaluation is *batched*: each generation's new genomes (duplicates and genomes seen in earlier
 generations removed) are passed together to ``evaluate_batch``, so a parallel runner can spread
@@ -52,7 +55,7 @@ class GAConfig:
     tournament_size: int = 2
     elitism: int = 2
     crossover: str = "single"       # or "uniform"
-    unique_population: bool = True  # re-mutate an offspring that duplicates a member of the new population
+    unique_population: bool = False  # re-mutate an offspring that duplicates a member of the new population
     seed: int = 0
 
     def check(self) -> None:
