@@ -181,8 +181,9 @@ class StudyRunner:
                 key = item.key()
             else:
                 self.stats.not_cached += 1
-                log.warning("a worker runs different shevsim sources than this process: its result is used but "
-                            "not cached; restart the study for consistent results")
+                if self.stats.not_cached == 1:
+                    log.warning("a worker runs different shevsim sources than this process: its results are used "
+                                "but not cached; restart the study for consistent results")
                 key = None
         if key is not None and self.cache is not None:
             self.cache.put(key, item.inputs(), out, wall)
