@@ -31,7 +31,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from ..core.errors import ShevsimError
-from .evaluate import failure_reason, is_failed
+from .evaluate import code_version, failure_reason, is_failed, shevsim_version
 from .ga import GAConfig, exhaustive_genomes, narrow_bounds, rank_key, run_ga, space_size
 from .problem import DEFAULT_EDGES_W, DEFAULT_LEVELS_WPS, FE_KEY, SOOT_KEY, check_map
 
@@ -172,11 +172,14 @@ def run_powerrate_map(problem, runner, cfg: MapStudyConfig | None = None, out_di
     busy = st["busy_s"] - stats0["busy_s"]
     perf = {"wall_s": wall, "new_evaluations": new, "cached_evaluations": st["cached"] - stats0["cached"],
             "evals_per_s": new / run_wall if run_wall > 0 else math.nan, "slots": st["slots"],
-            "parallel_efficiency": busy / (st["slots"] * run_wall) if run_wall > 0 else math.nan}
+            "parallel_efficiency": busy / (st["slots"] * run_wall) if run_wall > 0 else math.nan,
+            "code_changed_mid_study": st["code_changed_mid_study"],
+            "not_cached_code_mismatch": st["not_cached_code_mismatch"]}
     log(f"{new} new evaluations in {wall:.1f} s: {perf['evals_per_s']:.3g} evaluations/s, "
         f"parallel efficiency {perf['parallel_efficiency']:.2f} on {st['slots']} slot(s)")
     summary = {
         "study": "powerrate_map", "problem": problem.describe(), "config": _cfg_dict(cfg),
+        "shevsim_version": shevsim_version(), "code_sha256": code_version(),
         "baseline": {"fuel_economy_kmpl": obj.fe0, "soot_g_per_km": obj.soot0, "alpha_star_kmpl": obj.alpha_star},
         "best_map": {"edges_w": list(edges), **best},
         "best_constant": best_const,

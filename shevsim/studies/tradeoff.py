@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from ..core.errors import ShevsimError
-from .evaluate import failure_reason, is_failed
+from .evaluate import code_version, failure_reason, is_failed, shevsim_version
 from .problem import DEFAULT_EDGES_W, FE_KEY, SOOT_KEY
 
 
@@ -47,6 +47,7 @@ def run_tradeoff(problem, runner, rates_wps, out_dir: str | Path | None = None, 
     best = min(ok, key=lambda row: (row["soot_g_per_km"], -row["rate_wps"])) if ok else None
     wall = time.perf_counter() - t0
     summary = {"study": "tradeoff", "problem": problem.describe(), "edges_w": list(edges_w),
+               "shevsim_version": shevsim_version(), "code_sha256": code_version(),
                "baseline": {"fuel_economy_kmpl": fe0, "soot_g_per_km": s0},
                "fe_loss_max_frac": fe_loss_max_frac, "best_within_loss": best, "rows": rows,
                "performance": {"wall_s": wall, **runner.stats.as_dict()}}
