@@ -19,7 +19,8 @@ Steps (:func:`run_workflow`):
    differences / sqrt 2), correlation with the model's candidate regressors and with measured columns the
    model does not use.
 4. **Test** every candidate effect: fit model + effect (declared + effect parameters, multi-start where
-   the effect declares starts) on the training part; evaluate held-out RMSE per channel, the combined
+   the effect declares starts; at most ``CAND_NFEV`` = 60 function evaluations per candidate fit, the
+   final refit runs to convergence) on the training part; evaluate held-out RMSE per channel, the combined
    held-out score ``sqrt(mean_c (rmse_c / rmse_c,baseline)^2)`` (baseline = 1.0) and an
    autocorrelation-corrected BIC on the training residuals:
    ``BIC = sum_c n_eff,c ln(SSE_c / n_c) + k ln(n_eff)``, ``n_eff,c = n_c (1 - rho1_c) / (1 + rho1_c)``
@@ -66,6 +67,7 @@ MAX_FIT_SAMPLES = 4000
 N_STARTS_KEPT = 2
 PRE_NFEV = 8
 PAIR_TOP = 3
+CAND_NFEV = 60
 
 
 # ------------------------------------------------------------------------------------------ helpers
@@ -78,6 +80,9 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)   # mkstemp creates 0600; give the usual permissions
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -356,7 +361,7 @@ def run_workflow(model_name: str, data, known: dict | None = None, holdout: floa
         current.bic = _bic(current, rho)
         cur_score = _score(current, ref)
         def assess(effs, start):
-            fr = fitter.fit(tuple(selected) + tuple(effs), start=start)
+            fr = fitter.fit(tuple(selected) + tuple(effs), start=start, max_nfev=CAND_NFEV)
             fr.score = _score(fr, ref)
             fr.bic = _bic(fr, rho)
             fr.dbic = fr.bic - current.bic

@@ -343,4 +343,4 @@ def test_real_panasonic_us06(tmp_path, name):
                 assert c["passed"] and c["gain"] >= MIN_GAIN
     for ch, b in rep["rmse_before"].items():
         assert rep["rmse_after"][ch]["holdout"] <= 1.1 * b["holdout"]
-    assert rep["elapsed_s"] < 120.0
+    assert rep["elapsed_s"] < 300.0   # ~40-50 s here with the machine shared; generous bound against load
