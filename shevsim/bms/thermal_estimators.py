@@ -36,6 +36,15 @@ import numpy as np
 from shevsim.battery.thermal import ThermalParams
 from shevsim.core.errors import SimulationError
 
+try:  # numba is a dependency; without it the Python reference path runs
+    from numba import njit as _njit
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover
+    HAVE_NUMBA = False
+
+    def _njit(*args, **kwargs):
+        return lambda f: f
+
 __all__ = ["ThermalEstimate", "ThermalKF", "ThermalDKF", "ThermalJEKF", "TwoStateDiscretiser", "tuning",
            "run_stage", "table_3_3"]
 
@@ -199,6 +208,177 @@ class TwoStateDiscretiser:
         return (-24.0 * k * R / den2, -7.5 * R * R * k / den2, 24.0 * k * R / den2)
 
 
+# ---------------------------------------------------------------------------------
+# compiled DKF step (the same arithmetic, in the same order, as ThermalDKF._update_py with
+# the closed-form ZOH of TwoStateDiscretiser._zoh: bit-identical results, see
+# tests/unit/test_thermal_estimators.py::test_dkf_compiled_step_is_bit_identical)
+# ---------------------------------------------------------------------------------
+@_njit(cache=True, inline="always")
+def _zoh_nb(h, R, dt, bq, c48, c15, c320, c120, k24, k4, rr):  # pragma: no cover - compiled
+    den = k24 + R * h
+    a00 = c48 * h / (R * den)
+    a01 = c15 * h / den
+    a10 = c320 * h / (rr * den)
+    a11 = c120 * (k4 + R * h) / (rr * den)
+    tr = a00 + a11
+    det = a00 * a11 - a01 * a10
+    disc = 0.25 * tr * tr - det
+    sq = math.sqrt(disc if disc > 0.0 else 0.0)
+    l1 = 0.5 * tr + sq
+    l2 = 0.5 * tr - sq
+    l1dt = l1 * dt
+    l2dt = l2 * dt
+    e1 = math.exp(l1dt)
+    e2 = math.exp(l2dt)
+    f1 = (math.expm1(l1dt) / l1) if abs(l1dt) > 1e-12 else dt * (1.0 + 0.5 * l1dt)
+    f2 = (math.expm1(l2dt) / l2) if abs(l2dt) > 1e-12 else dt * (1.0 + 0.5 * l2dt)
+    dl = l1 - l2
+    if dl > 1e-12 * (abs(l1) + abs(l2) + 1e-300):
+        c1 = (e1 - e2) / dl
+        c0 = (l1 * e2 - l2 * e1) / dl
+        d1 = (f1 - f2) / dl
+        d0 = (l1 * f2 - l2 * f1) / dl
+    else:
+        c1 = dt * e1
+        c0 = e1 - l1 * c1
+        d1 = (dt * e1 - f1) / l1 if l1 != 0.0 else 0.5 * dt * dt
+        d0 = f1 - l1 * d1
+    g00 = d0 + d1 * a00
+    g01 = d1 * a01
+    g10 = d1 * a10
+    g11 = d0 + d1 * a11
+    return (c0 + c1 * a00, c1 * a01, c1 * a10, c0 + c1 * a11,
+            g00 * bq, -(g00 * a00 + g01 * a10),
+            g10 * bq, -(g10 * a00 + g11 * a10))
+
+
+@_njit(cache=True)
+def _dkf_step_nb(st, c, y, ta, q_w):  # pragma: no cover - compiled
+    """One ThermalDKF.update on ``st = [x0, x1, p00, p01, p11, h, ph, dx0, dx1, has_u, uq, ut]`` (in
+    place) with ``c = [R, k, dt, bq, c48, c15, c320, c120, k24, k4, rr, q, r, qh, h_min, h_max, total, 2.0]``;
+    returns ``(T_mean, gamma, T_core, T_surface, h)`` of the a-posteriori estimate."""
+    R = c[0]
+    k = c[1]
+    dt = c[2]
+    bq = c[3]
+    c48 = c[4]
+    c15 = c[5]
+    c320 = c[6]
+    c120 = c[7]
+    k24 = c[8]
+    k4 = c[9]
+    rr = c[10]
+    total = c[16] > 0.5
+    x0 = st[0]
+    x1 = st[1]
+    p00 = st[2]
+    p01 = st[3]
+    p11 = st[4]
+    h = st[5]
+    ph = st[6] + c[13]
+    dx0 = st[7]
+    dx1 = st[8]
+    if st[9] > 0.5:
+        uq = st[10]
+        ut = st[11]
+        xp0 = x0
+        xp1 = x1
+        a00, a01, a10, a11, b00, b01, b10, b11 = _zoh_nb(h, R, dt, bq, c48, c15, c320, c120, k24, k4, rr)
+        x0 = a00 * xp0 + a01 * xp1 + b00 * uq + b01 * ut
+        x1 = a10 * xp0 + a11 * xp1 + b10 * uq + b11 * ut
+        m00 = a00 * p00 + a01 * p01
+        m01 = a00 * p01 + a01 * p11
+        m10 = a10 * p00 + a11 * p01
+        m11 = a10 * p01 + a11 * p11
+        p00 = m00 * a00 + m01 * a01 + c[11]
+        p01 = m00 * a10 + m01 * a11
+        p11 = m10 * a10 + m11 * a11 + c[11]
+        if total:
+            dh = 1e-5 * (abs(h) + 1.0)
+            hp = _zoh_nb(h + dh, R, dt, bq, c48, c15, c320, c120, k24, k4, rr)
+            hm = _zoh_nb(h - dh if h - dh > 0.0 else 0.0, R, dt, bq, c48, c15, c320, c120, k24, k4, rr)
+            span = dh + (dh if h - dh > 0.0 else h)
+            da0 = (hp[0] - hm[0]) / span
+            da1 = (hp[1] - hm[1]) / span
+            da2 = (hp[2] - hm[2]) / span
+            da3 = (hp[3] - hm[3]) / span
+            da4 = (hp[4] - hm[4]) / span
+            da5 = (hp[5] - hm[5]) / span
+            da6 = (hp[6] - hm[6]) / span
+            da7 = (hp[7] - hm[7]) / span
+            g0 = da0 * xp0 + da1 * xp1 + da4 * uq + da5 * ut
+            g1 = da2 * xp0 + da3 * xp1 + da6 * uq + da7 * ut
+            d0 = dx0
+            d1 = dx1
+            dx0 = g0 + a00 * d0 + a01 * d1
+            dx1 = g1 + a10 * d0 + a11 * d1
+    # out(h), dout(h)
+    den = 24.0 * k + R * h
+    cs0 = 24.0 * k / den
+    cs1 = 7.5 * R * k / den
+    ds = R * h / den
+    # CPython evaluates ``x ** 2`` with libm pow (not always x * x to the last bit): call pow with a
+    # run-time exponent (c[17] = 2.0) so that LLVM cannot rewrite it as a multiplication
+    den2 = math.pow(24.0 * k + R * h, c[17])
+    dcs0 = -24.0 * k * R / den2
+    dcs1 = -7.5 * R * R * k / den2
+    dds = 24.0 * k * R / den2
+    e = y - (cs0 * x0 + cs1 * x1 + ds * ta)
+    ch = dcs0 * x0 + dcs1 * x1 + dds * ta
+    if total:
+        ch += cs0 * dx0 + cs1 * dx1
+    # state measurement update
+    v0 = p00 * cs0 + p01 * cs1
+    v1 = p01 * cs0 + p11 * cs1
+    s = cs0 * v0 + cs1 * v1 + c[12]
+    k0 = v0 / s
+    k1 = v1 / s
+    x0 += k0 * e
+    x1 += k1 * e
+    p00 = p00 - k0 * v0
+    p01 = p01 - k0 * v1
+    p11 = p11 - k1 * v1
+    if total:
+        dx0 -= k0 * ch
+        dx1 -= k1 * ch
+    # parameter measurement update
+    s = ch * ch * ph + c[12]
+    lg = ph * ch / s
+    hn = h + lg * e
+    ph = (1.0 - lg * ch) * ph
+    h = c[14] if hn < c[14] else (c[15] if hn > c[15] else hn)
+    st[0] = x0
+    st[1] = x1
+    st[2] = p00
+    st[3] = p01
+    st[4] = p11
+    st[5] = h
+    st[6] = ph
+    st[7] = dx0
+    st[8] = dx1
+    st[9] = 1.0
+    st[10] = q_w
+    st[11] = ta
+    # estimate at the new h: out(h)
+    den = 24.0 * k + R * h
+    cs0 = 24.0 * k / den
+    cs1 = 7.5 * R * k / den
+    ds = R * h / den
+    cc0 = (24.0 * k - 3.0 * R * h) / den
+    cc1 = -(120.0 * R * k + 15.0 * R * R * h) / (8.0 * den)
+    dc = 4.0 * R * h / den
+    return x0, x1, cc0 * x0 + cc1 * x1 + dc * ta, cs0 * x0 + cs1 * x1 + ds * ta, h
+
+
+def _st_property(i: int, doc: str):
+    def get(self):
+        return float(self._st[i])
+
+    def set_(self, v):
+        self._st[i] = v
+    return property(get, set_, doc=doc)
+
+
 class _Base:
     def __init__(self, params, dt_s, h0, x0_c, discretisation, sigma_c, beta1, p0, h_min, h_max):
         self.params = params if params is not None else ThermalParams()
@@ -311,18 +491,59 @@ class ThermalDKF(_Base):
     ``total_derivative`` (see module docstring).
     """
 
+    # the filter state lives in one float array (the compiled step updates it in place); the
+    # attributes below read and write it
+    x0 = _st_property(0, "a-posteriori T_mean [degC]")
+    x1 = _st_property(1, "a-posteriori gamma [K/m]")
+    p00 = _st_property(2, "state covariance")
+    p01 = _st_property(3, "state covariance")
+    p11 = _st_property(4, "state covariance")
+    h = _st_property(5, "h estimate [W/m^2/K]")
+    ph = _st_property(6, "h variance")
+    dx0 = _st_property(7, "d x0^+ / d h")
+    dx1 = _st_property(8, "d x1^+ / d h")
+
+    @property
+    def _u(self):
+        """(q_w, t_amb_c) of the previous sample, None before the first update."""
+        st = self._st
+        return (float(st[10]), float(st[11])) if st[9] > 0.5 else None
+
+    @_u.setter
+    def _u(self, v):
+        st = self._st
+        if v is None:
+            st[9] = 0.0
+        else:
+            st[9], st[10], st[11] = 1.0, v[0], v[1]
+
     def __init__(self, params: ThermalParams | None = None, h0_w_m2k: float = 56.2, dt_s: float = 1.0,
                  x0_c=(30.0, 0.0), sigma_c: float = 0.05, beta1: float = 5e-4, beta2: float = 7e-3,
                  p0=(1.0, 1.0), s0: float = 0.05, discretisation: str = "zoh", h_min: float = 0.5,
-                 h_max: float = 1000.0, total_derivative: bool = True):
+                 h_max: float = 1000.0, total_derivative: bool = True, compiled: bool = True):
+        self._st = np.zeros(12)
         super().__init__(params, dt_s, h0_w_m2k, x0_c, discretisation, sigma_c, beta1, p0, h_min, h_max)
         self.ph = float(s0)
         self.qh = float(beta2) ** 2
         self.total = bool(total_derivative)
         self.dx0 = 0.0   # d x^+ / d h
         self.dx1 = 0.0
+        # compiled step (numba, exact ZOH only): same arithmetic as _update_py, bit-identical
+        self.compiled = bool(compiled and HAVE_NUMBA and discretisation == "zoh")
+        d = self.disc
+        self._c = np.array((d._R, d._k, d.dt, d._bq) + d._consts
+                           + (self.q, self.r, self.qh, self.h_min, self.h_max, 1.0 if self.total else 0.0, 2.0))
 
     def update(self, t_surface_meas_c: float, t_amb_c: float, q_w: float) -> ThermalEstimate:
+        if self.compiled:
+            if not (math.isfinite(t_surface_meas_c) and math.isfinite(t_amb_c) and math.isfinite(q_w)):
+                self._check(t_surface_meas_c, t_amb_c, q_w)
+            return ThermalEstimate(*_dkf_step_nb(self._st, self._c, float(t_surface_meas_c), float(t_amb_c),
+                                                 float(q_w)))
+        return self._update_py(t_surface_meas_c, t_amb_c, q_w)
+
+    def _update_py(self, t_surface_meas_c: float, t_amb_c: float, q_w: float) -> ThermalEstimate:
+        """The reference (Python) step; :meth:`update` runs the same arithmetic compiled."""
         self._check(t_surface_meas_c, t_amb_c, q_w)
         h = self.h
         # parameter time update (3.11)

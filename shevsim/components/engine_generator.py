@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.engine import EG_DIR, EngineGenMaps, advance, steady_state
+from shevsim.powertrain.engine import EG_DIR, CompiledAdvance, EngineGenMaps, advance, steady_state
 
 
 @dataclass(frozen=True)
@@ -121,13 +121,16 @@ class EngineGenerator(Component):
         out("elec_energy_j", "J", 0.0, "cumulative electrical energy delivered"),
         out("shaft_kinetic_energy_j", "J", 0.0, "change of the shaft kinetic energy since t0"),
     )
-    _static = ("name", "params", "maps")
+    _static = ("name", "params", "maps", "_advance")
 
-    def __init__(self, name: str = "engine_generator", params: EngineGeneratorParams | None = None):
+    def __init__(self, name: str = "engine_generator", params: EngineGeneratorParams | None = None,
+                 compiled: bool = True):
         super().__init__(name, params)
         p = self.params
         self.maps = EngineGenMaps(p.fuel_map_file, p.torque_map_file, p.max_torque_file, p.soot_map_file,
                                   p.generator_eff_file, p.generator_max_torque_file, p.ool_file)
+        # compiled advance (numba; same arithmetic, bit-identical) unless compiled=False or unavailable
+        self._advance = CompiledAdvance.make(self.maps, p) if compiled else None
 
     def initialize(self, t0: float) -> None:
         self.st = steady_state(self.maps, self.u["power_cmd_w"])
@@ -158,5 +161,8 @@ class EngineGenerator(Component):
         pc, rate = self.u["power_cmd_w"], self.u["power_rate_max_wps"]
         if pc != pc or rate != rate:
             raise SimulationError(f"{self.name}: NaN input at t={t:g} s (power_cmd_w={pc}, power_rate_max_wps={rate})")
-        e_el, fuel, soot = advance(self.maps, self.params, self.st, pc, rate, h)
+        if self._advance is not None:
+            e_el, fuel, soot = self._advance(self.st, pc, rate, h)
+        else:
+            e_el, fuel, soot = advance(self.maps, self.params, self.st, pc, rate, h)
         self._write(e_el / h, fuel / h, soot / h)

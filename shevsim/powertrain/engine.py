@@ -223,3 +223,229 @@ def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_u
 def generator_torque_limit(maps: EngineGenMaps, w: float) -> float:
     """Max generator shaft torque at engine speed ``w`` [N m] (for checks and plots)."""
     return maps.gmax(w)
+
+
+# ---------------------------------------------------------------------------------------------
+# compiled advance: the arithmetic of :func:`advance` (and of the maps' clamped bilinear lookups) in
+# the same order, bit-identical; used by the engine_generator component on its hot path
+# ---------------------------------------------------------------------------------------------
+try:  # numba is a dependency; without it the Python path runs
+    from numba import njit as _njit
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover
+    HAVE_NUMBA = False
+
+    def _njit(*args, **kwargs):
+        return lambda f: f
+
+_PRM_FIELDS = ("max_substep_s", "power_rate_down_max_wps", "shaft_inertia_kg_m2", "rack_kp_per_nm",
+               "rack_ki_per_nm_s", "speed_time_constant_s", "speed_accel_max_radps2", "turbo_lag_s",
+               "fuel_fall_s", "fuel_lhv_j_per_g", "transient_soot_mg_per_g", "soot_scale_frac")
+
+
+@_njit(cache=True, inline="always")
+def _bisect_right(d, o, n, x):  # pragma: no cover - compiled
+    lo = 0
+    hi = n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if x < d[o + mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@_njit(cache=True, inline="always")
+def _curve_nb(d, o, n, x):  # pragma: no cover - compiled
+    """Clamped curve at ``d[o:o+n]`` (x) / ``d[o+n:o+2n]`` (y), as ``Curve.__call__``; NaN for NaN x."""
+    if x != x:
+        return x
+    if x <= d[o]:
+        i = 0
+        f = 0.0
+    elif x >= d[o + n - 1]:
+        i = n - 2
+        f = 1.0
+    else:
+        i = _bisect_right(d, o, n, x) - 1
+        x0 = d[o + i]
+        f = (x - x0) / (d[o + i + 1] - x0)
+    y0 = d[o + n + i]
+    return y0 + f * (d[o + n + i + 1] - y0)
+
+
+@_njit(cache=True, inline="always")
+def _grid_nb(d, o, nx, ny, x, y):  # pragma: no cover - compiled
+    """Clamped bilinear map: axes ``d[o:o+nx]``, ``d[o+nx:o+nx+ny]``, values row-major after them."""
+    if x != x or y != y:
+        return x + y
+    if x <= d[o]:
+        i = 0
+        fx = 0.0
+    elif x >= d[o + nx - 1]:
+        i = nx - 2
+        fx = 1.0
+    else:
+        i = _bisect_right(d, o, nx, x) - 1
+        x0 = d[o + i]
+        fx = (x - x0) / (d[o + i + 1] - x0)
+    oy = o + nx
+    if y <= d[oy]:
+        j = 0
+        fy = 0.0
+    elif y >= d[oy + ny - 1]:
+        j = ny - 2
+        fy = 1.0
+    else:
+        j = _bisect_right(d, oy, ny, y) - 1
+        y0 = d[oy + j]
+        fy = (y - y0) / (d[oy + j + 1] - y0)
+    oz = oy + ny
+    r0 = oz + i * ny
+    r1 = r0 + ny
+    a = d[r0 + j] + fy * (d[r0 + j + 1] - d[r0 + j])
+    b = d[r1 + j] + fy * (d[r1 + j + 1] - d[r1 + j])
+    return a + fx * (b - a)
+
+
+@_njit(cache=True)
+def _advance_nb(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g, fuel_j, eng_loss_j,
+                shaft_j, ke_j, gen_loss_j, elec_j, soot_mg, soot_tr_mg, p_cmd_w, rate_up_wps, h):  # pragma: no cover
+    n = max(1, math.ceil(h / c[0] - 1e-9))
+    dt = h / n
+    target = min(max(p_cmd_w, 0.0), p_max)
+    r_up = max(rate_up_wps, 0.0) * dt
+    r_dn = c[1] * dt
+    J = c[2]
+    kp = c[3]
+    ki = c[4]
+    a_w = math.exp(-dt / c[5])
+    dw_max = c[6] * dt
+    tf_up = c[7]
+    tf_dn = c[8]
+    a_up = math.exp(-dt / tf_up)
+    a_dn = math.exp(-dt / tf_dn)
+    lhv = c[9]
+    c_tr = c[10]
+    s_qs = c[11]
+    e_el = 0.0
+    fuel = 0.0
+    soot = 0.0
+    for _ in range(n):
+        dp = target - p_lim
+        p_lim += r_up if dp > r_up else (-r_dn if dp < -r_dn else dp)
+        w0 = w
+        w_set = _curve_nb(md, mi[0], mi[1], p_lim)
+        w1 = w_set + (w0 - w_set) * a_w
+        if w1 - w0 > dw_max:
+            w1 = w0 + dw_max
+        elif w0 - w1 > dw_max:
+            w1 = w0 - dw_max
+        tau_ref = _curve_nb(md, mi[2], mi[3], p_lim) / w0
+        tl = _curve_nb(md, mi[4], mi[5], w0)
+        if tau_ref > tl:
+            tau_ref = tl
+        e = tau_ref - tau_e
+        integ = integ0 + ki * e * dt
+        rack = kp * e + integ
+        if rack > 1.0:
+            rack = 1.0
+            if e > 0.0:
+                integ = integ0
+        elif rack < 0.0:
+            rack = 0.0
+            if e < 0.0:
+                integ = integ0
+        integ0 = integ
+        fl = _curve_nb(md, mi[6], mi[7], w1)
+        m_c = rack * fl
+        m0 = m_f
+        if m_c > m0:
+            a = a_up
+            tf = tf_up
+        else:
+            a = a_dn
+            tf = tf_dn
+        m1 = m_c + (m0 - m_c) * a
+        dm = m_c * dt + (m0 - m_c) * tf * (1.0 - a)
+        tau1 = _grid_nb(md, mi[8], mi[9], mi[10], w1, m1)
+        w_avg = 0.5 * (w0 + w1)
+        tau_avg = 0.5 * (tau_e + tau1)
+        w_e = tau_avg * w_avg * dt
+        dke = 0.5 * J * (w1 * w1 - w0 * w0)
+        w_g = w_e - dke
+        tau_g = w_g / (w_avg * dt)
+        eta = _grid_nb(md, mi[11], mi[12], mi[13], w_avg, abs(tau_g))
+        el = w_g * eta if w_g >= 0.0 else w_g / eta
+        s = s_qs * _grid_nb(md, mi[14], mi[15], mi[16], w_avg, tau_avg) * dt if tau_avg > 0.0 else 0.0
+        deficit = m_c * dt - dm
+        s_tr = c_tr * deficit * deficit / (dt * fl) if deficit > 0.0 else 0.0
+        w = w1
+        m_f = m1
+        tau_e = tau1
+        fuel_cmd = m_c
+        fuel_g += dm
+        fuel_j += dm * lhv
+        eng_loss_j += dm * lhv - w_e
+        shaft_j += w_g
+        ke_j += dke
+        gen_loss_j += w_g - el
+        elec_j += el
+        soot_mg += s + s_tr
+        soot_tr_mg += s_tr
+        e_el += el
+        fuel += dm
+        soot += s + s_tr
+    return (p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g, fuel_j, eng_loss_j, shaft_j, ke_j, gen_loss_j,
+            elec_j, soot_mg, soot_tr_mg, e_el, fuel, soot)
+
+
+class CompiledAdvance:
+    """:func:`advance` compiled for one (maps, parameters) pair; ``None`` from :meth:`make` when the maps
+    use an extrapolation other than ``clamp`` (the compiled lookups implement only that) or numba is
+    missing.  ``__call__(st, p_cmd_w, rate_up_wps, h)`` has the semantics of ``advance`` (a non-finite
+    value met inside is re-run through the Python path, which raises the maps' errors)."""
+
+    _STATE = ("p_lim", "w", "integ", "rack", "m_f", "tau_e", "fuel_cmd", "fuel_g", "fuel_j", "eng_loss_j",
+              "shaft_j", "ke_j", "gen_loss_j", "elec_j", "soot_mg", "soot_tr_mg")
+
+    def __init__(self, maps: EngineGenMaps, prm):
+        import numpy as np
+        self.maps, self.prm = maps, prm
+        chunks, mi, off = [], [], 0
+        for cv in (maps.ool_speed, maps.ool_shaft, maps.tmax, maps.fmax):
+            chunks += [cv.x, cv.y]
+            mi += [off, cv.x.size]
+            off += 2 * cv.x.size
+        for g in (maps.torque, maps.geff, maps.soot):
+            chunks += [g.x, g.y, g.z.ravel()]
+            mi += [off, g.x.size, g.y.size]
+            off += g.x.size + g.y.size + g.z.size
+        self.md = np.ascontiguousarray(np.concatenate(chunks), dtype=np.float64)
+        self.mi = np.array(mi, dtype=np.int64)
+        self.c = np.array([float(getattr(prm, k)) for k in _PRM_FIELDS])
+        self.p_max = float(maps.p_max_w)
+
+    @classmethod
+    def make(cls, maps: EngineGenMaps, prm):
+        if not HAVE_NUMBA:
+            return None
+        curves = (maps.ool_speed, maps.ool_shaft, maps.tmax, maps.fmax)
+        grids = (maps.torque, maps.geff, maps.soot)
+        if any(cv.mode != "clamp" for cv in curves) or any(g.mode_x != "clamp" or g.mode_y != "clamp"
+                                                            for g in grids):
+            return None
+        return cls(maps, prm)
+
+    def __call__(self, st: EngineGenState, p_cmd_w: float, rate_up_wps: float, h: float):
+        r = _advance_nb(self.md, self.mi, self.c, self.p_max, st.p_lim, st.w, st.integ, st.rack, st.m_f,
+                        st.tau_e, st.fuel_cmd, st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j,
+                        st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg, float(p_cmd_w), float(rate_up_wps),
+                        float(h))
+        if not (math.isfinite(r[16]) and math.isfinite(r[17]) and math.isfinite(r[18])
+                and math.isfinite(r[1]) and math.isfinite(r[5])):
+            return advance(self.maps, self.prm, st, p_cmd_w, rate_up_wps, h)   # raises the maps' errors
+        (st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e, st.fuel_cmd, st.fuel_g, st.fuel_j, st.eng_loss_j,
+         st.shaft_j, st.ke_j, st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg) = r[:16]
+        return r[16], r[17], r[18]
