@@ -233,6 +233,28 @@ class CellTables:
         """Delta S = F dU_oc/dT [J/mol/K]."""
         return self._ds(soc)
 
+    def packed(self):
+        """All tables in one float array plus int offsets, for compiled lookups.
+
+        Layout (``idx``): ``[o_ocv, n_ocv, o_ds, n_ds, o_dch, ns_dch, nt_dch, o_chg, ns_chg, nt_chg, nq]``;
+        a 1-D table at ``o`` holds ``xs (n), ys (n), slopes (n-1), cum (n)``; an ECM grid at ``o`` holds
+        ``socs (ns), temps (nt), vals (nt x ns x nq)``.
+        """
+        import numpy as np
+        data: list[float] = []
+        idx: list[int] = []
+        for t in (self._ocv, self._ds):
+            idx += [len(data), len(t.xs)]
+            data += list(t.xs) + list(t.ys) + list(t.slopes) + list(t.cum)
+        nq = self._dch.nq
+        for g in (self._dch, self._chg):
+            if g.nq != nq:
+                raise DataError("charge and discharge ECM tables must have the same columns")
+            idx += [len(data), len(g.socs), len(g.temps)]
+            data += list(g.socs) + list(g.temps) + [v for row in g.vals for cell in row for v in cell]
+        idx.append(nq)
+        return np.array(data, dtype=np.float64), np.array(idx, dtype=np.int64)
+
 
 _DEFAULT: CellTables | None = None
 

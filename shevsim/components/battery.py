@@ -62,6 +62,153 @@ from shevsim.core.variables import inp, out
 
 _NOISE_BLOCK = 4096
 
+try:  # numba is a dependency; without it the Python path runs
+    from numba import njit as _njit
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover
+    HAVE_NUMBA = False
+
+    def _njit(*args, **kwargs):
+        return lambda f: f
+
+
+# ------------------------------------------------------------------------------------------------
+# compiled step of the two-state pack (the arithmetic of BatteryPack.do_step and of the CellTables
+# lookups in the same order: bit-identical, see tests/unit/test_compiled_kernels.py)
+# ------------------------------------------------------------------------------------------------
+@_njit(cache=True, inline="always")
+def _bisect_right(d, o, n, x):  # pragma: no cover - compiled
+    lo = 0
+    hi = n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if x < d[o + mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@_njit(cache=True, inline="always")
+def _t1_value(d, o, n, x):  # pragma: no cover - compiled
+    if x <= d[o]:
+        return d[o + n]
+    if x >= d[o + n - 1]:
+        return d[o + 2 * n - 1]
+    k = _bisect_right(d, o, n, x) - 1
+    return d[o + n + k] + d[o + 2 * n + k] * (x - d[o + k])
+
+
+@_njit(cache=True, inline="always")
+def _t1_slope(d, o, n, x):  # pragma: no cover - compiled
+    if x <= d[o]:
+        k = 0
+    elif x >= d[o + n - 1]:
+        k = n - 2
+    else:
+        k = _bisect_right(d, o, n, x) - 1
+    return d[o + 2 * n + k]
+
+
+@_njit(cache=True, inline="always")
+def _t1_integral(d, o, n, x):  # pragma: no cover - compiled
+    oc = o + 3 * n - 1
+    if x <= d[o]:
+        return d[o + n] * (x - d[o])
+    if x >= d[o + n - 1]:
+        return d[oc + n - 1] + d[o + 2 * n - 1] * (x - d[o + n - 1])
+    k = _bisect_right(d, o, n, x) - 1
+    dx = x - d[o + k]
+    return d[oc + k] + d[o + n + k] * dx + 0.5 * d[o + 2 * n + k] * dx * dx
+
+
+@_njit(cache=True, inline="always")
+def _g2_locate(d, o, n, x):  # pragma: no cover - compiled
+    if x <= d[o]:
+        return 0, 0.0
+    if x >= d[o + n - 1]:
+        return n - 2, 1.0
+    j = _bisect_right(d, o, n, x) - 1
+    return j, (x - d[o + j]) / (d[o + j + 1] - d[o + j])
+
+
+@_njit(cache=True)
+def _pack_step_nb(d, ix, c, thc, soc, v1, v2, x0, x1, p_pack, h, t_amb):  # pragma: no cover - compiled
+    """One two-state pack step; ``c = [n_p, n_pack, q_as, current_mode, temperature_dependent,
+    entropic_heat, F]``, ``thc`` = ZOH (a00..b11) and output (c00, c01, d0, c10, c11, d1) coefficients.
+    Returns ``(i, soc_new, v1n, v2n, x0n, x1n, e_chem, e_loss, q, rs, clamped, voc, v, t_core, t_surf)``."""
+    q_as = c[2]
+    current_mode = c[3] > 0.5
+    p_cell = (p_pack / c[0]) if current_mode else (p_pack / c[1])
+    t_mean = x0
+    t_look = t_mean if c[4] > 0.5 else 25.0
+    # ECM parameters (discharge table for p_cell >= 0)
+    if p_cell >= 0.0:
+        og, ns, nt = ix[4], ix[5], ix[6]
+    else:
+        og, ns, nt = ix[7], ix[8], ix[9]
+    nq = ix[10]
+    i_s, ws = _g2_locate(d, og, ns, soc)
+    j_t, wt = _g2_locate(d, og + ns, nt, t_look)
+    ov = og + ns + nt
+    pa = ov + (j_t * ns + i_s) * nq
+    pb = pa + nq
+    pc = ov + ((j_t + 1) * ns + i_s) * nq
+    pd = pc + nq
+    w00 = (1.0 - ws) * (1.0 - wt)
+    w01 = ws * (1.0 - wt)
+    w10 = (1.0 - ws) * wt
+    w11 = ws * wt
+    rs = w00 * d[pa] + w01 * d[pb] + w10 * d[pc] + w11 * d[pd]
+    r1 = w00 * d[pa + 1] + w01 * d[pb + 1] + w10 * d[pc + 1] + w11 * d[pd + 1]
+    c1 = w00 * d[pa + 2] + w01 * d[pb + 2] + w10 * d[pc + 2] + w11 * d[pd + 2]
+    r2 = w00 * d[pa + 3] + w01 * d[pb + 3] + w10 * d[pc + 3] + w11 * d[pd + 3]
+    c2 = w00 * d[pa + 4] + w01 * d[pb + 4] + w10 * d[pc + 4] + w11 * d[pd + 4]
+    oo, no = ix[0], ix[1]
+    tau1 = r1 * c1
+    tau2 = r2 * c2
+    ex1 = math.exp(-h / tau1)
+    ex2 = math.exp(-h / tau2)
+    g1 = tau1 * (1.0 - ex1)
+    g2 = tau2 * (1.0 - ex2)
+    a = h * _t1_value(d, oo, no, soc) - v1 * g1 - v2 * g2
+    b = h * rs + r1 * (h - g1) + r2 * (h - g2) + 0.5 * h * h * _t1_slope(d, oo, no, soc) / q_as
+    clamped = 0
+    if current_mode:
+        i = p_cell
+    else:
+        ph = p_cell * h
+        disc = a * a - 4.0 * b * ph
+        if disc >= 0.0 and a > 0.0:
+            i = 2.0 * ph / (a + math.sqrt(disc))
+        else:
+            i = 0.5 * a / b if a > 0.0 else 0.0
+            clamped = 1
+    soc_new = soc - i * h / q_as
+    vinf = r1 * i
+    dd = v1 - vinf
+    v1n = vinf + dd * ex1
+    iv1 = vinf * h + dd * g1
+    iv1s = vinf * vinf * h + 2.0 * vinf * dd * g1 + dd * dd * 0.5 * tau1 * (1.0 - ex1 * ex1)
+    vinf = r2 * i
+    dd = v2 - vinf
+    v2n = vinf + dd * ex2
+    iv2 = vinf * h + dd * g2
+    iv2s = vinf * vinf * h + 2.0 * vinf * dd * g2 + dd * dd * 0.5 * tau2 * (1.0 - ex2 * ex2)
+    e_chem = q_as * (_t1_integral(d, oo, no, soc) - _t1_integral(d, oo, no, soc_new))
+    e_loss = i * i * rs * h + i * (iv1 + iv2)
+    q = i * i * rs + (iv1s / r1 + iv2s / r2) / h
+    if c[5] > 0.5:
+        ds = _t1_value(d, ix[2], ix[3], 0.5 * (soc + soc_new))
+        q -= i * (t_mean + 273.15) * ds / c[6]
+    x0n = thc[0] * x0 + thc[1] * x1 + thc[4] * q + thc[5] * t_amb
+    x1n = thc[2] * x0 + thc[3] * x1 + thc[6] * q + thc[7] * t_amb
+    voc = _t1_value(d, oo, no, soc_new)
+    v = voc - rs * i - v1n - v2n
+    t_core = thc[8] * x0n + thc[9] * x1n + thc[10] * t_amb
+    t_surf = thc[11] * x0n + thc[12] * x1n + thc[13] * t_amb
+    return i, soc_new, v1n, v2n, x0n, x1n, e_chem, e_loss, q, rs, clamped, voc, v, t_core, t_surf
+
 
 @dataclass(frozen=True)
 class BatteryPackParams:
@@ -162,9 +309,10 @@ class BatteryPack(Component):
         out("ah_throughput_ah", "A.h", 0.0, "cumulative int |i| dt, pack"),
         out("clamp_count", "1", 0.0, "steps whose power demand exceeded the pack's capability"),
     )
-    _static = ("name", "params", "tables", "thermal", "_fd_w", "_ns", "_np", "_npack", "_q_as")
+    _static = ("name", "params", "tables", "thermal", "_fd_w", "_ns", "_np", "_npack", "_q_as", "_nb", "_thkey",
+               "_thc")
 
-    def __init__(self, name: str = "battery", params: BatteryPackParams | None = None):
+    def __init__(self, name: str = "battery", params: BatteryPackParams | None = None, compiled: bool = True):
         super().__init__(name, params)
         p = self.params
         self.tables = _cell.CellTables(p.ocv_file or None, p.entropy_file or None,
@@ -181,6 +329,16 @@ class BatteryPack(Component):
         self._np = float(p.n_parallel)
         self._npack = self._ns * self._np
         self._q_as = 3600.0 * p.capacity_ah
+        # compiled step (numba; two-state thermal model only; bit-identical to the Python step)
+        self._nb = None
+        if compiled and HAVE_NUMBA and self._fd_w is None and self.tables._dch.nq == 5:
+            d, ix = self.tables.packed()
+            c = np.array([self._np, self._npack, self._q_as, 1.0 if p.input_mode == "current" else 0.0,
+                          1.0 if p.temperature_dependent else 0.0, 1.0 if p.entropic_heat else 0.0,
+                          _cell.FARADAY_C_MOL])
+            self._nb = (d, ix, c)
+        self._thkey = None
+        self._thc = None
         self.initialize(0.0)
 
     # -- helpers -------------------------------------------------------------------------
@@ -252,6 +410,53 @@ class BatteryPack(Component):
     def _t_lookup(self) -> float:
         return self._t_mean(self.x_th) if self.params.temperature_dependent else 25.0
 
+    def _do_step_compiled(self, t: float, h: float, p_pack: float, h_conv: float, t_amb: float) -> None:
+        d, ix, c = self._nb
+        x0, x1 = self.x_th
+        (i, soc_new, v1n, v2n, x0n, x1n, e_chem, e_loss, q, rs, clamped, voc, v, tc, ts) = _pack_step_nb(
+            d, ix, c, self._thermal_coeffs(h_conv, h), self.soc, self.v1, self.v2, x0, x1, p_pack, h, t_amb)
+        if clamped:
+            self.clamps += 1
+        if not (0.0 <= soc_new <= 1.0):
+            raise SimulationError(f"{self.name}: SOC left [0, 100] % at t={t + h:.6g} s "
+                                  f"(soc_pct={100.0 * soc_new:.4g}, pack current {i * self._np:.6g} A)")
+        self.x_th = (x0n, x1n)
+        self.soc = soc_new
+        self.v1 = v1n
+        self.v2 = v2n
+        self.i_cell = i
+        self.e_chem += e_chem
+        self.e_loss += e_loss
+        self.ah += abs(i) * h / 3600.0
+        # outputs (as _write_outputs, with voc, v, t_core, t_surface from the kernel)
+        y = self.y
+        p = self.params
+        n0, n1, n2, n3 = self._noise4()
+        y["current_a"] = i * self._np
+        y["voltage_v"] = v * self._ns
+        y["soc_pct"] = 100.0 * soc_new
+        y["ocv_v"] = voc * self._ns
+        y["t_core_c"] = tc
+        y["t_surface_c"] = ts
+        y["t_mean_c"] = x0n
+        y["heat_w"] = q
+        y["cell_current_meas_a"] = i + p.sigma_current_a * n0
+        y["cell_voltage_meas_v"] = v + p.sigma_voltage_v * n1
+        y["t_surface_meas_c"] = ts + p.sigma_temperature_c * n2
+        y["t_ambient_meas_c"] = t_amb + p.sigma_temperature_c * n3
+        y["loss_energy_j"] = self.e_loss * self._npack
+        y["chem_energy_j"] = self.e_chem * self._npack
+        y["ah_throughput_ah"] = self.ah * self._np
+        y["clamp_count"] = float(self.clamps)
+
+    def _thermal_coeffs(self, h_conv: float, h: float):
+        """ZOH and output coefficients of the two-state model as one array (kept while h_conv, h hold)."""
+        key = (h_conv, h)
+        if key != self._thkey:
+            self._thc = np.array(self.thermal._coeffs(h_conv, h) + self.thermal._ocoeffs(h_conv))
+            self._thkey = key
+        return self._thc
+
     def do_step(self, t: float, h: float) -> None:
         u = self.u
         prm = self.params
@@ -262,6 +467,9 @@ class BatteryPack(Component):
         if not (math.isfinite(p_pack) and math.isfinite(h_conv) and math.isfinite(t_amb)):
             raise SimulationError(f"{self.name}: non-finite input at t={t:.6g} s "
                                   f"({'current_cmd_a' if current_mode else 'power_w'}={p_pack!r}, h_conv_w_m2k={h_conv!r}, t_ambient_c={t_amb!r})")
+        if self._nb is not None:
+            self._do_step_compiled(t, float(h), float(p_pack), float(h_conv), float(t_amb))
+            return
         tab = self.tables
         soc = self.soc
         v1 = self.v1
