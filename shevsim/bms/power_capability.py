@@ -54,6 +54,7 @@ from typing import NamedTuple
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
 from shevsim.battery.thermal import ThermalParams
+from shevsim.battery.table_kernels import HAVE_NUMBA, _njit, _t1_slope, _t1_value
 from shevsim.bms.thermal_estimators import TwoStateDiscretiser
 from shevsim.core.errors import ScenarioError
 
@@ -161,6 +162,114 @@ def _coeff_cache(key) -> _SharedCache:
     return c
 
 
+# ---------------------------------------------------------------------------------------------
+# compiled compute(): the arithmetic of electrical_current_limits, thermal_current_limits,
+# _exact_limits and voltage_after in the same order (bit-identical; pow via libm as CPython's **)
+# ---------------------------------------------------------------------------------------------
+@_njit(cache=True)
+def _compute_nb(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, last_max, last_min):  # pragma: no cover
+    """``k = [N, dt, soc_min, soc_max, v_min, v_max, t_core_max, i_cell_max, capacity_ah, n_pack,
+    exact, F, float(N)]``; ``th`` = the 17 thermal coefficients of ``_thermal_coeffs``."""
+    n = k[0]
+    dt = k[1]
+    oo = ix[0]
+    no = ix[1]
+    # electrical_current_limits
+    ndt = n * dt
+    q_as = 3600.0 * k[8]
+    i_smin = (soc - k[2]) * q_as / ndt
+    i_smax = (soc - k[3]) * q_as / ndt
+    aN = math.exp(-ndt / (r1 * c1))
+    gain = rs + r1 * (1.0 - aN) + _t1_slope(d, oo, no, soc) * ndt / q_as
+    free = _t1_value(d, oo, no, soc) - aN * v1
+    i_vmin = (free - k[4]) / gain
+    i_vmax = (free - k[5]) / gain
+    # thermal_current_limits
+    a00 = th[0]
+    a01 = th[1]
+    a10 = th[2]
+    a11 = th[3]
+    b00 = th[4]
+    b01 = th[5]
+    b10 = th[6]
+    b11 = th[7]
+    cc0 = th[8]
+    cc1 = th[9]
+    dc = th[10]
+    free = (cc0 * (a00 * t_mean_c + a01 * gamma + b01 * t_amb_c)
+            + cc1 * (a10 * t_mean_c + a11 * gamma + b11 * t_amb_c) + dc * t_amb_c)
+    gq = cc0 * b00 + cc1 * b10
+    beta = (t_mean_c + 273.15) * _t1_value(d, ix[2], ix[3], soc) / k[11]
+    if k[10] > 0.5:
+        e00 = th[11]
+        e01 = th[12]
+        e10 = th[13]
+        e11 = th[14]
+        bq0 = th[15]
+        bq1 = th[16]
+        a = math.exp(-dt / (r1 * c1))
+        rho = a
+        d00 = e00 - rho
+        d11 = e11 - rho
+        det = d00 * d11 - e01 * e10
+        if abs(det) < 1e-13:
+            rho *= 1.0 - 1e-6
+            d00 = e00 - rho
+            d11 = e11 - rho
+            det = d00 * d11 - e01 * e10
+        v0 = (d11 * bq0 - e01 * bq1) / det
+        v1_ = (-e10 * bq0 + d00 * bq1) / det
+        rn = math.pow(rho, k[12])
+        s1 = (cc0 * (a00 * v0 + a01 * v1_ - rn * v0) + cc1 * (a10 * v0 + a11 * v1_ - rn * v1_))
+        rho = a * a
+        d00 = e00 - rho
+        d11 = e11 - rho
+        det = d00 * d11 - e01 * e10
+        if abs(det) < 1e-13:
+            rho *= 1.0 - 1e-6
+            d00 = e00 - rho
+            d11 = e11 - rho
+            det = d00 * d11 - e01 * e10
+        v0 = (d11 * bq0 - e01 * bq1) / det
+        v1_ = (-e10 * bq0 + d00 * bq1) / det
+        rn = math.pow(rho, k[12])
+        s2 = (cc0 * (a00 * v0 + a01 * v1_ - rn * v0) + cc1 * (a10 * v0 + a11 * v1_ - rn * v1_))
+        qa = gq * rs + r1 * (gq - 2.0 * s1 + s2)
+        qb = -gq * beta + 2.0 * v1 * (s1 - s2)
+        qc = free + v1 * v1 * s2 / r1 - k[6]
+        disc = qb * qb - 4.0 * qa * qc
+        if disc < 0.0:
+            i_td = -qb / (2.0 * qa)
+            i_tc = i_td
+        else:
+            sq = math.sqrt(disc)
+            i_td = (-qb + sq) / (2.0 * qa)
+            i_tc = (-qb - sq) / (2.0 * qa)
+    else:
+        v1n = aN * v1 + r1 * (1.0 - aN) * last_max
+        q_pol = max(v1 * v1, v1n * v1n) / r1
+        mu_d = (k[6] - free - gq * q_pol) / gq
+        v1n = aN * v1 + r1 * (1.0 - aN) * last_min
+        q_pol = max(v1 * v1, v1n * v1n) / r1
+        mu_c = (k[6] - free - gq * q_pol) / gq
+        disc_d = beta * beta + 4.0 * rs * mu_d
+        disc_c = beta * beta + 4.0 * rs * mu_c
+        i_min_heat = beta / (2.0 * rs)
+        i_td = (beta + math.sqrt(disc_d)) / (2.0 * rs) if disc_d >= 0.0 else i_min_heat
+        i_tc = (beta - math.sqrt(disc_c)) / (2.0 * rs) if disc_c >= 0.0 else i_min_heat
+    # compute()
+    i_max = min(i_smin, i_vmin, i_td, k[7])
+    i_min = max(i_smax, i_vmax, i_tc, -k[7])
+    soc_n = soc - i_max * ndt / (3600.0 * k[8])
+    v_d = _t1_value(d, oo, no, soc_n) - i_max * rs - aN * v1 - i_max * r1 * (1.0 - aN)
+    soc_n = soc - i_min * ndt / (3600.0 * k[8])
+    v_c = _t1_value(d, oo, no, soc_n) - i_min * rs - aN * v1 - i_min * r1 * (1.0 - aN)
+    p_max = i_max * v_d * k[9]
+    p_min = i_min * v_c * k[9]
+    return (i_max, i_min, p_max if p_max > 0.0 else 0.0, p_min if p_min < 0.0 else 0.0,
+            i_smin, i_smax, i_vmin, i_vmax, i_td, i_tc, v_d, v_c)
+
+
 class PowerCapability:
     """Algebraic-Propagation power capability with electrical and thermal constraints.
 
@@ -179,7 +288,7 @@ class PowerCapability:
     """
 
     def __init__(self, params: PowerCapabilityParams | None = None, thermal_params: ThermalParams | None = None,
-                 tables: CellTables | None = None):
+                 tables: CellTables | None = None, compiled: bool = True):
         self.params = params if params is not None else PowerCapabilityParams()
         self.thermal_params = thermal_params if thermal_params is not None else ThermalParams()
         self.tables = tables if tables is not None else default_tables()
@@ -189,8 +298,17 @@ class PowerCapability:
         # thermal coefficients per (rounded) h: a pure function of h and the constants, shared by
         # every instance with the same constants and not part of the state (not deep-copied)
         self._hcache = _coeff_cache((self.thermal_params, p.horizon_steps, p.dt_s))
+        self._hcache_nb = _coeff_cache(("array", self.thermal_params, p.horizon_steps, p.dt_s))
         self._exact = p.polarisation_heat == "exact"
         self._npack = float(p.n_series * p.n_parallel)
+        # compiled compute() (numba; same arithmetic, bit-identical); compiled=False for the Python path
+        self.compiled = bool(compiled and HAVE_NUMBA)
+        if self.compiled:
+            import numpy as np
+            self._tabs = self.tables.packed()
+            self._k = np.array([p.horizon_steps, p.dt_s, p.soc_min_frac, p.soc_max_frac, p.v_min_v, p.v_max_v,
+                                p.t_core_max_c, p.i_cell_max_a, p.capacity_ah, self._npack,
+                                1.0 if self._exact else 0.0, FARADAY_C_MOL, float(p.horizon_steps)])
         self.last_i_max_a = 0.0
         self.last_i_min_a = 0.0
 
@@ -291,6 +409,21 @@ class PowerCapability:
     def compute(self, soc: float, v1: float, rs: float, r1: float, c1: float, t_mean_c: float, gamma: float,
                 h_w_m2k: float, t_amb_c: float) -> PowerLimits:
         """Current and power limits from the estimated states (SOC as a fraction, cell quantities)."""
+        if self.compiled:
+            hr = round(h_w_m2k, 3)
+            th = self._hcache_nb.get(hr)
+            if th is None:
+                import numpy as np
+                th = np.array(self._thermal_coeffs(hr))
+                if len(self._hcache_nb) >= _CACHE_MAX:
+                    self._hcache_nb.clear()
+                self._hcache_nb[hr] = th
+            d, ix = self._tabs
+            r = _compute_nb(d, ix, self._k, th, float(soc), float(v1), float(rs), float(r1), float(c1),
+                            float(t_mean_c), float(gamma), float(t_amb_c), self.last_i_max_a, self.last_i_min_a)
+            self.last_i_max_a = r[0]
+            self.last_i_min_a = r[1]
+            return PowerLimits(*r)
         p = self.params
         i_smin, i_smax, i_vmin, i_vmax = electrical_current_limits(soc, v1, rs, r1, c1, p, self.tables)
         i_td, i_tc = self.thermal_current_limits(soc, v1, rs, r1, c1, t_mean_c, gamma, h_w_m2k, t_amb_c)

@@ -121,3 +121,25 @@ def test_battery_pack_compiled_step_is_bit_identical(mode):
 def test_battery_pack_fd30_uses_the_python_path():
     from shevsim.components.battery import BatteryPack, BatteryPackParams
     assert BatteryPack("b", BatteryPackParams(thermal_model="fd30"))._nb is None
+
+
+@pytest.mark.parametrize("mode", ["exact", "seed"])
+def test_power_capability_compiled_compute_is_bit_identical(mode):
+    import random
+
+    from shevsim.bms.power_capability import PowerCapability, PowerCapabilityParams
+    prm = PowerCapabilityParams(polarisation_heat=mode, i_cell_max_a=60.0 if mode == "seed" else math.inf)
+    fast, ref = PowerCapability(prm), PowerCapability(prm, compiled=False)
+    assert fast.compiled and not ref.compiled
+    rng = random.Random(2)
+    n_diff, limited_by = 0, set()
+    for _ in range(3000):       # states across the whole range: SOC, voltage, thermal and rating limits bind
+        args = (rng.uniform(0.0, 1.0), rng.uniform(-0.1, 0.1), rng.uniform(0.005, 0.02), rng.uniform(0.005, 0.03),
+                rng.uniform(100.0, 5000.0), rng.uniform(15.0, 50.0), rng.uniform(-100.0, 100.0),
+                rng.uniform(1.0, 100.0), rng.uniform(15.0, 40.0))
+        a, b = fast.compute(*args), ref.compute(*args)
+        n_diff += tuple(a) != tuple(b)
+        limited_by.add(min((b.i_soc_min_a, "soc"), (b.i_v_min_a, "v"), (b.i_t_dch_a, "t"))[1])
+    assert n_diff == 0
+    assert (fast.last_i_max_a, fast.last_i_min_a) == (ref.last_i_max_a, ref.last_i_min_a)
+    assert limited_by == {"soc", "v", "t"}
