@@ -40,6 +40,7 @@ import math
 from dataclasses import dataclass
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
+from shevsim.battery.table_kernels import HAVE_NUMBA, _njit, _t1_slope, _t1_value
 from shevsim.core.errors import SimulationError
 
 __all__ = ["DEKFParams", "DEKF"]
@@ -93,6 +94,76 @@ class DEKFParams:
     rs_min_ohm: float = 1e-5
 
 
+@_njit(cache=True)
+def _dekf_step_nb(d, ix, k, soc0, v1_prev, rs, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11,
+                  i_a, v_meas_v, dt_s, t_mean_c):  # pragma: no cover - compiled
+    """DEKF.step (and DEKF.heat at the new estimates) with the same arithmetic; ``k = [capacity_ah,
+    q_soc, q_v1, q_rs, r_v, q_r1, q_c1, r1_min, r1_max, c1_min, c1_max, rs_min, F]``.  Returns
+    ``(ok, soc, v1, rs, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, heat)``; ``ok = 0`` when
+    the innovation variance is unusable (the caller re-runs the Python step, which raises)."""
+    s00 += k[5]
+    s11 += k[6]
+    tau = r1 * c1
+    a = math.exp(-dt_s / tau)
+    soc = soc0 - dt_s * i_a / (3600.0 * k[0])
+    v1 = a * v1_prev + r1 * (1.0 - a) * i_a
+    p01 = p01 * a
+    p11 = p11 * (a * a)
+    p12 = p12 * a
+    p00 += k[1]
+    p11 += k[2]
+    p22 += k[3]
+    oo = ix[0]
+    no = ix[1]
+    c0 = _t1_slope(d, oo, no, soc)
+    c2 = -i_a
+    e = v_meas_v - (_t1_value(d, oo, no, soc) - v1 - rs * i_a)
+    h0 = p00 * c0 - p01 + p02 * c2
+    h1 = p01 * c0 - p11 + p12 * c2
+    h2 = p02 * c0 - p12 + p22 * c2
+    sden = c0 * h0 - h1 + c2 * h2 + k[4]
+    if not (sden > 0.0 and math.isfinite(sden) and math.isfinite(e)):
+        return (0, soc, v1, rs, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, 0.0)
+    k0 = h0 / sden
+    k1 = h1 / sden
+    k2 = h2 / sden
+    soc += k0 * e
+    v1 += k1 * e
+    rs += k2 * e
+    p00 -= k0 * h0
+    p01 -= k0 * h1
+    p02 -= k0 * h2
+    p11 -= k1 * h1
+    p12 -= k1 * h2
+    p22 -= k2 * h2
+    da_dr1 = a * dt_s / (r1 * tau)
+    da_dc1 = a * dt_s / (c1 * tau)
+    w = v1_prev - r1 * i_a
+    g0 = -da_dr1 * w - (1.0 - a) * i_a
+    g1 = -da_dc1 * w
+    m0 = s00 * g0 + s01 * g1
+    m1 = s01 * g0 + s11 * g1
+    tden = g0 * m0 + g1 * m1 + k[4]
+    l0 = m0 / tden
+    l1 = m1 / tden
+    r1 += l0 * e
+    c1 += l1 * e
+    s00 -= l0 * m0
+    s01 -= l0 * m1
+    s11 -= l1 * m1
+    if soc < 0.0:
+        soc = 0.0
+    elif soc > 1.0:
+        soc = 1.0
+    if rs < k[11]:
+        rs = k[11]
+    r1 = min(max(r1, k[7]), k[8])
+    c1 = min(max(c1, k[9]), k[10])
+    ds = _t1_value(d, ix[2], ix[3], soc)
+    heat = i_a * i_a * rs + v1 * v1 / r1 - i_a * (t_mean_c + 273.15) * ds / k[12]
+    return (1, soc, v1, rs, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, heat)
+
+
 class DEKF:
     """Dual EKF over ``x = [SOC, V1, R_s]``, ``theta = [R1, C1]`` (see module docstring).
 
@@ -108,9 +179,17 @@ class DEKF:
         Current estimates (SOC as a fraction, V, Ohm, Ohm, F).
     """
 
-    def __init__(self, params: DEKFParams | None = None, tables: CellTables | None = None):
+    def __init__(self, params: DEKFParams | None = None, tables: CellTables | None = None, compiled: bool = True):
         self.params = params if params is not None else DEKFParams()
         self.tables = tables if tables is not None else default_tables()
+        # compiled step (numba; same arithmetic, bit-identical); compiled=False for the Python path
+        self.compiled = bool(compiled and HAVE_NUMBA)
+        if self.compiled:
+            import numpy as np
+            p = self.params
+            self._tabs = self.tables.packed()
+            self._k = np.array([p.capacity_ah, p.q_soc, p.q_v1, p.q_rs, p.r_v, p.q_r1, p.q_c1, p.r1_min_ohm,
+                                p.r1_max_ohm, p.c1_min_f, p.c1_max_f, p.rs_min_ohm, FARADAY_C_MOL])
         self.reset()
 
     def reset(self, soc0_frac: float | None = None) -> None:
@@ -137,11 +216,35 @@ class DEKF:
         ds = self.tables.entropy_change(self.soc)
         return i_a * i_a * self.rs + self.v1 * self.v1 / self.r1 - i_a * (t_mean_c + 273.15) * ds / FARADAY_C_MOL
 
+    def step_heat(self, i_a: float, v_meas_v: float, dt_s: float, t_mean_c: float) -> float:
+        """:meth:`step`, then :meth:`heat` at the new estimates; returns the heat [W]."""
+        if self.compiled:
+            px, pth = self.px, self.pth
+            d, ix = self._tabs
+            r = _dekf_step_nb(d, ix, self._k, self.soc, self.v1, self.rs, self.r1, self.c1, px[0], px[1], px[2],
+                              px[3], px[4], px[5], pth[0], pth[1], pth[2], float(i_a), float(v_meas_v),
+                              float(dt_s), float(t_mean_c))
+            if r[0]:
+                (_, self.soc, self.v1, self.rs, self.r1, self.c1, p00, p01, p02, p11, p12, p22, s00, s01, s11,
+                 self.innovation, q) = r
+                self.px = [p00, p01, p02, p11, p12, p22]
+                self.pth = [s00, s01, s11]
+                return q
+        self._step_py(i_a, v_meas_v, dt_s)
+        return self.heat(i_a, t_mean_c)
+
     def step(self, i_a: float, v_meas_v: float, dt_s: float) -> float:
         """One DEKF step with the measured cell current [A] (+ discharge) and voltage [V].
 
         Returns the innovation ``y - g(x^-, i)`` [V].
         """
+        if self.compiled:
+            self.step_heat(i_a, v_meas_v, dt_s, 25.0)
+            return self.innovation
+        return self._step_py(i_a, v_meas_v, dt_s)
+
+    def _step_py(self, i_a: float, v_meas_v: float, dt_s: float) -> float:
+        """The reference (Python) step; the compiled kernel runs the same arithmetic."""
         p = self.params
         tab = self.tables
         # 1. parameter time update (5.21)

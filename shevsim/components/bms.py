@@ -258,8 +258,7 @@ class BMS(Component):
         if h != self.dt:
             self._build(h)
         d = self.dekf
-        d.step(i, v, h)                                  # 1. electrical DEKF
-        self.q_est = d.heat(i, self.t_mean)              # 2. heat with the previous T_mean
+        self.q_est = d.step_heat(i, v, h, self.t_mean)   # 1. electrical DEKF, 2. heat with the previous T_mean
         est = self.thermal.update(ts, ta, self.q_est)    # 3. thermal filter
         self.t_mean = est.t_mean_c
         self.gamma = est.gamma_c_per_m

@@ -143,3 +143,27 @@ def test_power_capability_compiled_compute_is_bit_identical(mode):
     assert n_diff == 0
     assert (fast.last_i_max_a, fast.last_i_min_a) == (ref.last_i_max_a, ref.last_i_min_a)
     assert limited_by == {"soc", "v", "t"}
+
+
+@pytest.mark.parametrize("retuned", [False, True])
+def test_dekf_compiled_step_is_bit_identical(retuned):
+    import random
+
+    from shevsim.bms.electrical import DEKF, DEKFParams
+    from shevsim.core.errors import SimulationError
+    prm = DEKFParams(q_soc=1e-5, q_v1=2e-3, q_rs=1e-8, q_c1=1e4) if retuned else DEKFParams()
+    fast, ref = DEKF(prm), DEKF(prm, compiled=False)
+    assert fast.compiled and not ref.compiled
+    rng = random.Random(3)
+    n_diff = 0
+    for k in range(5000):
+        i = 20.0 * math.sin(k / 50.0) + rng.gauss(0.0, 5.0)
+        v = 3.3 - 0.012 * i + rng.gauss(0.0, 0.01) - 0.1 * math.sin(k / 3000.0)
+        tm = 25.0 + 5.0 * math.sin(k / 1000.0)
+        qa, qb = fast.step_heat(i, v, 0.1, tm), ref.step_heat(i, v, 0.1, tm)
+        n_diff += (qa, fast.soc, fast.v1, fast.rs, fast.r1, fast.c1, fast.px, fast.pth, fast.innovation) != \
+            (qb, ref.soc, ref.v1, ref.rs, ref.r1, ref.c1, ref.px, ref.pth, ref.innovation)
+    assert n_diff == 0
+    assert fast.step(1.0, 3.3, 0.1) == ref.step(1.0, 3.3, 0.1)
+    with pytest.raises(SimulationError, match="innovation"):
+        fast.step(1.0, math.nan, 0.1)
