@@ -510,16 +510,21 @@ def write_report(out: Path, rep: dict, fitter: Fitter, base: FitResult, final: F
             _savefig(fig, out / name)
             plt.close(fig)
             pngs.append(name)
-        cands = rep["candidates"]
-        if cands:
-            fig, ax = plt.subplots(figsize=(8, 0.45 * len(cands) + 1.2))
-            names = [c["name"] for c in cands]
-            sc = [c["score"] for c in cands]
-            ax.barh(names, sc, color=["C2" if c["passed"] else "C7" for c in cands])
-            ax.axvline(1.0, color="k", lw=0.8, label="baseline")
-            ax.axvline(1.0 - MIN_GAIN, color="C3", ls="--", lw=0.8, label=f"-{MIN_GAIN:.0%} threshold")
-            ax.set_xlabel("combined held-out score (baseline = 1; lower is better)")
-            ax.legend(fontsize=7)
+        rounds = rep["rounds"]
+        if rounds:
+            nrow = sum(len(rd["candidates"]) + len(rd.get("pairs", [])) for rd in rounds)
+            fig, axes = plt.subplots(len(rounds), 1, figsize=(8, 0.4 * nrow + 1.0 * len(rounds) + 0.5), squeeze=False)
+            for ax, rd in zip(axes[:, 0], rounds):
+                cs = rd["candidates"] + rd.get("pairs", [])
+                ax.barh([c["name"] for c in cs], [c["score"] for c in cs],
+                        color=["C2" if c["passed"] else "C7" for c in cs])
+                ax.axvline(rd["current_score"], color="k", lw=0.8, label="current model")
+                ax.axvline(rd["current_score"] * (1.0 - MIN_GAIN), color="C3", ls="--", lw=0.8,
+                           label=f"-{MIN_GAIN:.0%} threshold")
+                ax.set_title(f"round {rd['round']} (on top of: {', '.join(rd['on_top_of']) or 'baseline'}; "
+                             f"selected: {rd.get('selected', 'none')})", fontsize=8)
+                ax.legend(fontsize=6, loc="lower right")
+            axes[-1, 0].set_xlabel("combined held-out score (baseline = 1; lower is better; green = passes the rule)")
             fig.tight_layout()
             _savefig(fig, out / "evidence.png")
             plt.close(fig)
