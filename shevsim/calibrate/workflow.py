@@ -312,8 +312,19 @@ def run_workflow(model_name: str, data, known: dict | None = None, holdout: floa
     """Run the whole calibration loop on ``data`` (:class:`~shevsim.calibrate.data.MeasuredData`).
 
     Returns the report dictionary (also written to ``out_dir/report.json`` with ``report.md`` and plots
-    when ``out_dir`` is given).
+    when ``out_dir`` is given).  BLAS is limited to one thread during the run (via threadpoolctl when
+    installed): the least-squares SVDs of tall, thin Jacobians are ~100x slower when BLAS threads fight
+    over a shared machine's cores.
     """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - optional
+        return _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plots, params_where, log)
+    with threadpool_limits(limits=1):
+        return _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plots, params_where, log)
+
+
+def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plots, params_where, log):
     t_start = time.perf_counter()
     say = log or (lambda msg: None)
     model = get_model(model_name, known, params_where)
