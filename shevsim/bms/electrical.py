@@ -32,7 +32,9 @@ walk of variance 2.5e8 Ohm^2 per step on R1 is not physical, so the default read
 2.5e-8 (a dropped minus sign).  Only the ratios to Sigma_v matter to a Kalman filter, so
 Sigma_v = 1 is a scaling, not the sensor's variance.
 
-Everything is plain Python floats (3x3 and 2x2 symmetric covariances unrolled).
+Everything is plain Python floats (3x3 and 2x2 symmetric covariances unrolled).  ``DEKF(compiled=True)``
+(default) runs the same arithmetic as one numba kernel (:func:`_dekf_step_nb`, bit-identical);
+:meth:`DEKF.step_heat` is the step followed by the heat estimate (5.16) in one call.
 """
 from __future__ import annotations
 
@@ -172,6 +174,8 @@ class DEKF:
     params : DEKFParams
     tables : CellTables, optional
         OCV and entropy tables the BMS knows (default: the A123 26650 tables).
+    compiled : bool
+        Compiled step (default; bit-identical to the Python step) or the Python reference.
 
     Attributes
     ----------

@@ -280,6 +280,9 @@ class PowerCapability:
         Cell thermal parameters of the two-state model.
     tables : CellTables
         OCV and entropy tables.
+    compiled : bool
+        Run :meth:`compute` as one numba kernel (:func:`_compute_nb`, the same arithmetic, bit-identical;
+        default) or in Python.
 
     Notes
     -----

@@ -488,7 +488,9 @@ class ThermalDKF(_Base):
 
     Parameters as :class:`ThermalKF`, plus ``beta2`` (h random-walk std per step, seed 7e-3),
     ``s0`` (initial h variance, seed 0.05), ``h_min``/``h_max`` (clip of the h estimate) and
-    ``total_derivative`` (see module docstring).
+    ``total_derivative`` (see module docstring) and ``compiled`` (default True: with the exact ZOH the step
+    runs as one numba kernel, :func:`_dkf_step_nb`, with the arithmetic of :meth:`_update_py` - bit-identical;
+    False runs the Python reference).  The filter state is one float array ``_st``; ``x0``, ``h``, ... read it.
     """
 
     # the filter state lives in one float array (the compiled step updates it in place); the

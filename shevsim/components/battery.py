@@ -44,6 +44,10 @@ Outputs (at t + h; none is direct feedthrough)
     (pack, int |i| dt); ``clamp_count`` [1] steps whose power demand was infeasible;
     ``t_mean_c`` [degC] volume-averaged cell temperature.
 
+Speed: with the two-state thermal model the step runs as one numba kernel (:func:`_pack_step_nb`, the
+arithmetic of the Python step and of the CellTables lookups in the same order - bit-identical);
+``BatteryPack(name, params, compiled=False)`` and the ``fd30`` model use the Python step.
+
 The voltage/current pair reported at t + h is the left limit (current of the finished step,
 state at t + h): the pair a BMS sampling at t + h sees.
 """

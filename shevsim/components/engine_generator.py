@@ -25,6 +25,8 @@ Outputs (at t + h, no direct feedthrough: every output comes from the state or t
 Energy balance (exact): ``fuel_energy_j = elec_energy_j + engine_loss_energy_j +
 gen_loss_energy_j + shaft_kinetic_energy_j``.
 Initial state: steady operation on the optimal line at the start value of ``power_cmd_w``.
+Speed: :func:`~shevsim.powertrain.engine.advance` runs compiled (:class:`~shevsim.powertrain.engine.CompiledAdvance`,
+numba, bit-identical) when every map it uses clamps outside its grid; ``compiled=False`` runs the Python code.
 """
 from __future__ import annotations
 
