@@ -7,7 +7,8 @@ information criterion), refit and report error before/after (``report.json``, ``
 Modules
 -------
 data       load and check measured CSV files into canonical columns (:func:`load_measured`).
-models     fast calibration models (``cell``, ``vehicle``) with declared parameters and effect libraries.
+models     fast calibration models (``cell``, ``vehicle``, ``engine`` soot) with declared parameters and
+           effect libraries.
 workflow   the fit / diagnose / test / select / refit / report loop (:func:`run_workflow`).
 synthetic  a richer "truth" generator with undeclared effects, for tests.
 cli        ``shevsim calibrate MODEL DATA.csv --out DIR ...`` (:func:`main_calibrate`).

@@ -5,6 +5,7 @@ Canonical columns (SI, unit-suffixed; extra columns are kept as candidate explan
 * ``cell``: ``time_s``, ``current_a`` (positive = discharge), ``voltage_v``, ``t_surface_c``,
   ``t_ambient_c``; optional ``t_core_c``.
 * ``vehicle``: ``time_s``, ``speed_mps``, ``power_w`` (total electrical load on the bus, positive = drawn).
+* ``engine``: ``time_s``, ``power_w`` (engine brake power), ``soot_rate_mgps`` (soot mass rate).
 
 File format: CSV with one header line; lines starting with ``#`` are comments; ``.csv.gz`` is read
 transparently.  ``mapping`` renames file columns to canonical names (``{"current_a": "Current"}``).
@@ -34,8 +35,9 @@ from ..core.errors import DataError
 REQUIRED = {
     "cell": ("time_s", "current_a", "voltage_v", "t_surface_c", "t_ambient_c"),
     "vehicle": ("time_s", "speed_mps", "power_w"),
+    "engine": ("time_s", "power_w", "soot_rate_mgps"),
 }
-OPTIONAL = {"cell": ("t_core_c",), "vehicle": ()}
+OPTIONAL = {"cell": ("t_core_c",), "vehicle": (), "engine": ()}
 CURRENT_SIGNS = ("discharge-positive", "charge-positive")
 POWER_SIGNS = ("drawn-positive", "delivered-positive")
 
@@ -245,6 +247,15 @@ def _check_units(df, model, path, line_of):
         k = np.flatnonzero(np.abs(i) > 1000.0)
         if k.size:
             bad("current_a", f"cell current {i[k[0]]} A implausible (> 1000 A; milliamps?)", int(k[0]))
+    elif model == "engine":
+        p = df["power_w"].to_numpy()
+        if np.abs(p).max() < 2000.0:
+            bad("power_w", f"largest engine power {np.abs(p).max():.3g} - looks like kW, expected W",
+                int(np.argmax(np.abs(p))))
+        sr = df["soot_rate_mgps"].to_numpy()
+        k = np.flatnonzero(sr < -1.0)
+        if k.size:
+            bad("soot_rate_mgps", f"negative soot rate {sr[k[0]]} mg/s", int(k[0]))
     else:
         s = df["speed_mps"].to_numpy()
         k = np.flatnonzero(s < -0.5)

@@ -165,3 +165,58 @@ def synth_vehicle(effects: dict | None = None, duration_s: float = 1800.0, dt_s:
 def as_measured(df: pd.DataFrame, model: str) -> MeasuredData:
     """Wrap a synthetic DataFrame as loaded data (skips the file checks)."""
     return MeasuredData(df=df.reset_index(drop=True), path="<synthetic>", model=model)
+
+
+ENGINE_TRUTH = {"soot_a_mgps": 0.8, "soot_b_mgps_kw": 0.021, "soot_c_mgps_kw2": 1.3e-4}
+ENGINE_EFFECTS = {
+    "transient_soot": {"k_transient_mgps_kw": 0.12, "tau_turbo_s": 3.0},
+    "analyzer_lag": {"tau_analyzer_s": 4.0},
+    "analyzer_offset": {"soot_offset_mgps": 1.5},
+}
+
+
+def synth_engine(effects: dict | None = None, duration_s: float = 1800.0, dt_s: float = 1.0,
+                 seed: int = 0, truth: dict | None = None):
+    """Synthetic engine-generator record (``time_s``, ``power_w``, ``soot_rate_mgps``) and the truth.
+
+    Power: a genset following supervisor commands - steps between random levels (0-300 kW) every 5-60 s,
+    rate-limited to 50 kW/s; the engine is off (no soot) at zero power.  Truth runs at 0.1 s with its own first-order lags; analyzer noise 2 % + 0.05 mg/s.
+    """
+    rng = np.random.default_rng(seed)
+    dt = 0.1
+    n = int(round(duration_s / dt)) + 1
+    t = np.arange(n) * dt
+    cmd = np.zeros(n)
+    k = 0
+    while k < n:
+        seg = int(rng.uniform(5, 60) / dt)
+        cmd[k:k + seg] = rng.choice([0.0, rng.uniform(30, 300)], p=[0.2, 0.8])
+        k += seg
+    p = np.zeros(n)
+    for j in range(1, n):
+        p[j] = p[j - 1] + np.clip(cmd[j] - p[j - 1], -50.0 * dt, 50.0 * dt)
+    vals = dict(ENGINE_TRUTH, **(truth or {}))
+    for name, over in (effects or {}).items():
+        vals.update(dict(ENGINE_EFFECTS[name], **(over or {})))
+    s = (vals["soot_a_mgps"] + vals["soot_b_mgps_kw"] * p + vals["soot_c_mgps_kw2"] * p * p) * (p > 0.5)
+    if vals.get("k_transient_mgps_kw", 0.0):
+        a = dt / vals["tau_turbo_s"]
+        p_air = np.empty(n)
+        p_air[0] = p[0]
+        for j in range(1, n):  # forward Euler at the fine step (independent of the library's exact lag)
+            p_air[j] = p_air[j - 1] + a * (p[j - 1] - p_air[j - 1])
+        s = s + vals["k_transient_mgps_kw"] * np.maximum(p - p_air, 0.0)
+    if vals.get("tau_analyzer_s", 0.0):
+        a = dt / vals["tau_analyzer_s"]
+        y = np.empty(n)
+        y[0] = s[0]
+        for j in range(1, n):
+            y[j] = y[j - 1] + a * (s[j - 1] - y[j - 1])
+        s = y
+    s = s + vals.get("soot_offset_mgps", 0.0)
+    step = int(round(dt_s / dt))
+    sl = slice(None, None, step)
+    m = t[sl].size
+    df = pd.DataFrame({"time_s": t[sl], "power_w": p[sl] * 1000.0,
+                       "soot_rate_mgps": s[sl] * (1 + rng.normal(0, 0.02, m)) + rng.normal(0, 0.05, m)})
+    return df, vals
