@@ -183,7 +183,6 @@ class MPCSupervisor(Component):
         self._rule = RuleBasedSupervisor(rule_settings, rate_map, p.sample_time_s)
         self.mpc = _MPC(settings, p.fuel_curve(where), rate_map, rule=self._rule)
         self.fallback_count = 0
-        self.plan = None
         self.last_call_us = 0.0      # wall time of the last call (state -> QP -> first move) [us]
         self.call_times_us = None    # set to a list to collect every call's wall time [us]
 
@@ -220,9 +219,14 @@ class MPCSupervisor(Component):
         if self.call_times_us is not None:
             self.call_times_us.append(dt_us)
         self.fallback_count = self.mpc.fallback_count
-        self.plan = None if self.mpc._plan_kw is None else self.mpc._plan_kw.copy()
         self._write(cmd)
         self.prev_cmd = float(cmd)
+
+    @property
+    def plan(self):
+        """Engine powers [kW] of the last optimal plan (a copy), None before the first solution."""
+        p = self.mpc._plan_kw
+        return None if p is None else p.copy()
 
     def get_state(self):
         st = super().get_state()

@@ -588,9 +588,29 @@ class MPCSupervisor:
         self.last = MPCResult()
         self._plan_kw = None          # absolute engine powers of the last optimal plan (N_c)
         self._plan_age = 0
+        self._nc = settings.n_c
         self._dv_min_kw = settings.power_rate_min_wps / 1e3 * settings.dt_s
         self._pg_min_kw = settings.power_gen_min_w / 1e3
         self._pg_max_kw = settings.power_gen_max_w / 1e3
+
+    # the plan (absolute engine powers [kW] of the last optimal solution) is formed from the solution
+    # only when read (fallback 'shift', state snapshots, tests): the solvers return a fresh array per
+    # solve (DAQP, cvxpy) or a copy is kept (OSQP), so the values are those of the eager computation
+    @property
+    def _plan_kw(self):
+        pend = self._plan_pending
+        if pend is not None:
+            z, vo = pend
+            plan = np.cumsum(z[:self._nc])
+            plan += vo
+            self._plan_val = plan
+            self._plan_pending = None
+        return self._plan_val
+
+    @_plan_kw.setter
+    def _plan_kw(self, value) -> None:
+        self._plan_val = value
+        self._plan_pending = None
 
     def _make_solver(self, name: str) -> None:
         self.solver_name = name
@@ -632,13 +652,10 @@ class MPCSupervisor:
         else:
             z, status = None, "unusable inputs (non-finite, V_oc <= 0, R_s <= 0 or P_b,max < P_b,min)"
         if z is not None:
-            nc = self.settings.n_c
+            nc = self._nc
             # solver tolerance (~1e-9 kW) may put the move a hair outside the engine limits
             v_cmd = min(max(vo + float(z[0]), self._pg_min_kw), self._pg_max_kw)
-            if self._plan_kw is None:
-                self._plan_kw = np.empty(nc)
-            np.cumsum(z[:nc], out=self._plan_kw)
-            self._plan_kw += vo
+            self._plan_pending = (z if self.solver_name != "osqp" else z.copy(), vo)
             self._plan_age = 0
             res.ok = True
             res.battery_slack_w = float(z[nc]) * 1e3
