@@ -64,7 +64,7 @@ def _cmd_cycles(a) -> int:
 
 def _cmd_study(a, rest) -> int:
     from .studies.cli import main_study
-    return main_study([a.which] + rest)
+    return main_study([a.which] + [r for r in rest if r != a.which])
 
 
 def _cmd_calibrate(rest) -> int:
@@ -94,7 +94,7 @@ def main(argv=None) -> int:
     c = sub.add_parser("cycles", help="list drive cycles with statistics")
     c.add_argument("folder", nargs="?")
     s = sub.add_parser("study", help="studies: thermal, bms, tradeoff, powerrate-map", add_help=False)
-    s.add_argument("which")
+    s.add_argument("which", nargs="?", default="--help")
     sub.add_parser("calibrate", help="closed-loop calibration against measured data", add_help=False)
     f = sub.add_parser("fmu", help="FMU tools")
     fsub = f.add_subparsers(dest="fmu_cmd", required=True)
