@@ -1,8 +1,8 @@
 """calibrate_speed.py - the whole calibration workflow on a 1-hour, 10 Hz record (36,001 samples).
 
 Prints the wall time of `run_workflow` (fit, candidate tests, selection, refit, report with plots) for the
-cell model (synthetic record with a cooling change) and the vehicle model (synthetic record with a
-regeneration limit).  Target: under a minute each on this machine.
+cell model (synthetic record with a cooling change), the vehicle model (synthetic record with a
+regeneration limit) and the engine soot model (transient soot).  Target: under a minute each on this machine.
 
     python benchmarks/calibrate_speed.py
 """
@@ -16,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from shevsim.calibrate.models import _cell_kernel  # noqa: E402,F401  (compile outside the timing)
-from shevsim.calibrate.synthetic import as_measured, synth_cell, synth_vehicle  # noqa: E402
+from shevsim.calibrate.synthetic import as_measured, synth_cell, synth_engine, synth_vehicle  # noqa: E402
 from shevsim.calibrate.workflow import run_workflow  # noqa: E402
 
 
@@ -25,7 +25,8 @@ def main():
     df, _ = synth_cell({}, duration_s=300.0)
     run_workflow("cell", as_measured(df, "cell"), effects=["current_offset"])
     cases = [("cell", *synth_cell({"cooling_change": {}}, duration_s=3600.0, dt_s=0.1)),
-             ("vehicle", *synth_vehicle({"regen_limit": {}}, duration_s=3600.0, dt_s=0.1))]
+             ("vehicle", *synth_vehicle({"regen_limit": {}}, duration_s=3600.0, dt_s=0.1)),
+             ("engine", *synth_engine({"transient_soot": {}}, duration_s=3600.0, dt_s=0.1))]
     for model, df, _ in cases:
         with tempfile.TemporaryDirectory() as out:
             t0 = time.perf_counter()
