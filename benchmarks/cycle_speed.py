@@ -82,6 +82,7 @@ def main(argv=None) -> int:
     pin = _pin(args.cpu)
     t0 = time.perf_counter()
     sys.path.insert(0, str(ROOT))
+    import shevsim
     from shevsim.core.scenario import build_master, load_scenario, stop_time
     t_import = time.perf_counter() - t0
     sc = load_scenario(SCENARIO, ["cycle.repeat=1"])
@@ -94,7 +95,7 @@ def main(argv=None) -> int:
 
     load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
     print(f"# cycle_speed: {SCENARIO.relative_to(ROOT)} with cycle.repeat=1, {pin}, "
-          f"load average {load[0]:.2f} on {os.cpu_count()} CPUs")
+          f"load average {load[0]:.2f} on {os.cpu_count()} CPUs; shevsim from {Path(shevsim.__file__).parent}")
     print(f"start-up: import shevsim {t_import:.3f} s; first build_master {t_first_build:.3f} s "
           f"(numba QP build from cache or compiled); later build_master {t_build:.3f} s")
 
