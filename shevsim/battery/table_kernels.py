@@ -16,7 +16,7 @@ except ImportError:  # pragma: no cover
         return lambda f: f
 
 
-@_njit(cache=True, inline="always")
+@_njit(cache=True)
 def _bisect_right(d, o, n, x):  # pragma: no cover - compiled
     lo = 0
     hi = n
@@ -29,7 +29,7 @@ def _bisect_right(d, o, n, x):  # pragma: no cover - compiled
     return lo
 
 
-@_njit(cache=True, inline="always")
+@_njit(cache=True)
 def _t1_value(d, o, n, x):  # pragma: no cover - compiled
     if x <= d[o]:
         return d[o + n]
@@ -39,7 +39,7 @@ def _t1_value(d, o, n, x):  # pragma: no cover - compiled
     return d[o + n + k] + d[o + 2 * n + k] * (x - d[o + k])
 
 
-@_njit(cache=True, inline="always")
+@_njit(cache=True)
 def _t1_slope(d, o, n, x):  # pragma: no cover - compiled
     if x <= d[o]:
         k = 0
@@ -50,7 +50,7 @@ def _t1_slope(d, o, n, x):  # pragma: no cover - compiled
     return d[o + 2 * n + k]
 
 
-@_njit(cache=True, inline="always")
+@_njit(cache=True)
 def _t1_integral(d, o, n, x):  # pragma: no cover - compiled
     oc = o + 3 * n - 1
     if x <= d[o]:
@@ -62,7 +62,7 @@ def _t1_integral(d, o, n, x):  # pragma: no cover - compiled
     return d[oc + k] + d[o + n + k] * dx + 0.5 * d[o + 2 * n + k] * dx * dx
 
 
-@_njit(cache=True, inline="always")
+@_njit(cache=True)
 def _g2_locate(d, o, n, x):  # pragma: no cover - compiled
     if x <= d[o]:
         return 0, 0.0

@@ -213,7 +213,7 @@ class TwoStateDiscretiser:
 # the closed-form ZOH of TwoStateDiscretiser._zoh: bit-identical results, see
 # tests/unit/test_thermal_estimators.py::test_dkf_compiled_step_is_bit_identical)
 # ---------------------------------------------------------------------------------
-@_njit(cache=True, inline="always")
+@_njit(cache=True)
 def _zoh_nb(h, R, dt, bq, c48, c15, c320, c120, k24, k4, rr):  # pragma: no cover - compiled
     den = k24 + R * h
     a00 = c48 * h / (R * den)

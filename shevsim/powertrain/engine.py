@@ -243,7 +243,7 @@ _PRM_FIELDS = ("max_substep_s", "power_rate_down_max_wps", "shaft_inertia_kg_m2"
                "fuel_fall_s", "fuel_lhv_j_per_g", "transient_soot_mg_per_g", "soot_scale_frac")
 
 
-@_njit(cache=True, inline="always")
+@_njit(cache=True)
 def _bisect_right(d, o, n, x):  # pragma: no cover - compiled
     lo = 0
     hi = n
@@ -256,7 +256,7 @@ def _bisect_right(d, o, n, x):  # pragma: no cover - compiled
     return lo
 
 
-@_njit(cache=True, inline="always")
+@_njit(cache=True)
 def _curve_nb(d, o, n, x):  # pragma: no cover - compiled
     """Clamped curve at ``d[o:o+n]`` (x) / ``d[o+n:o+2n]`` (y), as ``Curve.__call__``; NaN for NaN x."""
     if x != x:
@@ -275,7 +275,7 @@ def _curve_nb(d, o, n, x):  # pragma: no cover - compiled
     return y0 + f * (d[o + n + i + 1] - y0)
 
 
-@_njit(cache=True, inline="always")
+@_njit(cache=True)
 def _grid_nb(d, o, nx, ny, x, y):  # pragma: no cover - compiled
     """Clamped bilinear map: axes ``d[o:o+nx]``, ``d[o+nx:o+nx+ny]``, values row-major after them."""
     if x != x or y != y:
