@@ -127,7 +127,7 @@ class TwoStateDiscretiser:
         """Closed-form ZOH of the two-state model at ``h`` (the arithmetic of :meth:`a_mat` and the
         2x2 matrix exponential written out with the h-independent factors hoisted; bit-identical to
         evaluating them step by step)."""
-        R, k, dt = self._R, self._k, self.dt
+        R, dt = self._R, self.dt
         c48, c15, c320, c120, k24, k4, rr = self._consts
         den = k24 + R * h
         a00 = c48 * h / (R * den)
