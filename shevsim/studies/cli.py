@@ -3,7 +3,7 @@
     shevsim study tradeoff SCENARIO --rates-kwps 30 25 19.3 15 10 [--workers N | --scheduler ADDR] [--out DIR]
     shevsim study powerrate-map SCENARIO [--generations G --population P --seed S --workers N
                                           --scheduler ADDR --out DIR --cache FILE --max-evaluations K]
-    shevsim study thermal [--out DIR]        # battery thermal-model verification
+    shevsim study thermal [DIR | --out DIR]  # battery thermal-model verification
     shevsim study bms ...                    # (not yet available)
 
 Add a study by adding ``name: (help, handler)`` to :data:`STUDIES`; a handler takes the remaining
@@ -139,11 +139,13 @@ def cmd_powerrate_map(argv) -> int:
 
 def cmd_thermal(argv) -> int:
     ap = argparse.ArgumentParser(prog="shevsim study thermal", description="battery thermal-model verification")
+    ap.add_argument("out_dir", nargs="?", help="output folder (same as --out)")
     ap.add_argument("--out", default="results/study_thermal")
     a = ap.parse_args(argv)
     from ..battery.verification import run_thermal_verification
-    run_thermal_verification(Path(a.out))
-    print(f"thermal verification written to {a.out}")
+    out = a.out_dir or a.out
+    run_thermal_verification(Path(out))
+    print(f"thermal verification written to {out}")
     return 0
 
 
