@@ -228,10 +228,8 @@ def _write_outputs(out: Path, summary: dict, es_scored, obj: Objective, levels, 
 
 
 def _csv_atomic(df, path: Path) -> None:
-    import os
-    tmp = path.with_name(f".{path.name}.tmp")
-    df.to_csv(tmp, index=False)
-    os.replace(tmp, path)
+    from ..core.atomic import write_csv_atomic
+    write_csv_atomic(path, df)
 
 
 def _step(edges_w, rates_wps):

@@ -1,0 +1,70 @@
+"""atomic.py - write files so that a crash never leaves half of one.
+
+Everything is written to a temporary file in the destination folder and moved onto the
+destination with ``os.replace`` (atomic on POSIX and Windows). The temporary file gets the
+usual permissions (``mkstemp`` creates it 0600).
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+
+def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:
+    """Call ``write(tmp_path)`` to fill a temporary file, then move it onto ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        write(tmp)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (flushed to disk before the rename)."""
+    def w(tmp):
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+    return atomic_write(path, w)
+
+
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    """Write UTF-8 ``text`` to ``path`` atomically."""
+    return write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, tuple):
+        return list(o)
+    return str(o)
+
+
+def write_json_atomic(path: str | Path, obj: Any) -> Path:
+    """Write ``obj`` as indented JSON (numpy values converted) to ``path`` atomically."""
+    return write_text_atomic(path, json.dumps(obj, indent=2, default=_json_default, allow_nan=True))
+
+
+def write_csv_atomic(path: str | Path, df, **to_csv_kwargs) -> Path:
+    """Write a DataFrame as CSV to ``path`` atomically."""
+    to_csv_kwargs.setdefault("index", False)
+    return atomic_write(path, lambda tmp: df.to_csv(tmp, **to_csv_kwargs))
