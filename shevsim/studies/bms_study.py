@@ -15,7 +15,8 @@ Three studies, each writing PNG figures and CSV/JSON tables atomically (temporar
     closed-loop run's (``replay_soc_max_diff_pct``).
 :func:`thermal_table`
     seed Table 3.3 analogue: :func:`shevsim.bms.thermal_estimators.table_3_3` (KF, DKF, JEKF on a
-    30-node plant, stages I-III).
+    30-node plant, stages I-III), with the synthetic heat profile and with the per-cell heat of the
+    UAC proxy run (current x1 and x2).
 :func:`power_capability_study`
     seed Fig. 5.15 analogue: ``scenarios/uac_proxy_mpc_cooling_fault.toml`` (h 20 -> 3 W/m2K at
     300 s) with the BMS power limits enforced (motors derated through ``bus.motor_power_max_w`` /
@@ -365,36 +366,83 @@ def dekf_study(out_dir, seed: int = 1, stop_s: float | None = None, settle_s: fl
 
 
 # -- 2. Table 3.3 --------------------------------------------------------------------------------
-def thermal_table(out_dir, seed: int = 0, duration_s: float = 3600.0) -> dict:
-    """Seed Table 3.3 analogue via :func:`shevsim.bms.thermal_estimators.table_3_3`.
-
-    Writes ``table_3_3.csv``, ``table_3_3.json``, ``table_3_3.png`` into ``out_dir`` (generated in a
-    temporary folder, then each moved into place). Returns per stage and filter the core RMSE,
-    final h and its settling, plus the ratios the issue asks about.
-    """
-    from ..bms.thermal_estimators import H_STAR_W_M2K, table_3_3
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=out, prefix=".table_3_3.tmp-"))
-    try:
-        res = table_3_3(tmp, seed=seed, duration_s=duration_s)
-        for name in ("table_3_3.csv", "table_3_3.json", "table_3_3.png"):
-            os.replace(tmp / name, out / name)
-    finally:
-        import shutil
-        shutil.rmtree(tmp, ignore_errors=True)
+def _thermal_metrics(res: dict) -> dict:
+    from ..bms.thermal_estimators import H_STAR_W_M2K
     f = {s: r["filters"] for s, r in res.items()}
     rm = {s: {k: v["rmse_core_c"] for k, v in fs.items()} for s, fs in f.items()}
-    h_true_final = {"I": H_STAR_W_M2K, "II": 90.0, "III": H_STAR_W_M2K}
-    met = {"seed": seed, "duration_s": duration_s, "rmse_core_c": rm,
+    h_true_final = {"I": H_STAR_W_M2K, "II": 90.0, "III": H_STAR_W_M2K, "III_h0_star": H_STAR_W_M2K}
+    met = {"rmse_core_c": rm,
            "h_final_w_m2k": {s: {k: v["h_final_w_m2k"] for k, v in fs.items() if k != "KF"} for s, fs in f.items()},
            "h_final_rel_err": {s: {k: abs(v["h_final_w_m2k"] / h_true_final[s] - 1.0) for k, v in fs.items() if k != "KF"}
                                for s, fs in f.items()},
            "h_settle_10pct_s": {s: {k: v["h_settle_10pct_s"] for k, v in fs.items() if k != "KF"} for s, fs in f.items()},
+           "mean_heat_w": {s: r["mean_heat_w"] for s, r in res.items()},
+           "mean_core_minus_ambient_c": {s: r["mean_core_minus_ambient_c"] for s, r in res.items()},
+           "max_core_minus_ambient_c": {s: r["max_core_minus_ambient_c"] for s, r in res.items()},
            "stage_I_dkf_over_kf": rm["I"]["DKF"] / rm["I"]["KF"], "stage_I_jekf_over_kf": rm["I"]["JEKF"] / rm["I"]["KF"],
            "stage_III_kf_over_dkf": rm["III"]["KF"] / rm["III"]["DKF"],
-           "stage_III_kf_over_jekf": rm["III"]["KF"] / rm["III"]["JEKF"],
+           "stage_III_kf_over_jekf": rm["III"]["KF"] / rm["III"]["JEKF"]}
+    if "III_h0_star" in rm:
+        met["stage_III_h0_star_kf_over_dkf"] = rm["III_h0_star"]["KF"] / rm["III_h0_star"]["DKF"]
+        met["stage_III_h0_star_kf_over_jekf"] = rm["III_h0_star"]["KF"] / rm["III_h0_star"]["JEKF"]
+    return met
+
+
+def _table_into(out: Path, name: str, **kw) -> dict:
+    """Run :func:`table_3_3` in a temporary folder of ``out``, then move its files into place."""
+    from ..bms.thermal_estimators import table_3_3
+    tmp = Path(tempfile.mkdtemp(dir=out, prefix=f".{name}.tmp-"))
+    try:
+        res = table_3_3(tmp, name=name, **kw)
+        for ext in ("csv", "json", "png"):
+            os.replace(tmp / f"{name}.{ext}", out / f"{name}.{ext}")
+    finally:
+        import shutil
+        shutil.rmtree(tmp, ignore_errors=True)
+    return res
+
+
+def thermal_table(out_dir, seed: int = 0, duration_s: float = 3600.0, uac_proxy: bool = True,
+                  current_scales=(1.0, 2.0), scenario_path=BASE_SCENARIO) -> dict:
+    """Seed Table 3.3 analogue via :func:`shevsim.bms.thermal_estimators.table_3_3`.
+
+    Writes ``table_3_3.csv``, ``table_3_3.json``, ``table_3_3.png`` (synthetic ``i^2 0.015 ohm``
+    heat, |i| <= 25 A) into ``out_dir`` (generated in a temporary folder, then each moved into
+    place). Returns per stage and filter the core RMSE, final h and its settling, plus the ratios
+    the issue asks about.
+
+    With ``uac_proxy`` it also simulates ``scenario_path`` once (UAC proxy, ~2 s, its own seed;
+    :func:`~shevsim.bms.thermal_estimators.uac_proxy_profile`) and repeats the same experiment with
+    its per-cell heat (true ``battery.heat_w``, 1-s means, repeated end to end over the three stages)
+    for each current scale s in ``current_scales`` (heat x s^2): ``table_3_3_uac_proxy.*`` for s = 1,
+    ``table_3_3_uac_proxy_x{s}.*`` otherwise, each with the extra row ``III_h0_star`` (DKF/JEKF
+    started at the seed's theta(0) = h* in stage III). Their metrics are under ``"uac_proxy"``.
+    """
+    from ..bms.thermal_estimators import uac_proxy_profile
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    res = _table_into(out, "table_3_3", seed=seed, duration_s=duration_s)
+    met = {"seed": seed, "duration_s": duration_s, **_thermal_metrics(res),
            "figure": str(out / "table_3_3.png"), "table_csv": str(out / "table_3_3.csv")}
+    if uac_proxy:
+        prof = uac_proxy_profile(scenario_path)
+        met["uac_proxy"] = {}
+        for sc in current_scales:
+            sc = float(sc)
+            name = "table_3_3_uac_proxy" + ("" if sc == 1.0 else f"_x{sc:g}")
+            heat = prof["heat_w"] * sc ** 2
+            note = (f"heat: {Path(prof['scenario']).name} (seed {prof['seed']}) true battery.heat_w per cell, "
+                    f"1-s means, {prof['period_s']:.0f} s repeated; current x{sc:g} (heat x{sc * sc:g}), "
+                    f"mean {heat.mean():.2f} W")
+            r = _table_into(out, name, seed=seed, duration_s=duration_s, heat_w=heat, seed_h0_row=True, note=note)
+            cur = prof["current_a"] * sc
+            met["uac_proxy"][name] = {"current_scale": sc, "heat_mean_w": float(heat.mean()),
+                                      "heat_max_w": float(heat.max()),
+                                      "cell_current_rms_a": float(np.sqrt(np.mean(cur ** 2))),
+                                      "cell_current_max_abs_a": float(np.max(np.abs(cur))),
+                                      "scenario": prof["scenario"], "scenario_seed": prof["seed"],
+                                      **_thermal_metrics(r), "figure": str(out / f"{name}.png"),
+                                      "table_csv": str(out / f"{name}.csv")}
     write_json_atomic(out / "table_3_3_summary.json", met)
     return met
 
@@ -621,6 +669,11 @@ def main(argv=None) -> int:
         for st in ("I", "II", "III"):
             print(f"Table 3.3 stage {st}: core RMSE KF {r[st]['KF']:.3f}, DKF {r[st]['DKF']:.3f}, "
                   f"JEKF {r[st]['JEKF']:.3f} degC")
+        for name, u in s["thermal"].get("uac_proxy", {}).items():
+            print(f"{name} (mean heat {u['heat_mean_w']:.2f} W/cell): stage III KF/DKF "
+                  f"{u['stage_III_kf_over_dkf']:.2f}, KF/JEKF {u['stage_III_kf_over_jekf']:.2f} "
+                  f"(DKF/JEKF from h*: {u['stage_III_h0_star_kf_over_dkf']:.2f} / "
+                  f"{u['stage_III_h0_star_kf_over_jekf']:.2f})")
     if "power" in s:
         p = s["power"]
         for k, r in p["runs"].items():

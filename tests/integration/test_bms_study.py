@@ -103,12 +103,19 @@ def test_cli_study_bms_thermal_quick(tmp_path):
     from shevsim.studies.cli import main_study
     out = tmp_path / "bms"
     assert main_study(["bms", str(out), "--quick", "--only", "thermal"]) == 0
-    for name in ("table_3_3.csv", "table_3_3.png", "table_3_3_summary.json", "summary.json"):
+    for name in ("table_3_3.csv", "table_3_3.png", "table_3_3_summary.json", "summary.json",
+                 "table_3_3_uac_proxy.csv", "table_3_3_uac_proxy.png", "table_3_3_uac_proxy_x2.csv"):
         assert (out / name).is_file(), name
     s = json.loads((out / "summary.json").read_text())
     r = s["thermal"]["rmse_core_c"]
     # stage III: the KF with 2x the true h is worse than the filters that estimate h
     assert r["III"]["KF"] > r["III"]["DKF"] and r["III"]["KF"] > r["III"]["JEKF"]
+    u = s["thermal"]["uac_proxy"]
+    # current x2 -> heat x4 (same trace)
+    assert u["table_3_3_uac_proxy_x2"]["heat_mean_w"] == pytest.approx(4 * u["table_3_3_uac_proxy"]["heat_mean_w"])
+    for v in u.values():
+        rr = v["rmse_core_c"]
+        assert rr["III"]["KF"] > rr["III"]["DKF"] and rr["III_h0_star"]["KF"] > 2 * rr["III_h0_star"]["DKF"]
     assert not list(out.glob(".*tmp*")), "temporary files left behind"
 
 
