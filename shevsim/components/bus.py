@@ -18,6 +18,10 @@ Outputs (direct feedthrough of the inputs they use)
     gen + battery_power_min - aux [W]: what the motors may draw / return so that the battery stays
     inside its power capability (the vehicle controller's traction derating). With the parameter
     ``enforce_battery_limits = false`` they are +-1e12 (the counterfactual without limits).
+    ``gen_power_max_w`` = max(motor + aux - battery_power_min, 0) [W]: the most generator power the bus
+    can absorb without charging the battery beyond its capability (the engine-generator sheds load
+    above it, see :mod:`shevsim.components.engine_generator`); 1e12 with
+    ``enforce_battery_limits = false``.
     ``battery_power_w`` [W] + discharge; ``demand_power_w`` [W] = motor + aux;
     cumulative ``aux_energy_j``, ``motor_energy_j``, ``gen_energy_j``, ``battery_energy_j`` [J].
 """
@@ -46,6 +50,7 @@ class BusParams:
 
 
 _LIM = ("gen_power_w", "aux_power_w", "battery_power_max_w", "battery_power_min_w")
+_GLIM = ("motor_power_w", "aux_power_w", "battery_power_min_w")
 
 
 class PowerBus(Component):
@@ -61,6 +66,7 @@ class PowerBus(Component):
         inp("battery_power_min_w", "W", -1e12, "battery charge power capability (<= 0)"),
         out("motor_power_max_w", "W", 1e12, "most power the motors may draw", _LIM),
         out("motor_power_min_w", "W", -1e12, "most power the motors may return (<= 0)", _LIM),
+        out("gen_power_max_w", "W", 1e12, "most generator power the bus can absorb (>= 0)", _GLIM),
         out("battery_power_w", "W", 0.0, "battery power, + discharge", _ALL),
         out("demand_power_w", "W", 0.0, "motor + auxiliary power", ("motor_power_w", "aux_power_w")),
         out("aux_energy_j", "J", 0.0, "cumulative auxiliary energy", ("aux_power_w",)),
@@ -75,9 +81,11 @@ class PowerBus(Component):
             base = u["gen_power_w"] - u["aux_power_w"]
             y["motor_power_max_w"] = max(base + u["battery_power_max_w"], 0.0)
             y["motor_power_min_w"] = min(base + u["battery_power_min_w"], 0.0)
+            y["gen_power_max_w"] = max(u["motor_power_w"] + u["aux_power_w"] - u["battery_power_min_w"], 0.0)
         else:
             y["motor_power_max_w"] = 1e12
             y["motor_power_min_w"] = -1e12
+            y["gen_power_max_w"] = 1e12
 
     def initialize(self, t0: float) -> None:
         self.e = [0.0, 0.0, 0.0, 0.0]

@@ -4,7 +4,8 @@ Physics in :mod:`shevsim.powertrain.engine` (read its docstring for the equation
 limit on the command -> optimal-operating-line speed set point and shaft-power demand -> PI rack
 controller on the torque error (seed B.1) -> turbo-lag filter on the fuel -> engine torque map
 (speed, fuel) -> shaft speed response -> generator efficiency map; fuel and soot (quasi-static
-map + transient term from the turbo-lag fuel deficit).
+map + transient term from the turbo-lag fuel deficit); load shedding when the bus cannot absorb the
+power (command and generator torque cut, governor fuel cut; item 10 of the physics docstring).
 
 Ports
 -----
@@ -12,13 +13,21 @@ Inputs
     ``power_cmd_w`` [W] electrical power command (+ to the bus), clipped to [0, P_max].
     ``power_rate_max_wps`` [W/s] max rate of increase of the (internal) power command; start 1e12
     (no limit).
+    ``elec_power_max_w`` [W] most electrical power the bus can absorb (``bus.gen_power_max_w``: motors +
+    auxiliaries + battery charge capability); start 1e12 (no limit). Not direct feedthrough: it acts
+    inside the step. Below the rate-limited command it cuts the command at once (no downward rate
+    limit) and the generator torque is cut so that the electrical power of every internal sub-step
+    is ``<= max(elec_power_max_w, 0)``; the surplus engine work accelerates the shaft (booked as
+    kinetic energy) until the governor has cut the fuel (falls with ``fuel_fall_s``).
 Outputs (at t + h, no direct feedthrough: every output comes from the state or the step just run)
     ``elec_power_w`` [W] + to the bus, *mean over the last step* (so that sum(P h) equals the
     electrical energy delivered); ``engine_power_w`` [W] crankshaft power (end of step);
     ``engine_speed_radps`` [rad/s]; ``engine_torque_nm`` [N m]; ``rack_frac`` [1] rack position
     zeta; ``fuel_rate_gps`` [g/s] and ``soot_rate_mgps`` [mg/s] means over the last step;
-    ``power_limited_w`` [W] the rate-limited command; ``elec_power_max_w`` [W] max steady
-    electrical output (constant, end of the optimal operating line); cumulative ``fuel_mass_g``, ``fuel_energy_j``,
+    ``power_limited_w`` [W] the rate-limited (and shed) command; ``elec_power_rated_w`` [W] max steady
+    electrical output (constant, end of the optimal operating line); ``shed_count`` [1] cumulative
+    number of load-shedding episodes, ``shed_time_s`` [s] cumulative time shedding was active
+    (command cut or generator torque cut); cumulative ``fuel_mass_g``, ``fuel_energy_j``,
     ``soot_mass_mg``, ``soot_transient_mg``, ``engine_loss_energy_j``, ``gen_loss_energy_j``,
     ``elec_energy_j``, ``shaft_kinetic_energy_j`` (change of 1/2 J w^2 since t0).
 
@@ -105,6 +114,7 @@ class EngineGenerator(Component):
     VARIABLES = (
         inp("power_cmd_w", "W", 0.0, "electrical power command, + to the bus"),
         inp("power_rate_max_wps", "W/s", 1e12, "max rate of increase of the power command"),
+        inp("elec_power_max_w", "W", 1e12, "most electrical power the bus can absorb (load shedding below it)"),
         out("elec_power_w", "W", 0.0, "electrical power delivered to the bus (mean over the last step)"),
         out("engine_power_w", "W", 0.0, "engine crankshaft power"),
         out("engine_speed_radps", "rad/s", 0.0, "engine speed"),
@@ -112,8 +122,10 @@ class EngineGenerator(Component):
         out("rack_frac", "1", 0.0, "rack position zeta in [0, 1]"),
         out("fuel_rate_gps", "g/s", 0.0, "fuel rate (mean over the last step)"),
         out("soot_rate_mgps", "mg/s", 0.0, "engine-out soot rate (mean over the last step)"),
-        out("power_limited_w", "W", 0.0, "rate-limited internal power command"),
-        out("elec_power_max_w", "W", 0.0, "max steady electrical output (end of the optimal line), constant"),
+        out("power_limited_w", "W", 0.0, "rate-limited (and shed) internal power command"),
+        out("elec_power_rated_w", "W", 0.0, "max steady electrical output (end of the optimal line), constant"),
+        out("shed_count", "1", 0.0, "cumulative number of load-shedding episodes"),
+        out("shed_time_s", "s", 0.0, "cumulative time with load shedding active"),
         out("fuel_mass_g", "g", 0.0, "cumulative fuel mass"),
         out("fuel_energy_j", "J", 0.0, "cumulative fuel energy (LHV)"),
         out("soot_mass_mg", "mg", 0.0, "cumulative soot mass"),
@@ -149,7 +161,9 @@ class EngineGenerator(Component):
         y["fuel_rate_gps"] = fuel_gps
         y["soot_rate_mgps"] = soot_mgps
         y["power_limited_w"] = st.p_lim
-        y["elec_power_max_w"] = self.maps.p_max_w
+        y["elec_power_rated_w"] = self.maps.p_max_w
+        y["shed_count"] = st.shed_n
+        y["shed_time_s"] = st.shed_s
         y["fuel_mass_g"] = st.fuel_g
         y["fuel_energy_j"] = st.fuel_j
         y["soot_mass_mg"] = st.soot_mg
@@ -160,11 +174,12 @@ class EngineGenerator(Component):
         y["shaft_kinetic_energy_j"] = st.ke_j
 
     def do_step(self, t: float, h: float) -> None:
-        pc, rate = self.u["power_cmd_w"], self.u["power_rate_max_wps"]
-        if pc != pc or rate != rate:
-            raise SimulationError(f"{self.name}: NaN input at t={t:g} s (power_cmd_w={pc}, power_rate_max_wps={rate})")
+        pc, rate, lim = self.u["power_cmd_w"], self.u["power_rate_max_wps"], self.u["elec_power_max_w"]
+        if pc != pc or rate != rate or lim != lim:
+            raise SimulationError(f"{self.name}: NaN input at t={t:g} s (power_cmd_w={pc}, power_rate_max_wps={rate}, "
+                                  f"elec_power_max_w={lim})")
         if self._advance is not None:
-            e_el, fuel, soot = self._advance(self.st, pc, rate, h)
+            e_el, fuel, soot = self._advance(self.st, pc, rate, h, lim)
         else:
-            e_el, fuel, soot = advance(self.maps, self.params, self.st, pc, rate, h)
+            e_el, fuel, soot = advance(self.maps, self.params, self.st, pc, rate, h, lim)
         self._write(e_el / h, fuel / h, soot / h)

@@ -36,12 +36,36 @@ Chain, advanced in sub-steps of at most ``max_substep_s`` with the inputs held:
    error, hence the rack and ``m_c - m_f``, small, so it cuts transient soot - the seed's
    fuel/soot trade-off.
 9. **Generator** efficiency ``eta_g(w, |tau_g|)`` (Fig. B.3 role, ``generator_eff_map.csv``).
+10. **Load shedding** (input ``elec_max_w`` = what the bus can absorb without over-charging the
+    battery, ``L = max(elec_max_w, 0)``). A series hybrid's generator controller cuts generator torque
+    at once when the bus cannot take the power, and the engine governor cuts fuel; the downward
+    power-rate limit is a smoothness constraint of normal operation, not physics. Hence, per sub-step:
+
+    a. *command cut*: after the rate limit, ``P_lim = min(P_lim, L)`` (bypassing ``R_down``); the
+       torque demand (4) follows at once, the PI rack (5) drops and the fuel falls with
+       ``fuel_fall_s`` (6);
+    b. *generator torque cut*: if the electrical energy of the sub-step would exceed ``L dt``, the
+       generator torque is cut so that ``E_el = L dt`` exactly; its shaft work is
+       ``W_g = min(L dt / eta_g(w, tau_gc), W_g,free)`` (efficiency at the cut torque
+       ``tau_gc = L dt / (eta_free w_avg dt)``; never more shaft work than uncut), and the surplus
+       engine work accelerates the shaft: ``dKE = W_e - W_g``, ``w1 = sqrt(w0^2 + 2 dKE / J)``; the
+       engine torque at the end of the sub-step is re-read from the map at that speed;
+    c. *governor*: while the generator torque is cut (previous sub-step) the generator no longer
+       holds the speed, so the speed loop's torque ``J (w* - w) / T_w`` is asked of the engine
+       instead (added to the torque demand of the PI rack): the over-speed from (b) is removed by
+       cutting fuel, and the shaft's kinetic energy then returns to the bus (within ``L``).
+
+    (b) makes the electrical output of every sub-step ``<= L`` (hence its step mean too), exactly;
+    the bookkeeping below stays exact because the surplus is booked as ``dKE``. Counted as
+    ``shed_n`` (number of episodes: sub-steps with (a) or (b) following one without) and ``shed_s``
+    (time with (a) or (b) active).
 
 Energy bookkeeping per sub-step (all exact for the discrete trajectory):
 ``E_fuel = LHV * fuel mass``; ``W_e = mean(tau_e) * mean(w) * dt`` (trapezoid in torque);
 ``dKE = J (w1^2 - w0^2)/2``; generator shaft work ``W_g = W_e - dKE``; electrical
 ``E_el = W_g eta_g`` (``W_g / eta_g`` when motoring); ``engine_loss = E_fuel - W_e``;
-``gen_loss = W_g - E_el``; hence ``E_fuel = E_el + engine_loss + gen_loss + dKE_shaft``.
+``gen_loss = W_g - E_el``; hence ``E_fuel = E_el + engine_loss + gen_loss + dKE_shaft`` (also with
+load shedding, where ``dKE = W_e - W_g`` defines the new speed).
 """
 from __future__ import annotations
 
@@ -89,7 +113,7 @@ class EngineGenState:
 
     __slots__ = ("p_lim", "w", "integ", "rack", "m_f", "tau_e", "fuel_cmd",
                  "fuel_g", "fuel_j", "soot_mg", "soot_tr_mg", "eng_loss_j", "gen_loss_j",
-                 "elec_j", "shaft_j", "ke_j")
+                 "elec_j", "shaft_j", "ke_j", "gen_sat", "shed", "shed_n", "shed_s")
 
     def __init__(self):
         for s in self.__slots__:
@@ -114,12 +138,16 @@ def steady_state(maps: EngineGenMaps, p_elec_w: float, state: EngineGenState | N
     st.rack = st.m_f / maps.fmax(st.w)
     st.integ = st.rack
     st.ke_j = 0.0
+    st.gen_sat = st.shed = 0.0
     return st
 
 
 def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_up_wps: float,
-            h: float) -> tuple[float, float, float]:
+            h: float, elec_max_w: float = 1e12) -> tuple[float, float, float]:
     """Advance ``st`` by ``h`` with the inputs held; return (elec J, fuel g, soot mg) of this step.
+
+    ``elec_max_w`` [W]: most electrical power the bus can absorb (load shedding, item 10 of the
+    module docstring); the electrical energy of every sub-step is at most ``max(elec_max_w, 0) dt``.
 
     ``prm`` provides ``rack_kp_per_nm, rack_ki_per_nm_s, turbo_lag_s, fuel_fall_s,
     speed_time_constant_s, speed_accel_max_radps2, shaft_inertia_kg_m2, power_rate_down_max_wps,
@@ -138,6 +166,9 @@ def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_u
     a_dn = math.exp(-dt / prm.fuel_fall_s)
     lhv, c_tr, s_qs = prm.fuel_lhv_j_per_g, prm.transient_soot_mg_per_g, prm.soot_scale_frac
     tf_up, tf_dn = prm.turbo_lag_s, prm.fuel_fall_s
+    t_w = prm.speed_time_constant_s
+    p_shed = max(elec_max_w, 0.0)
+    e_shed = p_shed * dt
     # the maps' plain-function forms (same values as calling the map objects)
     ool_speed, ool_shaft, tmax, fmax = maps.ool_speed.fn, maps.ool_shaft.fn, maps.tmax.fn, maps.fmax.fn
     torque, geff, soot_map = maps.torque.fn, maps.geff.fn, maps.soot.fn
@@ -145,11 +176,16 @@ def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_u
     p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd = st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e, st.fuel_cmd
     fuel_g, fuel_j, eng_loss_j, shaft_j, ke_j = st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j
     gen_loss_j, elec_j, soot_mg, soot_tr_mg = st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg
+    gen_sat, shed, shed_n, shed_s = st.gen_sat, st.shed, st.shed_n, st.shed_s
     e_el = fuel = soot = 0.0
     for _ in range(n):
-        # 1. rate limit
+        # 1. rate limit, 10a. command cut to the bus limit (bypasses the downward rate limit)
         dp = target - p_lim
         p_lim += r_up if dp > r_up else (-r_dn if dp < -r_dn else dp)
+        cut = 0.0
+        if p_lim > p_shed:
+            p_lim = p_shed
+            cut = 1.0
         # 2-3. speed set point and speed response
         w0 = w
         w_set = ool_speed(p_lim)
@@ -158,8 +194,10 @@ def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_u
             w1 = w0 + dw_max
         elif w0 - w1 > dw_max:
             w1 = w0 - dw_max
-        # 4. torque demand
+        # 4. torque demand (10c. + the speed loop's torque while the generator torque is cut)
         tau_ref = ool_shaft(p_lim) / w0
+        if gen_sat > 0.0:
+            tau_ref += J * (w_set - w0) / t_w
         tl = tmax(w0)
         if tau_ref > tl:
             tau_ref = tl
@@ -196,6 +234,28 @@ def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_u
         tau_g = w_g / (w_avg * dt)
         eta = geff(w_avg, abs(tau_g))
         el = w_g * eta if w_g >= 0.0 else w_g / eta
+        # 10b. generator torque cut to the bus limit; the surplus engine work accelerates the shaft
+        gen_sat = 0.0
+        if el > e_shed:
+            if e_shed > 0.0:
+                eta = geff(w_avg, e_shed / (eta * w_avg * dt))
+                w_gc = e_shed / eta
+            else:
+                w_gc = 0.0
+            if w_gc < w_g:
+                w_g = w_gc
+            el = e_shed
+            dke = w_e - w_g
+            w1 = math.sqrt(w0 * w0 + 2.0 * dke / J)
+            tau1 = torque(w1, m1)
+            gen_sat = 1.0
+        if cut > 0.0 or gen_sat > 0.0:
+            if shed == 0.0:
+                shed_n += 1.0
+            shed = 1.0
+            shed_s += dt
+        else:
+            shed = 0.0
         # 8. soot: quasi-static + transient (deficit of burnt fuel against the rack's command)
         s = s_qs * soot_map(w_avg, tau_avg) * dt if tau_avg > 0.0 else 0.0
         deficit = m_c * dt - dm                              # int (m_c - m_f) dt over the sub-step [g]
@@ -217,6 +277,7 @@ def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_u
     st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e, st.fuel_cmd = p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd
     st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j = fuel_g, fuel_j, eng_loss_j, shaft_j, ke_j
     st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg = gen_loss_j, elec_j, soot_mg, soot_tr_mg
+    st.gen_sat, st.shed, st.shed_n, st.shed_s = gen_sat, shed, shed_n, shed_s
     return e_el, fuel, soot
 
 
@@ -311,7 +372,8 @@ def _grid_nb(d, o, nx, ny, x, y):  # pragma: no cover - compiled
 
 @_njit(cache=True)
 def _advance_nb(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g, fuel_j, eng_loss_j,
-                shaft_j, ke_j, gen_loss_j, elec_j, soot_mg, soot_tr_mg, p_cmd_w, rate_up_wps, h):  # pragma: no cover
+                shaft_j, ke_j, gen_loss_j, elec_j, soot_mg, soot_tr_mg, gen_sat, shed, shed_n, shed_s,
+                p_cmd_w, rate_up_wps, h, elec_max_w):  # pragma: no cover
     n = max(1, math.ceil(h / c[0] - 1e-9))
     dt = h / n
     target = min(max(p_cmd_w, 0.0), p_max)
@@ -329,12 +391,19 @@ def _advance_nb(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, 
     lhv = c[9]
     c_tr = c[10]
     s_qs = c[11]
+    t_w = c[5]
+    p_shed = max(elec_max_w, 0.0)
+    e_shed = p_shed * dt
     e_el = 0.0
     fuel = 0.0
     soot = 0.0
     for _ in range(n):
         dp = target - p_lim
         p_lim += r_up if dp > r_up else (-r_dn if dp < -r_dn else dp)
+        cut = 0.0
+        if p_lim > p_shed:
+            p_lim = p_shed
+            cut = 1.0
         w0 = w
         w_set = _curve_nb(md, mi[0], mi[1], p_lim)
         w1 = w_set + (w0 - w_set) * a_w
@@ -343,6 +412,8 @@ def _advance_nb(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, 
         elif w0 - w1 > dw_max:
             w1 = w0 - dw_max
         tau_ref = _curve_nb(md, mi[2], mi[3], p_lim) / w0
+        if gen_sat > 0.0:
+            tau_ref += J * (w_set - w0) / t_w
         tl = _curve_nb(md, mi[4], mi[5], w0)
         if tau_ref > tl:
             tau_ref = tl
@@ -378,6 +449,27 @@ def _advance_nb(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, 
         tau_g = w_g / (w_avg * dt)
         eta = _grid_nb(md, mi[11], mi[12], mi[13], w_avg, abs(tau_g))
         el = w_g * eta if w_g >= 0.0 else w_g / eta
+        gen_sat = 0.0
+        if el > e_shed:
+            if e_shed > 0.0:
+                eta = _grid_nb(md, mi[11], mi[12], mi[13], w_avg, e_shed / (eta * w_avg * dt))
+                w_gc = e_shed / eta
+            else:
+                w_gc = 0.0
+            if w_gc < w_g:
+                w_g = w_gc
+            el = e_shed
+            dke = w_e - w_g
+            w1 = math.sqrt(w0 * w0 + 2.0 * dke / J)
+            tau1 = _grid_nb(md, mi[8], mi[9], mi[10], w1, m1)
+            gen_sat = 1.0
+        if cut > 0.0 or gen_sat > 0.0:
+            if shed == 0.0:
+                shed_n += 1.0
+            shed = 1.0
+            shed_s += dt
+        else:
+            shed = 0.0
         s = s_qs * _grid_nb(md, mi[14], mi[15], mi[16], w_avg, tau_avg) * dt if tau_avg > 0.0 else 0.0
         deficit = m_c * dt - dm
         s_tr = c_tr * deficit * deficit / (dt * fl) if deficit > 0.0 else 0.0
@@ -398,17 +490,18 @@ def _advance_nb(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, 
         fuel += dm
         soot += s + s_tr
     return (p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g, fuel_j, eng_loss_j, shaft_j, ke_j, gen_loss_j,
-            elec_j, soot_mg, soot_tr_mg, e_el, fuel, soot)
+            elec_j, soot_mg, soot_tr_mg, gen_sat, shed, shed_n, shed_s, e_el, fuel, soot)
 
 
 class CompiledAdvance:
     """:func:`advance` compiled for one (maps, parameters) pair; ``None`` from :meth:`make` when the maps
     use an extrapolation other than ``clamp`` (the compiled lookups implement only that) or numba is
-    missing.  ``__call__(st, p_cmd_w, rate_up_wps, h)`` has the semantics of ``advance`` (a non-finite
+    missing.  ``__call__(st, p_cmd_w, rate_up_wps, h, elec_max_w=1e12)`` has the semantics of ``advance`` (a non-finite
     value met inside is re-run through the Python path, which raises the maps' errors)."""
 
     _STATE = ("p_lim", "w", "integ", "rack", "m_f", "tau_e", "fuel_cmd", "fuel_g", "fuel_j", "eng_loss_j",
-              "shaft_j", "ke_j", "gen_loss_j", "elec_j", "soot_mg", "soot_tr_mg")
+              "shaft_j", "ke_j", "gen_loss_j", "elec_j", "soot_mg", "soot_tr_mg", "gen_sat", "shed", "shed_n",
+              "shed_s")
 
     def __init__(self, maps: EngineGenMaps, prm):
         import numpy as np
@@ -438,14 +531,16 @@ class CompiledAdvance:
             return None
         return cls(maps, prm)
 
-    def __call__(self, st: EngineGenState, p_cmd_w: float, rate_up_wps: float, h: float):
+    def __call__(self, st: EngineGenState, p_cmd_w: float, rate_up_wps: float, h: float,
+                 elec_max_w: float = 1e12):
         r = _advance_nb(self.md, self.mi, self.c, self.p_max, st.p_lim, st.w, st.integ, st.rack, st.m_f,
                         st.tau_e, st.fuel_cmd, st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j,
-                        st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg, float(p_cmd_w), float(rate_up_wps),
-                        float(h))
-        if not (math.isfinite(r[16]) and math.isfinite(r[17]) and math.isfinite(r[18])
+                        st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg, st.gen_sat, st.shed, st.shed_n,
+                        st.shed_s, float(p_cmd_w), float(rate_up_wps), float(h), float(elec_max_w))
+        if not (math.isfinite(r[20]) and math.isfinite(r[21]) and math.isfinite(r[22])
                 and math.isfinite(r[1]) and math.isfinite(r[5])):
-            return advance(self.maps, self.prm, st, p_cmd_w, rate_up_wps, h)   # raises the maps' errors
+            return advance(self.maps, self.prm, st, p_cmd_w, rate_up_wps, h, elec_max_w)   # raises the maps' errors
         (st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e, st.fuel_cmd, st.fuel_g, st.fuel_j, st.eng_loss_j,
-         st.shaft_j, st.ke_j, st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg) = r[:16]
-        return r[16], r[17], r[18]
+         st.shaft_j, st.ke_j, st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg, st.gen_sat, st.shed, st.shed_n,
+         st.shed_s) = r[:20]
+        return r[20], r[21], r[22]

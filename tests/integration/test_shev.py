@@ -78,3 +78,52 @@ def test_mpc_keeps_soc_window_without_fallbacks(rate_map_pair):
     assert r["battery.soc_pct"].min() > 30.0 and r["battery.soc_pct"].max() < 70.0
     assert m["speed_miss_rms_kmh"] < 1.0
     assert abs(m["energy_closure_error_frac"]) < 1e-3
+
+
+@pytest.fixture(scope="module")
+def cooling_fault_1500():
+    return run("uac_proxy_mpc_cooling_fault", stop_s=1500.0)
+
+
+def test_load_shedding_keeps_the_battery_within_its_power_capability(cooling_fault_1500):
+    """Cooling fault (h 20 -> 3 W/m2K at 300 s): the BMS's charge limit P_b,min goes to a few tens of kW.
+    The bus derates the motors and (load shedding) caps the generator at what the bus can absorb.
+    Both act on the previous step's bus values (the engine-generator runs before the bus, which books
+    its power), so what is left is the one-step lag: at step k the battery can be charged beyond
+    P_b,min only by the drop of the motor power within that step (or, with the generator limit at 0,
+    by the rise of the generator power), and discharged beyond P_b,max only by the drop of the
+    generator power - exact inequalities, checked on every step. Before load shedding
+    this run spent 19.8 s more than 1 kW beyond the limits (worst 181 kW: the generator kept delivering
+    after braking started); with it ~5 s, in steps where the motor power fell within the step."""
+    r, m = cooling_fault_1500
+    assert r.termination == "completed"
+    t = r.time_s
+    pb, gen, mot = r["bus.battery_power_w"], r["engine_generator.elec_power_w"], r["motor.elec_power_w"]
+    pmax, pmin, gmax = r["bms.power_max_w"], r["bms.power_min_w"], r["bus.gen_power_max_w"]
+    # the engine-generator never delivers more than the bus limit it saw (previous step's bus output)
+    assert np.all(gen[1:] <= gmax[:-1] * (1 + 1e-12) + 1e-6)
+    # one-step-lag bounds (limits judged as published before the step, as in the BMS study); exact up to
+    # round-off. Charge side: with the generator capped (limit > 0) the excess is at most the motor power's
+    # drop within the step; else the motor derating bounds it by the generator's rise.
+    tol = 1e-3  # W
+    drop_motor = np.maximum(mot[:-1] - mot[1:], 0.0)
+    rise_gen = np.maximum(gen[1:] - gen[:-1], 0.0)
+    drop_gen = np.maximum(gen[:-1] - gen[1:], 0.0)
+    capped = gmax[:-1] > 0.0
+    assert np.all((pmin[:-1] - pb[1:] - drop_motor)[capped] <= tol)
+    assert np.all(pmin[:-1] - pb[1:] - np.maximum(drop_motor, rise_gen) <= tol)
+    assert np.all(pb[1:] - pmax[:-1] - drop_gen <= tol)
+    # beyond the limits by more than 1 kW only briefly, and never two steps running at the full excess
+    over = np.maximum(pmin[:-1] - pb[1:], pb[1:] - pmax[:-1])
+    dt = float(np.median(np.diff(t)))
+    t_over = dt * np.count_nonzero(over > 1e3)
+    print("time beyond limits by > 1 kW: %.1f s, worst %.1f kW, shedding episodes %d, %.1f s" % (
+        t_over, over.max() / 1e3, r["engine_generator.shed_count"][-1], r["engine_generator.shed_time_s"][-1]))
+    assert t_over < 10.0                        # was 19.8 s without load shedding
+    assert r["engine_generator.shed_count"][-1] > 0
+    # no lasting violation: a 1 s moving mean of the excess stays below 20 kW (was up to ~100 kW)
+    k = int(round(1.0 / dt))
+    mean_over = np.convolve(np.maximum(over, 0.0), np.ones(k) / k, mode="valid")
+    assert mean_over.max() < 20e3, mean_over.max()
+    # energy still closes across the whole vehicle
+    assert abs(m["energy_closure_error_frac"]) < 1e-3, m["energy_closure_error_frac"]

@@ -70,17 +70,20 @@ def test_engine_generator_compiled_advance_is_bit_identical():
     fast.initialize(0.0)
     ref.initialize(0.0)
     rng = random.Random(0)
-    cmd, n_diff = 0.0, 0
+    cmd, lim, n_diff = 0.0, 1e12, 0
     for k in range(4000):          # random commands incl. out-of-range ones, rate limits on and off
         if k % 2 == 0:
             cmd = max(-1e4, min(260e3, cmd + rng.gauss(0.0, 15e3)))
         rate = rng.choice([30e3, 12e3, 1e12])
+        if k % 5 == 0:             # bus limit (load shedding): none, or anywhere from below 0 to above rating
+            lim = rng.choice([1e12, 1e12, rng.uniform(-1e4, 230e3)])
         for c in (fast, ref):
-            c.u["power_cmd_w"], c.u["power_rate_max_wps"] = cmd, rate
+            c.u["power_cmd_w"], c.u["power_rate_max_wps"], c.u["elec_power_max_w"] = cmd, rate, lim
             c.do_step(0.1 * k, 0.1)
         n_diff += fast.y != ref.y
     assert n_diff == 0
     assert ref.y["fuel_mass_g"] > 100.0 and ref.y["soot_transient_mg"] > 0.0   # the run did something
+    assert ref.y["shed_count"] > 50 and ref.y["shed_time_s"] > 20.0            # and shed load often
 
 
 def test_engine_generator_compiled_path_falls_back_for_non_clamp_maps():

@@ -44,7 +44,7 @@ SIGNAL_TABLE = {   # docs/DEVELOPING.md, SHEV signal table
                "brake_energy_j", "grade_energy_j", "kinetic_energy_j")),
     PowerBus: (("motor_power_w", "gen_power_w", "aux_power_w", "battery_power_max_w", "battery_power_min_w"),
                ("battery_power_w", "demand_power_w", "aux_energy_j", "motor_power_max_w", "motor_power_min_w")),
-    EngineGenerator: (("power_cmd_w", "power_rate_max_wps"),
+    EngineGenerator: (("power_cmd_w", "power_rate_max_wps", "elec_power_max_w"),
                       ("elec_power_w", "engine_power_w", "engine_speed_radps", "engine_torque_nm", "rack_frac",
                        "fuel_rate_gps", "soot_rate_mgps", "fuel_mass_g", "fuel_energy_j", "soot_mass_mg",
                        "engine_loss_energy_j", "gen_loss_energy_j")),
@@ -59,6 +59,8 @@ def test_ports_match_signal_table(cls):
     assert cls(cls.TYPE).variables()                          # default construction works
     if cls is EngineGenerator:
         assert {v.name: v.start for v in cls.inputs()}["power_rate_max_wps"] == 1e12
+        assert {v.name: v.start for v in cls.inputs()}["elec_power_max_w"] == 1e12
+        assert all(not v.depends_on for v in cls.outputs())    # the bus limit acts inside the step
 
 
 # ----------------------------------------------------------------------------- maps
@@ -262,11 +264,15 @@ def test_engine_generator_energy_balance():
         if k % 30 == 0:
             eg.u["power_cmd_w"] = float(rng.uniform(-20e3, 220e3))
             eg.u["power_rate_max_wps"] = float(rng.choice([1e12, 30e3]))
+        if k % 7 == 0:   # bus limit: often none, else anywhere from below zero to above the rating
+            eg.u["elec_power_max_w"] = float(rng.choice([1e12, 1e12, rng.uniform(-10e3, 220e3)]))
         eg.do_step(t, h)
         t += h
         y = eg.y
         assert y["engine_loss_energy_j"] >= 0 and y["gen_loss_energy_j"] >= 0
+        assert y["elec_power_w"] <= max(eg.u["elec_power_max_w"], 0.0) * (1 + 1e-12) + 1e-9
     y = eg.y
+    assert y["shed_count"] > 5 and y["shed_time_s"] > 1.0      # the random limits did bind
     rhs = y["elec_energy_j"] + y["engine_loss_energy_j"] + y["gen_loss_energy_j"] + y["shaft_kinetic_energy_j"]
     assert y["fuel_energy_j"] == pytest.approx(rhs, rel=1e-10)
     assert y["fuel_energy_j"] == pytest.approx(y["fuel_mass_g"] * 42600.0, rel=1e-12)
@@ -275,6 +281,83 @@ def test_engine_generator_energy_balance():
     assert y["shaft_kinetic_energy_j"] == pytest.approx(0.5 * 3.0 * (eg.st.w ** 2 - w0 ** 2), rel=1e-9, abs=1e-6)
     # overall efficiency fuel -> electricity of a diesel genset: 20-45 %
     assert 0.20 < y["elec_energy_j"] / y["fuel_energy_j"] < 0.45
+
+
+def _shed_run(params=None, limit=40e3, p0=180e3, t_on=5.0, t_off=None, t_end=20.0, h=0.1, rate=30e3):
+    eg = EngineGenerator("eg", params)
+    eg.u["power_cmd_w"] = p0
+    eg.initialize(0.0)
+    eg.u["power_rate_max_wps"] = rate
+    log = []
+    for k in range(int(round(t_end / h))):
+        t = k * h
+        on = t >= t_on - 1e-9 and (t_off is None or t < t_off - 1e-9)
+        eg.u["elec_power_max_w"] = limit if on else 1e12
+        eg.do_step(t, h)
+        log.append((t, on, dict(eg.y)))
+    return eg, log
+
+
+def test_load_shedding_cuts_electrical_power_at_once_and_energy_closes():
+    """Steady at 180 kW, the bus limit drops to 40 kW at 5 s (the supervisor still commands 180 kW) with
+    a slow downward rate limit (10 kW/s, 14 s to get there): the electrical power of the very step the
+    limit is seen is <= 40 kW (generator torque cut), the internal command is cut at once, the fuel
+    falls within a few fuel_fall_s, the surplus is booked as shaft kinetic energy, energy closes."""
+    prm = EngineGeneratorParams(power_rate_down_max_wps=10e3)
+    eg, log = _shed_run(prm)
+    maps = eg.maps
+    y_before = [y for t, on, y in log if not on][-1]
+    assert y_before["elec_power_w"] == pytest.approx(180e3, rel=1e-3) and y_before["shed_count"] == 0
+    fuel0 = y_before["fuel_rate_gps"]
+    shed = [(t, y) for t, on, y in log if on]
+    for t, y in shed:                                   # from the first step on, never above the limit
+        assert y["elec_power_w"] <= 40e3 * (1 + 1e-12)
+        assert y["power_limited_w"] <= 40e3             # command cut, not ramped down at 10 kW/s
+    assert shed[0][1]["elec_power_w"] == pytest.approx(40e3, rel=1e-12)   # generator torque cut to the limit
+    # governor cut the fuel: after 5 fuel_fall_s the fuel rate is near the 40 kW quasi-static rate,
+    # far below what the 10 kW/s ramp would still burn (~ the 175 kW rate)
+    t5 = [y for t, y in shed if t >= 5.0 + 5 * prm.fuel_fall_s][0]
+    assert t5["fuel_rate_gps"] < 0.35 * fuel0
+    assert t5["fuel_rate_gps"] < 1.5 * maps.fuel_quasi_static(40e3)
+    # surplus engine work went into the shaft (over-speed), bounded, then removed by the governor
+    w_peak = max(y["engine_speed_radps"] for t, y in shed)
+    assert maps.ool_speed(180e3) < w_peak < 1.3 * maps.ool_speed(180e3)
+    y = eg.y
+    assert y["engine_speed_radps"] == pytest.approx(maps.ool_speed(40e3), rel=0.02)   # back on the line
+    assert y["elec_power_w"] == pytest.approx(40e3, rel=0.02)
+    assert y["shed_count"] == 1 and y["shed_time_s"] == pytest.approx(15.0, abs=1e-9)
+    # exact bookkeeping through the transient, kinetic energy = actual 1/2 J w^2 change
+    rhs = y["elec_energy_j"] + y["engine_loss_energy_j"] + y["gen_loss_energy_j"] + y["shaft_kinetic_energy_j"]
+    assert y["fuel_energy_j"] == pytest.approx(rhs, rel=1e-12)
+    assert y["shaft_kinetic_energy_j"] == pytest.approx(
+        0.5 * prm.shaft_inertia_kg_m2 * (eg.st.w ** 2 - maps.ool_speed(180e3) ** 2), rel=1e-9, abs=1e-6)
+    assert y["gen_loss_energy_j"] >= 0.0 and y["engine_loss_energy_j"] >= 0.0
+
+
+def test_load_shedding_to_zero_and_release():
+    eg, log = _shed_run(limit=0.0, t_on=2.0, t_off=6.0, t_end=12.0)
+    on = [y for t, on, y in log if on]
+    assert max(y["elec_power_w"] for y in on) <= 0.0
+    assert on[-1]["fuel_rate_gps"] < 1.2 * eg.maps.fuel_quasi_static(0.0)   # down to idle fuel
+    y = eg.y                                                      # released: ramps up again at 30 kW/s
+    assert y["power_limited_w"] == pytest.approx(min(180e3, 30e3 * 6.0), rel=1e-9)
+    assert y["shed_count"] == 1 and y["shed_time_s"] == pytest.approx(4.0, abs=1e-9)
+    rhs = y["elec_energy_j"] + y["engine_loss_energy_j"] + y["gen_loss_energy_j"] + y["shaft_kinetic_energy_j"]
+    assert y["fuel_energy_j"] == pytest.approx(rhs, rel=1e-12)
+
+
+def test_no_load_shedding_when_the_limit_is_high():
+    """A bus limit at or above what the engine-generator delivers changes nothing, bit for bit."""
+    ref, log_ref = run_eg(p_cmd=150e3, rate=40e3, t_end=10.0, p0=10e3)     # input left at its start 1e12
+    for limit in (1e12, 236e3, 201e3):
+        eg = EngineGenerator("eg")
+        eg.u["power_cmd_w"] = 10e3
+        eg.initialize(0.0)
+        eg.u["power_cmd_w"], eg.u["power_rate_max_wps"], eg.u["elec_power_max_w"] = 150e3, 40e3, limit
+        for k in range(100):
+            eg.do_step(k * 0.1, 0.1)
+            assert eg.y == log_ref[k][1]
+        assert eg.y["shed_count"] == 0 and eg.y["shed_time_s"] == 0.0
 
 
 def test_engine_generator_state_save_restore_and_nan_error():
@@ -612,3 +695,24 @@ def test_bus_motor_limits_follow_battery_capability():
     off = PowerBus("bus", type(b.params)(enforce_battery_limits=False))
     off.initialize(0.0)
     assert off.y["motor_power_max_w"] >= 1e12
+
+
+def test_bus_generator_limit_keeps_the_battery_within_its_charge_capability():
+    b = PowerBus("bus")
+    b.u.update(motor_power_w=-30e3, gen_power_w=60e3, aux_power_w=5e3, battery_power_max_w=30e3,
+               battery_power_min_w=-40e3)
+    b.initialize(0.0)
+    b.do_step(0.0, 0.1)
+    g = b.y["gen_power_max_w"]
+    assert g == pytest.approx(-30e3 + 5e3 + 40e3)
+    # a generator delivering exactly that charges the battery exactly at its limit
+    b.u["gen_power_w"] = g
+    b.do_step(0.1, 0.1)
+    assert b.y["battery_power_w"] == pytest.approx(-40e3)
+    b.u.update(motor_power_w=-80e3)                  # regen alone exceeds the charge limit: no generator
+    b.do_step(0.2, 0.1)
+    assert b.y["gen_power_max_w"] == 0.0
+    off = PowerBus("bus", type(b.params)(enforce_battery_limits=False))
+    off.initialize(0.0)
+    off.do_step(0.0, 0.1)
+    assert off.y["gen_power_max_w"] == 1e12
