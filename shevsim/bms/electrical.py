@@ -32,6 +32,39 @@ walk of variance 2.5e8 Ohm^2 per step on R1 is not physical, so the default read
 2.5e-8 (a dropped minus sign).  Only the ratios to Sigma_v matter to a Kalman filter, so
 Sigma_v = 1 is a scaling, not the sensor's variance.
 
+Table-scaled R_s, R1, C1 (``rs_model``, ``rc_model``; departure from the seed)
+------------------------------------------------------------------------------
+``"free"`` (both, the ``DEKFParams`` default) is the seed's filter above: x[2] = R_s [Ohm] and
+theta = [R1, C1], one value each for both current directions and all temperatures, tracked by random
+walks (5.19, 5.21).  Against a cell whose R_s differs between charge and discharge (the A123 tables:
+charge ~5 % lower) and varies with SOC and temperature, one random walk can only sit between the
+two tables and lag every current reversal.
+
+``"table_scaled"`` (the BMS component's default for both) is the usual production-BMS form: the BMS
+knows the cell type's nominal ECM maps R_s,nom, R1,nom, C1,nom(SOC, T, sign i) (the ``CellTables``
+it already loads; R1, C1 = the first RC branch of the maps), and the filters estimate only
+multiplicative factors for ageing and cell-to-cell spread::
+
+    x     = [SOC, V1, kappa_s]                   (Omega_1, kappa_s a random walk as 5.19)
+    theta = [kappa_1, kappa_2]                   (Omega_2, random walks as 5.21)
+    R_s = kappa_s R_s,nom,  R1 = kappa_1 R1,nom,  C1 = kappa_2 C1,nom   at (SOC_k^-, T_k, sign i_k)
+    C^x     = [dV_oc/dSOC, -1, -R_s,nom i_k]
+    C^theta = [R1,nom dV_t/dR1, C1,nom dV_t/dC1]  (5.17d-e at the effective R1, C1)
+
+- The maps are read once per step at the *predicted* SOC, with the discharge table for ``i >= 0`` and
+  the charge table for ``i < 0`` (the plant's convention, here on the measured current), at ``T`` =
+  the previous step's mean-temperature estimate of the thermal filter (``t_mean_c`` of
+  :meth:`DEKF.step_heat`, which the sequential scheme of Sec. 5.3.2 already passes for the heat).
+  They are known inputs: their SOC slopes are left out of C^x (as the seed leaves theta out of it).
+- The factors start at 1 (a nominal cell) with variance ``factor_p0`` (1e-2) and random walk
+  ``factor_q`` (1e-4 per step = the re-tuned free-R_s walk 1e-8 Ohm^2 relative to 0.01 Ohm).
+- Published ``rs``, ``r1``, ``c1`` are the effective values of the step (used by the heat (5.16)
+  and the power capability); the bounds ``rs_min_ohm``, ``r1_*``, ``c1_*`` apply to them.
+- The state/parameter grouping, the 5.21-5.24 update sequence and the SOC/V1 tuning are unchanged;
+  with both models ``"free"`` the arithmetic is the seed filter's, bit for bit.
+- Limitation: with the seed's Sigma_v = 1 scaling, the theta gain is tiny; on a plant with R1 aged
+  by 20 % kappa_1 stays near 1 over 2000 s (kappa_s does converge; tests/unit/test_bms.py).
+
 Everything is plain Python floats (3x3 and 2x2 symmetric covariances unrolled).  ``DEKF(compiled=True)``
 (default) runs the same arithmetic as one numba kernel (:func:`_dekf_step_nb`, bit-identical);
 :meth:`DEKF.step_heat` is the step followed by the heat estimate (5.16) in one call.
@@ -42,7 +75,7 @@ import math
 from dataclasses import dataclass
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
-from shevsim.battery.table_kernels import HAVE_NUMBA, _njit, _t1_slope, _t1_value
+from shevsim.battery.table_kernels import HAVE_NUMBA, _g2_locate, _njit, _t1_slope, _t1_value
 from shevsim.core.errors import SimulationError
 
 __all__ = ["DEKFParams", "DEKF"]
@@ -70,6 +103,19 @@ class DEKFParams:
         S(0) diagonal (initial parameter covariance).
     r1_min_ohm, r1_max_ohm, c1_min_f, c1_max_f, rs_min_ohm : float
         Physical bounds the estimates are kept in.
+    rs_model : str
+        ``"free"`` (seed: R_s itself is the third state; tuned by ``q_rs``, ``p0_rs``, ``rs0_ohm``) or
+        ``"table_scaled"`` (the third state is a factor kappa_s on the nominal map,
+        ``R_s = kappa_s R_s,nom(SOC, T, sign i)``, starting at 1, tuned by ``factor_q``, ``factor_p0``).
+    rc_model : str
+        ``"free"`` (seed: theta = [R1, C1]; ``q_r1``, ``q_c1``, ``s0_r1``, ``s0_c1``, ``r1_0_ohm``,
+        ``c1_0_f``) or ``"table_scaled"`` (theta = factors [kappa_1, kappa_2] on the nominal first-branch
+        maps R1,nom, C1,nom(SOC, T, sign i), starting at 1, tuned by ``factor_q``, ``factor_p0``).
+    factor_p0, factor_q : float
+        Initial variance [-] and per-step random-walk variance [-] of every table factor: 1e-2
+        (1-sigma 10 %: cell-to-cell spread plus ageing not yet seen) and 1e-4 (the re-tuned free R_s
+        random walk, 1e-8 Ohm^2, relative to the nominal ~0.01 Ohm: the same relative walk).  See the
+        module docstring.
     """
 
     capacity_ah: float = 2.3
@@ -94,20 +140,70 @@ class DEKFParams:
     c1_min_f: float = 10.0
     c1_max_f: float = 1e6
     rs_min_ohm: float = 1e-5
+    rs_model: str = "free"
+    rc_model: str = "free"
+    factor_p0: float = 1e-2
+    factor_q: float = 1e-4
+
+    def __post_init__(self) -> None:
+        for name in ("rs_model", "rc_model"):
+            if getattr(self, name) not in ("free", "table_scaled"):
+                raise ValueError(f"DEKFParams: {name} must be 'free' or 'table_scaled', got {getattr(self, name)!r}")
+        if not (self.factor_p0 >= 0.0 and self.factor_q >= 0.0):
+            raise ValueError(f"DEKFParams: factor_p0 and factor_q must be >= 0, got {self.factor_p0!r}, "
+                             f"{self.factor_q!r}")
 
 
 @_njit(cache=True)
-def _dekf_step_nb(d, ix, k, soc0, v1_prev, rs, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11,
+def _ecm_nom_nb(d, ix, soc, t_c, i_a):  # pragma: no cover - compiled
+    """``(R_s, R1, C1)`` of the nominal maps (``CellTables.params(soc, t_c, i_a)[:3]``, same arithmetic)."""
+    if i_a >= 0.0:
+        og, ns, nt = ix[4], ix[5], ix[6]
+    else:
+        og, ns, nt = ix[7], ix[8], ix[9]
+    nq = ix[10]
+    i_s, ws = _g2_locate(d, og, ns, soc)
+    j_t, wt = _g2_locate(d, og + ns, nt, t_c)
+    ov = og + ns + nt
+    pa = ov + (j_t * ns + i_s) * nq
+    pb = pa + nq
+    pc = ov + ((j_t + 1) * ns + i_s) * nq
+    pd = pc + nq
+    w00 = (1.0 - ws) * (1.0 - wt)
+    w01 = ws * (1.0 - wt)
+    w10 = (1.0 - ws) * wt
+    w11 = ws * wt
+    return (w00 * d[pa] + w01 * d[pb] + w10 * d[pc] + w11 * d[pd],
+            w00 * d[pa + 1] + w01 * d[pb + 1] + w10 * d[pc + 1] + w11 * d[pd + 1],
+            w00 * d[pa + 2] + w01 * d[pb + 2] + w10 * d[pc + 2] + w11 * d[pd + 2])
+
+
+@_njit(cache=True)
+def _dekf_step_nb(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12, p22, s00, s01, s11,
                   i_a, v_meas_v, dt_s, t_mean_c):  # pragma: no cover - compiled
     """DEKF.step (and DEKF.heat at the new estimates) with the same arithmetic; ``k = [capacity_ah,
-    q_soc, q_v1, q_rs, r_v, q_r1, q_c1, r1_min, r1_max, c1_min, c1_max, rs_min, F]``.  Returns
-    ``(ok, soc, v1, rs, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, heat)``; ``ok = 0`` when
-    the innovation variance is unusable (the caller re-runs the Python step, which raises)."""
+    q_soc, q_v1, q_x2, r_v, q_th1, q_th2, r1_min, r1_max, c1_min, c1_max, rs_min, F, rs_scaled,
+    rc_scaled]``.  Returns ``(ok, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22,
+    s00, s01, s11, e, heat)`` (``x2``, ``th1``, ``th2`` the filter's states/parameters: R_s, R1, C1
+    or their factors; ``rs``, ``r1``, ``c1`` the effective values); ``ok = 0`` when the innovation
+    variance is unusable (the caller re-runs the Python step, which raises)."""
     s00 += k[5]
     s11 += k[6]
+    soc = soc0 - dt_s * i_a / (3600.0 * k[0])
+    rsn = 1.0
+    r1n = 1.0
+    c1n = 1.0
+    if k[13] > 0.5 or k[14] > 0.5:
+        rsn_t, r1n_t, c1n_t = _ecm_nom_nb(d, ix, soc, t_mean_c, i_a)
+        if k[13] > 0.5:
+            rsn = rsn_t
+        if k[14] > 0.5:
+            r1n = r1n_t
+            c1n = c1n_t
+    r1 = th1 * r1n
+    c1 = th2 * c1n
     tau = r1 * c1
     a = math.exp(-dt_s / tau)
-    soc = soc0 - dt_s * i_a / (3600.0 * k[0])
     v1 = a * v1_prev + r1 * (1.0 - a) * i_a
     p01 = p01 * a
     p11 = p11 * (a * a)
@@ -118,20 +214,20 @@ def _dekf_step_nb(d, ix, k, soc0, v1_prev, rs, r1, c1, p00, p01, p02, p11, p12, 
     oo = ix[0]
     no = ix[1]
     c0 = _t1_slope(d, oo, no, soc)
-    c2 = -i_a
-    e = v_meas_v - (_t1_value(d, oo, no, soc) - v1 - rs * i_a)
+    c2 = -i_a * rsn
+    e = v_meas_v - (_t1_value(d, oo, no, soc) - v1 - x2 * rsn * i_a)
     h0 = p00 * c0 - p01 + p02 * c2
     h1 = p01 * c0 - p11 + p12 * c2
     h2 = p02 * c0 - p12 + p22 * c2
     sden = c0 * h0 - h1 + c2 * h2 + k[4]
     if not (sden > 0.0 and math.isfinite(sden) and math.isfinite(e)):
-        return (0, soc, v1, rs, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, 0.0)
+        return (0, soc, v1, x2, x2 * rsn, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, 0.0)
     k0 = h0 / sden
     k1 = h1 / sden
     k2 = h2 / sden
     soc += k0 * e
     v1 += k1 * e
-    rs += k2 * e
+    x2 += k2 * e
     p00 -= k0 * h0
     p01 -= k0 * h1
     p02 -= k0 * h2
@@ -141,15 +237,15 @@ def _dekf_step_nb(d, ix, k, soc0, v1_prev, rs, r1, c1, p00, p01, p02, p11, p12, 
     da_dr1 = a * dt_s / (r1 * tau)
     da_dc1 = a * dt_s / (c1 * tau)
     w = v1_prev - r1 * i_a
-    g0 = -da_dr1 * w - (1.0 - a) * i_a
-    g1 = -da_dc1 * w
+    g0 = (-da_dr1 * w - (1.0 - a) * i_a) * r1n
+    g1 = -da_dc1 * w * c1n
     m0 = s00 * g0 + s01 * g1
     m1 = s01 * g0 + s11 * g1
     tden = g0 * m0 + g1 * m1 + k[4]
     l0 = m0 / tden
     l1 = m1 / tden
-    r1 += l0 * e
-    c1 += l1 * e
+    th1 += l0 * e
+    th2 += l1 * e
     s00 -= l0 * m0
     s01 -= l0 * m1
     s11 -= l1 * m1
@@ -157,13 +253,16 @@ def _dekf_step_nb(d, ix, k, soc0, v1_prev, rs, r1, c1, p00, p01, p02, p11, p12, 
         soc = 0.0
     elif soc > 1.0:
         soc = 1.0
-    if rs < k[11]:
-        rs = k[11]
-    r1 = min(max(r1, k[7]), k[8])
-    c1 = min(max(c1, k[9]), k[10])
+    if x2 * rsn < k[11]:
+        x2 = k[11] / rsn
+    r1 = min(max(th1 * r1n, k[7]), k[8])
+    c1 = min(max(th2 * c1n, k[9]), k[10])
+    th1 = r1 / r1n
+    th2 = c1 / c1n
+    rs = x2 * rsn
     ds = _t1_value(d, ix[2], ix[3], soc)
     heat = i_a * i_a * rs + v1 * v1 / r1 - i_a * (t_mean_c + 273.15) * ds / k[12]
-    return (1, soc, v1, rs, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, heat)
+    return (1, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, heat)
 
 
 class DEKF:
@@ -180,20 +279,41 @@ class DEKF:
     Attributes
     ----------
     soc, v1, rs, r1, c1 : float
-        Current estimates (SOC as a fraction, V, Ohm, Ohm, F).
+        Current estimates (SOC as a fraction, V, Ohm, Ohm, F); ``rs`` is the effective R_s of the
+        last step (``rs_factor * R_s,nom`` at that step's SOC, temperature and current direction
+        for ``table_scaled``).
+    x2 : float
+        The third filter state: R_s [Ohm] (``free``) or the factor kappa [-] (``table_scaled``).
     """
 
     def __init__(self, params: DEKFParams | None = None, tables: CellTables | None = None, compiled: bool = True):
         self.params = params if params is not None else DEKFParams()
         self.tables = tables if tables is not None else default_tables()
+        p = self.params
+        self.scaled = p.rs_model == "table_scaled"
+        # third state x2: R_s [Ohm] (free) or the factor kappa [-] on R_s,nom (table_scaled)
+        if self.scaled:
+            self._q_x2, self._p0_x2, self._x2_0 = p.factor_q, p.factor_p0, 1.0
+        else:
+            self._q_x2, self._p0_x2, self._x2_0 = p.q_rs, p.p0_rs, p.rs0_ohm
+        # theta = [R1 [Ohm], C1 [F]] (free) or [kappa_1, kappa_2] on R1,nom, C1,nom (table_scaled)
+        self.rc_scaled = p.rc_model == "table_scaled"
+        if self.rc_scaled:
+            self._q_th1 = self._q_th2 = p.factor_q
+            self._s0_th1 = self._s0_th2 = p.factor_p0
+            self._th0 = (1.0, 1.0)
+        else:
+            self._q_th1, self._q_th2, self._s0_th1, self._s0_th2 = p.q_r1, p.q_c1, p.s0_r1, p.s0_c1
+            self._th0 = (p.r1_0_ohm, p.c1_0_f)
         # compiled step (numba; same arithmetic, bit-identical); compiled=False for the Python path
         self.compiled = bool(compiled and HAVE_NUMBA)
         if self.compiled:
             import numpy as np
             p = self.params
             self._tabs = self.tables.packed()
-            self._k = np.array([p.capacity_ah, p.q_soc, p.q_v1, p.q_rs, p.r_v, p.q_r1, p.q_c1, p.r1_min_ohm,
-                                p.r1_max_ohm, p.c1_min_f, p.c1_max_f, p.rs_min_ohm, FARADAY_C_MOL])
+            self._k = np.array([p.capacity_ah, p.q_soc, p.q_v1, self._q_x2, p.r_v, self._q_th1, self._q_th2,
+                                p.r1_min_ohm, p.r1_max_ohm, p.c1_min_f, p.c1_max_f, p.rs_min_ohm, FARADAY_C_MOL,
+                                1.0 if self.scaled else 0.0, 1.0 if self.rc_scaled else 0.0])
         self.reset()
 
     def reset(self, soc0_frac: float | None = None) -> None:
@@ -201,13 +321,15 @@ class DEKF:
         p = self.params
         self.soc = p.soc0_frac if soc0_frac is None else float(soc0_frac)
         self.v1 = p.v1_0_v
+        self.x2 = self._x2_0
         self.rs = p.rs0_ohm
         self.r1 = p.r1_0_ohm
         self.c1 = p.c1_0_f
+        self.th1, self.th2 = self._th0
         # P_x symmetric 3x3: p00 p01 p02 / p11 p12 / p22
-        self.px = [p.p0_soc, 0.0, 0.0, p.p0_v1, 0.0, p.p0_rs]
+        self.px = [p.p0_soc, 0.0, 0.0, p.p0_v1, 0.0, self._p0_x2]
         # P_theta symmetric 2x2: s00 s01 / s11
-        self.pth = [p.s0_r1, 0.0, p.s0_c1]
+        self.pth = [self._s0_th1, 0.0, self._s0_th2]
         self.innovation = 0.0
 
     # -- model ------------------------------------------------------------------------------
@@ -220,50 +342,69 @@ class DEKF:
         ds = self.tables.entropy_change(self.soc)
         return i_a * i_a * self.rs + self.v1 * self.v1 / self.r1 - i_a * (t_mean_c + 273.15) * ds / FARADAY_C_MOL
 
+    @property
+    def rs_factor(self) -> float:
+        """kappa = R_s / R_s,nom (``table_scaled``); ``nan`` for the free model."""
+        return self.x2 if self.scaled else math.nan
+
     def step_heat(self, i_a: float, v_meas_v: float, dt_s: float, t_mean_c: float) -> float:
-        """:meth:`step`, then :meth:`heat` at the new estimates; returns the heat [W]."""
+        """:meth:`step`, then :meth:`heat` at the new estimates; returns the heat [W].
+
+        ``t_mean_c`` [degC] (the previous step's mean-temperature estimate) is used by the heat's
+        entropic term and, for ``table_scaled``, by the R_s,nom lookup.
+        """
         if self.compiled:
             px, pth = self.px, self.pth
             d, ix = self._tabs
-            r = _dekf_step_nb(d, ix, self._k, self.soc, self.v1, self.rs, self.r1, self.c1, px[0], px[1], px[2],
-                              px[3], px[4], px[5], pth[0], pth[1], pth[2], float(i_a), float(v_meas_v),
+            r = _dekf_step_nb(d, ix, self._k, self.soc, self.v1, self.x2, self.th1, self.th2, px[0], px[1],
+                              px[2], px[3], px[4], px[5], pth[0], pth[1], pth[2], float(i_a), float(v_meas_v),
                               float(dt_s), float(t_mean_c))
             if r[0]:
-                (_, self.soc, self.v1, self.rs, self.r1, self.c1, p00, p01, p02, p11, p12, p22, s00, s01, s11,
-                 self.innovation, q) = r
+                (_, self.soc, self.v1, self.x2, self.rs, self.th1, self.th2, self.r1, self.c1, p00, p01, p02, p11,
+                 p12, p22, s00, s01, s11, self.innovation, q) = r
                 self.px = [p00, p01, p02, p11, p12, p22]
                 self.pth = [s00, s01, s11]
                 return q
-        self._step_py(i_a, v_meas_v, dt_s)
+        self._step_py(i_a, v_meas_v, dt_s, t_mean_c)
         return self.heat(i_a, t_mean_c)
 
-    def step(self, i_a: float, v_meas_v: float, dt_s: float) -> float:
+    def step(self, i_a: float, v_meas_v: float, dt_s: float, t_c: float = 25.0) -> float:
         """One DEKF step with the measured cell current [A] (+ discharge) and voltage [V].
 
+        ``t_c`` [degC]: cell temperature for the R_s,nom lookup (``table_scaled``; unused by ``free``).
         Returns the innovation ``y - g(x^-, i)`` [V].
         """
         if self.compiled:
-            self.step_heat(i_a, v_meas_v, dt_s, 25.0)
+            self.step_heat(i_a, v_meas_v, dt_s, t_c)
             return self.innovation
-        return self._step_py(i_a, v_meas_v, dt_s)
+        return self._step_py(i_a, v_meas_v, dt_s, t_c)
 
-    def _step_py(self, i_a: float, v_meas_v: float, dt_s: float) -> float:
+    def _step_py(self, i_a: float, v_meas_v: float, dt_s: float, t_c: float = 25.0) -> float:
         """The reference (Python) step; the compiled kernel runs the same arithmetic."""
         p = self.params
         tab = self.tables
-        # 1. parameter time update (5.21)
+        # 1. parameter time update (5.21); theta = [R1, C1] (free) or their factors (table_scaled)
         s00, s01, s11 = self.pth
-        s00 += p.q_r1
-        s11 += p.q_c1
-        r1 = self.r1
-        c1 = self.c1
+        s00 += self._q_th1
+        s11 += self._q_th2
+        # SOC time update first: the nominal maps are read at the predicted SOC
+        soc = self.soc - dt_s * i_a / (3600.0 * p.capacity_ah)
+        rsn = r1n = c1n = 1.0
+        if self.scaled or self.rc_scaled:
+            rsn_t, r1n_t, c1n_t, _, _ = tab.params(soc, t_c, i_a)
+            if self.scaled:
+                rsn = rsn_t
+            if self.rc_scaled:
+                r1n, c1n = r1n_t, c1n_t
+        th1, th2 = self.th1, self.th2
+        r1 = th1 * r1n
+        c1 = th2 * c1n
         # 2. state time update (5.22) with i_{k-1} = i_k (ZOH)
         tau = r1 * c1
         a = math.exp(-dt_s / tau)
         v1_prev = self.v1
-        soc = self.soc - dt_s * i_a / (3600.0 * p.capacity_ah)
         v1 = a * v1_prev + r1 * (1.0 - a) * i_a
-        rs = self.rs
+        x2 = self.x2
         p00, p01, p02, p11, p12, p22 = self.px
         # A = diag(1, a, 1): A P A^T
         p01 *= a
@@ -271,11 +412,11 @@ class DEKF:
         p12 *= a
         p00 += p.q_soc
         p11 += p.q_v1
-        p22 += p.q_rs
-        # 3. state measurement update (5.23)
+        p22 += self._q_x2
+        # 3. state measurement update (5.23); R_s = x2 * rsn (free: rsn = 1, x2 = R_s)
         c0 = tab.docv_dsoc(soc)
-        c2 = -i_a
-        e = v_meas_v - (tab.ocv(soc) - v1 - rs * i_a)
+        c2 = -i_a * rsn
+        e = v_meas_v - (tab.ocv(soc) - v1 - x2 * rsn * i_a)
         # P C^T with C = [c0, -1, c2]
         h0 = p00 * c0 - p01 + p02 * c2
         h1 = p01 * c0 - p11 + p12 * c2
@@ -289,7 +430,7 @@ class DEKF:
         k2 = h2 / sden
         soc += k0 * e
         v1 += k1 * e
-        rs += k2 * e
+        x2 += k2 * e
         # P^+ = P - K (P C^T)^T   (symmetric form of (I - K C) P)
         p00 -= k0 * h0
         p01 -= k0 * h1
@@ -297,32 +438,36 @@ class DEKF:
         p11 -= k1 * h1
         p12 -= k1 * h2
         p22 -= k2 * h2
-        # 4. parameter measurement update (5.24) with C^theta (5.17d-e, corrected)
+        # 4. parameter measurement update (5.24) with C^theta (5.17d-e, corrected), times the nominal
+        #    value for a factor (dV/dkappa1 = R1,nom dV/dR1, dV/dkappa2 = C1,nom dV/dC1)
         da_dr1 = a * dt_s / (r1 * tau)
         da_dc1 = a * dt_s / (c1 * tau)
         w = v1_prev - r1 * i_a
-        g0 = -da_dr1 * w - (1.0 - a) * i_a
-        g1 = -da_dc1 * w
+        g0 = (-da_dr1 * w - (1.0 - a) * i_a) * r1n
+        g1 = -da_dc1 * w * c1n
         m0 = s00 * g0 + s01 * g1
         m1 = s01 * g0 + s11 * g1
         tden = g0 * m0 + g1 * m1 + p.r_v
         l0 = m0 / tden
         l1 = m1 / tden
-        r1 += l0 * e
-        c1 += l1 * e
+        th1 += l0 * e
+        th2 += l1 * e
         s00 -= l0 * m0
         s01 -= l0 * m1
         s11 -= l1 * m1
-        # keep the estimates physical
+        # keep the estimates physical (bounds on the effective R_s, R1, C1)
         if soc < 0.0:
             soc = 0.0
         elif soc > 1.0:
             soc = 1.0
-        if rs < p.rs_min_ohm:
-            rs = p.rs_min_ohm
-        r1 = min(max(r1, p.r1_min_ohm), p.r1_max_ohm)
-        c1 = min(max(c1, p.c1_min_f), p.c1_max_f)
-        self.soc, self.v1, self.rs, self.r1, self.c1 = soc, v1, rs, r1, c1
+        if x2 * rsn < p.rs_min_ohm:
+            x2 = p.rs_min_ohm / rsn
+        r1 = min(max(th1 * r1n, p.r1_min_ohm), p.r1_max_ohm)
+        c1 = min(max(th2 * c1n, p.c1_min_f), p.c1_max_f)
+        th1 = r1 / r1n
+        th2 = c1 / c1n
+        self.soc, self.v1, self.x2, self.rs, self.r1, self.c1 = soc, v1, x2, x2 * rsn, r1, c1
+        self.th1, self.th2 = th1, th2
         self.px = [p00, p01, p02, p11, p12, p22]
         self.pth = [s00, s01, s11]
         self.innovation = e

@@ -3,7 +3,9 @@
 Each step (sample time = the component's step h, seed 0.1 s), in the seed's order (Fig. 5.6, 5.8):
 
 1. electrical DEKF (:class:`shevsim.bms.electrical.DEKF`, 5.18-5.25) on the measured cell
-   current and voltage -> SOC, V1, R_s, R1, C1;
+   current and voltage -> SOC, V1, R_s, R1, C1 (``rs_model``/``rc_model = "table_scaled"``, default:
+   R_s, R1, C1 are factors on the nominal (SOC, T, direction) maps at the previous step's T_mean
+   estimate; ``"free"``: the seed's R_s state and R1, C1 parameters);
 2. heat-generation estimate (5.16) with the DEKF's estimates and the *previous* step's estimated
    mean temperature (Sec. 5.3.2);
 3. thermal DKF (:class:`shevsim.bms.thermal_estimators.ThermalDKF`, 3.10-3.15; KF or JEKF
@@ -79,6 +81,13 @@ class BMSParams:
         Cell thermal parameters (Table 3.1).
     ocv_file, entropy_file : str
         OCV and entropy tables the BMS knows (empty: the A123 26650 defaults).
+    rs_model, rc_model : str
+        ``"table_scaled"`` (default): the DEKF estimates factors on the cell type's nominal
+        R_s(SOC, T, direction) map (``rs_model``) and R1, C1 first-branch maps (``rc_model``) of the
+        default ECM tables, looked up at the previous step's mean-temperature estimate; ``"free"``:
+        the seed's R_s random walk / free R1, C1 parameters.  See :mod:`shevsim.bms.electrical`.
+    factor_p0, factor_q : float
+        Initial and per-step random-walk variance of those factors (1e-2, 1e-4).
     """
 
     n_series: int = 130
@@ -122,8 +131,19 @@ class BMSParams:
     kt_w_mk: float = 0.610
     ocv_file: str = ""
     entropy_file: str = ""
+    rs_model: str = "table_scaled"
+    rc_model: str = "table_scaled"
+    factor_p0: float = 1e-2
+    factor_q: float = 1e-4
 
     def __post_init__(self) -> None:
+        for name in ("rs_model", "rc_model"):
+            if getattr(self, name) not in ("free", "table_scaled"):
+                raise ScenarioError(f"bms parameters: {name} must be 'table_scaled' or 'free', "
+                                    f"got {getattr(self, name)!r}")
+        if not (self.factor_p0 >= 0.0 and self.factor_q >= 0.0):
+            raise ScenarioError(f"bms parameters: factor_p0 and factor_q must be >= 0, got {self.factor_p0!r}, "
+                                f"{self.factor_q!r}")
         if self.thermal_estimator not in ("dkf", "jekf", "kf"):
             raise ScenarioError(f"bms parameters: thermal_estimator must be 'dkf', 'jekf' or 'kf', "
                                 f"got {self.thermal_estimator!r}")
@@ -214,7 +234,8 @@ class BMS(Component):
         self.dekf = DEKF(DEKFParams(
             capacity_ah=p.capacity_ah, soc0_frac=p.soc0_pct / 100.0, rs0_ohm=p.rs0_ohm, r1_0_ohm=p.r1_0_ohm,
             c1_0_f=p.c1_0_f, q_soc=p.q_soc, q_v1=p.q_v1, q_rs=p.q_rs, r_v=p.r_v, q_r1=p.q_r1, q_c1=p.q_c1,
-            p0_soc=p.p0_soc, p0_v1=p.p0_v1, p0_rs=p.p0_rs, s0_r1=p.s0_r1, s0_c1=p.s0_c1), self.tables)
+            p0_soc=p.p0_soc, p0_v1=p.p0_v1, p0_rs=p.p0_rs, s0_r1=p.s0_r1, s0_c1=p.s0_c1,
+            rs_model=p.rs_model, rc_model=p.rc_model, factor_p0=p.factor_p0, factor_q=p.factor_q), self.tables)
         self.t_mean = p.t0_c
         self.gamma = 0.0
         self.t_core = p.t0_c

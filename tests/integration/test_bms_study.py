@@ -151,15 +151,36 @@ def test_full_dekf_soc_within_2pct_over_second_cycle(dekf_full):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="one R_s estimate vs the plant's charge/discharge tables 5 % apart: "
-                                       "max error ~8 % (RMS ~3.3 %) over the second repetition")
+@pytest.mark.xfail(strict=True, reason="table-scaled R_s (default): max error 5.5 % over the second repetition, "
+                                       "all of it at |i| < 1 A where the measured current's noise picks the "
+                                       "other (5 % lower) table while the plant's zero current counts as "
+                                       "discharge; with |i| > 1 A the max is 0.3 % (test below). Seed's free "
+                                       "R_s: 7.7 %")
 def test_full_dekf_rs_max_within_5pct(dekf_full):
     assert bs.dekf_metrics(dekf_full)["rs_rel_err_max_after_settle"] < 0.05
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="1-RC heat estimate vs the 2-RC plant with direction-dependent R_s: "
-                                       "RMSE ~6 % of the mean heat (~3 % with the plant's R_s, OCV-R-RC "
-                                       "floor ~1.7 %); the issue's target is 2 %")
+def test_full_dekf_rs_max_within_5pct_under_load(dekf_full):
+    # steps with |i| > 1 A, where R_s acts (seed's free R_s: 7.7 %, its charge/discharge average)
+    assert bs.dekf_metrics(dekf_full)["rs_rel_err_max_loaded"] < 0.05
+
+
+@pytest.mark.slow
 def test_full_dekf_heat_rmse_below_2pct(dekf_full):
+    # table-scaled R_s, R1, C1 (default): 1.8 % (seed's free R_s, R1, C1: 6.0 %; OCV-R-RC floor 1.6 %)
     assert bs.dekf_metrics(dekf_full)["heat_rmse_rel_mean"] < 0.02
+
+
+@pytest.fixture(scope="module")
+def dekf_full_seed_filter():
+    return bs.dekf_replay(bs.BASE_SCENARIO, SEED, soc_offset_pct=-10.0,
+                          bms_sets=("bms.rs_model=free", "bms.rc_model=free"))
+
+
+@pytest.mark.slow
+def test_full_dekf_seed_filter_still_meets_soc_and_misses_rs_and_heat(dekf_full_seed_filter):
+    # the seed's free R_s, R1, C1 (rs_model = rc_model = "free") stays available and behaves as recorded
+    m = bs.dekf_metrics(dekf_full_seed_filter)
+    assert m["soc_err_max_after_settle_pct"] < 2.0
+    assert m["rs_rel_err_max_loaded"] > 0.05 and m["heat_rmse_rel_mean"] > 0.04

@@ -55,24 +55,30 @@ def plant_run():
 
 def run_dekf(data, **kw):
     f = DEKF(DEKFParams(soc0_frac=0.5, **kw))     # 10 % initial SOC error
-    out = np.empty((len(data), 3))
+    out = np.empty((len(data), 4))
     for k, (i, v, _, _, _, t_mean, _, _) in enumerate(data):
-        f.step(i, v, DT)
-        out[k] = (f.soc, f.rs, f.heat(i, t_mean))
+        f.step(i, v, DT, t_mean)        # t_mean: plant mean temperature at the start of the step (the BMS's
+        out[k] = (f.soc, f.rs, f.heat(i, t_mean), f.x2)      # previous-step estimate; its lookup temperature)
     return out
 
 
+# (rs_model, rc_model): the seed's free R_s, R1, C1 and the BMS default (factors on the nominal maps)
+MODELS = [("free", "free"), ("table_scaled", "table_scaled")]
+
+
 # -- DEKF ---------------------------------------------------------------------------------------
-def test_dekf_soc_converges_from_10pct_error_and_stays(plant_run):
-    est = run_dekf(plant_run, **RETUNED)
+@pytest.mark.parametrize("rs_model, rc_model", MODELS)
+def test_dekf_soc_converges_from_10pct_error_and_stays(plant_run, rs_model, rc_model):
+    est = run_dekf(plant_run, rs_model=rs_model, rc_model=rc_model, **RETUNED)
     err = np.abs(est[:, 0] - plant_run[:, 2])
     assert err[0] > 0.09
     half = len(err) // 2
     assert err[half:].max() < 0.02, f"max |SOC error| after 1000 s: {err[half:].max():.4f}"
 
 
-def test_dekf_rs_tracks_plant_within_5pct(plant_run):
-    est = run_dekf(plant_run, **RETUNED)
+@pytest.mark.parametrize("rs_model, rc_model", MODELS)
+def test_dekf_rs_tracks_plant_within_5pct(plant_run, rs_model, rc_model):
+    est = run_dekf(plant_run, rs_model=rs_model, rc_model=rc_model, **RETUNED)
     rel = np.abs(est[:, 1] / plant_run[:, 3] - 1.0)
     half = len(rel) // 2
     assert rel[half:].max() < 0.05, f"max R_s error after 1000 s: {rel[half:].max():.4f}"
@@ -86,9 +92,15 @@ def test_dekf_table_5_4_tuning_reduces_soc_error(plant_run):
     assert err[-2000:].max() < 0.05
 
 
-def test_dekf_heat_estimate_mean_within_2pct(plant_run):
+@pytest.mark.parametrize("rs_model, rc_model", [
+    MODELS[0],
+    pytest.param(*MODELS[1], marks=pytest.mark.xfail(
+        strict=True, reason="R1, C1 from the first-branch map on this high-current profile: the 1-RC V1 "
+                            "absorbs part of the plant's slow V2 and V1^2/R1,nom over-estimates: mean "
+                            "+2.3 % (free R1, C1: +1.5 %); on the UAC proxy +0.5 % (integration test)"))])
+def test_dekf_heat_estimate_mean_within_2pct(plant_run, rs_model, rc_model):
     # the thermal filter low-passes the heat: its mean (energy) is what drives the temperature
-    est = run_dekf(plant_run, **RETUNED)
+    est = run_dekf(plant_run, rs_model=rs_model, rc_model=rc_model, **RETUNED)
     half = len(est) // 2
     q_true, q_est = plant_run[half:, 4], est[half:, 2]
     assert abs(q_est.mean() / q_true.mean() - 1.0) < 0.02
@@ -102,8 +114,9 @@ def _oracle_heat_rmse(data, half):
     return math.sqrt(np.mean((v * v / r_best - pol) ** 2)), q.mean()
 
 
-def test_dekf_heat_rmse_close_to_the_one_rc_structural_floor(plant_run):
-    est = run_dekf(plant_run, **RETUNED)
+@pytest.mark.parametrize("rs_model, rc_model", MODELS)
+def test_dekf_heat_rmse_close_to_the_one_rc_structural_floor(plant_run, rs_model, rc_model):
+    est = run_dekf(plant_run, rs_model=rs_model, rc_model=rc_model, **RETUNED)
     half = len(est) // 2
     floor, q_mean = _oracle_heat_rmse(plant_run, half)
     rmse = math.sqrt(np.mean((est[half:, 2] - plant_run[half:, 4]) ** 2))
@@ -112,14 +125,67 @@ def test_dekf_heat_rmse_close_to_the_one_rc_structural_floor(plant_run):
 
 
 @pytest.mark.xfail(strict=True, reason="1-RC DEKF vs 2-RC plant: instantaneous polarisation heat V1^2/R1 "
-                                       "cannot match V1^2/R1 + V2^2/R2 of the plant; measured RMSE ~5.4 % "
-                                       "of the mean heat, the best constant-R OCV-R-RC estimate with true "
-                                       "states ~4.5 % (target 2 %)")
-def test_dekf_heat_estimate_rmse_below_2pct_of_mean(plant_run):
-    est = run_dekf(plant_run, **RETUNED)
+                                       "cannot match V1^2/R1 + V2^2/R2 of the plant; measured RMSE 5.4 % "
+                                       "(free) / 5.3 % (table-scaled) of the mean heat, the best constant-R "
+                                       "OCV-R-RC estimate with true states 4.5 % on this profile (target 2 %; "
+                                       "met on the UAC proxy, tests/integration/test_bms_study.py)")
+@pytest.mark.parametrize("rs_model, rc_model", MODELS)
+def test_dekf_heat_estimate_rmse_below_2pct_of_mean(plant_run, rs_model, rc_model):
+    est = run_dekf(plant_run, rs_model=rs_model, rc_model=rc_model, **RETUNED)
     half = len(est) // 2
     q_true, q_est = plant_run[half:, 4], est[half:, 2]
     assert math.sqrt(np.mean((q_est - q_true) ** 2)) < 0.02 * q_true.mean()
+
+
+@pytest.fixture(scope="module")
+def aged_run(tmp_path_factory):
+    """The plant of :func:`plant_run` built from tables with R_s and R1 x 1.2 (an aged cell), 2000 s."""
+    tmp = tmp_path_factory.mktemp("aged")
+    files = {}
+    for kind in ("discharge", "charge"):
+        lines = (cell.DATA_DIR / f"a123_26650_ecm_{kind}.csv").read_text().splitlines()
+        out = []
+        for ln in lines:
+            if ln.startswith("#") or ln.startswith("soc_frac"):
+                out.append(ln)
+                continue
+            v = ln.split(",")
+            v[2] = repr(1.2 * float(v[2]))        # rs_ohm
+            v[3] = repr(1.2 * float(v[3]))        # r1_ohm
+            out.append(",".join(v))
+        files[kind] = tmp / f"aged_{kind}.csv"
+        files[kind].write_text("\n".join(out) + "\n")
+    n = 20000
+    prof = drive_profile(n, DT)
+    b = BatteryPack("battery", BatteryPackParams(soc_init_pct=60.0, seed=3, discharge_file=str(files["discharge"]),
+                                                 charge_file=str(files["charge"])))
+    f = DEKF(DEKFParams(soc0_frac=0.5, rs_model="table_scaled", rc_model="table_scaled", **RETUNED))
+    rows = []
+    for k in range(n):
+        b.u["power_w"] = prof[k]
+        t_mean = b._t_mean(b.x_th)
+        b.do_step(k * DT, DT)
+        rs_true = b.tables.params(b.soc, t_mean, b.i_cell)[0]
+        f.step(b.y["cell_current_meas_a"], b.y["cell_voltage_meas_v"], DT, t_mean)
+        rows.append((f.soc - b.y["soc_pct"] / 100.0, f.x2, f.th1, f.rs / rs_true - 1.0, b.i_cell))
+    return np.array(rows)
+
+
+def test_dekf_table_scaled_tracks_an_aged_cell(aged_run):
+    # the BMS knows only the nominal maps; the plant's R_s and R1 are 20 % above them
+    half = len(aged_run) // 2
+    soc_err, kappa_s, rel = aged_run[half:, 0], aged_run[half:, 1], aged_run[half:, 3]
+    assert np.abs(soc_err).max() < 0.02
+    assert np.abs(kappa_s / 1.2 - 1.0).max() < 0.05, (kappa_s.min(), kappa_s.max())
+    loaded = np.abs(aged_run[half:, 4]) > 1.0
+    assert np.abs(rel[loaded]).max() < 0.05
+
+
+@pytest.mark.xfail(strict=True, reason="theta gain is tiny with the seed's Sigma_v = 1 scaling: kappa_1 stays "
+                                       "at ~1.00 (truth 1.2) over 2000 s; the R1 factor does not track ageing")
+def test_dekf_table_scaled_r1_factor_tracks_an_aged_cell(aged_run):
+    half = len(aged_run) // 2
+    assert np.abs(aged_run[half:, 2] / 1.2 - 1.0).max() < 0.05
 
 
 def test_dekf_exact_on_its_own_model_noise_free():

@@ -148,13 +148,15 @@ def test_power_capability_compiled_compute_is_bit_identical(mode):
     assert limited_by == {"soc", "v", "t"}
 
 
+@pytest.mark.parametrize("rs_model", ["free", "table_scaled"])
 @pytest.mark.parametrize("retuned", [False, True])
-def test_dekf_compiled_step_is_bit_identical(retuned):
+def test_dekf_compiled_step_is_bit_identical(retuned, rs_model):
     import random
 
     from shevsim.bms.electrical import DEKF, DEKFParams
     from shevsim.core.errors import SimulationError
-    prm = DEKFParams(q_soc=1e-5, q_v1=2e-3, q_rs=1e-8, q_c1=1e4) if retuned else DEKFParams()
+    prm = DEKFParams(q_soc=1e-5, q_v1=2e-3, q_rs=1e-8, q_c1=1e4, rs_model=rs_model) if retuned else \
+        DEKFParams(rs_model=rs_model)
     fast, ref = DEKF(prm), DEKF(prm, compiled=False)
     assert fast.compiled and not ref.compiled
     rng = random.Random(3)
@@ -162,7 +164,7 @@ def test_dekf_compiled_step_is_bit_identical(retuned):
     for k in range(5000):
         i = 20.0 * math.sin(k / 50.0) + rng.gauss(0.0, 5.0)
         v = 3.3 - 0.012 * i + rng.gauss(0.0, 0.01) - 0.1 * math.sin(k / 3000.0)
-        tm = 25.0 + 5.0 * math.sin(k / 1000.0)
+        tm = 25.0 + 5.0 * math.sin(k / 1000.0)     # table_scaled: R_s,nom looked up at tm, both directions
         qa, qb = fast.step_heat(i, v, 0.1, tm), ref.step_heat(i, v, 0.1, tm)
         n_diff += (qa, fast.soc, fast.v1, fast.rs, fast.r1, fast.c1, fast.px, fast.pth, fast.innovation) != \
             (qb, ref.soc, ref.v1, ref.rs, ref.r1, ref.c1, ref.px, ref.pth, ref.innovation)
