@@ -10,6 +10,10 @@
   Re-recorded on purpose once: generator load shedding (``bus.gen_power_max_w`` ->
   ``engine_generator.elec_power_max_w``; the pre-shedding values were SOC 43.77017110455245 %, BMS SOC
   45.350742879449655 %, fuel 189.78907052126672 g, soot 273.51201071077725 mg).
+  Re-recorded on purpose a second time: BMS DEKF with table-scaled R_s, R1, C1 (``bms.rs_model`` /
+  ``bms.rc_model`` = ``"table_scaled"``, the new default; with both ``"free"`` the run still gives the
+  previous values SOC 43.77985778512031 %, BMS SOC 45.35872105352354 %, fuel 188.9284041133944 g,
+  soot 273.159073775851 mg, checked by the test below).
 * Two identical runs give bit-identical DataFrames (no wall-clock or other non-deterministic
   quantity among the recorded outputs; the battery's measurement noise is seeded).
 """
@@ -25,8 +29,16 @@ from shevsim.core.scenario import build_master, load_scenario
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "scenarios" / "hd_udds_mpc.toml"
 
-# recorded before the optimisation, re-recorded with load shedding, stop_s = 120 s (see the module docstring)
+# recorded before the optimisation, re-recorded with load shedding and with the table-scaled BMS DEKF,
+# stop_s = 120 s (see the module docstring)
 REFERENCE_120S = {
+    "battery.soc_pct": 44.200539642578576,
+    "bms.soc_pct": 43.57971944785983,
+    "engine_generator.fuel_mass_g": 198.64883910016795,
+    "engine_generator.soot_mass_mg": 285.06307661894033,
+}
+# the same run with the seed's DEKF (bms.rs_model = bms.rc_model = "free"): the values before the BMS change
+REFERENCE_120S_SEED_DEKF = {
     "battery.soc_pct": 43.77985778512031,
     "bms.soc_pct": 45.35872105352354,
     "engine_generator.fuel_mass_g": 188.9284041133944,
@@ -34,8 +46,8 @@ REFERENCE_120S = {
 }
 
 
-def _run(stop_s: float):
-    sc = load_scenario(SCENARIO, ["cycle.repeat=1"])
+def _run(stop_s: float, sets=()):
+    sc = load_scenario(SCENARIO, ["cycle.repeat=1", *sets])
     m = build_master(sc)
     return m.run(stop_s)
 
@@ -45,6 +57,14 @@ def test_short_hd_udds_mpc_run_matches_pre_optimisation_reference():
     assert res.termination == "completed"
     assert res.time_s[-1] == pytest.approx(120.0)
     for name, ref in REFERENCE_120S.items():
+        got = float(res[name][-1])
+        assert got == pytest.approx(ref, rel=1e-9, abs=0.0), f"{name}: {got!r} vs reference {ref!r}"
+
+
+def test_short_run_with_the_seed_dekf_matches_the_values_before_the_bms_change():
+    res = _run(120.0, ("bms.rs_model=free", "bms.rc_model=free"))
+    assert res.termination == "completed"
+    for name, ref in REFERENCE_120S_SEED_DEKF.items():
         got = float(res[name][-1])
         assert got == pytest.approx(ref, rel=1e-9, abs=0.0), f"{name}: {got!r} vs reference {ref!r}"
 
