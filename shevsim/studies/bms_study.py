@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.atomic import atomic_write, write_text_atomic
 from ..core.errors import ShevsimError
 from ..core.results import write_json_atomic
 from ..core.scenario import PROJECT_ROOT, build_master, load_scenario
@@ -51,31 +52,9 @@ _MEAS = ("cell_current_meas_a", "cell_voltage_meas_v", "t_surface_meas_c", "t_am
 QUICK = {"dekf_stop_s": 1800.0, "power_stop_s": 1500.0, "thermal_duration_s": 1200.0}
 
 
-# -- atomic writers ------------------------------------------------------------------------------
-def _atomic(path: Path, write) -> Path:
-    """Call ``write(tmp_path)`` then move the temporary file onto ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix + ".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)          # mkstemp creates 0600; give the usual permissions
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
-
-
-def _write_text(path: Path, text: str) -> Path:
-    def w(tmp):
-        with open(tmp, "w") as f:
-            f.write(text)
-    return _atomic(path, w)
+# -- atomic writers (shevsim.core.atomic) --------------------------------------------------------
+_atomic = atomic_write
+_write_text = write_text_atomic
 
 
 def _write_csv(path: Path, df, header: str = "") -> Path:
