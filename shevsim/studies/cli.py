@@ -36,8 +36,8 @@ def _common(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--max-evaluations", type=int, help="stop after this many new evaluations (resume later)")
     ap.add_argument("--synthetic", action="store_true", help="use the analytic surrogate (no simulation)")
     ap.add_argument("--fe-metric", default=None,
-                    help="fuel-economy metric key (default fuel_economy_soc_sustained_kmpl, seed A.1; for runs "
-                         "shorter than two cycles use fuel_economy_dsoc_corrected_kmpl)")
+                    help="fuel-economy metric key (default fuel_economy_dsoc_corrected_kmpl; the seed's A.1 "
+                         "definition is fuel_economy_soc_sustained_kmpl, which needs SOC-sustained windows)")
     ap.add_argument("--soot-metric", default=None, help="soot metric key (default soot_g_per_km)")
     ap.add_argument("--no-plots", action="store_true")
     ap.add_argument("--quiet", action="store_true", help="no progress bars")
