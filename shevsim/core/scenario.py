@@ -84,6 +84,9 @@ def resolve_path(p: str, scenario_path: Path | None) -> Path:
     for c in cands:
         if c.exists():
             return c.resolve()
+    for c in cands:                       # not there yet (an FMU to build): where its folder exists
+        if c.parent.is_dir():
+            return c.resolve()
     return cands[0]
 
 
