@@ -279,8 +279,9 @@ def instantiate(spec: ComponentSpec, scenario: Scenario):
     if spec.type == "fmu":
         from ..fmu.adapter import FMUComponent, load_model_description
         if not spec.fmu.is_file():
+            kind = spec.replaces or "TYPE"
             raise ScenarioError(f"{where}: field 'fmu': file '{spec.fmu}' not found (an exported native component "
-                                f"is built with: shevsim fmu export TYPE --params FILE -o {spec.fmu})")
+                                f"is built with: shevsim fmu export {kind} --params FILE -o {spec.fmu})")
         expected = None
         if spec.replaces is not None:
             from ..components import get_component_class
