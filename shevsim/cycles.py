@@ -18,8 +18,10 @@ Statistics (all from the sampled trace, interval ``i`` between samples ``i`` and
   over the intervals with ``a_i > ACCEL_THRESHOLD_MPS2``; ``decel_*`` the same
   for ``-a_i`` over ``a_i < -ACCEL_THRESHOLD_MPS2`` (reported positive).
 * ``pke_mps2``: positive kinetic energy per unit mass and distance,
-  ``sum(max(v_{i+1}^2 - v_i^2, 0)) / (2 * distance)`` (J/kg/m = m/s^2), the
-  standard aggressiveness measure of a cycle.
+  ``sum(max(v_{i+1}^2 - v_i^2, 0)) / (2 * distance)`` (J/kg/m = m/s^2), an
+  aggressiveness measure of a cycle. This is the "characteristic acceleration" of
+  Sovran & Blaser / O'Keefe et al. (2007); the PKE of Watson et al. (1983) common in
+  the drive-cycle literature, ``sum(max(dv^2, 0)) / distance``, is twice this value.
 * ``rms_accel_mps2``: root mean square of ``a_i`` over all intervals.
 """
 from __future__ import annotations

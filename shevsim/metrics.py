@@ -51,7 +51,9 @@ Metrics
   (``*.chem_energy_j``); sinks = every loss (``*loss_energy_j``: engine, generator,
   battery, motors, ...) + auxiliary load (``*.aux_energy_j``) + road loads
   (``vehicle.aero_energy_j``, ``rolling_energy_j``, friction ``brake_energy_j``,
-  ``grade_energy_j``) + change of kinetic energy (``vehicle.kinetic_energy_j``).
+  ``grade_energy_j``) + change of kinetic energy (``vehicle.kinetic_energy_j``) + change of the
+  engine-generator shaft's kinetic energy (``*.shaft_kinetic_energy_j``, when recorded; the
+  engine-generator's own balance is fuel = elec + losses + shaft KE change).
   Residual = sources - sinks; closure error = residual / throughput, with
   throughput = fuel energy + gross battery energy (sum of |increments| of
   ``chem_energy_j``). Per-node residuals (engine-generator, bus, battery, motor,
@@ -366,6 +368,9 @@ def energy_balance(df, vehicle: str = "vehicle") -> dict:
     src = {c: _delta(df, c) for c in fuel + chem}
     sink = {c: _delta(df, c) for c in losses + aux + road}
     sink[ke + " (delta)"] = _delta(df, ke)
+    for c in cols:
+        if c.endswith(".shaft_kinetic_energy_j"):
+            sink[c + " (delta)"] = _delta(df, c)
     residual = sum(src.values()) - sum(sink.values())
     throughput = sum(_delta(df, c) for c in fuel) + sum(float(np.sum(np.abs(np.diff(_col(df, c))))) for c in chem)
     out.update(sources_j=src, sinks_j=sink, residual_j=residual, throughput_j=throughput,
@@ -373,11 +378,12 @@ def energy_balance(df, vehicle: str = "vehicle") -> dict:
     return out
 
 
-#: Per-node balances (name -> (+terms, -terms)); each residual should be ~0. Evaluated when all columns exist.
+#: Per-node balances (name -> (+terms, -terms)); each residual should be ~0. Evaluated when all columns exist
+#: (a term ending in ``?`` is optional: counted when recorded, else taken as 0).
 NODE_BALANCES = {
     "engine_generator": (("engine_generator.fuel_energy_j",),
                          ("engine_generator.engine_loss_energy_j", "engine_generator.gen_loss_energy_j",
-                          "bus.gen_energy_j")),
+                          "bus.gen_energy_j", "engine_generator.shaft_kinetic_energy_j?")),
     "bus": (("bus.gen_energy_j", "bus.battery_energy_j"), ("bus.motor_energy_j", "bus.aux_energy_j")),
     "battery": (("battery.chem_energy_j",), ("battery.loss_energy_j", "bus.battery_energy_j")),
     "motor_electrical": (("bus.motor_energy_j",), ("motor.elec_energy_j",)),
@@ -400,6 +406,7 @@ def node_balances(df, vehicle: str = "vehicle") -> dict:
     for node, (plus, minus) in NODE_BALANCES.items():
         plus = [c.format(v=vehicle) for c in plus]
         minus = [c.format(v=vehicle) for c in minus]
+        minus = [c.rstrip("?") for c in minus if not c.endswith("?") or c.rstrip("?") in df.columns]
         if all(c in df.columns for c in plus + minus):
             res[node] = sum(_delta(df, c) for c in plus) - sum(_delta(df, c) for c in minus)
     return res
