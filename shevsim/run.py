@@ -28,7 +28,7 @@ def simulate(scenario: Scenario, progress: bool = False) -> Result:
     if scenario.record is not None:
         missing = [s for s in scenario.record if s not in res.signals]
         if missing:
-            raise ShevsimError(f"{scenario.path}: [record] unknown signal(s) {missing}")
+            raise ShevsimError(f"{scenario.path or '<scenario>'}: [record] unknown signal(s) {missing}")
         keep = set(scenario.record)
         res.signals = {k: v for k, v in res.signals.items() if k in keep}
         res.units = {k: v for k, v in res.units.items() if k in keep}

@@ -105,6 +105,7 @@ class MasterState:
     n_rows: int
     forced: dict
     faults_done: int
+    t0: float = 0.0
 
 
 class Master:
@@ -145,6 +146,7 @@ class Master:
             self.step_multiples[n] = k
         self.faults = sorted(faults, key=lambda f: f.at_s)
         self._vars = {n: {v.name: v for v in c.variables()} for n, c in self.components.items()}
+        self._check_depends_on()
         self._check_connections()
         for f in self.faults:
             self._port(f.component, f.port, "input", f"fault at {f.at_s} s")
@@ -174,6 +176,15 @@ class Master:
             hint = f" (did you mean '{best[0]}'?)" if best else f" ({want}s: {', '.join(cands) or 'none'})"
             raise ConnectionError_(f"{ctx}: component '{comp}' has no {want} '{port}'{hint}")
         return vs[port]
+
+    def _check_depends_on(self) -> None:
+        # a misspelt feedthrough dependency would silently drop an ordering constraint
+        for n, vs in self._vars.items():
+            for v in vs.values():
+                for i in (v.depends_on if v.causality == "output" else ()):
+                    if i not in vs or vs[i].causality != "input":
+                        raise ScenarioError(f"component '{n}' output '{v.name}' depends_on '{i}', but the component "
+                                            f"has no such input{_port_hint(i, vs)}")
 
     def _check_connections(self) -> None:
         seen = {}
@@ -276,6 +287,12 @@ class Master:
         """Initialise every component at ``t0`` in execution order (sources first)."""
         self.t0 = self.time_s = float(t0)
         self.step_index = 0
+        if not math.isfinite(self.t0):
+            raise ScenarioError(f"master: start time t0 must be a finite number, got {t0!r}")
+        # a re-initialisation starts over: no fault is active before its time
+        self._forced = {}
+        self._faults_done = 0
+        self._build_links()
         self._apply_faults()
         for comp, links, _ in self._sched:
             for du, dk, sy, sk in links:
@@ -386,9 +403,15 @@ class Master:
 
     def run(self, stop_s: float, t0: float = 0.0) -> Result:
         """Initialise (if needed) and step until ``stop_s``; return the result."""
+        if not (isinstance(stop_s, (int, float)) and math.isfinite(stop_s)):
+            raise ScenarioError(f"master: stop time must be a finite number, got {stop_s!r}")
         if not self._initialized:
             self.initialize(t0)
-        n = int(round((stop_s - self.t0) / self.settings.step_s)) - self.step_index
+        # end at the first communication point at or after stop_s (a stop time that is a multiple
+        # of the step, up to rounding, is hit exactly)
+        x = (stop_s - self.t0) / self.settings.step_s
+        n_total = round(x) if abs(x - round(x)) <= 1e-9 * max(1.0, abs(x)) else math.ceil(x)
+        n = int(n_total) - self.step_index
         termination = "completed"
         bar = None
         if self.settings.progress and n > 1000:
@@ -408,6 +431,7 @@ class Master:
                     self.step()
                     if i % 500 == 499:
                         bar.update(500)
+                bar.update(n - bar.n)
         finally:
             if bar is not None:
                 bar.close()
@@ -439,7 +463,7 @@ class Master:
         """Snapshot of the whole system (components, time, recorded length, faults)."""
         return MasterState(self.step_index, self.time_s,
                            {n: c.get_state() for n, c in self.components.items()},
-                           len(self._times), dict(self._forced), self._faults_done)
+                           len(self._times), dict(self._forced), self._faults_done, self.t0)
 
     def restore_state(self, s: MasterState) -> None:
         """Return to a snapshot made by :meth:`save_state`; later records are dropped."""
@@ -447,6 +471,8 @@ class Master:
             c.set_state(s.components[n])
         self.step_index = s.step_index
         self.time_s = s.time_s
+        self.t0 = s.t0
+        self._initialized = True     # run() continues from the snapshot (also in a fresh master)
         del self._buf[s.n_rows * len(self._signal_names):]
         del self._times[s.n_rows:]
         self._forced = dict(s.forced)
@@ -477,6 +503,13 @@ class Master:
         if unconnected:
             lines.append("unconnected inputs (held at start value): " + ", ".join(unconnected))
         return "\n".join(lines)
+
+
+def _port_hint(name: str, vs: dict) -> str:
+    import difflib
+    cands = [k for k, v in vs.items() if v.causality == "input"]
+    best = difflib.get_close_matches(name, cands, n=1)
+    return f" (did you mean '{best[0]}'?)" if best else f" (inputs: {', '.join(cands) or 'none'})"
 
 
 def _find_cycle(succ: dict[tuple, list[tuple]]) -> list[tuple] | None:

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from .atomic import write_json_atomic  # the one atomic JSON writer (re-exported)
+from .errors import ShevsimError
 
 
 @dataclass
@@ -105,6 +106,13 @@ def save_result(result: Result, out_dir: str | Path, *, scenario_text: str | Non
     ``plots`` is an optional callable ``plots(result, folder)`` that writes figures.
     """
     out_dir = Path(out_dir)
+    # the folder is replaced as a whole: never a file, nor a folder that holds something else
+    if out_dir.exists() or out_dir.is_symlink():
+        if not out_dir.is_dir():
+            raise ShevsimError(f"output folder '{out_dir}' exists and is not a folder: not replaced")
+        if any(out_dir.iterdir()) and not (out_dir / "run.json").is_file():
+            raise ShevsimError(f"output folder '{out_dir}' is not empty and not a shevsim result "
+                               f"(no run.json): not replaced; choose another --out")
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.tmp-"))
     try:

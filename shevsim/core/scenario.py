@@ -133,7 +133,8 @@ class Scenario:
     def resolved(self) -> dict:
         """A plain-dict view of what will run (saved with results)."""
         return {"name": self.name, "step_s": self.settings.step_s, "method": self.settings.method,
-                "stop_s": self.stop_s, "seed": self.seed,
+                "stop_s": self.stop_s, "t0_s": self.t0_s, "seed": self.seed, "order": self.order,
+                "record": self.record,
                 "components": {c.name: {"type": c.type, "params": str(c.params_file) if c.params_file else None,
                                         "set": c.overrides, "start": c.start, "step_multiple": c.step_multiple,
                                         "fmu": str(c.fmu) if c.fmu else None}
@@ -204,7 +205,8 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
         rep = cd.get("replaces")
         if rep is not None and (cd["type"] != "fmu" or not isinstance(rep, str)):
             raise ScenarioError(f"{w}: field 'replaces' (a native component TYPE) is only for type = \"fmu\"")
-        specs.append(ComponentSpec(cname, cd["type"], pf, dict(cd.get("set", {})), dict(cd.get("start", {})),
+        over = {key: _file_value(key, v, spath) for key, v in cd.get("set", {}).items()}
+        specs.append(ComponentSpec(cname, cd["type"], pf, over, dict(cd.get("start", {})),
                                    k, fmu, dict(cd.get("map", {})), rep))
     names = {s.name for s in specs}
     for s in sets:
@@ -214,7 +216,8 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
         cname, pname = key.strip().split(".", 1)
         if cname not in names:
             raise ScenarioError(f"--set '{s}': unknown component '{cname}'{_hint(cname, names)}")
-        next(c for c in specs if c.name == cname).overrides[pname] = parse_value(val.strip())
+        # a relative *_file path given on the command line is relative to the working directory
+        next(c for c in specs if c.name == cname).overrides[pname] = _file_value(pname, parse_value(val.strip()), None)
     conns = []
     cd = doc.get("connections", {})
     if not isinstance(cd, dict):
@@ -253,6 +256,14 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
     elif not (isinstance(signals, list) and all(isinstance(x, str) for x in signals)):
         raise ScenarioError(f"{where}: [record] field 'signals' must be \"all\" or a list of 'component.port'")
     seed = num(sc, "seed", 0, f"{where}: [scenario]", int)
+    stop_s = num(sc, "stop_s", None, f"{where}: [scenario]")
+    t0_s = num(sc, "t0_s", 0.0, f"{where}: [scenario]")
+    import math
+    for key, v in (("t0_s", t0_s), ("stop_s", stop_s)):
+        if v is not None and not math.isfinite(v):
+            raise ScenarioError(f"{where}: [scenario] field '{key}' must be a finite number, got {v!r}")
+    if stop_s is not None and stop_s <= t0_s:
+        raise ScenarioError(f"{where}: [scenario] field 'stop_s' ({stop_s} s) must be after t0_s ({t0_s} s)")
     order = sc.get("order")
     if order is not None:
         if not (isinstance(order, list) and all(isinstance(x, str) for x in order)):
@@ -264,8 +275,15 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
             raise ScenarioError(f"{where}: [scenario] field 'order' must list every component exactly once "
                                 f"(missing: {sorted(names - set(order))})")
     return Scenario(spath, text, name, str(sc.get("description", "")), settings,
-                    num(sc, "stop_s", None, f"{where}: [scenario]"), num(sc, "t0_s", 0.0, f"{where}: [scenario]"),
-                    seed, specs, conns, faults, signals, dict(doc.get("metrics", {})), order)
+                    stop_s, t0_s, seed, specs, conns, faults, signals, dict(doc.get("metrics", {})), order)
+
+
+def _file_value(key: str, value: Any, scenario_path: Path | None) -> Any:
+    """A ``*_file`` override as an absolute path: relative to the scenario file (its ``set`` table) or
+    to the working directory (``--set``); other values unchanged."""
+    if key.endswith("_file") and isinstance(value, str) and value:
+        return str(resolve_path(value, scenario_path).absolute())
+    return value
 
 
 def component_seed(scenario_seed: int, name: str) -> int:
@@ -328,11 +346,19 @@ def instantiate(spec: ComponentSpec, scenario: Scenario):
 def build_master(scenario: Scenario) -> Master:
     """Instantiate the components and the master of a scenario (connections checked)."""
     comps = [instantiate(s, scenario) for s in scenario.components]
+    where = scenario.path or '<scenario>'
     try:
-        return Master(comps, scenario.connections, scenario.settings,
-                      {s.name: s.step_multiple for s in scenario.components}, scenario.faults, scenario.order)
+        m = Master(comps, scenario.connections, scenario.settings,
+                   {s.name: s.step_multiple for s in scenario.components}, scenario.faults, scenario.order)
     except ShevsimError as exc:
-        raise type(exc)(f"{scenario.path or '<scenario>'}: {exc}") from None
+        raise type(exc)(f"{where}: {exc}") from None
+    if scenario.record is not None:     # checked before the run, not after it
+        known = set(m._signal_names)
+        for sig in scenario.record:
+            if sig not in known:
+                raise ScenarioError(f"{where}: [record] field 'signals': unknown signal '{sig}'"
+                                    f"{_hint(sig, known)}")
+    return m
 
 
 def stop_time(scenario: Scenario, master: Master) -> float:

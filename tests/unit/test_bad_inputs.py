@@ -224,3 +224,50 @@ def test_bad_method(tmp_path):
     bad = GOOD.replace("step_s = 0.01", 'step_s = 0.01\nmethod = "gauss"')
     with pytest.raises(ScenarioError, match=r"method must be 'gauss-seidel' or 'jacobi'"):
         load(bad, tmp_path)
+
+
+# --------------------------------------------------------------- bug hunt (core), 2026-11-22
+@pytest.mark.parametrize("field, value", [("stop_s", "nan"), ("stop_s", "inf"), ("t0_s", "nan"),
+                                          ("t0_s", "-inf"), ("stop_s", "-1.0"), ("stop_s", "0.0")])
+def test_bad_stop_or_start_time_names_the_field(tmp_path, field, value):
+    text = GOOD.replace("stop_s = 0.1", "stop_s = 0.1" if field == "t0_s" else f"stop_s = {value}")
+    if field == "t0_s":
+        text = text.replace("step_s = 0.01", f"step_s = 0.01\nt0_s = {value}")
+    with pytest.raises(ScenarioError, match=rf"s.toml: \[scenario\] field '{field}'"):
+        load(text, tmp_path)
+
+
+def test_record_unknown_signal_fails_before_running_and_names_file_field(tmp_path):
+    from shevsim.run import simulate
+    text = GOOD + '\n[record]\nsignals = ["body1.position_m", "body1.positon_m"]\n'
+    sc = load(text, tmp_path)
+    with pytest.raises(ScenarioError, match=r"s.toml: \[record\] field 'signals': unknown signal "
+                                            r"'body1.positon_m' \(did you mean 'body1.position_m'\?\)"):
+        build_master(sc)
+    with pytest.raises(ScenarioError, match=r"s.toml: \[record\]"):
+        simulate(sc)
+
+
+def test_set_file_override_is_relative_to_cwd_not_to_the_params_file(tmp_path, monkeypatch):
+    # `--set cycle.cycle_file=cycles/x.csv` typed at the project root names cycles/x.csv from there,
+    # not components/cycle/cycles/x.csv (the params file's folder)
+    from shevsim.components.cycle import CycleParams  # noqa: F401  (registry type 'cycle')
+    root = Path(__file__).resolve().parents[2]
+    monkeypatch.chdir(root)
+    params = tmp_path / "p" / "cycle.toml"
+    params.parent.mkdir()
+    params.write_text(f'[params]\ncycle_file = "{root / "cycles" / "hd_udds.csv"}"\n')
+    text = f"""
+[scenario]
+stop_s = 1.0
+[components.cycle]
+type = "cycle"
+params = "{params}"
+"""
+    sc = load(text, tmp_path, sets=["cycle.cycle_file=cycles/uac_proxy.csv"])
+    m = build_master(sc)
+    assert Path(m.components["cycle"].params.cycle_file) == root / "cycles" / "uac_proxy.csv"
+    # in the scenario's own `set` table the path is relative to the scenario file
+    (tmp_path / "c.csv").write_bytes((root / "cycles" / "uac_proxy.csv").read_bytes())
+    sc = load(text.replace('params = ', 'set = { cycle_file = "c.csv" }\nparams = '), tmp_path)
+    assert Path(build_master(sc).components["cycle"].params.cycle_file) == (tmp_path / "c.csv").resolve()

@@ -102,3 +102,75 @@ def test_result_columns_carry_units():
     df = r.to_pandas()
     assert "time_s" in df.columns and "body1.position_m" in df.columns
     assert r.units["coupling.force_n"] == "N"
+
+
+# --------------------------------------------------------------- bug hunt (core), 2026-11-22
+_GAIN_FAULT = """
+[scenario]
+step_s = 0.1
+stop_s = 1.0
+[components.a]
+type = "gain"
+start = { in_1 = 1.0 }
+[components.b]
+type = "gain"
+[connections]
+"b.in_1" = "a.out_1"
+[[faults]]
+at_s = 0.5
+port = "b.in_1"
+value = 7.0
+"""
+
+
+def test_initialize_again_resets_faults():
+    # a second initialize() (re-run from t0) must not keep a fault forced that starts later
+    m = build_master(load_scenario(None, [], text=_GAIN_FAULT))
+    first = m.run(1.0)["b.out_1"].copy()
+    assert first[5] == 1.0 and first[6] == 7.0
+    m.initialize(0.0)
+    second = m.run(1.0)["b.out_1"]
+    np.testing.assert_array_equal(first, second)
+
+
+def test_restore_into_fresh_master_continues_from_snapshot():
+    # a snapshot restored into a new (not yet initialised) master: run() continues, it does not restart
+    m = build_master(load_scenario(None, [], text=_GAIN_FAULT))
+    m.initialize(0.0)
+    for _ in range(3):
+        m.step()
+    snap = m.save_state()
+    ref = m.run(1.0)
+    m2 = build_master(load_scenario(None, [], text=_GAIN_FAULT))
+    m2.restore_state(snap)
+    r = m2.run(1.0)
+    np.testing.assert_allclose(r.time_s, ref.time_s[4:])
+    np.testing.assert_array_equal(r["b.out_1"], ref["b.out_1"][4:])
+
+
+def test_stop_time_not_a_multiple_of_the_step_is_reached():
+    # the run ends at the first communication point at or after stop_s, never before it
+    for stop, last in ((1.05, 1.1), (1.15, 1.2), (1.0, 1.0), (0.3 + 0.7, 1.0)):
+        m = build_master(load_scenario(None, [], text=_GAIN_FAULT))
+        r = m.run(stop)
+        assert r.time_s[-1] == pytest.approx(last), (stop, r.time_s[-1])
+
+
+def test_depends_on_an_unknown_input_is_an_error():
+    from shevsim.components.verification import Gain
+    from shevsim.core.errors import ScenarioError
+    from shevsim.core.variables import inp, out
+
+    class Typo(Gain):
+        VARIABLES = (inp("in_1", "1"), out("out_1", "1", depends_on=("inn_1",)))
+    with pytest.raises(ScenarioError, match=r"component 'x' output 'out_1' depends_on 'inn_1'.*no such input"):
+        Master([Typo("x")], [], MasterSettings(step_s=0.1))
+
+
+def test_progress_bar_reaches_the_total(capsys):
+    pytest.importorskip("tqdm")
+    m = build_master(load_scenario(TWO_BODY, []))
+    m.settings.progress = True
+    m.run(10.25)          # 1025 steps: not a multiple of the bar's update chunk
+    err = capsys.readouterr().err
+    assert "1025/1025" in err, err[-300:]

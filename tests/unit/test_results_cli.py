@@ -53,3 +53,36 @@ def test_cli_reports_errors_cleanly(tmp_path, capsys):
     assert main(["run", str(bad), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "bad.toml" in err and "step_s must be a positive number" in err
+
+
+# --------------------------------------------------------------- bug hunt (core), 2026-11-22
+def test_out_that_is_a_file_or_a_foreign_folder_is_not_replaced(tmp_path):
+    from shevsim.core.errors import ShevsimError
+    f = tmp_path / "notes.txt"
+    f.write_text("precious")
+    with pytest.raises(ShevsimError, match=r"notes.txt.*not a folder"):
+        run_scenario(TWO_BODY, f, plots=False)
+    assert f.read_text() == "precious"
+    d = tmp_path / "thesis"
+    d.mkdir()
+    (d / "thesis.tex").write_text("x")
+    with pytest.raises(ShevsimError, match=r"thesis.*not a shevsim result"):
+        run_scenario(TWO_BODY, d, plots=False)
+    assert (d / "thesis.tex").read_text() == "x"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt", "thesis"]
+    # an empty folder and a previous result are fine
+    e = tmp_path / "empty"
+    e.mkdir()
+    run_scenario(TWO_BODY, e, plots=False)
+    run_scenario(TWO_BODY, e, plots=False)
+    assert (e / "run.json").exists()
+
+
+def test_saved_scenario_records_t0_and_order(tmp_path):
+    text = TWO_BODY.read_text().replace("stop_s = 10.0", "stop_s = 1.0\nt0_s = 0.5\norder = [\"body1\", \"coupling\"]")
+    p = tmp_path / "tb.toml"
+    p.write_text(text)
+    res, _, out = run_scenario(p, tmp_path / "o", plots=False)
+    rs = load_result(out).meta["resolved_scenario"]
+    assert rs["t0_s"] == 0.5 and rs["order"] == ["body1", "coupling"]
+    assert res.time_s[0] == 0.5
