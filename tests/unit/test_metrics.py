@@ -274,8 +274,9 @@ def test_missing_columns_are_reported():
 
 
 def test_energy_balance_mid_run_with_grade_stored_energies_and_engine_shaft():
-    """Closure where every storage term is non-zero: stopped mid-cruise (kinetic energy), on a grade, with
-    the engine-generator shaft spun up (its documented balance: fuel = elec + losses + shaft KE change)."""
+    """Closure where every storage term is non-zero: stopped mid-cruise (kinetic energy), on a grade, with an
+    auxiliary load and the engine-generator shaft spun up (its documented balance: fuel = elec + losses +
+    shaft KE change)."""
     df = _shev_run().iloc[:801].copy()  # t = 80 s, 15 m/s
     t = df["time_s"].to_numpy()
     ke = df["vehicle.kinetic_energy_j"].to_numpy()
@@ -284,6 +285,9 @@ def test_energy_balance_mid_run_with_grade_stored_energies_and_engine_shaft():
     for c in ("vehicle.grade_energy_j", "battery.chem_energy_j", "bus.battery_energy_j", "bus.motor_energy_j",
               "motor.elec_energy_j", "motor.mech_energy_j", "vehicle.traction_energy_j"):
         df[c] = df[c] + g_j
+    x_j = 5.0e3 * t  # 5 kW auxiliary load on the bus, from the battery
+    for c in ("bus.aux_energy_j", "battery.chem_energy_j", "bus.battery_energy_j"):
+        df[c] = df[c] + x_j
     s_j = np.minimum(t, 10.0) * 3.0e3  # shaft spun up by 30 kJ in the first 10 s, from extra fuel
     df["engine_generator.fuel_energy_j"] = df["engine_generator.fuel_energy_j"] + s_j
     df["engine_generator.shaft_kinetic_energy_j"] = s_j
@@ -293,6 +297,7 @@ def test_energy_balance_mid_run_with_grade_stored_energies_and_engine_shaft():
     assert max(abs(r) for r in eb["nodes_j"].values()) < 1e-9 * fuel, eb["nodes_j"]
     # each storage term is needed, with its sign: a missing or flipped term leaves its size as residual
     for col, size in (("vehicle.kinetic_energy_j", ke[-1] - ke[0]), ("vehicle.grade_energy_j", g_j[-1]),
+                      ("bus.aux_energy_j", x_j[-1]),
                       ("engine_generator.shaft_kinetic_energy_j", s_j[-1])):
         bad = df.copy()
         bad[col] = -bad[col]
