@@ -254,8 +254,10 @@ class Master:
         # connections into a feedthrough input whose source runs later: they carry the value of the
         # previous communication step (reported by describe())
         pos = {n: i for i, n in enumerate(order)}
+        self._order_given = given is not None
+        jacobi = self.settings.method == "jacobi"     # Jacobi: every input holds the previous step's value
         self.delayed = [c for c in self.connections
-                        if c.dst_port in ft_inputs[c.dst] and c.src != c.dst and pos[c.src] > pos[c.dst]]
+                        if c.dst_port in ft_inputs[c.dst] and c.src != c.dst and (jacobi or pos[c.src] > pos[c.dst])]
         return order
 
     def _build_links(self) -> None:
@@ -495,8 +497,10 @@ class Master:
                     lines.append(f"      {v.causality:6s} {v.name:28s} [{v.unit}]  {v.description}{dep}")
         lines.append("connections:")
         delayed = set(self.delayed)
+        why = ("Jacobi" if self.settings.method == "jacobi" else
+               "source runs later in the given order" if self._order_given else "component cycle broken here")
         for c in self.connections:
-            note = "   (one-step delay: component cycle broken here)" if c in delayed else ""
+            note = f"   (one-step delay: {why})" if c in delayed else ""
             lines.append(f"  {c}{note}")
         unconnected = [f"{n}.{v.name}" for n, vs in self._vars.items() for v in vs.values()
                        if v.causality == "input" and not any(c.dst == n and c.dst_port == v.name for c in self.connections)]

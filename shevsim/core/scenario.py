@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
 import tomllib
 import zlib
 from dataclasses import dataclass, field
@@ -159,6 +160,8 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
     sc = doc.get("scenario", {})
     _check_keys(sc, _SCEN, f"{where}: [scenario]")
     name = sc.get("name", spath.stem if spath else "scenario")
+    if not isinstance(name, str) or not name:
+        raise ScenarioError(f"{where}: [scenario] field 'name' must be a string, got {name!r}")
 
     def num(d, k, default, w, typ=float):
         v = d.get(k, default)
@@ -184,6 +187,8 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
         _check_keys(cd, _COMP, w)
         if "type" not in cd:
             raise ScenarioError(f"{w}: missing field 'type'")
+        if not isinstance(cd["type"], str):
+            raise ScenarioError(f"{w}: field 'type' must be a string (a registry name), got {cd['type']!r}")
         pf = None
         if "params" in cd:
             if not isinstance(cd["params"], str):
@@ -195,6 +200,8 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
         if cd["type"] == "fmu":
             if "fmu" not in cd:
                 raise ScenarioError(f"{w}: type 'fmu' needs field 'fmu' (path of the .fmu file)")
+            if not isinstance(cd["fmu"], str):
+                raise ScenarioError(f"{w}: field 'fmu' must be a file path string")
             fmu = resolve_path(cd["fmu"], spath)
         k = cd.get("step_multiple", 1)
         if isinstance(k, bool) or not isinstance(k, int) or k < 1:
@@ -241,6 +248,8 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
             if key not in fd:
                 raise ScenarioError(f"{w}: missing field '{key}'")
         at = num(fd, "at_s", None, w)
+        if not math.isfinite(at):
+            raise ScenarioError(f"{w}: field 'at_s' must be a finite number, got {at!r}")
         val = num(fd, "value", None, w)
         if "." not in str(fd["port"]):
             raise ScenarioError(f"{w}: field 'port' must be 'component.port'")
@@ -258,7 +267,6 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
     seed = num(sc, "seed", 0, f"{where}: [scenario]", int)
     stop_s = num(sc, "stop_s", None, f"{where}: [scenario]")
     t0_s = num(sc, "t0_s", 0.0, f"{where}: [scenario]")
-    import math
     for key, v in (("t0_s", t0_s), ("stop_s", stop_s)):
         if v is not None and not math.isfinite(v):
             raise ScenarioError(f"{where}: [scenario] field '{key}' must be a finite number, got {v!r}")
@@ -272,8 +280,9 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
             if n not in names:
                 raise ScenarioError(f"{where}: [scenario] field 'order': unknown component '{n}'{_hint(n, names)}")
         if sorted(order) != sorted(names):
+            rep = sorted({n for n in order if order.count(n) > 1})
             raise ScenarioError(f"{where}: [scenario] field 'order' must list every component exactly once "
-                                f"(missing: {sorted(names - set(order))})")
+                                + (f"(repeated: {rep})" if rep else f"(missing: {sorted(names - set(order))})"))
     return Scenario(spath, text, name, str(sc.get("description", "")), settings,
                     stop_s, t0_s, seed, specs, conns, faults, signals, dict(doc.get("metrics", {})), order)
 
@@ -370,4 +379,8 @@ def stop_time(scenario: Scenario, master: Master) -> float:
     if not natural:
         raise ScenarioError(f"{scenario.path or '<scenario>'}: [scenario] needs 'stop_s' "
                             "(no component, such as a cycle, defines the run length)")
-    return max(natural)
+    stop = max(natural)
+    if stop <= scenario.t0_s:
+        raise ScenarioError(f"{scenario.path or '<scenario>'}: [scenario] field 't0_s' ({scenario.t0_s} s) is not "
+                            f"before the stop time {stop} s (the components' natural end); give 'stop_s'")
+    return stop

@@ -271,3 +271,33 @@ params = "{params}"
     (tmp_path / "c.csv").write_bytes((root / "cycles" / "uac_proxy.csv").read_bytes())
     sc = load(text.replace('params = ', 'set = { cycle_file = "c.csv" }\nparams = '), tmp_path)
     assert Path(build_master(sc).components["cycle"].params.cycle_file) == (tmp_path / "c.csv").resolve()
+
+
+@pytest.mark.parametrize("old, new, msg", [
+    ('name = "t"', 'name = 5', r"\[scenario\] field 'name' must be a string"),
+    ('type = "mass_spring"', 'type = 5', r"\[components.body1\]: field 'type' must be a string"),
+    ('type = "mass_spring"', 'type = "fmu"\nfmu = 3', r"\[components.body1\]: field 'fmu' must be a file path string"),
+    ('stop_s = 0.1', 'stop_s = 0.1\norder = ["body1", "body1", "coupling"]',
+     r"\[scenario\] field 'order' must list every component exactly once \(repeated: \['body1'\]\)"),
+])
+def test_wrong_field_types_name_file_and_field(tmp_path, old, new, msg):
+    with pytest.raises(ScenarioError, match=r"s.toml: " + msg):
+        load(GOOD.replace(old, new), tmp_path)
+
+
+def test_fault_time_must_be_finite(tmp_path):
+    bad = GOOD + '\n[[faults]]\nat_s = nan\nport = "body1.force_n"\nvalue = 1.0\n'
+    with pytest.raises(ScenarioError, match=r"s.toml: \[\[faults\]\] #1: field 'at_s' must be a finite number"):
+        load(bad, tmp_path)
+
+
+def test_start_time_after_the_natural_stop_time(tmp_path):
+    text = f"""
+[scenario]
+t0_s = 5000.0
+[components.cycle]
+type = "cycle"
+"""
+    sc = load(text, tmp_path)
+    with pytest.raises(ScenarioError, match=r"s.toml: \[scenario\] field 't0_s' \(5000.0 s\) is not before the stop"):
+        stop_time(sc, build_master(sc))

@@ -174,3 +174,19 @@ def test_progress_bar_reaches_the_total(capsys):
     m.run(10.25)          # 1025 steps: not a multiple of the bar's update chunk
     err = capsys.readouterr().err
     assert "1025/1025" in err, err[-300:]
+
+
+def test_delayed_connections_report_names_the_cause():
+    text = TWO_BODY.read_text()
+    # explicit order against the feedthrough: delayed because of the given order (there is no component cycle)
+    m = build_master(load_scenario(None, [], text=text.replace(
+        'method = "gauss-seidel"', 'method = "gauss-seidel"\norder = ["coupling", "body1"]')))
+    assert [str(c) for c in m.delayed] == ["body1.position_m -> coupling.position_m",
+                                           "body1.velocity_mps -> coupling.velocity_mps"]
+    d = m.describe()
+    assert "cycle broken" not in d and d.count("one-step delay: source runs later in the given order") == 2
+    # Jacobi: every connection into a feedthrough input carries the previous step's value
+    m = build_master(load_scenario(None, [], text=text.replace('method = "gauss-seidel"', 'method = "jacobi"')))
+    assert {str(c) for c in m.delayed} == {"body1.position_m -> coupling.position_m",
+                                           "body1.velocity_mps -> coupling.velocity_mps"}
+    assert m.describe().count("one-step delay: Jacobi") == 2
