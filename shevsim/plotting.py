@@ -28,9 +28,8 @@ PANELS = [
 
 def scenario_plots(result, folder: Path) -> list[Path]:
     """Write ``overview.png`` (all applicable panels) and one PNG per panel into ``folder``."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # a bare Figure (no pyplot): the caller's backend and open figures are left alone
+    from matplotlib.figure import Figure
     folder = Path(folder)
     t = result.time_s
     drawn = []
@@ -48,7 +47,8 @@ def scenario_plots(result, folder: Path) -> list[Path]:
     if not drawn:
         names = list(result.signals)[:8]
         drawn = [("signals", [(result.signals[n], n) for n in names])]
-    fig, axes = plt.subplots(len(drawn), 1, figsize=(10, 2.1 * len(drawn)), sharex=True, squeeze=False)
+    fig = Figure(figsize=(10, 2.1 * len(drawn)))
+    axes = fig.subplots(len(drawn), 1, sharex=True, squeeze=False)
     for ax, (title, series) in zip(axes[:, 0], drawn):
         for y, label in series:
             ax.plot(t, y, lw=0.8, label=label)
@@ -61,5 +61,4 @@ def scenario_plots(result, folder: Path) -> list[Path]:
     fig.tight_layout()
     path = folder / "overview.png"
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return [path]

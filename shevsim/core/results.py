@@ -69,9 +69,7 @@ class Result:
 
     def plot(self, signals: list[str], ax=None):
         """Plot signals against time; returns the matplotlib axes."""
-        import matplotlib
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt      # the caller's backend (headless: Agg by default)
         if ax is None:
             _, ax = plt.subplots(figsize=(8, 3))
         for n in signals:
@@ -136,6 +134,9 @@ def save_result(result: Result, out_dir: str | Path, *, scenario_text: str | Non
             (tmp / "scenario.toml").write_text(scenario_text)
         if plots is not None:
             plots(result, tmp)
+        umask = os.umask(0)                  # mkdtemp made the folder 0700: give it the usual permissions
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)
         old = None
         if out_dir.exists():
             old = out_dir.with_name(f".{out_dir.name}.old-{os.getpid()}")

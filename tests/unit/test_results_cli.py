@@ -86,3 +86,30 @@ def test_saved_scenario_records_t0_and_order(tmp_path):
     rs = load_result(out).meta["resolved_scenario"]
     assert rs["t0_s"] == 0.5 and rs["order"] == ["body1", "coupling"]
     assert res.time_s[0] == 0.5
+
+
+def test_plots_leave_the_callers_matplotlib_backend_and_figures_alone(tmp_path):
+    # a notebook user's backend (and open figures) must survive run_scenario(..., plots=True) and Result.plot
+    import matplotlib
+    import matplotlib.pyplot as plt
+    before = matplotlib.get_backend()
+    try:
+        plt.switch_backend("svg")
+        fig = plt.figure()
+        res, _, out = run_scenario(TWO_BODY, tmp_path / "tb", plots=True)
+        assert (out / "overview.png").stat().st_size > 1000
+        res.plot(["body1.position_m"])
+        assert matplotlib.get_backend() == "svg"
+        assert plt.fignum_exists(fig.number)
+    finally:
+        plt.close("all")
+        plt.switch_backend(before)
+
+
+def test_saved_result_folder_has_the_usual_permissions(tmp_path):
+    # mkdtemp makes the temporary folder 0700; once renamed into place it must be readable like any folder
+    import os
+    umask = os.umask(0)
+    os.umask(umask)
+    _, _, out = run_scenario(TWO_BODY, tmp_path / "tb", plots=False)
+    assert (out.stat().st_mode & 0o777) == (0o777 & ~umask)
