@@ -303,7 +303,8 @@ class Master:
             try:
                 comp.initialize(self.t0)
             except Exception as exc:
-                raise SimulationError(f"component '{comp.name}' failed to initialise at t={self.t0} s: {exc}") from exc
+                raise SimulationError(f"component '{comp.name}' failed to initialise at t={self.t0:.6g} s: "
+                                      f"{type(exc).__name__}: {exc}") from exc
         self._buf = array("d")
         self._times = []
         self._record()

@@ -106,6 +106,8 @@ def load_params(cls: type, path: str | Path | None, overrides: Mapping[str, Any]
             raise ScenarioError(f"{path}: unknown table '{k}'{_suggest(k, ['meta', 'params'])}")
         if "params" not in doc:
             raise ScenarioError(f"{path}: missing table [params]")
+        if not isinstance(doc["params"], dict):
+            raise ScenarioError(f"{path}: [params] must be a table of name = value, got {doc['params']!r}")
         values.update(doc["params"])
         base_dir = path.parent
         where = str(path)

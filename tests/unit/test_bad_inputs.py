@@ -301,3 +301,11 @@ type = "cycle"
     sc = load(text, tmp_path)
     with pytest.raises(ScenarioError, match=r"s.toml: \[scenario\] field 't0_s' \(5000.0 s\) is not before the stop"):
         stop_time(sc, build_master(sc))
+
+
+def test_params_table_that_is_not_a_table(tmp_path):
+    pf = tmp_path / "p.toml"
+    pf.write_text("params = 5\n")
+    bad = GOOD.replace('type = "mass_spring"', f'type = "mass_spring"\nparams = "{pf}"')
+    with pytest.raises(ScenarioError, match=r"p.toml: \[params\] must be a table"):
+        build(bad, tmp_path)

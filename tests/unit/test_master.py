@@ -190,3 +190,15 @@ def test_delayed_connections_report_names_the_cause():
     assert {str(c) for c in m.delayed} == {"body1.position_m -> coupling.position_m",
                                            "body1.velocity_mps -> coupling.velocity_mps"}
     assert m.describe().count("one-step delay: Jacobi") == 2
+
+
+def test_initialize_failure_names_component_time_and_exception_type():
+    from shevsim.components.verification import Gain
+    from shevsim.core.errors import SimulationError
+
+    class Broken(Gain):
+        def initialize(self, t0):
+            raise KeyError("ocv_v")
+    m = Master([Gain("a"), Broken("b")], [], MasterSettings(step_s=0.1))
+    with pytest.raises(SimulationError, match=r"component 'b' failed to initialise at t=2.5 s: KeyError: 'ocv_v'"):
+        m.run(3.0, t0=2.5)
