@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -43,14 +44,19 @@ def _cmd_info(a) -> int:
     sc = load_scenario(p)
     m = build_master(sc)
     print(f"scenario {sc.name}: step {sc.settings.step_s} s, method {sc.settings.method}, "
-          f"stop {stop_time(sc, m)} s, seed {sc.seed}")
+          f"start {sc.t0_s} s, stop {stop_time(sc, m)} s, seed {sc.seed}")
     if sc.description:
         print(f"  {sc.description}")
     print(m.describe())
     if sc.faults:
         print("faults:")
         for f in sc.faults:
-            print(f"  at {f.at_s} s: {f.component}.{f.port} = {f.value}")
+            # a fault acts from the first communication point at or after its time (as the master applies it)
+            h, t0 = sc.settings.step_s, sc.t0_s
+            k = max(0, math.ceil((f.at_s - t0) / h - 1e-9 * max(1.0, abs(f.at_s) / h)))
+            acts = "" if abs(t0 + k * h - f.at_s) <= 1e-9 * max(1.0, abs(f.at_s)) else \
+                f" (acts from the communication point {t0 + k * h:.6g} s)"
+            print(f"  at {f.at_s} s: {f.component}.{f.port} = {f.value}{acts}")
     m.terminate()
     return 0
 
@@ -114,6 +120,11 @@ def main(argv=None) -> int:
     except ShevsimError as exc:
         print(f"shevsim: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:             # output piped into `head` & co.: stop quietly
+        import os
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())   # the interpreter's final flush must not fail again
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

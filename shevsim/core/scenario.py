@@ -361,6 +361,11 @@ def build_master(scenario: Scenario) -> Master:
                    {s.name: s.step_multiple for s in scenario.components}, scenario.faults, scenario.order)
     except ShevsimError as exc:
         raise type(exc)(f"{where}: {exc}") from None
+    for spec in scenario.components:    # a connection overwrites the start value before initialize()
+        for c in scenario.connections:
+            if c.dst == spec.name and c.dst_port in spec.start:
+                raise ScenarioError(f"{where}: [components.{spec.name}] field 'start.{c.dst_port}': the input is "
+                                    f"connected to {c.src}.{c.src_port}, so its start value is never used")
     if scenario.record is not None:     # checked before the run, not after it
         known = set(m._signal_names)
         for sig in scenario.record:

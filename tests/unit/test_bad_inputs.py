@@ -309,3 +309,11 @@ def test_params_table_that_is_not_a_table(tmp_path):
     bad = GOOD.replace('type = "mass_spring"', f'type = "mass_spring"\nparams = "{pf}"')
     with pytest.raises(ScenarioError, match=r"p.toml: \[params\] must be a table"):
         build(bad, tmp_path)
+
+
+def test_start_value_on_a_connected_input_is_an_error(tmp_path):
+    # the connection overwrites the start value before initialize(): it would be silently ignored
+    bad = GOOD.replace('type = "spring_damper"', 'type = "spring_damper"\nstart = { position_m = 0.5 }')
+    with pytest.raises(ScenarioError, match=r"s.toml: \[components.coupling\] field 'start.position_m': the input is "
+                                            r"connected to body1.position_m"):
+        build(bad, tmp_path)

@@ -113,3 +113,26 @@ def test_saved_result_folder_has_the_usual_permissions(tmp_path):
     os.umask(umask)
     _, _, out = run_scenario(TWO_BODY, tmp_path / "tb", plots=False)
     assert (out.stat().st_mode & 0o777) == (0o777 & ~umask)
+
+
+def test_info_shows_start_time_and_when_an_off_grid_fault_acts(tmp_path, capsys):
+    text = TWO_BODY.read_text().replace("stop_s = 10.0", "stop_s = 1.0\nt0_s = 0.5") + \
+        '\n[[faults]]\nat_s = 0.655\nport = "body1.force_n"\nvalue = 0.0\n'
+    p = tmp_path / "tb.toml"
+    p.write_text(text)
+    assert main(["info", str(p)]) == 0
+    out = capsys.readouterr().out
+    assert "start 0.5 s" in out
+    assert "at 0.655 s: body1.force_n = 0.0 (acts from the communication point 0.66 s)" in out
+
+
+def test_cli_output_into_a_closed_pipe_is_quiet(tmp_path):
+    # `shevsim info X | head -1`: no BrokenPipeError traceback
+    import subprocess
+    import sys
+    p = subprocess.Popen([sys.executable, "-c", "import sys; from shevsim.cli import main; sys.exit(main())",
+                          "info", str(TWO_BODY)], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()                    # the reader is gone before anything is written
+    err = p.stderr.read().decode()
+    p.wait(timeout=60)
+    assert "Traceback" not in err and "BrokenPipe" not in err, err
