@@ -65,5 +65,9 @@ def run_scenario(path: str | Path | None = None, out: str | Path | None = None, 
             from .plotting import scenario_plots
             plot_fn = scenario_plots
         res.meta["git_commit"] = git_commit()
-        save_result(res, out_dir, scenario_text=scenario.text, metrics=metrics, plots=plot_fn)
+        res.meta["sets"] = list(scenario.sets)
+        text = scenario.text
+        if scenario.sets:   # the scenario as run: the command-line overrides on top of the file
+            text = "".join(f"# run with --set {s}\n" for s in scenario.sets) + text
+        save_result(res, out_dir, scenario_text=text, metrics=metrics, plots=plot_fn)
     return res, metrics, out_dir

@@ -130,6 +130,7 @@ class Scenario:
     record: list[str] | None
     metrics: dict[str, Any]
     order: list[str] | None = None
+    sets: list[str] = field(default_factory=list)     # command-line ``component.param=value`` overrides
 
     def resolved(self) -> dict:
         """A plain-dict view of what will run (saved with results)."""
@@ -284,7 +285,8 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
             raise ScenarioError(f"{where}: [scenario] field 'order' must list every component exactly once "
                                 + (f"(repeated: {rep})" if rep else f"(missing: {sorted(names - set(order))})"))
     return Scenario(spath, text, name, str(sc.get("description", "")), settings,
-                    stop_s, t0_s, seed, specs, conns, faults, signals, dict(doc.get("metrics", {})), order)
+                    stop_s, t0_s, seed, specs, conns, faults, signals, dict(doc.get("metrics", {})), order,
+                    list(sets))
 
 
 def _file_value(key: str, value: Any, scenario_path: Path | None) -> Any:

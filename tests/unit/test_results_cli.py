@@ -136,3 +136,13 @@ def test_cli_output_into_a_closed_pipe_is_quiet(tmp_path):
     err = p.stderr.read().decode()
     p.wait(timeout=60)
     assert "Traceback" not in err and "BrokenPipe" not in err, err
+
+
+def test_saved_scenario_records_the_command_line_overrides(tmp_path):
+    # the folder's scenario.toml is "the scenario as run": --set overrides must not be lost
+    _, _, out = run_scenario(TWO_BODY, tmp_path / "o", sets=["coupling.damping_ns_per_m=1.0"], plots=False)
+    text = (out / "scenario.toml").read_text()
+    assert "--set coupling.damping_ns_per_m=1.0" in text
+    assert json.loads((out / "run.json").read_text())["sets"] == ["coupling.damping_ns_per_m=1.0"]
+    import tomllib
+    assert tomllib.loads(text) == tomllib.loads(TWO_BODY.read_text())     # still the same TOML document
