@@ -12,6 +12,8 @@ from .core.scenario import PROJECT_ROOT, Scenario, build_master, load_scenario, 
 log = logging.getLogger(__name__)
 
 DEFAULT_SCENARIO = PROJECT_ROOT / "scenarios" / "hd_udds_mpc.toml"
+#: cumulative counters reported in metrics.json as ``component.port``: final value
+COUNTER_SUFFIXES = (".fallback_count", ".clamp_count", ".shed_count", ".shed_time_s")
 
 
 def simulate(scenario: Scenario, progress: bool = False) -> Result:
@@ -44,10 +46,18 @@ def compute_run_metrics(res: Result, scenario: Scenario) -> dict:
         from .metrics import compute_metrics
     except ImportError:  # pragma: no cover
         return {}
-    df = res.to_pandas()
-    if "vehicle.speed_mps" not in df.columns:
-        return {}
-    return compute_metrics(df, {"scenario": scenario.metrics, "parameters": res.parameters})
+    out = {}
+    # robustness counters every run reports (QP fallbacks, power demands clamped by the battery,
+    # generator load shedding): final value of every recorded counter; fallbacks and clamping logged
+    for name, values in res.signals.items():
+        if name.endswith(COUNTER_SUFFIXES) and len(values):
+            out[name] = float(values[-1])
+            if values[-1] > 0 and name.endswith((".fallback_count", ".clamp_count")):   # anomalies, not operation
+                log.warning("%s: %s = %g at the end of the run", scenario.name, name, values[-1])
+    if "vehicle.speed_mps" not in res.signals:
+        return out
+    out.update(compute_metrics(res.to_pandas(), {"scenario": scenario.metrics, "parameters": res.parameters}))
+    return out
 
 
 def run_scenario(path: str | Path | None = None, out: str | Path | None = None, sets=(), progress: bool = False,

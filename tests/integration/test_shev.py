@@ -127,3 +127,12 @@ def test_load_shedding_keeps_the_battery_within_its_power_capability(cooling_fau
     assert mean_over.max() < 20e3, mean_over.max()
     # energy still closes across the whole vehicle
     assert abs(m["energy_closure_error_frac"]) < 1e-3, m["energy_closure_error_frac"]
+
+
+def test_metrics_report_the_robustness_counters(rate_map_pair):
+    (r, m), _ = rate_map_pair
+    # QP fallbacks, battery clamping and generator load shedding are counted in metrics.json
+    for key in ("supervisor.fallback_count", "battery.clamp_count", "engine_generator.shed_count"):
+        assert key in m, key
+        assert m[key] == r[key][-1]
+    assert m["supervisor.fallback_count"] == 0
