@@ -9,6 +9,22 @@ from pathlib import Path
 
 import numpy as np
 
+def headless_pyplot():
+    """``matplotlib.pyplot`` for writing figure files, without taking over the caller's backend.
+
+    When nothing has imported pyplot yet (command-line runs, workers), select the non-interactive
+    Agg backend so no display is needed; when pyplot is already in use (a notebook, a GUI session),
+    keep the backend the user chose.
+    """
+    import sys
+
+    import matplotlib
+    if "matplotlib.pyplot" not in sys.modules:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
 PANELS = [
     ("speed tracking [km/h]", [("cycle.speed_ref_mps", 3.6, "reference"), ("vehicle.speed_mps", 3.6, "vehicle")]),
     ("power split [kW]", [("bus.demand_power_w", 1e-3, "demand"), ("engine_generator.elec_power_w", 1e-3, "engine-generator"),

@@ -217,9 +217,8 @@ def plot_accel_comparison(cycle_folder: str | Path, out_png: str | Path) -> Path
     Left: share of time per acceleration bin (|a| > 0.1 m/s^2); right: acceleration versus
     speed (each 1 s interval), with the proxy's drivability limit.
     """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from shevsim.plotting import headless_pyplot
+    plt = headless_pyplot()
 
     folder = Path(cycle_folder)
     cyc = {"HD-UDDS": load_cycle(folder / "hd_udds.csv"), "UAC proxy": load_cycle(folder / "uac_proxy.csv")}

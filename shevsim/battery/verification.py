@@ -257,9 +257,8 @@ def run_thermal_verification(out_dir, h_w_m2k: float = 5.0, n_nodes: int = 30,
     Writes ``thermal_freq_response.png``, ``thermal_freq_response.csv`` and
     ``thermal_verification.json`` into ``out_dir`` and returns the summary dict.
     """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from shevsim.plotting import headless_pyplot
+    plt = headless_pyplot()
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

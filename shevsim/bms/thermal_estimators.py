@@ -872,9 +872,8 @@ def table_3_3(out_dir=None, seed: int = 0, duration_s: float = 3600.0, heat_w=No
     (out / f"{name}.csv").write_text("\n".join(lines) + "\n")
     (out / f"{name}.json").write_text(json.dumps({s: {k: v for k, v in r.items() if k != "trace"}
                                                   for s, r in res.items()}, indent=2))
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from shevsim.plotting import headless_pyplot
+    plt = headless_pyplot()
 
     fig, axes = plt.subplots(2, len(res), figsize=(4.3 * len(res) + 0.1, 6), sharex=True, squeeze=False)
     for j, (s, r) in enumerate(res.items()):

@@ -481,9 +481,8 @@ def write_report(out: Path, rep: dict, fitter: Fitter, base: FitResult, final: F
     out.mkdir(parents=True, exist_ok=True)
     pngs = []
     if plots:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from shevsim.plotting import headless_pyplot
+        plt = headless_pyplot()
         step = max(1, t.size // 4000)
         ts = t[::step]
         chans = fitter.channels

@@ -317,9 +317,8 @@ def outputs(eng, soot, gen, mot, ool) -> dict[Path, tuple[list[str], dict]]:
 
 
 def plot(eng, gen, ool, path: Path) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from shevsim.plotting import headless_pyplot
+    plt = headless_pyplot()
 
     fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
     ax[0].plot(ool["p"] / 1e3, ool["fuel"], "k-")

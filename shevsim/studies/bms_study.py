@@ -71,9 +71,8 @@ def _save_fig(fig, path: Path) -> Path:
 
 
 def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from shevsim.plotting import headless_pyplot
+    plt = headless_pyplot()
     return plt
 
 

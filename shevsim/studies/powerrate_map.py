@@ -242,9 +242,8 @@ def _step(edges_w, rates_wps):
 
 def plot_rate_maps(summary: dict, path: Path) -> None:
     """Fig. A.3 analogue: design space (grey), narrowed space (blue band), top maps, best map."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from shevsim.plotting import headless_pyplot
+    plt = headless_pyplot()
     edges = summary["best_map"]["edges_w"]
     lv = summary["config"]["levels_wps"]
     fig, ax = plt.subplots(figsize=(7, 4.2))
@@ -272,9 +271,8 @@ def plot_rate_maps(summary: dict, path: Path) -> None:
 
 def plot_comparison(summary: dict, path: Path) -> None:
     """Fig. A.4 analogue: fuel-economy and soot change of the top maps and the best constant limit."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from shevsim.plotting import headless_pyplot
+    plt = headless_pyplot()
     rows = [(f"#{r['rank']}", r) for r in summary["top_solutions"]]
     if summary["best_constant"]:
         rows.append((f"const {summary['best_constant']['rate_wps'] / 1e3:g}", summary["best_constant"]))

@@ -75,9 +75,8 @@ def run_tradeoff(problem, runner, rates_wps, out_dir: str | Path | None = None, 
 
 def plot_tradeoff(summary: dict, path: Path) -> None:
     """Fig. A.2 analogue: fuel-economy and soot change vs the constant maximum power rate."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from shevsim.plotting import headless_pyplot
+    plt = headless_pyplot()
     rows = sorted(summary["rows"], key=lambda r: r["rate_wps"])
     x = [r["rate_wps"] / 1e3 for r in rows]
     fig, a1 = plt.subplots(figsize=(6.5, 4))
