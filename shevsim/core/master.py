@@ -469,15 +469,28 @@ class Master:
                            len(self._times), dict(self._forced), self._faults_done, self.t0)
 
     def restore_state(self, s: MasterState) -> None:
-        """Return to a snapshot made by :meth:`save_state`; later records are dropped."""
+        """Return to a snapshot made by :meth:`save_state`; later records are dropped.
+
+        When the recorded history does not reach the snapshot (restoring into a fresh master, or a
+        later snapshot after an earlier one was restored), the record restarts at the snapshot, so
+        the result's time vector never has a gap.
+        """
         for n, c in self.components.items():
             c.set_state(s.components[n])
         self.step_index = s.step_index
         self.time_s = s.time_s
         self.t0 = s.t0
         self._initialized = True     # run() continues from the snapshot (also in a fresh master)
-        del self._buf[s.n_rows * len(self._signal_names):]
-        del self._times[s.n_rows:]
+        fresh_record = len(self._times) < s.n_rows
+        if fresh_record:
+            # the recorded history does not reach the snapshot (a fresh master, or a snapshot taken
+            # after an earlier one that was restored since): start a new, contiguous record at the
+            # snapshot instead of leaving a gap in time
+            del self._buf[:]
+            del self._times[:]
+        else:
+            del self._buf[s.n_rows * len(self._signal_names):]
+            del self._times[s.n_rows:]
         self._forced = dict(s.forced)
         self._faults_done = s.faults_done
         # components' u/y dicts may be new objects after set_state: rebuild the links
@@ -485,6 +498,8 @@ class Master:
         for (cn, port) in self._forced:
             self._links[cn] = [l for l in self._links[cn] if l[1] != port]
         self._sched = [(self.components[n], self._links[n], self.step_multiples[n]) for n in self.order]
+        if fresh_record:
+            self._record()
 
     def describe(self) -> str:
         """Human-readable summary: components, ports with units, connections, order."""

@@ -144,8 +144,28 @@ def test_restore_into_fresh_master_continues_from_snapshot():
     m2 = build_master(load_scenario(None, [], text=_GAIN_FAULT))
     m2.restore_state(snap)
     r = m2.run(1.0)
-    np.testing.assert_allclose(r.time_s, ref.time_s[4:])
-    np.testing.assert_array_equal(r["b.out_1"], ref["b.out_1"][4:])
+    # the new record starts at the snapshot (t = 0.3 s) and continues without a gap
+    np.testing.assert_allclose(r.time_s, ref.time_s[3:])
+    np.testing.assert_array_equal(r["b.out_1"], ref["b.out_1"][3:])
+
+
+def test_restoring_a_later_snapshot_after_an_earlier_one_leaves_no_gap():
+    m = build_master(load_scenario(None, [], text=_GAIN_FAULT))
+    m.initialize(0.0)
+    for _ in range(2):
+        m.step()
+    early = m.save_state()
+    for _ in range(4):
+        m.step()
+    late = m.save_state()
+    ref = m.run(1.0)
+    m.restore_state(early)
+    m.restore_state(late)          # the history (to 0.2 s) does not reach this snapshot (0.6 s)
+    r = m.run(1.0)
+    dt = np.diff(r.time_s)
+    np.testing.assert_allclose(dt, 0.1, rtol=1e-9)       # contiguous
+    np.testing.assert_allclose(r.time_s, ref.time_s[6:])
+    np.testing.assert_array_equal(r["b.out_1"], ref["b.out_1"][6:])
 
 
 def test_stop_time_not_a_multiple_of_the_step_is_reached():
