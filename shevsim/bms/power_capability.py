@@ -166,6 +166,26 @@ def _coeff_cache(key) -> _SharedCache:
 # compiled compute(): the arithmetic of electrical_current_limits, thermal_current_limits,
 # _exact_limits and voltage_after in the same order (bit-identical; pow via libm as CPython's **)
 # ---------------------------------------------------------------------------------------------
+def _pole_sum(rho, e00, e01, e10, e11, bq0, bq1, n00, n01, n10, n11, cc0, cc1, n):
+    """``C_c (A^N - rho^N I) (A - rho I)^{-1} B_q`` of the 2x2 thermal model (``n`` = float(N));
+    the removable singularity at ``rho = eig(A)`` is stepped around."""
+    d00 = e00 - rho
+    d11 = e11 - rho
+    det = d00 * d11 - e01 * e10
+    if abs(det) < 1e-13:
+        rho *= 1.0 - 1e-6
+        d00 = e00 - rho
+        d11 = e11 - rho
+        det = d00 * d11 - e01 * e10
+    v0 = (d11 * bq0 - e01 * bq1) / det
+    v1_ = (-e10 * bq0 + d00 * bq1) / det
+    rn = math.pow(rho, n)
+    return cc0 * (n00 * v0 + n01 * v1_ - rn * v0) + cc1 * (n10 * v0 + n11 * v1_ - rn * v1_)
+
+
+_pole_sum_nb = _njit(cache=True)(_pole_sum)
+
+
 @_njit(cache=True)
 def _compute_nb(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, last_max, last_min):  # pragma: no cover
     """``k = [N, dt, soc_min, soc_max, v_min, v_max, t_core_max, i_cell_max, capacity_ah, n_pack,
@@ -208,32 +228,8 @@ def _compute_nb(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, las
         bq0 = th[15]
         bq1 = th[16]
         a = math.exp(-dt / (r1 * c1))
-        rho = a
-        d00 = e00 - rho
-        d11 = e11 - rho
-        det = d00 * d11 - e01 * e10
-        if abs(det) < 1e-13:
-            rho *= 1.0 - 1e-6
-            d00 = e00 - rho
-            d11 = e11 - rho
-            det = d00 * d11 - e01 * e10
-        v0 = (d11 * bq0 - e01 * bq1) / det
-        v1_ = (-e10 * bq0 + d00 * bq1) / det
-        rn = math.pow(rho, k[12])
-        s1 = (cc0 * (a00 * v0 + a01 * v1_ - rn * v0) + cc1 * (a10 * v0 + a11 * v1_ - rn * v1_))
-        rho = a * a
-        d00 = e00 - rho
-        d11 = e11 - rho
-        det = d00 * d11 - e01 * e10
-        if abs(det) < 1e-13:
-            rho *= 1.0 - 1e-6
-            d00 = e00 - rho
-            d11 = e11 - rho
-            det = d00 * d11 - e01 * e10
-        v0 = (d11 * bq0 - e01 * bq1) / det
-        v1_ = (-e10 * bq0 + d00 * bq1) / det
-        rn = math.pow(rho, k[12])
-        s2 = (cc0 * (a00 * v0 + a01 * v1_ - rn * v0) + cc1 * (a10 * v0 + a11 * v1_ - rn * v1_))
+        s1 = _pole_sum_nb(a, e00, e01, e10, e11, bq0, bq1, a00, a01, a10, a11, cc0, cc1, k[12])
+        s2 = _pole_sum_nb(a * a, e00, e01, e10, e11, bq0, bq1, a00, a01, a10, a11, cc0, cc1, k[12])
         qa = gq * rs + r1 * (gq - 2.0 * s1 + s2)
         qb = -gq * beta + 2.0 * v1 * (s1 - s2)
         qc = free + v1 * v1 * s2 / r1 - k[6]
@@ -367,30 +363,9 @@ class PowerCapability:
         n00, n01, n10, n11 = an
         cc0, cc1 = cc
         a = math.exp(-p.dt_s / (r1 * c1))
-        # S(rho) = C_c (A^N - rho^N I) (A - rho I)^{-1} B_q for rho = a and a^2; removable
-        # singularity at rho = eig(A) (written out twice: this runs every BMS step)
-        rho = a
-        d00, d11 = e00 - rho, e11 - rho
-        det = d00 * d11 - e01 * e10
-        if abs(det) < 1e-13:
-            rho *= 1.0 - 1e-6
-            d00, d11 = e00 - rho, e11 - rho
-            det = d00 * d11 - e01 * e10
-        v0 = (d11 * bq0 - e01 * bq1) / det
-        v1_ = (-e10 * bq0 + d00 * bq1) / det
-        rn = rho ** n
-        s1 = (cc0 * (n00 * v0 + n01 * v1_ - rn * v0) + cc1 * (n10 * v0 + n11 * v1_ - rn * v1_))
-        rho = a * a
-        d00, d11 = e00 - rho, e11 - rho
-        det = d00 * d11 - e01 * e10
-        if abs(det) < 1e-13:
-            rho *= 1.0 - 1e-6
-            d00, d11 = e00 - rho, e11 - rho
-            det = d00 * d11 - e01 * e10
-        v0 = (d11 * bq0 - e01 * bq1) / det
-        v1_ = (-e10 * bq0 + d00 * bq1) / det
-        rn = rho ** n
-        s2 = (cc0 * (n00 * v0 + n01 * v1_ - rn * v0) + cc1 * (n10 * v0 + n11 * v1_ - rn * v1_))
+        # S(rho) = C_c (A^N - rho^N I) (A - rho I)^{-1} B_q for rho = a and a^2
+        s1 = _pole_sum(a, e00, e01, e10, e11, bq0, bq1, n00, n01, n10, n11, cc0, cc1, float(n))
+        s2 = _pole_sum(a * a, e00, e01, e10, e11, bq0, bq1, n00, n01, n10, n11, cc0, cc1, float(n))
         qa = g * rs + r1 * (g - 2.0 * s1 + s2)
         qb = -g * beta + 2.0 * v1 * (s1 - s2)
         qc = free + v1 * v1 * s2 / r1 - p.t_core_max_c
