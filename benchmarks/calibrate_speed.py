@@ -15,7 +15,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from shevsim.calibrate.models import _cell_kernel  # noqa: E402,F401  (compile outside the timing)
+from shevsim.calibrate.cell import _cell_kernel  # noqa: E402,F401  (compile outside the timing)
 from shevsim.calibrate.synthetic import as_measured, synth_cell, synth_engine, synth_vehicle  # noqa: E402
 from shevsim.calibrate.workflow import run_workflow  # noqa: E402
 

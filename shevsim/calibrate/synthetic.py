@@ -20,7 +20,8 @@ import numpy as np
 import pandas as pd
 
 from .data import MeasuredData
-from .models import CellModel, VehicleModel
+from .cell import CellModel
+from .vehicle import VehicleModel
 
 CELL_TRUTH = {"r0_ohm": 0.031, "r1_ohm": 0.022, "tau1_s": 38.0, "cc_j_k": 52.0, "cs_j_k": 3.5,
               "rc_k_w": 2.8, "ru_k_w": 8.5}
