@@ -75,7 +75,7 @@ import math
 from dataclasses import dataclass
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
-from shevsim.battery.table_kernels import HAVE_NUMBA, _g2_locate, _njit, _t1_slope, _t1_value
+from shevsim.core.lookup import HAVE_NUMBA, _g2_locate, _njit, _t1_slope, _t1_value
 from shevsim.core.errors import SimulationError
 
 __all__ = ["DEKFParams", "DEKF"]

@@ -54,7 +54,7 @@ from typing import NamedTuple
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
 from shevsim.battery.thermal import ThermalParams
-from shevsim.battery.table_kernels import HAVE_NUMBA, _njit, _t1_slope, _t1_value
+from shevsim.core.lookup import HAVE_NUMBA, _njit, _t1_slope, _t1_value
 from shevsim.bms.thermal_estimators import TwoStateDiscretiser
 from shevsim.core.errors import ScenarioError
 

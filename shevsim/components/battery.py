@@ -66,7 +66,7 @@ from shevsim.core.variables import inp, out
 
 _NOISE_BLOCK = 4096
 
-from shevsim.battery.table_kernels import HAVE_NUMBA, _g2_locate, _njit, _t1_integral, _t1_slope, _t1_value
+from shevsim.core.lookup import HAVE_NUMBA, _g2_locate, _njit, _t1_integral, _t1_slope, _t1_value
 
 
 # ------------------------------------------------------------------------------------------------

@@ -290,84 +290,11 @@ def generator_torque_limit(maps: EngineGenMaps, w: float) -> float:
 # compiled advance: the arithmetic of :func:`advance` (and of the maps' clamped bilinear lookups) in
 # the same order, bit-identical; used by the engine_generator component on its hot path
 # ---------------------------------------------------------------------------------------------
-try:  # numba is a dependency; without it the Python path runs
-    from numba import njit as _njit
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover
-    HAVE_NUMBA = False
-
-    def _njit(*args, **kwargs):
-        return lambda f: f
+from shevsim.core.lookup import HAVE_NUMBA, _curve_nb, _grid_nb, _njit  # noqa: E402  (the one lookup module)
 
 _PRM_FIELDS = ("max_substep_s", "power_rate_down_max_wps", "shaft_inertia_kg_m2", "rack_kp_per_nm",
                "rack_ki_per_nm_s", "speed_time_constant_s", "speed_accel_max_radps2", "turbo_lag_s",
                "fuel_fall_s", "fuel_lhv_j_per_g", "transient_soot_mg_per_g", "soot_scale_frac")
-
-
-@_njit(cache=True)
-def _bisect_right(d, o, n, x):  # pragma: no cover - compiled
-    lo = 0
-    hi = n
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if x < d[o + mid]:
-            hi = mid
-        else:
-            lo = mid + 1
-    return lo
-
-
-@_njit(cache=True)
-def _curve_nb(d, o, n, x):  # pragma: no cover - compiled
-    """Clamped curve at ``d[o:o+n]`` (x) / ``d[o+n:o+2n]`` (y), as ``Curve.__call__``; NaN for NaN x."""
-    if x != x:
-        return x
-    if x <= d[o]:
-        i = 0
-        f = 0.0
-    elif x >= d[o + n - 1]:
-        i = n - 2
-        f = 1.0
-    else:
-        i = _bisect_right(d, o, n, x) - 1
-        x0 = d[o + i]
-        f = (x - x0) / (d[o + i + 1] - x0)
-    y0 = d[o + n + i]
-    return y0 + f * (d[o + n + i + 1] - y0)
-
-
-@_njit(cache=True)
-def _grid_nb(d, o, nx, ny, x, y):  # pragma: no cover - compiled
-    """Clamped bilinear map: axes ``d[o:o+nx]``, ``d[o+nx:o+nx+ny]``, values row-major after them."""
-    if x != x or y != y:
-        return x + y
-    if x <= d[o]:
-        i = 0
-        fx = 0.0
-    elif x >= d[o + nx - 1]:
-        i = nx - 2
-        fx = 1.0
-    else:
-        i = _bisect_right(d, o, nx, x) - 1
-        x0 = d[o + i]
-        fx = (x - x0) / (d[o + i + 1] - x0)
-    oy = o + nx
-    if y <= d[oy]:
-        j = 0
-        fy = 0.0
-    elif y >= d[oy + ny - 1]:
-        j = ny - 2
-        fy = 1.0
-    else:
-        j = _bisect_right(d, oy, ny, y) - 1
-        y0 = d[oy + j]
-        fy = (y - y0) / (d[oy + j + 1] - y0)
-    oz = oy + ny
-    r0 = oz + i * ny
-    r1 = r0 + ny
-    a = d[r0 + j] + fy * (d[r0 + j + 1] - d[r0 + j])
-    b = d[r1 + j] + fy * (d[r1 + j + 1] - d[r1 + j])
-    return a + fx * (b - a)
 
 
 @_njit(cache=True)

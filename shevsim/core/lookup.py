@@ -1,4 +1,7 @@
-"""table_kernels.py - compiled (numba) lookups on the cell tables packed by :meth:`CellTables.packed`.
+"""lookup.py - the one table-lookup module: compiled (numba) lookups on tables packed into float arrays.
+
+Used by the cell tables (:meth:`shevsim.battery.cell.CellTables.packed`), the engine-generator maps
+(:mod:`shevsim.powertrain.engine`), the BMS and the calibration.
 
 Each function repeats the arithmetic of the corresponding Python method of
 :mod:`shevsim.battery.cell` (``_Table1.__call__``, ``slope``, ``integral``, ``_Grid2._locate``) in the
@@ -70,3 +73,56 @@ def _g2_locate(d, o, n, x):  # pragma: no cover - compiled
         return n - 2, 1.0
     j = _bisect_right(d, o, n, x) - 1
     return j, (x - d[o + j]) / (d[o + j + 1] - d[o + j])
+
+
+@_njit(cache=True)
+def _curve_nb(d, o, n, x):  # pragma: no cover - compiled
+    """Clamped curve at ``d[o:o+n]`` (x) / ``d[o+n:o+2n]`` (y), as ``Curve.__call__``; NaN for NaN x."""
+    if x != x:
+        return x
+    if x <= d[o]:
+        i = 0
+        f = 0.0
+    elif x >= d[o + n - 1]:
+        i = n - 2
+        f = 1.0
+    else:
+        i = _bisect_right(d, o, n, x) - 1
+        x0 = d[o + i]
+        f = (x - x0) / (d[o + i + 1] - x0)
+    y0 = d[o + n + i]
+    return y0 + f * (d[o + n + i + 1] - y0)
+
+
+@_njit(cache=True)
+def _grid_nb(d, o, nx, ny, x, y):  # pragma: no cover - compiled
+    """Clamped bilinear map: axes ``d[o:o+nx]``, ``d[o+nx:o+nx+ny]``, values row-major after them."""
+    if x != x or y != y:
+        return x + y
+    if x <= d[o]:
+        i = 0
+        fx = 0.0
+    elif x >= d[o + nx - 1]:
+        i = nx - 2
+        fx = 1.0
+    else:
+        i = _bisect_right(d, o, nx, x) - 1
+        x0 = d[o + i]
+        fx = (x - x0) / (d[o + i + 1] - x0)
+    oy = o + nx
+    if y <= d[oy]:
+        j = 0
+        fy = 0.0
+    elif y >= d[oy + ny - 1]:
+        j = ny - 2
+        fy = 1.0
+    else:
+        j = _bisect_right(d, oy, ny, y) - 1
+        y0 = d[oy + j]
+        fy = (y - y0) / (d[oy + j + 1] - y0)
+    oz = oy + ny
+    r0 = oz + i * ny
+    r1 = r0 + ny
+    a = d[r0 + j] + fy * (d[r0 + j + 1] - d[r0 + j])
+    b = d[r1 + j] + fy * (d[r1 + j + 1] - d[r1 + j])
+    return a + fx * (b - a)
