@@ -134,6 +134,31 @@ class CalibrationModel:
     def simulate(self, ctx: dict, values: Mapping[str, float]) -> dict:
         raise NotImplementedError
 
+    # -- closing the loop in the simulator (every model implements these) -------------------
+    #: registry TYPE of the component whose parameters this model fits (e.g. "battery", "vehicle")
+    component: str = ""
+    #: component instance name used in the overlay / replay scenario
+    component_name: str = ""
+
+    def overlay(self, values: Mapping[str, float], out_dir) -> dict:
+        """The component parameters (the component's own names and units) that reproduce ``values``.
+
+        Returns ``{component_name: {param: value}}``: a *partial* parameter set, merged over a scenario's
+        parameter file by ``shevsim run SCENARIO --params COMPONENT=DIR/params.toml``.  Data that must
+        live in a file (e.g. an OCV table) is written into ``out_dir`` and referenced by a path relative
+        to it.
+        """
+        raise NotImplementedError
+
+    def replay(self, data, overlay_file) -> dict:
+        """Replay the measured inputs of ``data`` through the simulator itself.
+
+        The component(s) are built from the registry with the overlay ``overlay_file`` merged over their
+        defaults and stepped by :class:`shevsim.core.master.Master`; returns ``{channel: array}`` at the
+        data's sample times (the same channels as :meth:`simulate`).
+        """
+        raise NotImplementedError
+
     def param_bounds(self, ctx: dict) -> dict:
         """Data-dependent bounds overriding the declared ones (name -> (lo, hi))."""
         return {}
