@@ -132,6 +132,28 @@ def _check_dt(dt: float, where: str) -> float:
     return d
 
 
+def _two_state_abcd(radius_m, length_m, density_kg_m3, cp_j_kgk, kt_w_mk, h_w_m2k):
+    """The 16 entries of the two-state model's (A, B, C, D), row-major (seed 2.24-2.25 / 3.3).
+
+    Pure scalar arithmetic (numba-compatible): the ONE place the two-state matrices are written; used
+    by :func:`two_state_matrices` and compiled into :func:`two_state_coeffs`.
+    """
+    R = radius_m
+    k = kt_w_mk
+    V = math.pi * radius_m * radius_m * length_m
+    a = kt_w_mk / (density_kg_m3 * cp_j_kgk)
+    h = h_w_m2k
+    den = 24.0 * k + R * h
+    return (-48.0 * a * h / (R * den), -15.0 * a * h / den,
+            -320.0 * a * h / (R * R * den), -120.0 * a * (4.0 * k + R * h) / (R * R * den),
+            a / (k * V), 48.0 * a * h / (R * den),
+            0.0, 320.0 * a * h / (R * R * den),
+            (24.0 * k - 3.0 * R * h) / den, -(120.0 * R * k + 15.0 * R * R * h) / (8.0 * den),
+            24.0 * k / den, 15.0 * R * k / (2.0 * den),
+            0.0, 4.0 * R * h / den,
+            0.0, R * h / den)
+
+
 def two_state_matrices(p: ThermalParams, h_w_m2k: float):
     """Continuous-time matrices of the two-state model (seed 2.24-2.25 / 3.3).
 
@@ -149,17 +171,72 @@ def two_state_matrices(p: ThermalParams, h_w_m2k: float):
         ``u = [q_w, t_amb_c]``, ``y = [t_core_c, t_surface_c]``.
     """
     h = _check_h(h_w_m2k, "two_state_matrices")
-    R, k, a, V = p.radius_m, p.kt_w_mk, p.alpha_m2_s, p.volume_m3
-    den = 24.0 * k + R * h
-    A = np.array([[-48.0 * a * h / (R * den), -15.0 * a * h / den],
-                  [-320.0 * a * h / (R * R * den), -120.0 * a * (4.0 * k + R * h) / (R * R * den)]])
-    B = np.array([[a / (k * V), 48.0 * a * h / (R * den)],
-                  [0.0, 320.0 * a * h / (R * R * den)]])
-    C = np.array([[(24.0 * k - 3.0 * R * h) / den, -(120.0 * R * k + 15.0 * R * R * h) / (8.0 * den)],
-                  [24.0 * k / den, 15.0 * R * k / (2.0 * den)]])
-    D = np.array([[0.0, 4.0 * R * h / den],
-                  [0.0, R * h / den]])
-    return A, B, C, D
+    e = _two_state_abcd(p.radius_m, p.length_m, p.density_kg_m3, p.cp_j_kgk, p.kt_w_mk, h)
+    return (np.array(e[0:4]).reshape(2, 2), np.array(e[4:8]).reshape(2, 2),
+            np.array(e[8:12]).reshape(2, 2), np.array(e[12:16]).reshape(2, 2))
+
+
+def _phi(lam, dt):
+    """``(e^{lam dt} - 1) / lam`` (= dt at lam = 0), without cancellation."""
+    x = lam * dt
+    if abs(x) < 1e-8:
+        return dt * (1.0 + 0.5 * x)
+    return math.expm1(x) / lam
+
+
+def _two_state_coeffs(radius_m, length_m, density_kg_m3, cp_j_kgk, kt_w_mk, h_w_m2k, dt):
+    """Exact ZOH and output coefficients of the two-state model, 14 floats:
+    ``(a00, a01, a10, a11, b00, b01, b10, b11, c00, c01, d0, c10, c11, d1)`` with
+    ``x+ = Ad x + Bd [q, T_amb]``, ``[T_core, T_surface] = C x + D [q, T_amb]``.
+
+    ``Ad = e^{A dt}`` and ``Bd = int_0^dt e^{A s} ds B`` in closed form from the two (real, distinct:
+    the radial model's A has a positive discriminant for every h >= 0) eigenvalues
+    ``l1,2 = s +- q``: ``e^{At} = (e^{l1 t} (A - l2 I) - e^{l2 t} (A - l1 I)) / (l1 - l2)``.
+    """
+    e = _two_state_abcd(radius_m, length_m, density_kg_m3, cp_j_kgk, kt_w_mk, h_w_m2k)
+    a00, a01, a10, a11 = e[0], e[1], e[2], e[3]
+    b00, b01, b10, b11 = e[4], e[5], e[6], e[7]
+    s = 0.5 * (a00 + a11)
+    dd = 0.25 * (a00 - a11) * (a00 - a11) + a01 * a10
+    q = math.sqrt(dd) if dd > 0.0 else 0.0
+    l1 = s + q
+    l2 = s - q
+    e1 = math.exp(l1 * dt)
+    e2 = math.exp(l2 * dt)
+    p1 = _phi(l1, dt)
+    p2 = _phi(l2, dt)
+    if q > 1e-12 * abs(s):
+        w = 1.0 / (l1 - l2)
+        # f(A) = alpha I + beta A, with f(l) = e^{l dt} (Ad) or phi(l) (integral)
+        ba = (e1 - e2) * w
+        aa = e1 - ba * l1
+        bi = (p1 - p2) * w
+        ai = p1 - bi * l1
+    else:  # repeated eigenvalue (not reached by the radial model; kept for completeness)
+        ba = dt * e1
+        aa = e1 - ba * l1
+        bi = (dt * e1 - p1) / l1 if l1 != 0.0 else 0.5 * dt * dt
+        ai = p1 - bi * l1
+    ad00 = aa + ba * a00
+    ad01 = ba * a01
+    ad10 = ba * a10
+    ad11 = aa + ba * a11
+    i00 = ai + bi * a00
+    i01 = bi * a01
+    i10 = bi * a10
+    i11 = ai + bi * a11
+    return (ad00, ad01, ad10, ad11,
+            i00 * b00 + i01 * b10, i00 * b01 + i01 * b11, i10 * b00 + i11 * b10, i10 * b01 + i11 * b11,
+            e[8], e[9], e[13], e[10], e[11], e[15])
+
+
+try:
+    from numba import njit as _njit
+    _two_state_abcd = _njit(cache=True)(_two_state_abcd)
+    _phi = _njit(cache=True)(_phi)
+    two_state_coeffs = _njit(cache=True)(_two_state_coeffs)
+except ImportError:  # pragma: no cover - numba is a dependency
+    two_state_coeffs = _two_state_coeffs
 
 
 def _zoh(A: np.ndarray, B: np.ndarray, dt: float):
@@ -252,29 +329,26 @@ class TwoStateThermal:
         A, B, _, _ = two_state_matrices(self.params, h_w_m2k)
         return _zoh(A, B, _check_dt(dt, "TwoStateThermal.discretise"))
 
-    def _coeffs(self, h: float, dt: float):
+    def _all_coeffs(self, h: float, dt: float):
         key = (h, dt)
         c = self._disc.get(key)
         if c is None:
             _check_h(h, "TwoStateThermal.step")
             _check_dt(dt, "TwoStateThermal.step")
-            Ad, Bd = self.discretise(h, dt)
-            c = (float(Ad[0, 0]), float(Ad[0, 1]), float(Ad[1, 0]), float(Ad[1, 1]),
-                 float(Bd[0, 0]), float(Bd[0, 1]), float(Bd[1, 0]), float(Bd[1, 1]))
+            p = self.params
+            c = two_state_coeffs(p.radius_m, p.length_m, p.density_kg_m3, p.cp_j_kgk, p.kt_w_mk, float(h), float(dt))
             if len(self._disc) >= self._CACHE_MAX:
                 self._disc.clear()
             self._disc[key] = c
         return c
 
+    def _coeffs(self, h: float, dt: float):
+        """ZOH coefficients ``(a00, a01, a10, a11, b00, b01, b10, b11)`` (:func:`two_state_coeffs`)."""
+        return self._all_coeffs(h, dt)[:8]
+
     def _ocoeffs(self, h: float):
-        c = self._out.get(h)
-        if c is None:
-            _, _, C, D = two_state_matrices(self.params, h)
-            c = (float(C[0, 0]), float(C[0, 1]), float(D[0, 1]), float(C[1, 0]), float(C[1, 1]), float(D[1, 1]))
-            if len(self._out) >= self._CACHE_MAX:
-                self._out.clear()
-            self._out[h] = c
-        return c
+        """Output coefficients ``(c00, c01, d0, c10, c11, d1)`` (:func:`two_state_coeffs`)."""
+        return self._all_coeffs(h, 1.0)[8:]
 
     # -- hot path ------------------------------------------------------------------
     def step(self, x, q_w: float, t_amb_c: float, h_w_m2k: float, dt: float):

@@ -44,9 +44,18 @@ Outputs (at t + h; none is direct feedthrough)
     (pack, int |i| dt); ``clamp_count`` [1] steps whose power demand was infeasible;
     ``t_mean_c`` [degC] volume-averaged cell temperature.
 
-Speed: with the two-state thermal model the step runs as one numba kernel (:func:`_pack_step_nb`, the
-arithmetic of the Python step and of the CellTables lookups in the same order - bit-identical);
-``BatteryPack(name, params, compiled=False)`` and the ``fd30`` model use the Python step.
+Physics: written once in :mod:`shevsim.battery.model` (electrical step with its effects, two-state thermal
+step) and compiled there; this class only packs the parameters, holds the state and publishes outputs.
+``BatteryPack(name, params, compiled=False)`` runs the same functions uncompiled (``.py_func``).  The
+``fd30`` thermal model steps the same electrical function and the 30-node model of
+:mod:`shevsim.battery.thermal`.
+
+Effects (model terms switched by parameters; the defaults reproduce the plain model): see the table in
+:mod:`shevsim.battery.model` - ``dudt_soc_frac``/``dudt_v_k`` (entropic heat dU/dT(SOC)),
+``arrhenius_ea_r_k``, ``h_change_time_s``/``h_change_factor``/``h_change_width_s`` (convection change),
+``hyst_max_v``/``hyst_rate``, ``capacity_ah``, ``current_offset_a``, ``lowsoc_r_gain``/``lowsoc_r_scale_frac``,
+``r2_scale`` (0 removes the second RC branch); scale factors ``rs_scale, r1_scale, c1_scale, r2_scale,
+c2_scale`` on the ECM tables and ``h_conv_factor`` on the convection input.
 
 The voltage/current pair reported at t + h is the left limit (current of the finished step,
 state at t + h): the pair a BMS sampling at t + h sees.
@@ -54,101 +63,19 @@ state at t + h): the pair a BMS sampling at t + h sees.
 from __future__ import annotations
 
 import math
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from shevsim.battery import cell as _cell
+from shevsim.battery import model as _m
 from shevsim.battery.thermal import FDThermal, ThermalParams, TwoStateThermal, fd_matrices
 from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError, SimulationError
 from shevsim.core.variables import inp, out
 
 _NOISE_BLOCK = 4096
-
-from shevsim.core.lookup import HAVE_NUMBA, _g2_locate, _njit, _t1_integral, _t1_slope, _t1_value
-
-
-# ------------------------------------------------------------------------------------------------
-# compiled step of the two-state pack (the arithmetic of BatteryPack.do_step and of the CellTables
-# lookups in the same order: bit-identical, see tests/unit/test_compiled_kernels.py)
-# ------------------------------------------------------------------------------------------------
-@_njit(cache=True)
-def _pack_step_nb(d, ix, c, thc, soc, v1, v2, x0, x1, p_pack, h, t_amb):  # pragma: no cover - compiled
-    """One two-state pack step; ``c = [n_p, n_pack, q_as, current_mode, temperature_dependent,
-    entropic_heat, F]``, ``thc`` = ZOH (a00..b11) and output (c00, c01, d0, c10, c11, d1) coefficients.
-    Returns ``(i, soc_new, v1n, v2n, x0n, x1n, e_chem, e_loss, q, rs, clamped, voc, v, t_core, t_surf)``."""
-    q_as = c[2]
-    current_mode = c[3] > 0.5
-    p_cell = (p_pack / c[0]) if current_mode else (p_pack / c[1])
-    t_mean = x0
-    t_look = t_mean if c[4] > 0.5 else 25.0
-    # ECM parameters (discharge table for p_cell >= 0)
-    if p_cell >= 0.0:
-        og, ns, nt = ix[4], ix[5], ix[6]
-    else:
-        og, ns, nt = ix[7], ix[8], ix[9]
-    nq = ix[10]
-    i_s, ws = _g2_locate(d, og, ns, soc)
-    j_t, wt = _g2_locate(d, og + ns, nt, t_look)
-    ov = og + ns + nt
-    pa = ov + (j_t * ns + i_s) * nq
-    pb = pa + nq
-    pc = ov + ((j_t + 1) * ns + i_s) * nq
-    pd = pc + nq
-    w00 = (1.0 - ws) * (1.0 - wt)
-    w01 = ws * (1.0 - wt)
-    w10 = (1.0 - ws) * wt
-    w11 = ws * wt
-    rs = w00 * d[pa] + w01 * d[pb] + w10 * d[pc] + w11 * d[pd]
-    r1 = w00 * d[pa + 1] + w01 * d[pb + 1] + w10 * d[pc + 1] + w11 * d[pd + 1]
-    c1 = w00 * d[pa + 2] + w01 * d[pb + 2] + w10 * d[pc + 2] + w11 * d[pd + 2]
-    r2 = w00 * d[pa + 3] + w01 * d[pb + 3] + w10 * d[pc + 3] + w11 * d[pd + 3]
-    c2 = w00 * d[pa + 4] + w01 * d[pb + 4] + w10 * d[pc + 4] + w11 * d[pd + 4]
-    oo, no = ix[0], ix[1]
-    tau1 = r1 * c1
-    tau2 = r2 * c2
-    ex1 = math.exp(-h / tau1)
-    ex2 = math.exp(-h / tau2)
-    g1 = tau1 * (1.0 - ex1)
-    g2 = tau2 * (1.0 - ex2)
-    a = h * _t1_value(d, oo, no, soc) - v1 * g1 - v2 * g2
-    b = h * rs + r1 * (h - g1) + r2 * (h - g2) + 0.5 * h * h * _t1_slope(d, oo, no, soc) / q_as
-    clamped = 0
-    if current_mode:
-        i = p_cell
-    else:
-        ph = p_cell * h
-        disc = a * a - 4.0 * b * ph
-        if disc >= 0.0 and a > 0.0:
-            i = 2.0 * ph / (a + math.sqrt(disc))
-        else:
-            i = 0.5 * a / b if a > 0.0 else 0.0
-            clamped = 1
-    soc_new = soc - i * h / q_as
-    vinf = r1 * i
-    dd = v1 - vinf
-    v1n = vinf + dd * ex1
-    iv1 = vinf * h + dd * g1
-    iv1s = vinf * vinf * h + 2.0 * vinf * dd * g1 + dd * dd * 0.5 * tau1 * (1.0 - ex1 * ex1)
-    vinf = r2 * i
-    dd = v2 - vinf
-    v2n = vinf + dd * ex2
-    iv2 = vinf * h + dd * g2
-    iv2s = vinf * vinf * h + 2.0 * vinf * dd * g2 + dd * dd * 0.5 * tau2 * (1.0 - ex2 * ex2)
-    e_chem = q_as * (_t1_integral(d, oo, no, soc) - _t1_integral(d, oo, no, soc_new))
-    e_loss = i * i * rs * h + i * (iv1 + iv2)
-    q = i * i * rs + (iv1s / r1 + iv2s / r2) / h
-    if c[5] > 0.5:
-        ds = _t1_value(d, ix[2], ix[3], 0.5 * (soc + soc_new))
-        q -= i * (t_mean + 273.15) * ds / c[6]
-    x0n = thc[0] * x0 + thc[1] * x1 + thc[4] * q + thc[5] * t_amb
-    x1n = thc[2] * x0 + thc[3] * x1 + thc[6] * q + thc[7] * t_amb
-    voc = _t1_value(d, oo, no, soc_new)
-    v = voc - rs * i - v1n - v2n
-    t_core = thc[8] * x0n + thc[9] * x1n + thc[10] * t_amb
-    t_surf = thc[11] * x0n + thc[12] * x1n + thc[13] * t_amb
-    return i, soc_new, v1n, v2n, x0n, x1n, e_chem, e_loss, q, rs, clamped, voc, v, t_core, t_surf
 
 
 @dataclass(frozen=True)
@@ -181,6 +108,26 @@ class BatteryPackParams:
         Cell tables (empty: the representative A123 26650 tables in ``components/battery/``).
     radius_m, length_m, density_kg_m3, cp_j_kgk, kt_w_mk : float
         Cell thermal parameters (seed Table 3.1).
+    rs_scale, r1_scale, c1_scale, r2_scale, c2_scale : float
+        Factors [1] on the ECM tables' R_s, R_1, C_1, R_2, C_2 (calibration); ``r2_scale = 0`` removes the
+        second RC branch.
+    arrhenius_ea_r_k, arrhenius_t_ref_c : float
+        Arrhenius law on all resistances, ``exp(Ea/R (1/T - 1/T_ref))`` [K], [degC]; 0 = off.
+    hyst_max_v, hyst_rate : float
+        One-state OCV hysteresis: maximum voltage M [V] (0 = off) and rate gamma [1 per unit charge].
+    current_offset_a : float
+        Current-sensor offset [A] per cell: the true cell current is the commanded (logged) current
+        ``current_cmd_a / n_parallel`` minus this; ``cell_current_meas_a`` reads true + offset.
+    lowsoc_r_gain, lowsoc_r_scale_frac : float
+        Low-SOC resistance rise ``x (1 + g exp(-SOC/s))`` [1], [1]; gain 0 = off.
+    dudt_soc_frac, dudt_v_k : list of float
+        Entropic coefficient dU/dT [V/K] at SOC knots [1] (piecewise linear, clamped); when given it
+        replaces the entropy table (and acts whatever ``entropic_heat`` says); empty = off.
+    h_conv_factor : float
+        Factor [1] on the convection input ``h_conv_w_m2k``.
+    h_change_time_s, h_change_factor, h_change_width_s : float
+        Convection change: ``h`` times ``h_change_factor`` after ``h_change_time_s`` [s], logistic over
+        ``h_change_width_s`` [s] (0: a step); factor 1 = off.
     """
 
     n_series: int = 130
@@ -205,9 +152,44 @@ class BatteryPackParams:
     density_kg_m3: float = 2047.0
     cp_j_kgk: float = 1109.2
     kt_w_mk: float = 0.610
+    rs_scale: float = 1.0
+    r1_scale: float = 1.0
+    c1_scale: float = 1.0
+    r2_scale: float = 1.0
+    c2_scale: float = 1.0
+    arrhenius_ea_r_k: float = 0.0
+    arrhenius_t_ref_c: float = 25.0
+    hyst_max_v: float = 0.0
+    hyst_rate: float = 30.0
+    current_offset_a: float = 0.0
+    lowsoc_r_gain: float = 0.0
+    lowsoc_r_scale_frac: float = 0.1
+    dudt_soc_frac: tuple[float, ...] = ()
+    dudt_v_k: tuple[float, ...] = ()
+    h_conv_factor: float = 1.0
+    h_change_time_s: float = 0.0
+    h_change_factor: float = 1.0
+    h_change_width_s: float = 0.0
 
     def __post_init__(self) -> None:
         where = "battery parameters"
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, float) and not math.isfinite(v):
+                raise ScenarioError(f"{where}: {f.name} must be finite, got {v!r}")
+        for f in ("rs_scale", "r1_scale", "c1_scale", "c2_scale", "h_conv_factor", "h_change_factor",
+                  "lowsoc_r_scale_frac", "radius_m", "length_m", "density_kg_m3", "cp_j_kgk", "kt_w_mk"):
+            if not getattr(self, f) > 0.0:
+                raise ScenarioError(f"{where}: {f} must be > 0, got {getattr(self, f)!r}")
+        for f in ("r2_scale", "arrhenius_ea_r_k", "hyst_rate", "lowsoc_r_gain", "h_change_width_s"):
+            if getattr(self, f) < 0.0:
+                raise ScenarioError(f"{where}: {f} must be >= 0, got {getattr(self, f)!r}")
+        if len(self.dudt_soc_frac) != len(self.dudt_v_k):
+            raise ScenarioError(f"{where}: dudt_soc_frac and dudt_v_k must have the same length "
+                                f"({len(self.dudt_soc_frac)} != {len(self.dudt_v_k)})")
+        ks = list(self.dudt_soc_frac)
+        if any(not (b > a) for a, b in zip(ks, ks[1:])) or any(not math.isfinite(v) for v in ks + list(self.dudt_v_k)):
+            raise ScenarioError(f"{where}: dudt_soc_frac must be finite and strictly increasing, dudt_v_k finite")
         if self.n_series < 1 or self.n_parallel < 1:
             raise ScenarioError(f"{where}: n_series and n_parallel must be >= 1")
         if not self.capacity_ah > 0.0:
@@ -250,14 +232,16 @@ class BatteryPack(Component):
         out("ah_throughput_ah", "A.h", 0.0, "cumulative int |i| dt, pack"),
         out("clamp_count", "1", 0.0, "steps whose power demand exceeded the pack's capability"),
     )
-    _static = ("name", "params", "tables", "thermal", "_fd_w", "_ns", "_np", "_npack", "_q_as", "_nb", "_thkey",
-               "_thc")
+    _static = ("name", "params", "tables", "thermal", "_fd_w", "_ns", "_np", "_npack", "_d", "_ix", "_c",
+               "_step", "_elec", "_touts")
 
     def __init__(self, name: str = "battery", params: BatteryPackParams | None = None, compiled: bool = True):
         super().__init__(name, params)
         p = self.params
         self.tables = _cell.CellTables(p.ocv_file or None, p.entropy_file or None,
                                        p.discharge_file or None, p.charge_file or None)
+        if self.tables._dch.nq != 5:
+            raise ScenarioError(f"{name}: ECM tables must have the columns rs_ohm, r1_ohm, c1_f, r2_ohm, c2_f")
         tp = ThermalParams(radius_m=p.radius_m, length_m=p.length_m, density_kg_m3=p.density_kg_m3,
                            cp_j_kgk=p.cp_j_kgk, kt_w_mk=p.kt_w_mk)
         if p.thermal_model == "two_state":
@@ -265,28 +249,39 @@ class BatteryPack(Component):
             self._fd_w = None
         else:
             self.thermal = FDThermal(tp, n_nodes=30, scheme="fv")
-            self._fd_w = [float(v) for v in fd_matrices(tp, 1.0, 30, "fv")[4]]
+            self._fd_w = np.array([float(v) for v in fd_matrices(tp, 1.0, 30, "fv")[4]])
         self._ns = float(p.n_series)
         self._np = float(p.n_parallel)
         self._npack = self._ns * self._np
-        self._q_as = 3600.0 * p.capacity_ah
-        # compiled step (numba; two-state thermal model only; bit-identical to the Python step)
-        self._nb = None
-        if compiled and HAVE_NUMBA and self._fd_w is None and self.tables._dch.nq == 5:
-            d, ix = self.tables.packed()
-            c = np.array([self._np, self._npack, self._q_as, 1.0 if p.input_mode == "current" else 0.0,
-                          1.0 if p.temperature_dependent else 0.0, 1.0 if p.entropic_heat else 0.0,
-                          _cell.FARADAY_C_MOL])
-            self._nb = (d, ix, c)
-        self._thkey = None
-        self._thc = None
+        self._d, self._ix = self.tables.packed()
+        self._c = _m.pack_params(p)
+        # the one source, compiled (or its uncompiled reference)
+        pick = (lambda f: f) if compiled else (lambda f: f.py_func)
+        self._step = pick(_m.cell_step)
+        self._elec = pick(_m.cell_electrical)
+        self._touts = pick(_m.thermal_outputs)
         self.initialize(0.0)
 
     # -- helpers -------------------------------------------------------------------------
-    def _t_mean(self, x) -> float:
-        if self._fd_w is None:
-            return x[0]
-        return float(np.dot(self._fd_w, x))
+    @property
+    def soc(self) -> float:
+        """Cell state of charge [1]."""
+        return float(self.st[_m.S_SOC])
+
+    @property
+    def v1(self) -> float:
+        """First RC-branch voltage [V] (cell)."""
+        return float(self.st[_m.S_V1])
+
+    @property
+    def v2(self) -> float:
+        """Second RC-branch voltage [V] (cell)."""
+        return float(self.st[_m.S_V2])
+
+    @property
+    def x_th(self):
+        """Thermal state (two-state ``(T_mean, gamma)`` or the 30 node temperatures)."""
+        return (float(self.st[_m.S_X0]), float(self.st[_m.S_X1])) if self._fd_w is None else self._x_fd
 
     def _noise(self) -> float:
         k = self._k
@@ -304,167 +299,91 @@ class BatteryPack(Component):
             return self._buf[k:k + 4]
         return [self._noise(), self._noise(), self._noise(), self._noise()]
 
-    def _write_outputs(self, i: float, rs: float, q: float) -> None:
+    def _publish(self, t_amb: float) -> None:
+        yv = self.yv
+        st = self.st
         y = self.y
         p = self.params
-        u = self.u
-        voc = self.tables.ocv(self.soc)
-        v = voc - rs * i - self.v1 - self.v2
-        t_amb = u["t_ambient_c"]
-        tc, ts = self.thermal.outputs(self.x_th, q, t_amb, u["h_conv_w_m2k"])
+        i = float(yv[_m.Y_I])
+        v = float(yv[_m.Y_V])
+        ts = float(yv[_m.Y_TSURF])
         n0, n1, n2, n3 = self._noise4()
         y["current_a"] = i * self._np
         y["voltage_v"] = v * self._ns
-        y["soc_pct"] = 100.0 * self.soc
-        y["ocv_v"] = voc * self._ns
-        y["t_core_c"] = tc
+        y["soc_pct"] = 100.0 * float(st[_m.S_SOC])
+        y["ocv_v"] = float(yv[_m.Y_VOC]) * self._ns
+        y["t_core_c"] = float(yv[_m.Y_TCORE])
         y["t_surface_c"] = ts
-        y["t_mean_c"] = self._t_mean(self.x_th)
-        y["heat_w"] = q
-        y["cell_current_meas_a"] = i + p.sigma_current_a * n0
+        y["t_mean_c"] = float(yv[_m.Y_TMEAN])
+        y["heat_w"] = float(yv[_m.Y_Q])
+        y["cell_current_meas_a"] = i + p.current_offset_a + p.sigma_current_a * n0
         y["cell_voltage_meas_v"] = v + p.sigma_voltage_v * n1
         y["t_surface_meas_c"] = ts + p.sigma_temperature_c * n2
         y["t_ambient_meas_c"] = t_amb + p.sigma_temperature_c * n3
-        y["loss_energy_j"] = self.e_loss * self._npack
-        y["chem_energy_j"] = self.e_chem * self._npack
-        y["ah_throughput_ah"] = self.ah * self._np
-        y["clamp_count"] = float(self.clamps)
+        y["loss_energy_j"] = float(st[_m.S_ELOSS]) * self._npack
+        y["chem_energy_j"] = float(st[_m.S_ECHEM]) * self._npack
+        y["ah_throughput_ah"] = float(st[_m.S_AH]) * self._np
+        y["clamp_count"] = float(st[_m.S_CLAMPS])
 
     # -- contract --------------------------------------------------------------------------
     def initialize(self, t0: float) -> None:
         p = self.params
-        self.soc = p.soc_init_pct / 100.0
-        self.v1 = 0.0
-        self.v2 = 0.0
-        self.x_th = self.thermal.initial_state(p.t_init_c)
-        self.e_loss = 0.0   # per cell [J]
-        self.e_chem = 0.0   # per cell [J]
-        self.ah = 0.0       # per cell [A.h]
-        self.clamps = 0
-        self.i_cell = 0.0
+        st = np.zeros(_m.N_STATE)
+        st[_m.S_SOC] = p.soc_init_pct / 100.0
+        st[_m.S_X0] = p.t_init_c
+        self.st = st
+        self._x_fd = self.thermal.initial_state(p.t_init_c) if self._fd_w is not None else None
         self.rng = np.random.default_rng(p.seed)
         self._buf = self.rng.standard_normal(_NOISE_BLOCK).tolist()
         self._k = 0
-        rs = self.tables.params(self.soc, self._t_lookup(), 1.0)[0]
-        self._write_outputs(0.0, rs, 0.0)
+        yv = np.zeros(_m.N_OUT)
+        t_amb, h_conv = self.u["t_ambient_c"], self.u["h_conv_w_m2k"]
+        h_eff = h_conv * p.h_conv_factor
+        if self._fd_w is None:
+            self._touts(self._c, st, t_amb, h_eff, yv)
+        else:
+            yv[_m.Y_TCORE], yv[_m.Y_TSURF] = self.thermal.outputs(self._x_fd, 0.0, t_amb, h_eff)
+            yv[_m.Y_TMEAN] = float(np.dot(self._fd_w, self._x_fd))
+        t_look = float(yv[_m.Y_TMEAN]) if p.temperature_dependent else 25.0
+        yv[_m.Y_RS] = self.tables.params(float(st[_m.S_SOC]), t_look, 1.0)[0]
+        yv[_m.Y_VOC] = self.tables.ocv(float(st[_m.S_SOC]))
+        yv[_m.Y_V] = yv[_m.Y_VOC]
+        self.yv = yv
+        self._publish(t_amb)
 
-    def _t_lookup(self) -> float:
-        return self._t_mean(self.x_th) if self.params.temperature_dependent else 25.0
-
-    def _do_step_compiled(self, t: float, h: float, p_pack: float, h_conv: float, t_amb: float) -> None:
-        d, ix, c = self._nb
-        x0, x1 = self.x_th
-        (i, soc_new, v1n, v2n, x0n, x1n, e_chem, e_loss, q, rs, clamped, voc, v, tc, ts) = _pack_step_nb(
-            d, ix, c, self._thermal_coeffs(h_conv, h), self.soc, self.v1, self.v2, x0, x1, p_pack, h, t_amb)
-        if clamped:
-            self.clamps += 1
-        if not (0.0 <= soc_new <= 1.0):
-            raise SimulationError(f"{self.name}: SOC left [0, 100] % at t={t + h:.6g} s "
-                                  f"(soc_pct={100.0 * soc_new:.4g}, pack current {i * self._np:.6g} A)")
-        self.x_th = (x0n, x1n)
-        self.soc = soc_new
-        self.v1 = v1n
-        self.v2 = v2n
-        self.i_cell = i
-        self.e_chem += e_chem
-        self.e_loss += e_loss
-        self.ah += abs(i) * h / 3600.0
-        # outputs (as _write_outputs, with voc, v, t_core, t_surface from the kernel)
-        y = self.y
-        p = self.params
-        n0, n1, n2, n3 = self._noise4()
-        y["current_a"] = i * self._np
-        y["voltage_v"] = v * self._ns
-        y["soc_pct"] = 100.0 * soc_new
-        y["ocv_v"] = voc * self._ns
-        y["t_core_c"] = tc
-        y["t_surface_c"] = ts
-        y["t_mean_c"] = x0n
-        y["heat_w"] = q
-        y["cell_current_meas_a"] = i + p.sigma_current_a * n0
-        y["cell_voltage_meas_v"] = v + p.sigma_voltage_v * n1
-        y["t_surface_meas_c"] = ts + p.sigma_temperature_c * n2
-        y["t_ambient_meas_c"] = t_amb + p.sigma_temperature_c * n3
-        y["loss_energy_j"] = self.e_loss * self._npack
-        y["chem_energy_j"] = self.e_chem * self._npack
-        y["ah_throughput_ah"] = self.ah * self._np
-        y["clamp_count"] = float(self.clamps)
-
-    def _thermal_coeffs(self, h_conv: float, h: float):
-        """ZOH and output coefficients of the two-state model as one array (kept while h_conv, h hold)."""
-        key = (h_conv, h)
-        if key != self._thkey:
-            self._thc = np.array(self.thermal._coeffs(h_conv, h) + self.thermal._ocoeffs(h_conv))
-            self._thkey = key
-        return self._thc
+    @property
+    def i_cell(self) -> float:
+        """Cell current of the last step [A], + discharge."""
+        return float(self.yv[_m.Y_I])
 
     def do_step(self, t: float, h: float) -> None:
         u = self.u
-        prm = self.params
-        current_mode = prm.input_mode == "current"
+        current_mode = self.params.input_mode == "current"
         p_pack = u["current_cmd_a"] if current_mode else u["power_w"]
         h_conv = u["h_conv_w_m2k"]
         t_amb = u["t_ambient_c"]
-        if not (math.isfinite(p_pack) and math.isfinite(h_conv) and math.isfinite(t_amb)):
-            raise SimulationError(f"{self.name}: non-finite input at t={t:.6g} s "
-                                  f"({'current_cmd_a' if current_mode else 'power_w'}={p_pack!r}, h_conv_w_m2k={h_conv!r}, t_ambient_c={t_amb!r})")
-        if self._nb is not None:
-            self._do_step_compiled(t, float(h), float(p_pack), float(h_conv), float(t_amb))
-            return
-        tab = self.tables
-        soc = self.soc
-        v1 = self.v1
-        v2 = self.v2
-        q_as = self._q_as
-        p_cell = (p_pack / self._np) if current_mode else (p_pack / self._npack)  # cell current or power
-        t_mean = self.x_th[0] if self._fd_w is None else self._t_mean(self.x_th)
-        t_look = t_mean if prm.temperature_dependent else 25.0
-        rs, r1, c1, r2, c2 = tab.params(soc, t_look, p_cell)
-        tau1 = r1 * c1
-        tau2 = r2 * c2
-        ex1 = math.exp(-h / tau1)
-        ex2 = math.exp(-h / tau2)
-        g1 = tau1 * (1.0 - ex1)
-        g2 = tau2 * (1.0 - ex2)
-        a = h * tab.ocv(soc) - v1 * g1 - v2 * g2
-        b = h * rs + r1 * (h - g1) + r2 * (h - g2) + 0.5 * h * h * tab.docv_dsoc(soc) / q_as
-        if current_mode:
-            i = p_cell
+        if not (math.isfinite(p_pack) and math.isfinite(h_conv) and math.isfinite(t_amb)) or h_conv < 0.0:
+            raise SimulationError(f"{self.name}: bad input at t={t:.6g} s "
+                                  f"({'current_cmd_a' if current_mode else 'power_w'}={p_pack!r}, "
+                                  f"h_conv_w_m2k={h_conv!r} (finite, >= 0), t_ambient_c={t_amb!r})")
+        st = self.st
+        saved = st.copy()
+        if self._fd_w is None:
+            self._step(self._d, self._ix, self._c, st, float(p_pack), float(t), float(h), float(t_amb),
+                       float(h_conv), self.yv)
         else:
-            ph = p_cell * h
-            disc = a * a - 4.0 * b * ph
-            if disc >= 0.0 and a > 0.0:
-                i = 2.0 * ph / (a + math.sqrt(disc))
-            else:
-                i = 0.5 * a / b if a > 0.0 else 0.0
-                self.clamps += 1
-        soc_new = soc - i * h / q_as
+            x = self._x_fd
+            t_mean = float(np.dot(self._fd_w, x))
+            q = self._elec(self._d, self._ix, self._c, st, float(p_pack), float(h), t_mean, self.yv)
+            h_eff = _m.effective_h.py_func(self._c, t + 0.5 * h, h_conv)
+            self._x_fd = self.thermal.step(x, q, t_amb, h_eff, h)
+            h_out = _m.effective_h.py_func(self._c, t + h, h_conv)
+            self.yv[_m.Y_TCORE], self.yv[_m.Y_TSURF] = self.thermal.outputs(self._x_fd, q, t_amb, h_out)
+            self.yv[_m.Y_TMEAN] = float(np.dot(self._fd_w, self._x_fd))
+        soc_new = float(st[_m.S_SOC])
         if not (0.0 <= soc_new <= 1.0):
+            i = float(self.yv[_m.Y_I])
+            self.st = saved
             raise SimulationError(f"{self.name}: SOC left [0, 100] % at t={t + h:.6g} s "
                                   f"(soc_pct={100.0 * soc_new:.4g}, pack current {i * self._np:.6g} A)")
-        # exact RC-branch integrals over the step (cell.rc_integrals written out, reusing e^{-h/tau})
-        vinf = r1 * i
-        d = v1 - vinf
-        v1n = vinf + d * ex1
-        iv1 = vinf * h + d * g1
-        iv1s = vinf * vinf * h + 2.0 * vinf * d * g1 + d * d * 0.5 * tau1 * (1.0 - ex1 * ex1)
-        vinf = r2 * i
-        d = v2 - vinf
-        v2n = vinf + d * ex2
-        iv2 = vinf * h + d * g2
-        iv2s = vinf * vinf * h + 2.0 * vinf * d * g2 + d * d * 0.5 * tau2 * (1.0 - ex2 * ex2)
-        e_chem = q_as * (tab.ocv_integral(soc) - tab.ocv_integral(soc_new))
-        e_loss = i * i * rs * h + i * (iv1 + iv2)
-        q = i * i * rs + (iv1s / r1 + iv2s / r2) / h
-        if prm.entropic_heat:
-            ds = tab.entropy_change(0.5 * (soc + soc_new))
-            q -= i * (t_mean + 273.15) * ds / _cell.FARADAY_C_MOL
-        self.x_th = self.thermal.step(self.x_th, q, t_amb, h_conv, h)
-        self.soc = soc_new
-        self.v1 = v1n
-        self.v2 = v2n
-        self.i_cell = i
-        self.e_chem += e_chem
-        self.e_loss += e_loss
-        self.ah += abs(i) * h / 3600.0
-        self._write_outputs(i, rs, q)
+        self._publish(t_amb)

@@ -194,7 +194,7 @@ def test_power_to_current_in_plant_and_clamp():
         b.do_step(k * 0.1, 0.1)
     # small step: the plant's current solves P = (V_oc - V1 - V2) i - R_s i^2 at the step start
     voc_eff = b.tables.ocv(b.soc) - b.v1 - b.v2
-    rs = b.tables.params(b.soc, b._t_mean(b.x_th), 1.0)[0]
+    rs = b.tables.params(b.soc, b.y["t_mean_c"], 1.0)[0]
     b.u["power_w"] = 80e3
     b.do_step(5.0, 1e-4)
     i_direct = cell.current_from_power(80e3 / (NS * NP), voc_eff, rs)

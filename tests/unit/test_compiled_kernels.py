@@ -94,38 +94,6 @@ def test_engine_generator_compiled_path_falls_back_for_non_clamp_maps():
     assert CompiledAdvance.make(eg.maps, eg.params) is None
 
 
-@pytest.mark.parametrize("mode", ["power", "current"])
-def test_battery_pack_compiled_step_is_bit_identical(mode):
-    import random
-
-    from shevsim.components.battery import BatteryPack, BatteryPackParams
-    prm = BatteryPackParams(input_mode=mode, soc_init_pct=50.0)
-    fast, ref = BatteryPack("b", prm), BatteryPack("b", prm, compiled=False)
-    assert fast._nb is not None and ref._nb is None
-    rng = random.Random(1)
-    port = "power_w" if mode == "power" else "current_cmd_a"
-    scale = 1.0 if mode == "power" else 1.0 / 350.0          # W -> A at ~350 V
-    x, n_diff = 0.0, 0
-    for k in range(3000):
-        x = max(-150e3, min(300e3, 0.9 * x + rng.gauss(0.0, 30e3) + 3e3 * (ref.y["soc_pct"] - 50.0)))
-        demand = 5e6 if 1000 <= k < 1003 and mode == "power" else x       # beyond the pack: clamped
-        for c in (fast, ref):
-            c.u[port] = demand * scale
-            c.u["h_conv_w_m2k"] = 20.0 if k < 2000 else 4.0                  # cooling fault
-            c.u["t_ambient_c"] = 25.0 + 0.001 * k
-            c.do_step(0.1 * k, 0.1)
-        n_diff += fast.y != ref.y
-    assert n_diff == 0
-    assert abs(ref.y["soc_pct"] - 50.0) < 20.0 and ref.y["t_core_c"] > 26.0
-    if mode == "power":
-        assert ref.y["clamp_count"] == 3.0
-
-
-def test_battery_pack_fd30_uses_the_python_path():
-    from shevsim.components.battery import BatteryPack, BatteryPackParams
-    assert BatteryPack("b", BatteryPackParams(thermal_model="fd30"))._nb is None
-
-
 @pytest.mark.parametrize("mode", ["exact", "seed"])
 def test_power_capability_compiled_compute_is_bit_identical(mode):
     import random
