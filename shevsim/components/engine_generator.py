@@ -29,13 +29,19 @@ Outputs (at t + h, no direct feedthrough: every output comes from the state or t
     number of load-shedding episodes, ``shed_time_s`` [s] cumulative time shedding was active
     (command cut or generator torque cut); cumulative ``fuel_mass_g``, ``fuel_energy_j``,
     ``soot_mass_mg``, ``soot_transient_mg``, ``engine_loss_energy_j``, ``gen_loss_energy_j``,
-    ``elec_energy_j``, ``shaft_kinetic_energy_j`` (change of 1/2 J w^2 since t0).
+    ``elec_energy_j``, ``shaft_kinetic_energy_j`` (change of 1/2 J w^2 since t0);
+    ``soot_rate_meas_mgps`` [mg/s] the soot analyser's reading, mean over the last step (item 11 of the
+    physics docstring: first-order lag ``soot_analyzer_tau_s`` + offset ``soot_analyzer_offset_mgps``;
+    equal to ``soot_rate_mgps`` with both at their default 0, except at t0, where it includes
+    ``soot_scale_frac``).
 
 Energy balance (exact): ``fuel_energy_j = elec_energy_j + engine_loss_energy_j +
 gen_loss_energy_j + shaft_kinetic_energy_j``.
 Initial state: steady operation on the optimal line at the start value of ``power_cmd_w``.
-Speed: :func:`~shevsim.powertrain.engine.advance` runs compiled (:class:`~shevsim.powertrain.engine.CompiledAdvance`,
-numba, bit-identical) when every map it uses clamps outside its grid; ``compiled=False`` runs the Python code.
+Physics written once: the component wraps :func:`shevsim.powertrain.engine.step` (through
+:class:`~shevsim.powertrain.engine.EngineGenStep`), numba-compiled; ``compiled=False`` runs the same
+source in the Python interpreter (``step.py_func``).  Every extrapolation rule of the maps is supported
+by both.
 """
 from __future__ import annotations
 
@@ -44,7 +50,7 @@ from dataclasses import dataclass
 from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.engine import EG_DIR, CompiledAdvance, EngineGenMaps, advance, steady_state
+from shevsim.powertrain.engine import EG_DIR, EngineGenMaps, EngineGenStep, measured_soot_rate, steady_state
 
 
 @dataclass(frozen=True)
@@ -74,6 +80,11 @@ class EngineGeneratorParams:
         Multiplier of the quasi-static soot map [-].
     max_substep_s : float
         Longest internal sub-step [s].
+    soot_analyzer_tau_s : float
+        Time constant of the soot analyser's first-order lag [s] (output ``soot_rate_meas_mgps``);
+        0 = no lag.
+    soot_analyzer_offset_mgps : float
+        Constant offset of the soot analyser's reading [mg/s]; 0 = none.
     """
 
     fuel_map_file: str = str(EG_DIR / "engine_fuel_map.csv")
@@ -95,13 +106,16 @@ class EngineGeneratorParams:
     transient_soot_mg_per_g: float = 10.0
     soot_scale_frac: float = 1.0
     max_substep_s: float = 0.05
+    soot_analyzer_tau_s: float = 0.0
+    soot_analyzer_offset_mgps: float = 0.0
 
     def __post_init__(self):
         for k in ("fuel_lhv_j_per_g", "turbo_lag_s", "fuel_fall_s", "speed_time_constant_s",
                   "speed_accel_max_radps2", "shaft_inertia_kg_m2", "power_rate_down_max_wps", "max_substep_s"):
             if not getattr(self, k) > 0:
                 raise ValueError(f"parameter '{k}' must be > 0, got {getattr(self, k)!r}")
-        for k in ("rack_kp_per_nm", "rack_ki_per_nm_s", "transient_soot_mg_per_g", "soot_scale_frac"):
+        for k in ("rack_kp_per_nm", "rack_ki_per_nm_s", "transient_soot_mg_per_g", "soot_scale_frac",
+                  "soot_analyzer_tau_s"):
             if not getattr(self, k) >= 0:
                 raise ValueError(f"parameter '{k}' must be >= 0, got {getattr(self, k)!r}")
 
@@ -134,8 +148,9 @@ class EngineGenerator(Component):
         out("gen_loss_energy_j", "J", 0.0, "cumulative generator + controller loss"),
         out("elec_energy_j", "J", 0.0, "cumulative electrical energy delivered"),
         out("shaft_kinetic_energy_j", "J", 0.0, "change of the shaft kinetic energy since t0"),
+        out("soot_rate_meas_mgps", "mg/s", 0.0, "soot analyser reading: lagged soot rate + offset (mean over the last step)"),
     )
-    _static = ("name", "params", "maps", "_advance")
+    _static = ("name", "params", "maps", "_step")
 
     def __init__(self, name: str = "engine_generator", params: EngineGeneratorParams | None = None,
                  compiled: bool = True):
@@ -143,15 +158,16 @@ class EngineGenerator(Component):
         p = self.params
         self.maps = EngineGenMaps(p.fuel_map_file, p.torque_map_file, p.max_torque_file, p.soot_map_file,
                                   p.generator_eff_file, p.generator_max_torque_file, p.ool_file)
-        # compiled advance (numba; same arithmetic, bit-identical) unless compiled=False or unavailable
-        self._advance = CompiledAdvance.make(self.maps, p) if compiled else None
+        # the one-source step: numba-compiled, or its Python form (step.py_func) when compiled=False
+        self._step = EngineGenStep(self.maps, p, compiled=compiled)
 
     def initialize(self, t0: float) -> None:
-        self.st = steady_state(self.maps, self.u["power_cmd_w"])
+        self.st = steady_state(self.maps, self.u["power_cmd_w"], soot_scale_frac=self.params.soot_scale_frac)
         p0 = self.st.p_lim
-        self._write(p0, self.maps.fuel_quasi_static(p0), self.maps.soot(self.st.w, self.st.tau_e))
+        self._write(p0, self.maps.fuel_quasi_static(p0), self.maps.soot(self.st.w, self.st.tau_e),
+                    measured_soot_rate(self.st, self.params))
 
-    def _write(self, p_el: float, fuel_gps: float, soot_mgps: float) -> None:
+    def _write(self, p_el: float, fuel_gps: float, soot_mgps: float, soot_meas_mgps: float) -> None:
         st, y = self.st, self.y
         y["elec_power_w"] = p_el
         y["engine_power_w"] = st.tau_e * st.w
@@ -172,14 +188,12 @@ class EngineGenerator(Component):
         y["gen_loss_energy_j"] = st.gen_loss_j
         y["elec_energy_j"] = st.elec_j
         y["shaft_kinetic_energy_j"] = st.ke_j
+        y["soot_rate_meas_mgps"] = soot_meas_mgps
 
     def do_step(self, t: float, h: float) -> None:
         pc, rate, lim = self.u["power_cmd_w"], self.u["power_rate_max_wps"], self.u["elec_power_max_w"]
         if pc != pc or rate != rate or lim != lim:
             raise SimulationError(f"{self.name}: NaN input at t={t:g} s (power_cmd_w={pc}, power_rate_max_wps={rate}, "
                                   f"elec_power_max_w={lim})")
-        if self._advance is not None:
-            e_el, fuel, soot = self._advance(self.st, pc, rate, h, lim)
-        else:
-            e_el, fuel, soot = advance(self.maps, self.params, self.st, pc, rate, h, lim)
-        self._write(e_el / h, fuel / h, soot / h)
+        e_el, fuel, soot, soot_meas = self._step(self.st, pc, rate, h, lim)
+        self._write(e_el / h, fuel / h, soot / h, soot_meas)

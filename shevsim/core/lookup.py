@@ -126,3 +126,58 @@ def _grid_nb(d, o, nx, ny, x, y):  # pragma: no cover - compiled
     a = d[r0 + j] + fy * (d[r0 + j + 1] - d[r0 + j])
     b = d[r1 + j] + fy * (d[r1 + j + 1] - d[r1 + j])
     return a + fx * (b - a)
+
+
+# -- extrapolation modes (maps.Curve / maps.Grid2D ``mode``): 0 "clamp", 1 "linear", 2 "error" -------------
+import math  # noqa: E402
+
+EXTRAPOLATION_CODES = {"clamp": 0, "linear": 1, "error": 2}
+
+
+@_njit(cache=True)
+def _axis_ex(d, o, n, mode, x):  # pragma: no cover - compiled
+    """Cell index and fraction of ``x`` on the axis ``d[o:o+n]`` with extrapolation ``mode`` (0 clamp,
+    1 linear, 2 error), as ``maps._locate``; a NaN fraction where ``_locate`` raises (NaN ``x``, or
+    outside the axis in mode 2)."""
+    if x != x:
+        return 0, x
+    if x <= d[o]:
+        if mode == 0 or x == d[o]:
+            return 0, 0.0
+        if mode == 2:
+            return 0, math.nan
+        return 0, (x - d[o]) / (d[o + 1] - d[o])
+    if x >= d[o + n - 1]:
+        if mode == 0 or x == d[o + n - 1]:
+            return n - 2, 1.0
+        if mode == 2:
+            return n - 2, math.nan
+        return n - 2, (x - d[o + n - 2]) / (d[o + n - 1] - d[o + n - 2])
+    j = _bisect_right(d, o, n, x) - 1
+    return j, (x - d[o + j]) / (d[o + j + 1] - d[o + j])
+
+
+@_njit(cache=True)
+def _curve_ex(d, o, n, mode, x):  # pragma: no cover - compiled
+    """:func:`_curve_nb` with the extrapolation ``mode`` of ``Curve`` (0 clamp, 1 linear, 2 error -> NaN
+    outside the axis); for mode 0 it *is* ``_curve_nb``, so clamped maps keep their bits."""
+    if mode == 0 or x != x or (d[o] < x < d[o + n - 1]):
+        return _curve_nb(d, o, n, x)
+    i, f = _axis_ex(d, o, n, mode, x)
+    y0 = d[o + n + i]
+    return y0 + f * (d[o + n + i + 1] - y0)
+
+
+@_njit(cache=True)
+def _grid_ex(d, o, nx, ny, mx, my, x, y):  # pragma: no cover - compiled
+    """:func:`_grid_nb` with per-axis extrapolation modes of ``Grid2D`` (0 clamp, 1 linear, 2 error ->
+    NaN outside the axis); for modes (0, 0) it *is* ``_grid_nb``."""
+    if (mx == 0 and my == 0) or x != x or y != y:
+        return _grid_nb(d, o, nx, ny, x, y)
+    i, fx = _axis_ex(d, o, nx, mx, x)
+    j, fy = _axis_ex(d, o + nx, ny, my, y)
+    r0 = o + nx + ny + i * ny
+    r1 = r0 + ny
+    a = d[r0 + j] + fy * (d[r0 + j + 1] - d[r0 + j])
+    b = d[r1 + j] + fy * (d[r1 + j + 1] - d[r1 + j])
+    return a + fx * (b - a)

@@ -60,6 +60,18 @@ Chain, advanced in sub-steps of at most ``max_substep_s`` with the inputs held:
     ``shed_n`` (number of episodes: sub-steps with (a) or (b) following one without) and ``shed_s``
     (time with (a) or (b) active).
 
+11. **Soot analyser** (what a measurement of the soot rate reads; off by default): the soot rate of
+    each sub-step (held over it) through a first-order lag ``soot_analyzer_tau_s`` (exact exponential;
+    0 = no lag), plus a constant ``soot_analyzer_offset_mgps``; the reading reported for a step is its
+    exact mean over the step.  With both at 0 it equals the step's mean soot rate bit for bit.  It does
+    not act on the engine: it lets a calibration compare the model with an analyser's record through
+    the same physics (:mod:`shevsim.calibrate.engine`).
+
+The physics above is written once, in :func:`step` (numba-compiled; :data:`step_py` is the same source
+run by the Python interpreter), on maps packed by :func:`pack_maps`; every extrapolation rule of the
+maps (``clamp``, ``linear``, ``error``) is carried in the packed form (:func:`shevsim.core.lookup._curve_ex`,
+``_grid_ex``).  :class:`EngineGenStep` binds it to one (maps, parameters) pair for the component.
+
 Energy bookkeeping per sub-step (all exact for the discrete trajectory):
 ``E_fuel = LHV * fuel mass``; ``W_e = mean(tau_e) * mean(w) * dt`` (trapezoid in torque);
 ``dKE = J (w1^2 - w0^2)/2``; generator shaft work ``W_g = W_e - dKE``; electrical
@@ -108,12 +120,22 @@ class EngineGenMaps:
         return self.ool_fuel(p_elec_w)
 
 
+STATE = ("p_lim", "w", "integ", "rack", "m_f", "tau_e", "fuel_cmd", "fuel_g", "fuel_j", "eng_loss_j",
+         "shaft_j", "ke_j", "gen_loss_j", "elec_j", "soot_mg", "soot_tr_mg", "gen_sat", "shed", "shed_n",
+         "shed_s", "soot_lag")
+"""The state of the engine-generator, in the order :func:`step` takes and returns it."""
+
+PRM_FIELDS = ("max_substep_s", "power_rate_down_max_wps", "shaft_inertia_kg_m2", "rack_kp_per_nm",
+              "rack_ki_per_nm_s", "speed_time_constant_s", "speed_accel_max_radps2", "turbo_lag_s",
+              "fuel_fall_s", "fuel_lhv_j_per_g", "transient_soot_mg_per_g", "soot_scale_frac",
+              "soot_analyzer_tau_s", "soot_analyzer_offset_mgps")
+"""The parameters :func:`step` reads, in the order of its packed parameter array ``c``."""
+
+
 class EngineGenState:
     """Mutable state of the engine-generator (plain floats; deep-copied for save/restore)."""
 
-    __slots__ = ("p_lim", "w", "integ", "rack", "m_f", "tau_e", "fuel_cmd",
-                 "fuel_g", "fuel_j", "soot_mg", "soot_tr_mg", "eng_loss_j", "gen_loss_j",
-                 "elec_j", "shaft_j", "ke_j", "gen_sat", "shed", "shed_n", "shed_s")
+    __slots__ = STATE
 
     def __init__(self):
         for s in self.__slots__:
@@ -125,9 +147,21 @@ class EngineGenState:
             setattr(c, s, getattr(self, s))
         return c
 
+    def values(self) -> tuple:
+        """The state as a tuple in the order of :data:`STATE`."""
+        return tuple(getattr(self, s) for s in STATE)
 
-def steady_state(maps: EngineGenMaps, p_elec_w: float, state: EngineGenState | None = None) -> EngineGenState:
-    """State in steady operation at ``p_elec_w`` on the optimal line (cumulative sums left as given)."""
+    def set_values(self, vals) -> None:
+        for s, v in zip(STATE, vals):
+            setattr(self, s, v)
+
+
+def steady_state(maps: EngineGenMaps, p_elec_w: float, state: EngineGenState | None = None,
+                 soot_scale_frac: float = 1.0) -> EngineGenState:
+    """State in steady operation at ``p_elec_w`` on the optimal line (cumulative sums left as given).
+
+    The analyser's lagged soot rate ``soot_lag`` starts at the quasi-static soot rate
+    ``soot_scale_frac * S(w, tau_e)`` (no transient soot in steady operation)."""
     st = state if state is not None else EngineGenState()
     p = min(max(p_elec_w, 0.0), maps.p_max_w)
     st.p_lim = p
@@ -139,45 +173,76 @@ def steady_state(maps: EngineGenMaps, p_elec_w: float, state: EngineGenState | N
     st.integ = st.rack
     st.ke_j = 0.0
     st.gen_sat = st.shed = 0.0
+    st.soot_lag = soot_scale_frac * maps.soot(st.w, st.tau_e) if st.tau_e > 0.0 else 0.0
     return st
 
 
-def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_up_wps: float,
-            h: float, elec_max_w: float = 1e12) -> tuple[float, float, float]:
-    """Advance ``st`` by ``h`` with the inputs held; return (elec J, fuel g, soot mg) of this step.
+def measured_soot_rate(st: EngineGenState, prm) -> float:
+    """The analyser reading [mg/s] of state ``st`` (lagged soot rate + offset), e.g. at t0."""
+    return st.soot_lag + prm.soot_analyzer_offset_mgps
 
-    ``elec_max_w`` [W]: most electrical power the bus can absorb (load shedding, item 10 of the
-    module docstring); the electrical energy of every sub-step is at most ``max(elec_max_w, 0) dt``.
 
-    ``prm`` provides ``rack_kp_per_nm, rack_ki_per_nm_s, turbo_lag_s, fuel_fall_s,
-    speed_time_constant_s, speed_accel_max_radps2, shaft_inertia_kg_m2, power_rate_down_max_wps,
-    fuel_lhv_j_per_g, transient_soot_mg_per_g, soot_scale_frac, max_substep_s``.
+# ---------------------------------------------------------------------------------------------
+# the physics, written once: one numba-compatible function of packed maps (md, mi), packed parameters
+# (c) and the state (floats), returning the new state and the step's totals.  Compiled with numba for the
+# component's hot path and the calibration's record loop; ``step_py`` (= ``step.py_func``) is the same
+# source run by the Python interpreter (the reference of the tests; ``compiled=False``).
+# ---------------------------------------------------------------------------------------------
+from shevsim.core.errors import DataError  # noqa: E402
+from shevsim.core.lookup import EXTRAPOLATION_CODES, HAVE_NUMBA, _curve_ex, _grid_ex, _njit  # noqa: E402
+
+
+@_njit(cache=True)
+def step(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g, fuel_j, eng_loss_j,
+         shaft_j, ke_j, gen_loss_j, elec_j, soot_mg, soot_tr_mg, gen_sat, shed, shed_n, shed_s, soot_lag,
+         p_cmd_w, rate_up_wps, h, elec_max_w):
+    """Advance the engine-generator by ``h`` with the inputs held (items 1-11 of the module docstring).
+
+    Parameters
+    ----------
+    md, mi : ndarray
+        Maps packed by :func:`pack_maps` (values; offsets, sizes and extrapolation codes).
+    c : ndarray
+        Parameters in the order of :data:`PRM_FIELDS`.
+    p_max : float
+        Rated electrical power [W] (end of the optimal operating line).
+    p_lim ... soot_lag : float
+        The state, in the order of :data:`STATE`.
+    p_cmd_w, rate_up_wps, h, elec_max_w : float
+        Power command [W], its max rate of increase [W/s], step [s], bus limit [W].
+
+    Returns
+    -------
+    tuple
+        The new state (order of :data:`STATE`), then the step's electrical energy [J], fuel [g], soot
+        [mg] and the analyser's mean reading over the step [mg/s] (lagged soot rate + offset).
     """
-    n = max(1, math.ceil(h / prm.max_substep_s - 1e-9))
+    n = max(1, math.ceil(h / c[0] - 1e-9))
     dt = h / n
-    target = min(max(p_cmd_w, 0.0), maps.p_max_w)
+    target = min(max(p_cmd_w, 0.0), p_max)
     r_up = max(rate_up_wps, 0.0) * dt
-    r_dn = prm.power_rate_down_max_wps * dt
-    J = prm.shaft_inertia_kg_m2
-    kp, ki = prm.rack_kp_per_nm, prm.rack_ki_per_nm_s
-    a_w = math.exp(-dt / prm.speed_time_constant_s)
-    dw_max = prm.speed_accel_max_radps2 * dt
-    a_up = math.exp(-dt / prm.turbo_lag_s)
-    a_dn = math.exp(-dt / prm.fuel_fall_s)
-    lhv, c_tr, s_qs = prm.fuel_lhv_j_per_g, prm.transient_soot_mg_per_g, prm.soot_scale_frac
-    tf_up, tf_dn = prm.turbo_lag_s, prm.fuel_fall_s
-    t_w = prm.speed_time_constant_s
+    r_dn = c[1] * dt
+    J = c[2]
+    kp = c[3]
+    ki = c[4]
+    t_w = c[5]
+    a_w = math.exp(-dt / t_w)
+    dw_max = c[6] * dt
+    tf_up = c[7]
+    tf_dn = c[8]
+    a_up = math.exp(-dt / tf_up)
+    a_dn = math.exp(-dt / tf_dn)
+    lhv = c[9]
+    c_tr = c[10]
+    s_qs = c[11]
+    tau_a = c[12]
+    a_a = math.exp(-dt / tau_a) if tau_a > 0.0 else 0.0
     p_shed = max(elec_max_w, 0.0)
     e_shed = p_shed * dt
-    # the maps' plain-function forms (same values as calling the map objects)
-    ool_speed, ool_shaft, tmax, fmax = maps.ool_speed.fn, maps.ool_shaft.fn, maps.tmax.fn, maps.fmax.fn
-    torque, geff, soot_map = maps.torque.fn, maps.geff.fn, maps.soot.fn
-    # the state in locals (written back once; the same arithmetic in the same order)
-    p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd = st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e, st.fuel_cmd
-    fuel_g, fuel_j, eng_loss_j, shaft_j, ke_j = st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j
-    gen_loss_j, elec_j, soot_mg, soot_tr_mg = st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg
-    gen_sat, shed, shed_n, shed_s = st.gen_sat, st.shed, st.shed_n, st.shed_s
-    e_el = fuel = soot = 0.0
+    e_el = 0.0
+    fuel = 0.0
+    soot = 0.0
+    soot_meas = 0.0
     for _ in range(n):
         # 1. rate limit, 10a. command cut to the bus limit (bypasses the downward rate limit)
         dp = target - p_lim
@@ -188,17 +253,17 @@ def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_u
             cut = 1.0
         # 2-3. speed set point and speed response
         w0 = w
-        w_set = ool_speed(p_lim)
+        w_set = _curve_ex(md, mi[0], mi[1], mi[2], p_lim)
         w1 = w_set + (w0 - w_set) * a_w
         if w1 - w0 > dw_max:
             w1 = w0 + dw_max
         elif w0 - w1 > dw_max:
             w1 = w0 - dw_max
         # 4. torque demand (10c. + the speed loop's torque while the generator torque is cut)
-        tau_ref = ool_shaft(p_lim) / w0
+        tau_ref = _curve_ex(md, mi[3], mi[4], mi[5], p_lim) / w0
         if gen_sat > 0.0:
             tau_ref += J * (w_set - w0) / t_w
-        tl = tmax(w0)
+        tl = _curve_ex(md, mi[6], mi[7], mi[8], w0)
         if tau_ref > tl:
             tau_ref = tl
         # 5. PI rack with conditional integration
@@ -215,148 +280,7 @@ def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_u
                 integ = integ0
         integ0 = integ
         # 6. fuel command and turbo lag (exact)
-        fl = fmax(w1)
-        m_c = rack * fl
-        m0 = m_f
-        if m_c > m0:
-            a, tf = a_up, tf_up
-        else:
-            a, tf = a_dn, tf_dn
-        m1 = m_c + (m0 - m_c) * a
-        dm = m_c * dt + (m0 - m_c) * tf * (1.0 - a)          # fuel mass over the sub-step [g]
-        # 7. engine torque
-        tau1 = torque(w1, m1)
-        w_avg = 0.5 * (w0 + w1)
-        tau_avg = 0.5 * (tau_e + tau1)
-        w_e = tau_avg * w_avg * dt
-        dke = 0.5 * J * (w1 * w1 - w0 * w0)
-        w_g = w_e - dke
-        tau_g = w_g / (w_avg * dt)
-        eta = geff(w_avg, abs(tau_g))
-        el = w_g * eta if w_g >= 0.0 else w_g / eta
-        # 10b. generator torque cut to the bus limit; the surplus engine work accelerates the shaft
-        gen_sat = 0.0
-        if el > e_shed:
-            if e_shed > 0.0:
-                eta = geff(w_avg, e_shed / (eta * w_avg * dt))
-                w_gc = e_shed / eta
-            else:
-                w_gc = 0.0
-            if w_gc < w_g:
-                w_g = w_gc
-            el = e_shed
-            dke = w_e - w_g
-            w1 = math.sqrt(w0 * w0 + 2.0 * dke / J)
-            tau1 = torque(w1, m1)
-            gen_sat = 1.0
-        if cut > 0.0 or gen_sat > 0.0:
-            if shed == 0.0:
-                shed_n += 1.0
-            shed = 1.0
-            shed_s += dt
-        else:
-            shed = 0.0
-        # 8. soot: quasi-static + transient (deficit of burnt fuel against the rack's command)
-        s = s_qs * soot_map(w_avg, tau_avg) * dt if tau_avg > 0.0 else 0.0
-        deficit = m_c * dt - dm                              # int (m_c - m_f) dt over the sub-step [g]
-        s_tr = c_tr * deficit * deficit / (dt * fl) if deficit > 0.0 else 0.0
-        # bookkeeping
-        w, m_f, tau_e, fuel_cmd = w1, m1, tau1, m_c
-        fuel_g += dm
-        fuel_j += dm * lhv
-        eng_loss_j += dm * lhv - w_e
-        shaft_j += w_g
-        ke_j += dke
-        gen_loss_j += w_g - el
-        elec_j += el
-        soot_mg += s + s_tr
-        soot_tr_mg += s_tr
-        e_el += el
-        fuel += dm
-        soot += s + s_tr
-    st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e, st.fuel_cmd = p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd
-    st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j = fuel_g, fuel_j, eng_loss_j, shaft_j, ke_j
-    st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg = gen_loss_j, elec_j, soot_mg, soot_tr_mg
-    st.gen_sat, st.shed, st.shed_n, st.shed_s = gen_sat, shed, shed_n, shed_s
-    return e_el, fuel, soot
-
-
-def generator_torque_limit(maps: EngineGenMaps, w: float) -> float:
-    """Max generator shaft torque at engine speed ``w`` [N m] (for checks and plots)."""
-    return maps.gmax(w)
-
-
-# ---------------------------------------------------------------------------------------------
-# compiled advance: the arithmetic of :func:`advance` (and of the maps' clamped bilinear lookups) in
-# the same order, bit-identical; used by the engine_generator component on its hot path
-# ---------------------------------------------------------------------------------------------
-from shevsim.core.lookup import HAVE_NUMBA, _curve_nb, _grid_nb, _njit  # noqa: E402  (the one lookup module)
-
-_PRM_FIELDS = ("max_substep_s", "power_rate_down_max_wps", "shaft_inertia_kg_m2", "rack_kp_per_nm",
-               "rack_ki_per_nm_s", "speed_time_constant_s", "speed_accel_max_radps2", "turbo_lag_s",
-               "fuel_fall_s", "fuel_lhv_j_per_g", "transient_soot_mg_per_g", "soot_scale_frac")
-
-
-@_njit(cache=True)
-def _advance_nb(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g, fuel_j, eng_loss_j,
-                shaft_j, ke_j, gen_loss_j, elec_j, soot_mg, soot_tr_mg, gen_sat, shed, shed_n, shed_s,
-                p_cmd_w, rate_up_wps, h, elec_max_w):  # pragma: no cover
-    n = max(1, math.ceil(h / c[0] - 1e-9))
-    dt = h / n
-    target = min(max(p_cmd_w, 0.0), p_max)
-    r_up = max(rate_up_wps, 0.0) * dt
-    r_dn = c[1] * dt
-    J = c[2]
-    kp = c[3]
-    ki = c[4]
-    a_w = math.exp(-dt / c[5])
-    dw_max = c[6] * dt
-    tf_up = c[7]
-    tf_dn = c[8]
-    a_up = math.exp(-dt / tf_up)
-    a_dn = math.exp(-dt / tf_dn)
-    lhv = c[9]
-    c_tr = c[10]
-    s_qs = c[11]
-    t_w = c[5]
-    p_shed = max(elec_max_w, 0.0)
-    e_shed = p_shed * dt
-    e_el = 0.0
-    fuel = 0.0
-    soot = 0.0
-    for _ in range(n):
-        dp = target - p_lim
-        p_lim += r_up if dp > r_up else (-r_dn if dp < -r_dn else dp)
-        cut = 0.0
-        if p_lim > p_shed:
-            p_lim = p_shed
-            cut = 1.0
-        w0 = w
-        w_set = _curve_nb(md, mi[0], mi[1], p_lim)
-        w1 = w_set + (w0 - w_set) * a_w
-        if w1 - w0 > dw_max:
-            w1 = w0 + dw_max
-        elif w0 - w1 > dw_max:
-            w1 = w0 - dw_max
-        tau_ref = _curve_nb(md, mi[2], mi[3], p_lim) / w0
-        if gen_sat > 0.0:
-            tau_ref += J * (w_set - w0) / t_w
-        tl = _curve_nb(md, mi[4], mi[5], w0)
-        if tau_ref > tl:
-            tau_ref = tl
-        e = tau_ref - tau_e
-        integ = integ0 + ki * e * dt
-        rack = kp * e + integ
-        if rack > 1.0:
-            rack = 1.0
-            if e > 0.0:
-                integ = integ0
-        elif rack < 0.0:
-            rack = 0.0
-            if e < 0.0:
-                integ = integ0
-        integ0 = integ
-        fl = _curve_nb(md, mi[6], mi[7], w1)
+        fl = _curve_ex(md, mi[9], mi[10], mi[11], w1)
         m_c = rack * fl
         m0 = m_f
         if m_c > m0:
@@ -366,20 +290,22 @@ def _advance_nb(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, 
             a = a_dn
             tf = tf_dn
         m1 = m_c + (m0 - m_c) * a
-        dm = m_c * dt + (m0 - m_c) * tf * (1.0 - a)
-        tau1 = _grid_nb(md, mi[8], mi[9], mi[10], w1, m1)
+        dm = m_c * dt + (m0 - m_c) * tf * (1.0 - a)          # fuel mass over the sub-step [g]
+        # 7. engine torque
+        tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
         w_avg = 0.5 * (w0 + w1)
         tau_avg = 0.5 * (tau_e + tau1)
         w_e = tau_avg * w_avg * dt
         dke = 0.5 * J * (w1 * w1 - w0 * w0)
         w_g = w_e - dke
         tau_g = w_g / (w_avg * dt)
-        eta = _grid_nb(md, mi[11], mi[12], mi[13], w_avg, abs(tau_g))
+        eta = _grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg, abs(tau_g))
         el = w_g * eta if w_g >= 0.0 else w_g / eta
+        # 10b. generator torque cut to the bus limit; the surplus engine work accelerates the shaft
         gen_sat = 0.0
         if el > e_shed:
             if e_shed > 0.0:
-                eta = _grid_nb(md, mi[11], mi[12], mi[13], w_avg, e_shed / (eta * w_avg * dt))
+                eta = _grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg, e_shed / (eta * w_avg * dt))
                 w_gc = e_shed / eta
             else:
                 w_gc = 0.0
@@ -388,7 +314,7 @@ def _advance_nb(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, 
             el = e_shed
             dke = w_e - w_g
             w1 = math.sqrt(w0 * w0 + 2.0 * dke / J)
-            tau1 = _grid_nb(md, mi[8], mi[9], mi[10], w1, m1)
+            tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
             gen_sat = 1.0
         if cut > 0.0 or gen_sat > 0.0:
             if shed == 0.0:
@@ -397,9 +323,19 @@ def _advance_nb(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, 
             shed_s += dt
         else:
             shed = 0.0
-        s = s_qs * _grid_nb(md, mi[14], mi[15], mi[16], w_avg, tau_avg) * dt if tau_avg > 0.0 else 0.0
-        deficit = m_c * dt - dm
+        # 8. soot: quasi-static + transient (deficit of burnt fuel against the rack's command)
+        if tau_avg > 0.0:
+            s = s_qs * _grid_ex(md, mi[22], mi[23], mi[24], mi[25], mi[26], w_avg, tau_avg) * dt
+        else:
+            s = 0.0
+        deficit = m_c * dt - dm                              # int (m_c - m_f) dt over the sub-step [g]
         s_tr = c_tr * deficit * deficit / (dt * fl) if deficit > 0.0 else 0.0
+        # 11. analyser: first-order lag of the soot rate (held over the sub-step), exact integral
+        s_sub = s + s_tr
+        r = s_sub / dt
+        soot_meas += s_sub + (soot_lag - r) * tau_a * (1.0 - a_a)
+        soot_lag = r + (soot_lag - r) * a_a
+        # bookkeeping
         w = w1
         m_f = m1
         tau_e = tau1
@@ -411,63 +347,94 @@ def _advance_nb(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, 
         ke_j += dke
         gen_loss_j += w_g - el
         elec_j += el
-        soot_mg += s + s_tr
+        soot_mg += s_sub
         soot_tr_mg += s_tr
         e_el += el
         fuel += dm
-        soot += s + s_tr
+        soot += s_sub
     return (p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g, fuel_j, eng_loss_j, shaft_j, ke_j, gen_loss_j,
-            elec_j, soot_mg, soot_tr_mg, gen_sat, shed, shed_n, shed_s, e_el, fuel, soot)
+            elec_j, soot_mg, soot_tr_mg, gen_sat, shed, shed_n, shed_s, soot_lag,
+            e_el, fuel, soot, soot_meas / h + c[13])
 
 
-class CompiledAdvance:
-    """:func:`advance` compiled for one (maps, parameters) pair; ``None`` from :meth:`make` when the maps
-    use an extrapolation other than ``clamp`` (the compiled lookups implement only that) or numba is
-    missing.  ``__call__(st, p_cmd_w, rate_up_wps, h, elec_max_w=1e12)`` has the semantics of ``advance`` (a non-finite
-    value met inside is re-run through the Python path, which raises the maps' errors)."""
+step_py = getattr(step, "py_func", step)
+"""The same source as :func:`step`, run by the Python interpreter (reference; ``compiled=False``)."""
 
-    _STATE = ("p_lim", "w", "integ", "rack", "m_f", "tau_e", "fuel_cmd", "fuel_g", "fuel_j", "eng_loss_j",
-              "shaft_j", "ke_j", "gen_loss_j", "elec_j", "soot_mg", "soot_tr_mg", "gen_sat", "shed", "shed_n",
-              "shed_s")
 
-    def __init__(self, maps: EngineGenMaps, prm):
-        import numpy as np
+def pack_maps(maps: EngineGenMaps):
+    """Pack the maps :func:`step` reads into ``(md, mi)``: one float array of values and one int array of
+    (offset, size[, size], extrapolation code[, code]) per map, in the order ool_speed, ool_shaft, tmax,
+    fmax (curves), torque, geff, soot (grids)."""
+    import numpy as np
+    chunks, mi, off = [], [], 0
+    for cv in (maps.ool_speed, maps.ool_shaft, maps.tmax, maps.fmax):
+        chunks += [cv.x, cv.y]
+        mi += [off, cv.x.size, EXTRAPOLATION_CODES[cv.mode]]
+        off += 2 * cv.x.size
+    for g in (maps.torque, maps.geff, maps.soot):
+        chunks += [g.x, g.y, g.z.ravel()]
+        mi += [off, g.x.size, g.y.size, EXTRAPOLATION_CODES[g.mode_x], EXTRAPOLATION_CODES[g.mode_y]]
+        off += g.x.size + g.y.size + g.z.size
+    return (np.ascontiguousarray(np.concatenate(chunks), dtype=np.float64), np.array(mi, dtype=np.int64))
+
+
+def pack_params(prm):
+    """The parameters :func:`step` reads (:data:`PRM_FIELDS`) as a float array."""
+    import numpy as np
+    return np.array([float(getattr(prm, k)) for k in PRM_FIELDS], dtype=np.float64)
+
+
+class EngineGenStep:
+    """:func:`step` bound to one (maps, parameters) pair, acting on an :class:`EngineGenState`.
+
+    ``compiled=True`` calls the numba-compiled :func:`step` (when numba is installed), ``False`` its
+    Python form :data:`step_py`; both are the one source.  ``__call__(st, p_cmd_w, rate_up_wps, h,
+    elec_max_w=1e12)`` advances ``st`` in place and returns (elec J, fuel g, soot mg, analyser reading
+    mg/s) of the step.  A non-finite result (a map with extrapolation ``"error"`` queried outside its
+    range, or a NaN met inside) raises :class:`~shevsim.core.errors.DataError`; the state is then left
+    unchanged.
+    """
+
+    def __init__(self, maps: EngineGenMaps, prm, compiled: bool = True):
         self.maps, self.prm = maps, prm
-        chunks, mi, off = [], [], 0
-        for cv in (maps.ool_speed, maps.ool_shaft, maps.tmax, maps.fmax):
-            chunks += [cv.x, cv.y]
-            mi += [off, cv.x.size]
-            off += 2 * cv.x.size
-        for g in (maps.torque, maps.geff, maps.soot):
-            chunks += [g.x, g.y, g.z.ravel()]
-            mi += [off, g.x.size, g.y.size]
-            off += g.x.size + g.y.size + g.z.size
-        self.md = np.ascontiguousarray(np.concatenate(chunks), dtype=np.float64)
-        self.mi = np.array(mi, dtype=np.int64)
-        self.c = np.array([float(getattr(prm, k)) for k in _PRM_FIELDS])
+        self.md, self.mi = pack_maps(maps)
+        self.c = pack_params(prm)
         self.p_max = float(maps.p_max_w)
-
-    @classmethod
-    def make(cls, maps: EngineGenMaps, prm):
-        if not HAVE_NUMBA:
-            return None
-        curves = (maps.ool_speed, maps.ool_shaft, maps.tmax, maps.fmax)
-        grids = (maps.torque, maps.geff, maps.soot)
-        if any(cv.mode != "clamp" for cv in curves) or any(g.mode_x != "clamp" or g.mode_y != "clamp"
-                                                            for g in grids):
-            return None
-        return cls(maps, prm)
+        self.compiled = bool(compiled and HAVE_NUMBA)
+        self.fn = step if self.compiled else step_py
 
     def __call__(self, st: EngineGenState, p_cmd_w: float, rate_up_wps: float, h: float,
                  elec_max_w: float = 1e12):
-        r = _advance_nb(self.md, self.mi, self.c, self.p_max, st.p_lim, st.w, st.integ, st.rack, st.m_f,
-                        st.tau_e, st.fuel_cmd, st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j,
-                        st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg, st.gen_sat, st.shed, st.shed_n,
-                        st.shed_s, float(p_cmd_w), float(rate_up_wps), float(h), float(elec_max_w))
-        if not (math.isfinite(r[20]) and math.isfinite(r[21]) and math.isfinite(r[22])
+        r = self.fn(self.md, self.mi, self.c, self.p_max, st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e,
+                    st.fuel_cmd, st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j, st.gen_loss_j,
+                    st.elec_j, st.soot_mg, st.soot_tr_mg, st.gen_sat, st.shed, st.shed_n, st.shed_s, st.soot_lag,
+                    float(p_cmd_w), float(rate_up_wps), float(h), float(elec_max_w))
+        if not (math.isfinite(r[21]) and math.isfinite(r[22]) and math.isfinite(r[24])
                 and math.isfinite(r[1]) and math.isfinite(r[5])):
-            return advance(self.maps, self.prm, st, p_cmd_w, rate_up_wps, h, elec_max_w)   # raises the maps' errors
+            modes = [m.name for m in (self.maps.ool_speed, self.maps.ool_shaft, self.maps.tmax, self.maps.fmax)
+                     if m.mode == "error"]
+            modes += [g.name for g in (self.maps.torque, self.maps.geff, self.maps.soot)
+                      if "error" in (g.mode_x, g.mode_y)]
+            raise DataError(f"engine-generator step from p_lim={st.p_lim!r} W, w={st.w!r} rad/s with command "
+                            f"{p_cmd_w!r} W, h={h!r} s gave a non-finite result (a NaN lookup"
+                            + (f", or a lookup outside a map with extrapolation 'error': {', '.join(modes)}"
+                               if modes else "") + ")")
         (st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e, st.fuel_cmd, st.fuel_g, st.fuel_j, st.eng_loss_j,
          st.shaft_j, st.ke_j, st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg, st.gen_sat, st.shed, st.shed_n,
-         st.shed_s) = r[:20]
-        return r[20], r[21], r[22]
+         st.shed_s, st.soot_lag) = r[:21]
+        return r[21], r[22], r[23], r[24]
+
+
+def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_up_wps: float,
+            h: float, elec_max_w: float = 1e12) -> tuple[float, float, float]:
+    """Advance ``st`` by ``h`` (Python form of :func:`step`); return (elec J, fuel g, soot mg) of this step.
+
+    Convenience for one-off calls (packs the maps on every call); a component keeps an
+    :class:`EngineGenStep`.
+    """
+    return EngineGenStep(maps, prm, compiled=False)(st, p_cmd_w, rate_up_wps, h, elec_max_w)[:3]
+
+
+def generator_torque_limit(maps: EngineGenMaps, w: float) -> float:
+    """Max generator shaft torque at engine speed ``w`` [N m] (for checks and plots)."""
+    return maps.gmax(w)
