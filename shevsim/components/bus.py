@@ -2,6 +2,9 @@
 
     battery_power_w = motor_power_w + aux_power_w - gen_power_w      (+ = battery discharges)
 
+``aux_power_w`` is the input plus the parameter ``aux_power_w`` (a constant auxiliary load: HVAC,
+fans, electronics; default 0 = off). Wherever this docstring says ``aux`` it means that total.
+
 A lossless node (converter losses are inside the motor and generator maps). Cumulative energies
 are the inputs integrated with the same zero-order hold the master applies, so
 ``battery_energy_j = motor_energy_j + aux_energy_j - gen_energy_j`` exactly.
@@ -44,9 +47,17 @@ class BusParams:
     ----------
     enforce_battery_limits : bool
         Derive motor power limits from the battery power capability (default true).
+    aux_power_w : float
+        Constant auxiliary load [W] added to the ``aux_power_w`` input (default 0).
     """
 
     enforce_battery_limits: bool = True
+    aux_power_w: float = 0.0
+
+    def __post_init__(self):
+        import math
+        if not math.isfinite(self.aux_power_w):
+            raise ValueError(f"parameter 'aux_power_w' must be finite, got {self.aux_power_w!r}")
 
 
 _LIM = ("gen_power_w", "aux_power_w", "battery_power_max_w", "battery_power_min_w")
@@ -75,13 +86,18 @@ class PowerBus(Component):
         out("battery_energy_j", "J", 0.0, "cumulative battery energy, + discharged", _ALL),
     )
 
+    def _aux(self) -> float:
+        pa = self.u["aux_power_w"]
+        return pa + self.params.aux_power_w if self.params.aux_power_w else pa
+
     def _limits(self) -> None:
         u, y = self.u, self.y
         if self.params.enforce_battery_limits:
-            base = u["gen_power_w"] - u["aux_power_w"]
+            pa = self._aux()
+            base = u["gen_power_w"] - pa
             y["motor_power_max_w"] = max(base + u["battery_power_max_w"], 0.0)
             y["motor_power_min_w"] = min(base + u["battery_power_min_w"], 0.0)
-            y["gen_power_max_w"] = max(u["motor_power_w"] + u["aux_power_w"] - u["battery_power_min_w"], 0.0)
+            y["gen_power_max_w"] = max(u["motor_power_w"] + pa - u["battery_power_min_w"], 0.0)
         else:
             y["motor_power_max_w"] = 1e12
             y["motor_power_min_w"] = -1e12
@@ -91,14 +107,14 @@ class PowerBus(Component):
         self.e = [0.0, 0.0, 0.0, 0.0]
         self._limits()
         u, y = self.u, self.y
-        y["demand_power_w"] = u["motor_power_w"] + u["aux_power_w"]
+        y["demand_power_w"] = u["motor_power_w"] + self._aux()
         y["battery_power_w"] = y["demand_power_w"] - u["gen_power_w"]
         for k in ("aux_energy_j", "motor_energy_j", "gen_energy_j", "battery_energy_j"):
             y[k] = 0.0
 
     def do_step(self, t: float, h: float) -> None:
         u, y, e = self.u, self.y, self.e
-        pm, pg, pa = u["motor_power_w"], u["gen_power_w"], u["aux_power_w"]
+        pm, pg, pa = u["motor_power_w"], u["gen_power_w"], self._aux()
         if pm != pm or pg != pg or pa != pa:
             raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
                                   f"(motor_power_w={pm}, gen_power_w={pg}, aux_power_w={pa})")

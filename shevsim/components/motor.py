@@ -11,8 +11,13 @@ Force request -> motor torque -> limits -> delivered traction force, friction br
 * propulsion beyond the limit is not delivered (no other source); braking beyond the regen limit
   (and all braking below ``regen_speed_min_mps``, where an induction machine cannot regenerate
   usefully) goes to the friction brakes: ``brake_force_n = -(F_req - F_regen)``;
+* regenerative electrical power limited to ``regen_power_max_w`` (default inf = off; the rest of
+  the braking goes to the friction brakes, as beyond the bus limits);
 * electrical power ``P = tau w / eta`` (motoring) or ``tau w eta`` (generating), map
-  ``eta(w, tau)``.
+  ``eta(w, tau)`` times ``efficiency_scale_frac`` (default 1), capped at 1.
+
+The step itself is :func:`shevsim.powertrain.motor.motor_step` (compiled, shared with the vehicle
+calibration); the component holds the state and books the energies.
 
 The torque and the powers are held over the step (feedthrough of the held inputs), so the
 cumulative energies integrate exactly what was output: ``elec_energy_j = mech_energy_j +
@@ -46,7 +51,7 @@ from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
 from shevsim.powertrain.maps import load_curve_csv, load_grid_csv
-from shevsim.powertrain.motor import HEAT_RATE_PER_S, MotorMaps, electrical_power, heat_index_step, torque_limit
+from shevsim.powertrain.motor import HEAT_RATE_PER_S, MotorMaps, motor_step
 
 _DIR = Path(__file__).resolve().parents[2] / "components" / "motor"
 
@@ -73,6 +78,11 @@ class MotorParams:
         Below this vehicle speed braking is all friction [m/s].
     extrapolate_speed : bool
         Evaluate the shaft power at the extrapolated mid-step speed (see module docstring).
+    regen_power_max_w : float
+        Most electrical power the drive returns while regenerating [W] (inverter/machine limit; braking
+        beyond it goes to the friction brakes). Default inf = no limit (off).
+    efficiency_scale_frac : float
+        Actual / map efficiency [-]: ``eta = min(s eta_map(w, tau), 1)``. Default 1 (the map as built).
     """
 
     efficiency_map_file: str = str(_DIR / "motor_eff_map.csv")
@@ -83,6 +93,8 @@ class MotorParams:
     heat_rate_per_s: float = HEAT_RATE_PER_S
     regen_speed_min_mps: float = 0.5
     extrapolate_speed: bool = True
+    regen_power_max_w: float = float("inf")
+    efficiency_scale_frac: float = 1.0
 
     def __post_init__(self):
         for k in ("gear_ratio", "wheel_radius_m"):
@@ -92,6 +104,10 @@ class MotorParams:
             raise ValueError(f"parameter 'heat_index_init_frac' must be in [0, 1], got {self.heat_index_init_frac!r}")
         if not (self.heat_rate_per_s >= 0 and self.regen_speed_min_mps >= 0):
             raise ValueError("parameters 'heat_rate_per_s' and 'regen_speed_min_mps' must be >= 0")
+        if not self.regen_power_max_w >= 0:
+            raise ValueError(f"parameter 'regen_power_max_w' must be >= 0, got {self.regen_power_max_w!r}")
+        if not 0.0 < self.efficiency_scale_frac <= 2.0:
+            raise ValueError(f"parameter 'efficiency_scale_frac' must be in (0, 2], got {self.efficiency_scale_frac!r}")
 
 
 class Motor(Component):
@@ -116,7 +132,8 @@ class Motor(Component):
         out("elec_energy_j", "J", 0.0, "cumulative electrical energy drawn (signed)", _FT),
         out("mech_energy_j", "J", 0.0, "cumulative shaft energy delivered (signed)", _FT),
     )
-    _static = ("name", "params", "maps", "_k_tau", "_k_w", "extrapolate")
+    _static = ("name", "params", "maps", "_k_tau", "_k_w", "extrapolate", "_md", "_mi", "_v_regen", "_p_regen",
+               "_eff_scale", "_heat_rate")
 
     def __init__(self, name: str = "motor", params: MotorParams | None = None):
         super().__init__(name, params)
@@ -127,7 +144,12 @@ class Motor(Component):
             load_curve_csv(p.torque_curves_file, "speed_radps", "cont_torque_nm"))
         self._k_tau = p.wheel_radius_m / p.gear_ratio      # N m of motor torque per N at the wheel
         self._k_w = p.gear_ratio / p.wheel_radius_m        # rad/s of motor per m/s
-        self.extrapolate = p.extrapolate_speed
+        self.extrapolate = bool(p.extrapolate_speed)
+        self._md, self._mi = self.maps.packed()
+        self._v_regen = float(p.regen_speed_min_mps)
+        self._p_regen = float(p.regen_power_max_w)
+        self._eff_scale = float(p.efficiency_scale_frac)
+        self._heat_rate = float(p.heat_rate_per_s)
 
     def initialize(self, t0: float) -> None:
         self.gamma = self.params.heat_index_init_frac
@@ -143,56 +165,20 @@ class Motor(Component):
             self.y[k] = 0.0
 
     def do_step(self, t: float, h: float) -> None:
-        f_req = self.u["force_req_n"]
-        v = self.u["speed_mps"]
+        u = self.u
+        f_req = u["force_req_n"]
+        v = u["speed_mps"]
         if f_req != f_req or v != v:
             raise SimulationError(f"{self.name}: NaN input at t={t:g} s (force_req_n={f_req}, speed_mps={v})")
-        if v < 0.0:
-            v = 0.0
-        w = v * self._k_w
-        # mid-step speed by linear extrapolation of the speed input (second-order accurate power)
-        v_mid = v + 0.5 * (v - self.v_prev) * (h / self.h_prev) if self.extrapolate else v
+        tau, brake, p_el, p_m, w, t_lim, gamma, v = motor_step(
+            self._md, self._mi, f_req, v, u["elec_power_max_w"], u["elec_power_min_w"], h, self.v_prev, self.h_prev,
+            self.gamma, self._k_w, self._k_tau, self.extrapolate, self._v_regen, self._p_regen, self._eff_scale,
+            self._heat_rate)
         self.v_prev, self.h_prev = v, h
-        w_mid = v_mid * self._k_w if v_mid > 0.0 else 0.0
-        maps = self.maps
-        t_peak, t_cont = maps.peak(w), maps.cont(w)
-        t_lim = torque_limit(t_peak, t_cont, self.gamma)
-        tau = f_req * self._k_tau
-        brake = 0.0
-        if tau > t_lim:
-            tau = t_lim
-        elif tau < 0.0:
-            t_regen = t_lim if v >= self.params.regen_speed_min_mps else 0.0
-            if tau < -t_regen:
-                tau = -t_regen
-            brake = -(f_req - tau / self._k_tau)
-        p_el = electrical_power(tau, w_mid, maps.eff(w_mid, tau))
-        # bus power limits (battery power capability + generator output, from the bus):
-        # scale the torque down until the electrical power fits; the rest of a braking
-        # demand goes to the friction brakes, the rest of a propulsion demand is not delivered
-        p_hi = self.u["elec_power_max_w"]
-        p_lo = self.u["elec_power_min_w"]
-        if p_hi < 0.0:
-            p_hi = 0.0
-        if p_lo > 0.0:
-            p_lo = 0.0
-        if p_el > p_hi or p_el < p_lo:
-            target = p_hi if p_el > p_hi else p_lo
-            for _ in range(4):  # fixed point on tau: eta changes slowly with torque
-                tau *= target / p_el if p_el != 0.0 else 0.0
-                p_el = electrical_power(tau, w_mid, maps.eff(w_mid, tau))
-                if p_el == 0.0 or abs(p_el - target) <= 1e-6 * abs(target) + 1e-3:
-                    break
-            if p_el > p_hi or p_el < p_lo:   # guard: never exceed the limit
-                tau *= 0.999 * target / p_el if p_el != 0.0 else 0.0
-                p_el = electrical_power(tau, w_mid, maps.eff(w_mid, tau))
-            if f_req < 0.0:
-                brake = -(f_req - tau / self._k_tau)
-        p_m = tau * w_mid
         self.e_elec += p_el * h
         self.e_mech += p_m * h
         self.e_loss += (p_el - p_m) * h
-        self.gamma = heat_index_step(self.gamma, tau, t_cont, h, self.params.heat_rate_per_s)
+        self.gamma = gamma
         y = self.y
         y["traction_force_n"] = tau / self._k_tau
         y["brake_force_n"] = brake

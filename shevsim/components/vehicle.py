@@ -5,8 +5,12 @@ exact per-step energy bookkeeping (work of each force = force x mean speed x h),
 ``traction_energy_j - brake_energy_j - rolling_energy_j - aero_energy_j - grade_energy_j ==
 kinetic_energy_j - kinetic_energy_j(t0)`` to round-off.
 
-Ports
------
+Road grade along distance (parameters ``grade_distance_m`` / ``grade_frac``, default empty = off): the
+grade ``tan(theta)`` interpolated between the knots at the distance travelled, held beyond the end knots
+(:func:`shevsim.powertrain.vehicle.grade_rad_at`), is *added* to the ``grade_rad`` input.
+
+Ports (``input_mode = "force"``, the default: forward dynamics)
+---------------------------------------------------------------
 Inputs
     ``traction_force_n`` [N]  signed wheel force from the motor (+ propel, - regenerative braking).
     ``brake_force_n`` [N]  friction brake force (>= 0).
@@ -16,15 +20,31 @@ Outputs (state at t + h; none is direct feedthrough)
     cumulative works [J]: ``traction_energy_j`` (signed: regen counts negative),
     ``brake_energy_j``, ``rolling_energy_j``, ``aero_energy_j``, ``grade_energy_j`` (energy taken
     from the vehicle, >= 0 except grade downhill), and ``kinetic_energy_j`` = 1/2 M v^2 (state).
+
+Ports (``input_mode = "speed"``: speed-following / backward, e.g. replaying a measured speed trace)
+----------------------------------------------------------------------------------------------------
+The motion is prescribed: inputs ``speed_ref_mps`` [m/s] and ``accel_ref_mps2`` [m/s2] (the speed at
+t + h and the slope of the segment driven next, as a ``cycle`` outputs them) and ``grade_rad``. The
+vehicle takes ``speed_mps = max(speed_ref_mps, 0)`` and outputs ``force_req_n`` [N], the wheel force
+that drives the next step, ``traction_force_n(v, v + a h)`` (:mod:`shevsim.powertrain.vehicle`, the
+inverse of the forward step; 0 at ``initialize``), for a motor's ``force_req_n``. The works are booked
+with the force that produced the step's actual speed change (the brake work stays 0: the split of a
+negative force between regeneration and friction brakes is the motor's). All outputs are direct
+feedthrough of ``speed_ref_mps``; ``force_req_n`` also of ``accel_ref_mps2`` and ``grade_rad``.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.vehicle import G_MPS2, step_vehicle
+from shevsim.powertrain.vehicle import G_MPS2, grade_rad_at, road_forces, step_vehicle, traction_force_n
+
+INPUT_MODES = ("force", "speed")
 
 
 @dataclass(frozen=True)
@@ -46,7 +66,13 @@ class VehicleParams:
     gravity_mps2 : float
         g [m/s2].
     speed_init_mps : float
-        Initial speed [m/s].
+        Initial speed [m/s] (force mode; in speed mode the prescribed speed).
+    grade_distance_m, grade_frac : tuple of float
+        Road grade knots: distance [m] (strictly increasing) and grade ``tan(theta)`` [-], same length;
+        empty (default) = no grade from the parameters. Added to the ``grade_rad`` input.
+    input_mode : {"force", "speed"}
+        ``"force"``: forward dynamics from the traction/brake forces; ``"speed"``: the motion follows
+        the ``speed_ref_mps`` input and the required wheel force is an output (see module docstring).
     """
 
     mass_kg: float = 15554.0
@@ -56,6 +82,9 @@ class VehicleParams:
     air_density_kg_m3: float = 1.2
     gravity_mps2: float = G_MPS2
     speed_init_mps: float = 0.0
+    grade_distance_m: tuple[float, ...] = ()
+    grade_frac: tuple[float, ...] = ()
+    input_mode: str = "force"
 
     def __post_init__(self):
         for k in ("mass_kg", "frontal_area_m2", "air_density_kg_m3", "gravity_mps2"):
@@ -64,6 +93,16 @@ class VehicleParams:
         for k in ("drag_coefficient", "rolling_coefficient", "speed_init_mps"):
             if not getattr(self, k) >= 0:
                 raise ValueError(f"parameter '{k}' must be >= 0, got {getattr(self, k)!r}")
+        if self.input_mode not in INPUT_MODES:
+            raise ValueError(f"parameter 'input_mode' must be one of {INPUT_MODES}, got {self.input_mode!r}")
+        d, g = tuple(self.grade_distance_m), tuple(self.grade_frac)
+        if len(d) != len(g):
+            raise ValueError(f"parameters 'grade_distance_m' and 'grade_frac' must have the same length, "
+                             f"got {len(d)} and {len(g)}")
+        if not all(math.isfinite(x) for x in d + g):
+            raise ValueError("parameters 'grade_distance_m' / 'grade_frac' must be finite")
+        if any(b <= a for a, b in zip(d, d[1:])):
+            raise ValueError(f"parameter 'grade_distance_m' must be strictly increasing, got {d!r}")
 
     @property
     def c_aero(self) -> float:
@@ -91,18 +130,44 @@ class Vehicle(Component):
         out("kinetic_energy_j", "J", 0.0, "kinetic energy 1/2 M v^2"),
     )
 
+    _SPEED_INPUTS = ("speed_ref_mps", "accel_ref_mps2", "grade_rad")
+    VARIABLES_SPEED = (
+        inp("speed_ref_mps", "m/s", 0.0, "prescribed speed (speed mode), >= 0"),
+        inp("accel_ref_mps2", "m/s2", 0.0, "prescribed acceleration over the next step (speed mode)"),
+        inp("grade_rad", "rad", 0.0, "road grade, + uphill"),
+        out("force_req_n", "N", 0.0, "wheel force that drives the next step (speed mode), + propel", _SPEED_INPUTS),
+    ) + tuple(out(v.name, v.unit, v.start, v.description, ("speed_ref_mps",))
+              for v in VARIABLES if v.causality == "output")
+
     def __init__(self, name: str = "vehicle", params: VehicleParams | None = None):
         super().__init__(name, params)
         p = self.params
         self._m, self._c, self._fr, self._g = p.mass_kg, p.c_aero, p.rolling_coefficient, p.gravity_mps2
+        self._kd = np.array(p.grade_distance_m, dtype=float)
+        self._kg = np.array(p.grade_frac, dtype=float)
+        self._knots = self._kd.size > 0
+        self._speed = p.input_mode == "speed"
 
-    _static = ("name", "params", "_m", "_c", "_fr", "_g")
+    _static = ("name", "params", "_m", "_c", "_fr", "_g", "_kd", "_kg", "_knots", "_speed")
+
+    def variables(self):
+        """Force mode: :attr:`VARIABLES`; speed mode: :attr:`VARIABLES_SPEED`."""
+        p = getattr(self, "params", None)
+        return self.VARIABLES_SPEED if p is not None and p.input_mode == "speed" else self.VARIABLES
+
+    def _grade(self, th_in: float) -> float:
+        return th_in + grade_rad_at(self.dist, self._kd, self._kg) if self._knots else th_in
 
     def initialize(self, t0: float) -> None:
-        self.v = self.params.speed_init_mps
         self.e = [0.0, 0.0, 0.0, 0.0, 0.0]
         self.dist = 0.0
         y = self.y
+        if self._speed:
+            self.v = max(self.u["speed_ref_mps"], 0.0)
+            self.th = self._grade(self.u["grade_rad"])
+            y["force_req_n"] = 0.0
+        else:
+            self.v = self.params.speed_init_mps
         y["speed_mps"] = self.v
         y["accel_mps2"] = 0.0
         y["distance_m"] = 0.0
@@ -110,14 +175,39 @@ class Vehicle(Component):
             y[k] = 0.0
         y["kinetic_energy_j"] = 0.5 * self._m * self.v * self.v
 
-    def do_step(self, t: float, h: float) -> None:
+    def _step_speed(self, t: float, h: float):
+        """Speed mode: follow ``speed_ref_mps``; book the works; output the force for the next step."""
         u = self.u
-        f_t, f_b, th = u["traction_force_n"], u["brake_force_n"], u["grade_rad"]
-        if f_t != f_t or f_b != f_b or th != th:
+        vr, ar, th_in = u["speed_ref_mps"], u["accel_ref_mps2"], u["grade_rad"]
+        if vr != vr or ar != ar or th_in != th_in:
             raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
-                                  f"(traction_force_n={f_t}, brake_force_n={f_b}, grade_rad={th})")
+                                  f"(speed_ref_mps={vr}, accel_ref_mps2={ar}, grade_rad={th_in})")
         v0 = self.v
-        v1, dist, wp, wb, wr, wa, wg = step_vehicle(v0, f_t, f_b, th, h, self._m, self._c, self._fr, self._g)
+        v1 = vr if vr > 0.0 else 0.0
+        m, c, fr, g = self._m, self._c, self._fr, self._g
+        th = self.th
+        f = traction_force_n(v0, v1, h, th, m, c, fr, g)
+        dist = 0.5 * (v0 + v1) * h
+        f_g, f_rr = road_forces(th, m, fr, g) if dist > 0.0 else (0.0, 0.0)
+        self.dist += dist
+        self.th = self._grade(th_in)
+        v_next = v1 + ar * h
+        self.y["force_req_n"] = traction_force_n(v1, v_next if v_next > 0.0 else 0.0, h, self.th, m, c, fr, g)
+        return v1, dist, f * dist, 0.0, f_rr * dist, c * v0 * v1 * dist, f_g * dist
+
+    def do_step(self, t: float, h: float) -> None:
+        v0 = self.v
+        if self._speed:
+            v1, dist, wp, wb, wr, wa, wg = self._step_speed(t, h)
+        else:
+            u = self.u
+            f_t, f_b, th = u["traction_force_n"], u["brake_force_n"], u["grade_rad"]
+            if f_t != f_t or f_b != f_b or th != th:
+                raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
+                                      f"(traction_force_n={f_t}, brake_force_n={f_b}, grade_rad={th})")
+            if self._knots:
+                th = th + grade_rad_at(self.dist, self._kd, self._kg)
+            v1, dist, wp, wb, wr, wa, wg = step_vehicle(v0, f_t, f_b, th, h, self._m, self._c, self._fr, self._g)
         self.v = v1
         e = self.e
         e[0] += wp
@@ -125,7 +215,8 @@ class Vehicle(Component):
         e[2] += wr
         e[3] += wa
         e[4] += wg
-        self.dist += dist
+        if not self._speed:
+            self.dist += dist
         y = self.y
         y["speed_mps"] = v1
         y["accel_mps2"] = (v1 - v0) / h

@@ -23,24 +23,41 @@ Electrical power (the equivalent machine, motor-shaft quantities)::
     P_loss = P_elec - P_mech >= 0
 
 At standstill the map's efficiency gives zero loss (P_mech = 0); stall copper loss is not modelled.
+``efficiency_scale_frac`` (default 1, off) multiplies the map's efficiency, ``eta = min(s eta_map, 1)``.
+
+One step of the machine (:func:`motor_step`): force request -> torque -> heat-index torque limit ->
+regenerative limits (speed threshold, bus power limits, ``regen_power_max_w``: the most electrical
+power the drive returns, default inf = off) -> electrical power. It is the whole physics of the
+``motor`` component (:mod:`shevsim.components.motor`, which only holds the state and books energies)
+and of the vehicle calibration's model (:mod:`shevsim.calibrate.vehicle`); every function here is
+compiled with numba (``f.py_func`` is the Python source) and looks its maps up with the compiled
+lookups of :mod:`shevsim.core.lookup` on :meth:`MotorMaps.packed` arrays (bit-identical to the maps'
+Python lookups).
 """
 from __future__ import annotations
+
+import numpy as np
+
+from shevsim.core.lookup import _curve_nb, _grid_nb, _njit
 
 from .maps import Curve, Grid2D
 
 HEAT_RATE_PER_S = 0.3 / 180.0
 
 
+@_njit(cache=True)
 def torque_limit(tau_peak: float, tau_cont: float, gamma: float) -> float:
     """Max torque magnitude (B.2'): ``tau_cont + (1 - gamma)(tau_peak - tau_cont)``."""
     return tau_cont + (1.0 - gamma) * (tau_peak - tau_cont)
 
 
+@_njit(cache=True)
 def heat_index_rate(tau: float, tau_cont: float, rate_per_s: float = HEAT_RATE_PER_S) -> float:
     """d gamma / dt (B.3'), unclipped."""
     return rate_per_s * (abs(tau) / tau_cont - 1.0)
 
 
+@_njit(cache=True)
 def heat_index_step(gamma: float, tau: float, tau_cont: float, h: float,
                     rate_per_s: float = HEAT_RATE_PER_S) -> float:
     """gamma after ``h`` seconds at constant torque (exact, clipped to [0, 1])."""
@@ -48,10 +65,94 @@ def heat_index_step(gamma: float, tau: float, tau_cont: float, h: float,
     return 0.0 if g < 0.0 else (1.0 if g > 1.0 else g)
 
 
+@_njit(cache=True)
 def electrical_power(tau: float, w: float, eta: float) -> float:
     """Electrical power [W] (+ drawn) for shaft torque ``tau`` [N m] at ``w`` [rad/s]."""
     p = tau * w
     return p / eta if p >= 0.0 else p * eta
+
+
+@_njit(cache=True)
+def efficiency(md, mi, w: float, tau: float, scale: float) -> float:
+    """Map efficiency at motor speed ``w`` [rad/s], torque ``tau`` [N m], times ``scale`` (capped at 1)."""
+    eta = _grid_nb(md, mi[4], mi[5], mi[6], w, tau)
+    if scale != 1.0:
+        eta = min(eta * scale, 1.0)
+    return eta
+
+
+@_njit(cache=True)
+def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: float, v_prev: float,
+               h_prev: float, gamma: float, k_w: float, k_tau: float, extrapolate: bool, regen_speed_min: float,
+               regen_power_max: float, eff_scale: float, heat_rate: float):
+    """One step of the equivalent motor with inputs held over ``h`` (see :mod:`shevsim.components.motor`).
+
+    Parameters
+    ----------
+    md, mi : arrays
+        Packed maps (:meth:`MotorMaps.packed`).
+    f_req, v : float
+        Wheel force request [N] (+ propel) and vehicle speed [m/s].
+    p_hi, p_lo : float
+        Bus power limits [W] (>= 0 / <= 0; others are clamped to 0).
+    h, v_prev, h_prev, gamma : float
+        Step [s]; speed input and step of the previous step (mid-step speed extrapolation); heat index.
+    k_w, k_tau : float
+        Motor rad/s per m/s and motor N m per wheel N.
+    extrapolate, regen_speed_min, regen_power_max, eff_scale, heat_rate
+        Parameters ``extrapolate_speed``, ``regen_speed_min_mps``, ``regen_power_max_w``,
+        ``efficiency_scale_frac``, ``heat_rate_per_s``.
+
+    Returns
+    -------
+    tau, brake, p_el, p_m, w, t_lim, gamma1, v : float
+        Torque [N m], friction brake force [N], electrical power [W] (+ drawn), shaft power [W] at the
+        mid-step speed, motor speed [rad/s], torque limit [N m], heat index at t + h, the speed used
+        (the next step's ``v_prev``).
+    """
+    if v < 0.0:
+        v = 0.0
+    w = v * k_w
+    # mid-step speed by linear extrapolation of the speed input (second-order accurate power)
+    v_mid = v + 0.5 * (v - v_prev) * (h / h_prev) if extrapolate else v
+    w_mid = v_mid * k_w if v_mid > 0.0 else 0.0
+    t_peak = _curve_nb(md, mi[0], mi[1], w)
+    t_cont = _curve_nb(md, mi[2], mi[3], w)
+    t_lim = torque_limit(t_peak, t_cont, gamma)
+    tau = f_req * k_tau
+    brake = 0.0
+    if tau > t_lim:
+        tau = t_lim
+    elif tau < 0.0:
+        t_regen = t_lim if v >= regen_speed_min else 0.0
+        if tau < -t_regen:
+            tau = -t_regen
+        brake = -(f_req - tau / k_tau)
+    p_el = electrical_power(tau, w_mid, efficiency(md, mi, w_mid, tau, eff_scale))
+    # bus power limits (battery power capability + generator output) and the drive's own regenerative
+    # power limit: scale the torque down until the electrical power fits; the rest of a braking
+    # demand goes to the friction brakes, the rest of a propulsion demand is not delivered
+    if p_hi < 0.0:
+        p_hi = 0.0
+    if p_lo > 0.0:
+        p_lo = 0.0
+    if p_lo < -regen_power_max:
+        p_lo = -regen_power_max
+    if p_el > p_hi or p_el < p_lo:
+        target = p_hi if p_el > p_hi else p_lo
+        for _ in range(4):  # fixed point on tau: eta changes slowly with torque
+            tau *= target / p_el if p_el != 0.0 else 0.0
+            p_el = electrical_power(tau, w_mid, efficiency(md, mi, w_mid, tau, eff_scale))
+            if p_el == 0.0 or abs(p_el - target) <= 1e-6 * abs(target) + 1e-3:
+                break
+        if p_el > p_hi or p_el < p_lo:   # guard: never exceed the limit
+            tau *= 0.999 * target / p_el if p_el != 0.0 else 0.0
+            p_el = electrical_power(tau, w_mid, efficiency(md, mi, w_mid, tau, eff_scale))
+        if f_req < 0.0:
+            brake = -(f_req - tau / k_tau)
+    p_m = tau * w_mid
+    gamma1 = heat_index_step(gamma, tau, t_cont, h, heat_rate)
+    return tau, brake, p_el, p_m, w, t_lim, gamma1, v
 
 
 class MotorMaps:
@@ -75,3 +176,17 @@ class MotorMaps:
 
     def power(self, tau: float, w: float) -> float:
         return electrical_power(tau, w, self.eff(w, tau))
+
+    def packed(self):
+        """``(md, mi)``: the peak and continuous curves and the efficiency grid packed into one float
+        array ``md`` with offsets/sizes ``mi = [o_peak, n_peak, o_cont, n_cont, o_eff, n_w, n_tau]`` for
+        :func:`motor_step` (layout of :mod:`shevsim.core.lookup`)."""
+        parts, mi, o = [], [], 0
+        for c in (self.peak, self.cont):
+            parts += [c.x, c.y]
+            mi += [o, c.x.size]
+            o += 2 * c.x.size
+        g = self.eff
+        parts += [g.x, g.y, g.z.reshape(-1)]
+        mi += [o, g.x.size, g.y.size]
+        return np.ascontiguousarray(np.concatenate(parts), dtype=np.float64), np.array(mi, dtype=np.int64)

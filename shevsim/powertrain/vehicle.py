@@ -23,14 +23,68 @@ closes to round-off on any step size. When the update would give ``v1 < 0`` the 
 inside the step, at ``t_s = M v0 / R`` with ``R`` the net retarding force, after ``v0 t_s / 2``
 metres; each force works over that distance (``sum W = -M v0^2 / 2`` exactly), and it is then
 held at rest. The returned works are what the component uses for its distance too.
+
+Speed-following (backward) use: :func:`traction_force_n` is the exact inverse of :func:`step_vehicle`
+(the propulsion force that takes the point mass from ``v0`` to ``v1`` in ``h``, brakes off):
+
+    F = M (v1 - v0)/h + c v0 v1 + F_rr + M g sin(theta)          (0 when at rest at both ends)
+
+Both go through :func:`road_forces`, so the forward plant, the speed-following vehicle and the
+calibration (:mod:`shevsim.calibrate.vehicle`) share one set of force laws. Road grade along distance
+(:func:`grade_rad_at`): piecewise-linear grade ``tan(theta)`` between knots ``(d_j, g_j)``, held beyond
+the end knots.
+
+Every function here is compiled with numba (``f.py_func`` is the Python source); the components call
+the compiled functions, the calibration calls them from its compiled loop.
 """
 from __future__ import annotations
 
 import math
 
+from shevsim.core.lookup import _njit
+
 G_MPS2 = 9.80665
 
 
+@_njit(cache=True)
+def road_forces(grade_rad: float, mass_kg: float, f_roll_coeff: float, g: float = G_MPS2) -> tuple[float, float]:
+    """Grade force ``M g sin(theta)`` and rolling force ``f_r M g cos(theta)`` [N] (rolling applies while moving)."""
+    return mass_kg * g * math.sin(grade_rad), f_roll_coeff * mass_kg * g * math.cos(grade_rad)
+
+
+@_njit(cache=True)
+def grade_rad_at(d: float, knot_d, knot_frac) -> float:
+    """Road grade [rad] at distance ``d`` [m]: ``atan`` of the grade ``tan(theta)`` interpolated linearly
+    between knots ``knot_d`` [m] (increasing) / ``knot_frac`` [-], held beyond the end knots; 0 without knots."""
+    n = knot_d.shape[0]
+    if n == 0:
+        return 0.0
+    if d <= knot_d[0]:
+        return math.atan(knot_frac[0])
+    if d >= knot_d[n - 1]:
+        return math.atan(knot_frac[n - 1])
+    j = 0
+    while knot_d[j + 1] < d:
+        j += 1
+    f = (d - knot_d[j]) / (knot_d[j + 1] - knot_d[j])
+    return math.atan(knot_frac[j] + f * (knot_frac[j + 1] - knot_frac[j]))
+
+
+@_njit(cache=True)
+def traction_force_n(v0: float, v1: float, h: float, grade_rad: float, mass_kg: float, c_aero: float,
+                     f_roll_coeff: float, g: float = G_MPS2) -> float:
+    """Propulsion force [N] (negative = braking) that takes :func:`step_vehicle` from ``v0`` to ``v1``
+    over ``h`` with the brakes off: ``M (v1 - v0)/h + c v0 v1 + F_rr + M g sin(theta)``; 0 at rest at
+    both ends (the brakes hold the vehicle)."""
+    if v0 <= 0.0:
+        v0 = 0.0
+        if v1 <= 0.0:
+            return 0.0
+    f_g, f_rr = road_forces(grade_rad, mass_kg, f_roll_coeff, g)
+    return mass_kg * (v1 - v0) / h + c_aero * v0 * v1 + f_rr + f_g
+
+
+@_njit(cache=True)
 def step_vehicle(v0: float, f_prop: float, f_brk: float, grade_rad: float, h: float,
                  mass_kg: float, c_aero: float, f_roll_coeff: float,
                  g: float = G_MPS2) -> tuple[float, float, float, float, float, float, float]:
@@ -58,8 +112,7 @@ def step_vehicle(v0: float, f_prop: float, f_brk: float, grade_rad: float, h: fl
         it accelerates; brake, rolling, aero, grade as energy taken from the vehicle).
     """
     f_brk = max(f_brk, 0.0)
-    f_g = mass_kg * g * math.sin(grade_rad)
-    f_rr = f_roll_coeff * mass_kg * g * math.cos(grade_rad)
+    f_g, f_rr = road_forces(grade_rad, mass_kg, f_roll_coeff, g)
     if v0 <= 0.0:
         v0 = 0.0
         drive = f_prop - f_g
