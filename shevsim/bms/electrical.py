@@ -65,20 +65,24 @@ multiplicative factors for ageing and cell-to-cell spread::
 - Limitation: with the seed's Sigma_v = 1 scaling, the theta gain is tiny; on a plant with R1 aged
   by 20 % kappa_1 stays near 1 over 2000 s (kappa_s does converge; tests/unit/test_bms.py).
 
-Everything is plain Python floats (3x3 and 2x2 symmetric covariances unrolled).  ``DEKF(compiled=True)``
-(default) runs the same arithmetic as one numba kernel (:func:`_dekf_step_nb`, bit-identical);
-:meth:`DEKF.step_heat` is the step followed by the heat estimate (5.16) in one call.
+The filter is written once, as the numba-compatible pure function :func:`dekf_step` (floats and the
+packed tables in, a tuple out; 3x3 and 2x2 symmetric covariances unrolled), with the heat (5.16) in
+:func:`cell_heat`.  ``DEKF(compiled=True)`` (default) runs it compiled; ``compiled=False`` runs
+``dekf_step.py_func``, the same source in Python.  :meth:`DEKF.step_heat` is the step followed by the heat
+estimate in one call.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
 from shevsim.core.lookup import HAVE_NUMBA, _g2_locate, _njit, _t1_slope, _t1_value
 from shevsim.core.errors import SimulationError
 
-__all__ = ["DEKFParams", "DEKF"]
+__all__ = ["DEKFParams", "DEKF", "dekf_step", "cell_heat"]
 
 
 @dataclass(frozen=True)
@@ -155,7 +159,7 @@ class DEKFParams:
 
 
 @_njit(cache=True)
-def _ecm_nom_nb(d, ix, soc, t_c, i_a):  # pragma: no cover - compiled
+def _ecm_nom(d, ix, soc, t_c, i_a):
     """``(R_s, R1, C1)`` of the nominal maps (``CellTables.params(soc, t_c, i_a)[:3]``, same arithmetic)."""
     if i_a >= 0.0:
         og, ns, nt = ix[4], ix[5], ix[6]
@@ -179,22 +183,35 @@ def _ecm_nom_nb(d, ix, soc, t_c, i_a):  # pragma: no cover - compiled
 
 
 @_njit(cache=True)
-def _dekf_step_nb(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12, p22, s00, s01, s11,
-                  i_a, v_meas_v, dt_s, t_mean_c):  # pragma: no cover - compiled
-    """DEKF.step (and DEKF.heat at the new estimates) with the same arithmetic; ``k = [capacity_ah,
-    q_soc, q_v1, q_x2, r_v, q_th1, q_th2, r1_min, r1_max, c1_min, c1_max, rs_min, F, rs_scaled,
-    rc_scaled]``.  Returns ``(ok, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22,
-    s00, s01, s11, e, heat)`` (``x2``, ``th1``, ``th2`` the filter's states/parameters: R_s, R1, C1
-    or their factors; ``rs``, ``r1``, ``c1`` the effective values); ``ok = 0`` when the innovation
-    variance is unusable (the caller re-runs the Python step, which raises)."""
+def cell_heat(i_a, rs, v1, r1, t_c, ds):
+    """Heat generation [W] of the OCV-R-RC cell (5.16): ``i^2 R_s + V1^2 / R1 - i T dS / F`` (``ds`` = the
+    entropy change dS [J/mol/K] at the SOC, ``t_c`` [degC])."""
+    return i_a * i_a * rs + v1 * v1 / r1 - i_a * (t_c + 273.15) * ds / FARADAY_C_MOL
+
+
+@_njit(cache=True)
+def dekf_step(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12, p22, s00, s01, s11,
+              i_a, v_meas_v, dt_s, t_mean_c):
+    """One DEKF step (5.21-5.24, module docstring) and the heat (5.16) at the new estimates.
+
+    ``d, ix`` = ``CellTables.packed()``; ``k = [capacity_ah, q_soc, q_v1, q_x2, r_v, q_th1, q_th2, r1_min,
+    r1_max, c1_min, c1_max, rs_min, F, rs_scaled, rc_scaled]``; the covariances are the unrolled symmetric
+    ``P_x`` (p00 .. p22) and ``P_theta`` (s00 .. s11).  Returns ``(ok, soc, v1, x2, rs, th1, th2, r1, c1,
+    p00, p01, p02, p11, p12, p22, s00, s01, s11, e, var, heat)`` (``x2``, ``th1``, ``th2`` the filter's
+    states/parameters: R_s, R1, C1 or their factors; ``rs``, ``r1``, ``c1`` the effective values; ``e``
+    the innovation [V] and ``var`` its variance); ``ok = 0`` when the innovation variance is unusable
+    (the rest is then not an update).
+    """
+    # 1. parameter time update (5.21); theta = [R1, C1] (free) or their factors (table_scaled)
     s00 += k[5]
     s11 += k[6]
+    # SOC time update first: the nominal maps are read at the predicted SOC
     soc = soc0 - dt_s * i_a / (3600.0 * k[0])
     rsn = 1.0
     r1n = 1.0
     c1n = 1.0
     if k[13] > 0.5 or k[14] > 0.5:
-        rsn_t, r1n_t, c1n_t = _ecm_nom_nb(d, ix, soc, t_mean_c, i_a)
+        rsn_t, r1n_t, c1n_t = _ecm_nom(d, ix, soc, t_mean_c, i_a)
         if k[13] > 0.5:
             rsn = rsn_t
         if k[14] > 0.5:
@@ -202,6 +219,7 @@ def _dekf_step_nb(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12
             c1n = c1n_t
     r1 = th1 * r1n
     c1 = th2 * c1n
+    # 2. state time update (5.22) with i_{k-1} = i_k (ZOH); A = diag(1, a, 1): A P A^T + Sigma_w
     tau = r1 * c1
     a = math.exp(-dt_s / tau)
     v1 = a * v1_prev + r1 * (1.0 - a) * i_a
@@ -211,29 +229,35 @@ def _dekf_step_nb(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12
     p00 += k[1]
     p11 += k[2]
     p22 += k[3]
+    # 3. state measurement update (5.23); R_s = x2 * rsn (free: rsn = 1, x2 = R_s)
     oo = ix[0]
     no = ix[1]
     c0 = _t1_slope(d, oo, no, soc)
     c2 = -i_a * rsn
     e = v_meas_v - (_t1_value(d, oo, no, soc) - v1 - x2 * rsn * i_a)
+    # P C^T with C = [c0, -1, c2]
     h0 = p00 * c0 - p01 + p02 * c2
     h1 = p01 * c0 - p11 + p12 * c2
     h2 = p02 * c0 - p12 + p22 * c2
     sden = c0 * h0 - h1 + c2 * h2 + k[4]
     if not (sden > 0.0 and math.isfinite(sden) and math.isfinite(e)):
-        return (0, soc, v1, x2, x2 * rsn, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, 0.0)
+        return (0, soc, v1, x2, x2 * rsn, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, sden,
+                0.0)
     k0 = h0 / sden
     k1 = h1 / sden
     k2 = h2 / sden
     soc += k0 * e
     v1 += k1 * e
     x2 += k2 * e
+    # P^+ = P - K (P C^T)^T   (symmetric form of (I - K C) P)
     p00 -= k0 * h0
     p01 -= k0 * h1
     p02 -= k0 * h2
     p11 -= k1 * h1
     p12 -= k1 * h2
     p22 -= k2 * h2
+    # 4. parameter measurement update (5.24) with C^theta (5.17d-e, corrected), times the nominal
+    #    value for a factor (dV/dkappa1 = R1,nom dV/dR1, dV/dkappa2 = C1,nom dV/dC1)
     da_dr1 = a * dt_s / (r1 * tau)
     da_dc1 = a * dt_s / (c1 * tau)
     w = v1_prev - r1 * i_a
@@ -249,6 +273,7 @@ def _dekf_step_nb(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12
     s00 -= l0 * m0
     s01 -= l0 * m1
     s11 -= l1 * m1
+    # keep the estimates physical (bounds on the effective R_s, R1, C1)
     if soc < 0.0:
         soc = 0.0
     elif soc > 1.0:
@@ -260,9 +285,8 @@ def _dekf_step_nb(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12
     th1 = r1 / r1n
     th2 = c1 / c1n
     rs = x2 * rsn
-    ds = _t1_value(d, ix[2], ix[3], soc)
-    heat = i_a * i_a * rs + v1 * v1 / r1 - i_a * (t_mean_c + 273.15) * ds / k[12]
-    return (1, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, heat)
+    heat = cell_heat(i_a, rs, v1, r1, t_mean_c, _t1_value(d, ix[2], ix[3], soc))
+    return (1, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, sden, heat)
 
 
 class DEKF:
@@ -274,7 +298,7 @@ class DEKF:
     tables : CellTables, optional
         OCV and entropy tables the BMS knows (default: the A123 26650 tables).
     compiled : bool
-        Compiled step (default; bit-identical to the Python step) or the Python reference.
+        Run :func:`dekf_step` compiled (default) or its ``py_func`` (the same source in Python).
 
     Attributes
     ----------
@@ -305,15 +329,13 @@ class DEKF:
         else:
             self._q_th1, self._q_th2, self._s0_th1, self._s0_th2 = p.q_r1, p.q_c1, p.s0_r1, p.s0_c1
             self._th0 = (p.r1_0_ohm, p.c1_0_f)
-        # compiled step (numba; same arithmetic, bit-identical); compiled=False for the Python path
+        # the step is dekf_step, compiled (default) or its py_func (the same source run by Python)
         self.compiled = bool(compiled and HAVE_NUMBA)
-        if self.compiled:
-            import numpy as np
-            p = self.params
-            self._tabs = self.tables.packed()
-            self._k = np.array([p.capacity_ah, p.q_soc, p.q_v1, self._q_x2, p.r_v, self._q_th1, self._q_th2,
-                                p.r1_min_ohm, p.r1_max_ohm, p.c1_min_f, p.c1_max_f, p.rs_min_ohm, FARADAY_C_MOL,
-                                1.0 if self.scaled else 0.0, 1.0 if self.rc_scaled else 0.0])
+        self._step = dekf_step if self.compiled else getattr(dekf_step, "py_func", dekf_step)
+        self._tabs = self.tables.packed()
+        self._k = np.array([p.capacity_ah, p.q_soc, p.q_v1, self._q_x2, p.r_v, self._q_th1, self._q_th2,
+                            p.r1_min_ohm, p.r1_max_ohm, p.c1_min_f, p.c1_max_f, p.rs_min_ohm, FARADAY_C_MOL,
+                            1.0 if self.scaled else 0.0, 1.0 if self.rc_scaled else 0.0])
         self.reset()
 
     def reset(self, soc0_frac: float | None = None) -> None:
@@ -339,8 +361,8 @@ class DEKF:
 
     def heat(self, i_a: float, t_mean_c: float) -> float:
         """Heat generation estimate [W] (5.16 with the OCV-R-RC model): i^2 R_s + V1^2/R1 - i T dS/F."""
-        ds = self.tables.entropy_change(self.soc)
-        return i_a * i_a * self.rs + self.v1 * self.v1 / self.r1 - i_a * (t_mean_c + 273.15) * ds / FARADAY_C_MOL
+        return cell_heat(float(i_a), self.rs, self.v1, self.r1, float(t_mean_c),
+                         self.tables.entropy_change(self.soc))
 
     @property
     def rs_factor(self) -> float:
@@ -353,20 +375,20 @@ class DEKF:
         ``t_mean_c`` [degC] (the previous step's mean-temperature estimate) is used by the heat's
         entropic term and, for ``table_scaled``, by the R_s,nom lookup.
         """
-        if self.compiled:
-            px, pth = self.px, self.pth
-            d, ix = self._tabs
-            r = _dekf_step_nb(d, ix, self._k, self.soc, self.v1, self.x2, self.th1, self.th2, px[0], px[1],
-                              px[2], px[3], px[4], px[5], pth[0], pth[1], pth[2], float(i_a), float(v_meas_v),
-                              float(dt_s), float(t_mean_c))
-            if r[0]:
-                (_, self.soc, self.v1, self.x2, self.rs, self.th1, self.th2, self.r1, self.c1, p00, p01, p02, p11,
-                 p12, p22, s00, s01, s11, self.innovation, q) = r
-                self.px = [p00, p01, p02, p11, p12, p22]
-                self.pth = [s00, s01, s11]
-                return q
-        self._step_py(i_a, v_meas_v, dt_s, t_mean_c)
-        return self.heat(i_a, t_mean_c)
+        px, pth = self.px, self.pth
+        d, ix = self._tabs
+        r = self._step(d, ix, self._k, self.soc, self.v1, self.x2, self.th1, self.th2, px[0], px[1], px[2], px[3],
+                       px[4], px[5], pth[0], pth[1], pth[2], float(i_a), float(v_meas_v), float(dt_s),
+                       float(t_mean_c))
+        if not r[0]:
+            raise SimulationError(f"DEKF: non-finite or non-positive innovation variance "
+                                  f"(innovation {r[18]!r} V, variance {r[19]!r}; inputs i={i_a!r} A, "
+                                  f"v={v_meas_v!r} V)")
+        (_, self.soc, self.v1, self.x2, self.rs, self.th1, self.th2, self.r1, self.c1, p00, p01, p02, p11, p12, p22,
+         s00, s01, s11, self.innovation, _, q) = r
+        self.px = [p00, p01, p02, p11, p12, p22]
+        self.pth = [s00, s01, s11]
+        return q
 
     def step(self, i_a: float, v_meas_v: float, dt_s: float, t_c: float = 25.0) -> float:
         """One DEKF step with the measured cell current [A] (+ discharge) and voltage [V].
@@ -374,101 +396,5 @@ class DEKF:
         ``t_c`` [degC]: cell temperature for the R_s,nom lookup (``table_scaled``; unused by ``free``).
         Returns the innovation ``y - g(x^-, i)`` [V].
         """
-        if self.compiled:
-            self.step_heat(i_a, v_meas_v, dt_s, t_c)
-            return self.innovation
-        return self._step_py(i_a, v_meas_v, dt_s, t_c)
-
-    def _step_py(self, i_a: float, v_meas_v: float, dt_s: float, t_c: float = 25.0) -> float:
-        """The reference (Python) step; the compiled kernel runs the same arithmetic."""
-        p = self.params
-        tab = self.tables
-        # 1. parameter time update (5.21); theta = [R1, C1] (free) or their factors (table_scaled)
-        s00, s01, s11 = self.pth
-        s00 += self._q_th1
-        s11 += self._q_th2
-        # SOC time update first: the nominal maps are read at the predicted SOC
-        soc = self.soc - dt_s * i_a / (3600.0 * p.capacity_ah)
-        rsn = r1n = c1n = 1.0
-        if self.scaled or self.rc_scaled:
-            rsn_t, r1n_t, c1n_t, _, _ = tab.params(soc, t_c, i_a)
-            if self.scaled:
-                rsn = rsn_t
-            if self.rc_scaled:
-                r1n, c1n = r1n_t, c1n_t
-        th1, th2 = self.th1, self.th2
-        r1 = th1 * r1n
-        c1 = th2 * c1n
-        # 2. state time update (5.22) with i_{k-1} = i_k (ZOH)
-        tau = r1 * c1
-        a = math.exp(-dt_s / tau)
-        v1_prev = self.v1
-        v1 = a * v1_prev + r1 * (1.0 - a) * i_a
-        x2 = self.x2
-        p00, p01, p02, p11, p12, p22 = self.px
-        # A = diag(1, a, 1): A P A^T
-        p01 *= a
-        p11 *= a * a
-        p12 *= a
-        p00 += p.q_soc
-        p11 += p.q_v1
-        p22 += self._q_x2
-        # 3. state measurement update (5.23); R_s = x2 * rsn (free: rsn = 1, x2 = R_s)
-        c0 = tab.docv_dsoc(soc)
-        c2 = -i_a * rsn
-        e = v_meas_v - (tab.ocv(soc) - v1 - x2 * rsn * i_a)
-        # P C^T with C = [c0, -1, c2]
-        h0 = p00 * c0 - p01 + p02 * c2
-        h1 = p01 * c0 - p11 + p12 * c2
-        h2 = p02 * c0 - p12 + p22 * c2
-        sden = c0 * h0 - h1 + c2 * h2 + p.r_v
-        if not (sden > 0.0 and math.isfinite(sden) and math.isfinite(e)):
-            raise SimulationError(f"DEKF: non-finite or non-positive innovation variance "
-                                  f"(innovation {e!r} V, variance {sden!r}; inputs i={i_a!r} A, v={v_meas_v!r} V)")
-        k0 = h0 / sden
-        k1 = h1 / sden
-        k2 = h2 / sden
-        soc += k0 * e
-        v1 += k1 * e
-        x2 += k2 * e
-        # P^+ = P - K (P C^T)^T   (symmetric form of (I - K C) P)
-        p00 -= k0 * h0
-        p01 -= k0 * h1
-        p02 -= k0 * h2
-        p11 -= k1 * h1
-        p12 -= k1 * h2
-        p22 -= k2 * h2
-        # 4. parameter measurement update (5.24) with C^theta (5.17d-e, corrected), times the nominal
-        #    value for a factor (dV/dkappa1 = R1,nom dV/dR1, dV/dkappa2 = C1,nom dV/dC1)
-        da_dr1 = a * dt_s / (r1 * tau)
-        da_dc1 = a * dt_s / (c1 * tau)
-        w = v1_prev - r1 * i_a
-        g0 = (-da_dr1 * w - (1.0 - a) * i_a) * r1n
-        g1 = -da_dc1 * w * c1n
-        m0 = s00 * g0 + s01 * g1
-        m1 = s01 * g0 + s11 * g1
-        tden = g0 * m0 + g1 * m1 + p.r_v
-        l0 = m0 / tden
-        l1 = m1 / tden
-        th1 += l0 * e
-        th2 += l1 * e
-        s00 -= l0 * m0
-        s01 -= l0 * m1
-        s11 -= l1 * m1
-        # keep the estimates physical (bounds on the effective R_s, R1, C1)
-        if soc < 0.0:
-            soc = 0.0
-        elif soc > 1.0:
-            soc = 1.0
-        if x2 * rsn < p.rs_min_ohm:
-            x2 = p.rs_min_ohm / rsn
-        r1 = min(max(th1 * r1n, p.r1_min_ohm), p.r1_max_ohm)
-        c1 = min(max(th2 * c1n, p.c1_min_f), p.c1_max_f)
-        th1 = r1 / r1n
-        th2 = c1 / c1n
-        self.soc, self.v1, self.x2, self.rs, self.r1, self.c1 = soc, v1, x2, x2 * rsn, r1, c1
-        self.th1, self.th2 = th1, th2
-        self.px = [p00, p01, p02, p11, p12, p22]
-        self.pth = [s00, s01, s11]
-        self.innovation = e
-        return e
+        self.step_heat(i_a, v_meas_v, dt_s, t_c)
+        return self.innovation

@@ -55,7 +55,7 @@ from typing import NamedTuple
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
 from shevsim.battery.thermal import ThermalParams
 from shevsim.core.lookup import HAVE_NUMBA, _njit, _t1_slope, _t1_value
-from shevsim.bms.thermal_estimators import TwoStateDiscretiser
+from shevsim.bms.thermal_estimators import TwoStateDiscretiser, _py
 from shevsim.core.errors import ScenarioError
 
 __all__ = ["PowerCapabilityParams", "PowerLimits", "PowerCapability", "electrical_current_limits"]
@@ -127,20 +127,6 @@ class PowerLimits(NamedTuple):
     v_chg_v: float          # predicted cell voltage after N steps at i_min
 
 
-def electrical_current_limits(soc: float, v1: float, rs: float, r1: float, c1: float, p: PowerCapabilityParams,
-                              tables: CellTables):
-    """``(i_soc_min, i_soc_max, i_v_min, i_v_max)`` [A], seed 5.28 (cell, + discharge)."""
-    n = p.horizon_steps
-    ndt = n * p.dt_s
-    q_as = 3600.0 * p.capacity_ah
-    i_soc_min = (soc - p.soc_min_frac) * q_as / ndt
-    i_soc_max = (soc - p.soc_max_frac) * q_as / ndt
-    aN = math.exp(-ndt / (r1 * c1))
-    gain = rs + r1 * (1.0 - aN) + tables.docv_dsoc(soc) * ndt / q_as
-    free = tables.ocv(soc) - aN * v1
-    return i_soc_min, i_soc_max, (free - p.v_min_v) / gain, (free - p.v_max_v) / gain
-
-
 _CACHE_MAX = 16384
 _CACHES: dict = {}
 
@@ -163,9 +149,20 @@ def _coeff_cache(key) -> _SharedCache:
 
 
 # ---------------------------------------------------------------------------------------------
-# compiled compute(): the arithmetic of electrical_current_limits, thermal_current_limits,
-# _exact_limits and voltage_after in the same order (bit-identical; pow via libm as CPython's **)
+# the power capability written ONCE as numba-compatible pure functions (compiled from their source;
+# ``f.py_func`` runs the same source in Python, the reference of ``compiled=False``).
+# ``d, ix`` = ``CellTables.packed()``; ``k`` = :func:`_constants`; ``th`` = :meth:`PowerCapability._thermal_coeffs`.
 # ---------------------------------------------------------------------------------------------
+def _constants(p: PowerCapabilityParams):
+    """``k = [N, dt, soc_min, soc_max, v_min, v_max, t_core_max, i_cell_max, capacity_ah, n_pack, exact, F,
+    float(N)]`` of ``p``."""
+    import numpy as np
+    return np.array([p.horizon_steps, p.dt_s, p.soc_min_frac, p.soc_max_frac, p.v_min_v, p.v_max_v,
+                     p.t_core_max_c, p.i_cell_max_a, p.capacity_ah, float(p.n_series * p.n_parallel),
+                     1.0 if p.polarisation_heat == "exact" else 0.0, FARADAY_C_MOL, float(p.horizon_steps)])
+
+
+@_njit(cache=True)
 def _pole_sum(rho, e00, e01, e10, e11, bq0, bq1, n00, n01, n10, n11, cc0, cc1, n):
     """``C_c (A^N - rho^N I) (A - rho I)^{-1} B_q`` of the 2x2 thermal model (``n`` = float(N));
     the removable singularity at ``rho = eig(A)`` is stepped around."""
@@ -183,87 +180,84 @@ def _pole_sum(rho, e00, e01, e10, e11, bq0, bq1, n00, n01, n10, n11, cc0, cc1, n
     return cc0 * (n00 * v0 + n01 * v1_ - rn * v0) + cc1 * (n10 * v0 + n11 * v1_ - rn * v1_)
 
 
-_pole_sum_nb = _njit(cache=True)(_pole_sum)
+@_njit(cache=True)
+def _electrical_limits(d, ix, k, soc, v1, rs, r1, c1):
+    """``(i_soc_min, i_soc_max, i_v_min, i_v_max)`` [A], seed 5.28 (cell, + discharge)."""
+    ndt = k[0] * k[1]
+    q_as = 3600.0 * k[8]
+    aN = math.exp(-ndt / (r1 * c1))
+    gain = rs + r1 * (1.0 - aN) + _t1_slope(d, ix[0], ix[1], soc) * ndt / q_as
+    free = _t1_value(d, ix[0], ix[1], soc) - aN * v1
+    return (soc - k[2]) * q_as / ndt, (soc - k[3]) * q_as / ndt, (free - k[4]) / gain, (free - k[5]) / gain
 
 
 @_njit(cache=True)
-def _compute_nb(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, last_max, last_min):  # pragma: no cover
-    """``k = [N, dt, soc_min, soc_max, v_min, v_max, t_core_max, i_cell_max, capacity_ah, n_pack,
-    exact, F, float(N)]``; ``th`` = the 17 thermal coefficients of ``_thermal_coeffs``."""
-    n = k[0]
-    dt = k[1]
-    oo = ix[0]
-    no = ix[1]
-    # electrical_current_limits
-    ndt = n * dt
-    q_as = 3600.0 * k[8]
-    i_smin = (soc - k[2]) * q_as / ndt
-    i_smax = (soc - k[3]) * q_as / ndt
+def _voltage_after(d, ix, k, i_a, soc, v1, rs, r1, c1):
+    """Predicted cell terminal voltage after N steps at the held current ``i_a`` (5.36) [V]."""
+    ndt = k[0] * k[1]
     aN = math.exp(-ndt / (r1 * c1))
-    gain = rs + r1 * (1.0 - aN) + _t1_slope(d, oo, no, soc) * ndt / q_as
-    free = _t1_value(d, oo, no, soc) - aN * v1
-    i_vmin = (free - k[4]) / gain
-    i_vmax = (free - k[5]) / gain
-    # thermal_current_limits
-    a00 = th[0]
-    a01 = th[1]
-    a10 = th[2]
-    a11 = th[3]
-    b00 = th[4]
-    b01 = th[5]
-    b10 = th[6]
-    b11 = th[7]
-    cc0 = th[8]
-    cc1 = th[9]
-    dc = th[10]
+    soc_n = soc - i_a * ndt / (3600.0 * k[8])
+    return _t1_value(d, ix[0], ix[1], soc_n) - i_a * rs - aN * v1 - i_a * r1 * (1.0 - aN)
+
+
+@_njit(cache=True)
+def _thermal_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, last_max, last_min):
+    """``(i_t_dch, i_t_chg)`` [A] keeping the predicted core temperature <= T_c,max after N steps: exact
+    quadratic (``k[10]`` = 1, module docstring) or the 5.31 bound with the previous limits ``last_*``."""
+    a00, a01, a10, a11, b00, b01, b10, b11, cc0, cc1, dc = (th[0], th[1], th[2], th[3], th[4], th[5], th[6],
+                                                            th[7], th[8], th[9], th[10])
+    # free response of the core temperature (mu = 0, no polarisation heat)
     free = (cc0 * (a00 * t_mean_c + a01 * gamma + b01 * t_amb_c)
             + cc1 * (a10 * t_mean_c + a11 * gamma + b11 * t_amb_c) + dc * t_amb_c)
-    gq = cc0 * b00 + cc1 * b10
+    gq = cc0 * b00 + cc1 * b10            # sum_i C A^i B_q  (> 0)
     beta = (t_mean_c + 273.15) * _t1_value(d, ix[2], ix[3], soc) / k[11]
     if k[10] > 0.5:
-        e00 = th[11]
-        e01 = th[12]
-        e10 = th[13]
-        e11 = th[14]
-        bq0 = th[15]
-        bq1 = th[16]
-        a = math.exp(-dt / (r1 * c1))
-        s1 = _pole_sum_nb(a, e00, e01, e10, e11, bq0, bq1, a00, a01, a10, a11, cc0, cc1, k[12])
-        s2 = _pole_sum_nb(a * a, e00, e01, e10, e11, bq0, bq1, a00, a01, a10, a11, cc0, cc1, k[12])
+        # S(rho) = C_c (A^N - rho^N I) (A - rho I)^{-1} B_q for rho = a and a^2
+        a = math.exp(-k[1] / (r1 * c1))
+        s1 = _pole_sum(a, th[11], th[12], th[13], th[14], th[15], th[16], a00, a01, a10, a11, cc0, cc1, k[12])
+        s2 = _pole_sum(a * a, th[11], th[12], th[13], th[14], th[15], th[16], a00, a01, a10, a11, cc0, cc1, k[12])
         qa = gq * rs + r1 * (gq - 2.0 * s1 + s2)
         qb = -gq * beta + 2.0 * v1 * (s1 - s2)
         qc = free + v1 * v1 * s2 / r1 - k[6]
         disc = qb * qb - 4.0 * qa * qc
         if disc < 0.0:
-            i_td = -qb / (2.0 * qa)
-            i_tc = i_td
-        else:
-            sq = math.sqrt(disc)
-            i_td = (-qb + sq) / (2.0 * qa)
-            i_tc = (-qb - sq) / (2.0 * qa)
-    else:
-        v1n = aN * v1 + r1 * (1.0 - aN) * last_max
-        q_pol = max(v1 * v1, v1n * v1n) / r1
-        mu_d = (k[6] - free - gq * q_pol) / gq
-        v1n = aN * v1 + r1 * (1.0 - aN) * last_min
-        q_pol = max(v1 * v1, v1n * v1n) / r1
-        mu_c = (k[6] - free - gq * q_pol) / gq
-        disc_d = beta * beta + 4.0 * rs * mu_d
-        disc_c = beta * beta + 4.0 * rs * mu_c
-        i_min_heat = beta / (2.0 * rs)
-        i_td = (beta + math.sqrt(disc_d)) / (2.0 * rs) if disc_d >= 0.0 else i_min_heat
-        i_tc = (beta - math.sqrt(disc_c)) / (2.0 * rs) if disc_c >= 0.0 else i_min_heat
-    # compute()
+            return -qb / (2.0 * qa), -qb / (2.0 * qa)
+        sq = math.sqrt(disc)
+        return (-qb + sq) / (2.0 * qa), (-qb - sq) / (2.0 * qa)
+    aN = math.exp(-(k[0] * k[1]) / (r1 * c1))
+    v1n = aN * v1 + r1 * (1.0 - aN) * last_max
+    q_pol = max(v1 * v1, v1n * v1n) / r1          # 5.31
+    mu_d = (k[6] - free - gq * q_pol) / gq
+    v1n = aN * v1 + r1 * (1.0 - aN) * last_min
+    q_pol = max(v1 * v1, v1n * v1n) / r1
+    mu_c = (k[6] - free - gq * q_pol) / gq
+    disc_d = beta * beta + 4.0 * rs * mu_d
+    disc_c = beta * beta + 4.0 * rs * mu_c
+    i_min_heat = beta / (2.0 * rs)
+    return ((beta + math.sqrt(disc_d)) / (2.0 * rs) if disc_d >= 0.0 else i_min_heat,
+            (beta - math.sqrt(disc_c)) / (2.0 * rs) if disc_c >= 0.0 else i_min_heat)
+
+
+@_njit(cache=True)
+def power_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, last_max, last_min):
+    """One power-capability evaluation (4.17-4.19 / 5.34-5.36): the 12 fields of :class:`PowerLimits`."""
+    i_smin, i_smax, i_vmin, i_vmax = _electrical_limits(d, ix, k, soc, v1, rs, r1, c1)
+    i_td, i_tc = _thermal_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, last_max, last_min)
     i_max = min(i_smin, i_vmin, i_td, k[7])
     i_min = max(i_smax, i_vmax, i_tc, -k[7])
-    soc_n = soc - i_max * ndt / (3600.0 * k[8])
-    v_d = _t1_value(d, oo, no, soc_n) - i_max * rs - aN * v1 - i_max * r1 * (1.0 - aN)
-    soc_n = soc - i_min * ndt / (3600.0 * k[8])
-    v_c = _t1_value(d, oo, no, soc_n) - i_min * rs - aN * v1 - i_min * r1 * (1.0 - aN)
+    v_d = _voltage_after(d, ix, k, i_max, soc, v1, rs, r1, c1)
+    v_c = _voltage_after(d, ix, k, i_min, soc, v1, rs, r1, c1)
     p_max = i_max * v_d * k[9]
     p_min = i_min * v_c * k[9]
     return (i_max, i_min, p_max if p_max > 0.0 else 0.0, p_min if p_min < 0.0 else 0.0,
             i_smin, i_smax, i_vmin, i_vmax, i_td, i_tc, v_d, v_c)
+
+
+def electrical_current_limits(soc: float, v1: float, rs: float, r1: float, c1: float, p: PowerCapabilityParams,
+                              tables: CellTables):
+    """``(i_soc_min, i_soc_max, i_v_min, i_v_max)`` [A], seed 5.28 (cell, + discharge)."""
+    d, ix = tables.packed()
+    return _electrical_limits(d, ix, _constants(p), float(soc), float(v1), float(rs), float(r1), float(c1))
 
 
 class PowerCapability:
@@ -277,8 +271,7 @@ class PowerCapability:
     tables : CellTables
         OCV and entropy tables.
     compiled : bool
-        Run :meth:`compute` as one numba kernel (:func:`_compute_nb`, the same arithmetic, bit-identical;
-        default) or in Python.
+        Run :func:`power_limits` compiled (default) or its ``py_func`` (the same source in Python).
 
     Notes
     -----
@@ -296,28 +289,25 @@ class PowerCapability:
         self._disc1 = TwoStateDiscretiser(self.thermal_params, p.dt_s, "zoh")
         # thermal coefficients per (rounded) h: a pure function of h and the constants, shared by
         # every instance with the same constants and not part of the state (not deep-copied)
-        self._hcache = _coeff_cache((self.thermal_params, p.horizon_steps, p.dt_s))
-        self._hcache_nb = _coeff_cache(("array", self.thermal_params, p.horizon_steps, p.dt_s))
-        self._exact = p.polarisation_heat == "exact"
-        self._npack = float(p.n_series * p.n_parallel)
-        # compiled compute() (numba; same arithmetic, bit-identical); compiled=False for the Python path
+        self._hcache = _coeff_cache(("array", self.thermal_params, p.horizon_steps, p.dt_s))
         self.compiled = bool(compiled and HAVE_NUMBA)
-        if self.compiled:
-            import numpy as np
-            self._tabs = self.tables.packed()
-            self._k = np.array([p.horizon_steps, p.dt_s, p.soc_min_frac, p.soc_max_frac, p.v_min_v, p.v_max_v,
-                                p.t_core_max_c, p.i_cell_max_a, p.capacity_ah, self._npack,
-                                1.0 if self._exact else 0.0, FARADAY_C_MOL, float(p.horizon_steps)])
+        self._limits = power_limits if self.compiled else _py(power_limits)
+        self._tabs = self.tables.packed()
+        self._k = _constants(p)
         self.last_i_max_a = 0.0
         self.last_i_min_a = 0.0
 
-    def _thermal_coeffs(self, h_w_m2k: float) -> tuple:
-        """``ZOH(N dt) (8), C_core/D_core (3), ZOH(dt) A and B_q (6)`` at ``h_w_m2k`` (cached)."""
+    def _thermal_coeffs(self, h_w_m2k: float):
+        """``ZOH(N dt) (8), C_core/D_core (3), ZOH(dt) A and B_q (6)`` at ``h_w_m2k`` rounded to 1e-3
+        W/m^2/K (the estimated h changes a little every step; closed-form ZOH cached per rounded h; the
+        effect on T_core is ~1e-5 K), as a float array."""
+        h_w_m2k = round(h_w_m2k, 3)
         c = self._hcache.get(h_w_m2k)
         if c is None:
+            import numpy as np
             _, _, _, cc0, cc1, dc = self._discN.out(h_w_m2k)
-            e00, e01, e10, e11, bq0, _, bq1, _ = self._disc1._zoh(h_w_m2k)
-            c = self._discN._zoh(h_w_m2k) + (cc0, cc1, dc, e00, e01, e10, e11, bq0, bq1)
+            e00, e01, e10, e11, bq0, _, bq1, _ = self._disc1.ad_bd(h_w_m2k)
+            c = np.array(self._discN.ad_bd(h_w_m2k) + (cc0, cc1, dc, e00, e01, e10, e11, bq0, bq1))
             if len(self._hcache) >= _CACHE_MAX:
                 self._hcache.clear()
             self._hcache[h_w_m2k] = c
@@ -326,92 +316,23 @@ class PowerCapability:
     def thermal_current_limits(self, soc: float, v1: float, rs: float, r1: float, c1: float,
                                t_mean_c: float, gamma: float, h_w_m2k: float, t_amb_c: float):
         """``(i_t_dch, i_t_chg)`` [A] keeping the predicted core temperature <= T_c,max after N steps."""
-        p = self.params
-        ndt = p.horizon_steps * p.dt_s
-        # the estimated h changes a little every step: evaluate the thermal matrices at h rounded to
-        # 1e-3 W/m^2/K (closed-form ZOH, cached per rounded h; the effect on T_core is ~1e-5 K)
-        h_w_m2k = round(h_w_m2k, 3)
-        a00, a01, a10, a11, b00, b01, b10, b11, cc0, cc1, dc, e00, e01, e10, e11, bq0, bq1 = \
-            self._thermal_coeffs(h_w_m2k)
-        # free response of the core temperature (mu = 0, no polarisation heat)
-        free = (cc0 * (a00 * t_mean_c + a01 * gamma + b01 * t_amb_c)
-                + cc1 * (a10 * t_mean_c + a11 * gamma + b11 * t_amb_c) + dc * t_amb_c)
-        gq = cc0 * b00 + cc1 * b10            # sum_i C A^i B_q  (> 0)
-        beta = (t_mean_c + 273.15) * self.tables.entropy_change(soc) / FARADAY_C_MOL
-        if self._exact:
-            return self._exact_limits(v1, rs, r1, c1, beta, free, gq, h_w_m2k,
-                                      (a00, a01, a10, a11), (cc0, cc1), (e00, e01, e10, e11, bq0, bq1))
-        aN = math.exp(-ndt / (r1 * c1))
-        out = []
-        for i_prev in (self.last_i_max_a, self.last_i_min_a):
-            v1n = aN * v1 + r1 * (1.0 - aN) * i_prev
-            q_pol = max(v1 * v1, v1n * v1n) / r1          # 5.31
-            mu = (p.t_core_max_c - free - gq * q_pol) / gq
-            out.append(mu)
-        mu_d, mu_c = out
-        disc_d = beta * beta + 4.0 * rs * mu_d
-        disc_c = beta * beta + 4.0 * rs * mu_c
-        i_min_heat = beta / (2.0 * rs)
-        i_t_dch = (beta + math.sqrt(disc_d)) / (2.0 * rs) if disc_d >= 0.0 else i_min_heat
-        i_t_chg = (beta - math.sqrt(disc_c)) / (2.0 * rs) if disc_c >= 0.0 else i_min_heat
-        return i_t_dch, i_t_chg
-
-    def _exact_limits(self, v1, rs, r1, c1, beta, free, g, h_w_m2k, an, cc, e1=None):
-        p = self.params
-        n = p.horizon_steps
-        e00, e01, e10, e11, bq0, bq1 = e1 if e1 is not None else self._thermal_coeffs(h_w_m2k)[11:]
-        n00, n01, n10, n11 = an
-        cc0, cc1 = cc
-        a = math.exp(-p.dt_s / (r1 * c1))
-        # S(rho) = C_c (A^N - rho^N I) (A - rho I)^{-1} B_q for rho = a and a^2
-        s1 = _pole_sum(a, e00, e01, e10, e11, bq0, bq1, n00, n01, n10, n11, cc0, cc1, float(n))
-        s2 = _pole_sum(a * a, e00, e01, e10, e11, bq0, bq1, n00, n01, n10, n11, cc0, cc1, float(n))
-        qa = g * rs + r1 * (g - 2.0 * s1 + s2)
-        qb = -g * beta + 2.0 * v1 * (s1 - s2)
-        qc = free + v1 * v1 * s2 / r1 - p.t_core_max_c
-        disc = qb * qb - 4.0 * qa * qc
-        if disc < 0.0:
-            i0 = -qb / (2.0 * qa)
-            return i0, i0
-        sq = math.sqrt(disc)
-        return (-qb + sq) / (2.0 * qa), (-qb - sq) / (2.0 * qa)
+        d, ix = self._tabs
+        return _thermal_limits(d, ix, self._k, self._thermal_coeffs(h_w_m2k), float(soc), float(v1), float(rs),
+                               float(r1), float(c1), float(t_mean_c), float(gamma), float(t_amb_c),
+                               self.last_i_max_a, self.last_i_min_a)
 
     def voltage_after(self, i_a: float, soc: float, v1: float, rs: float, r1: float, c1: float) -> float:
         """Predicted cell terminal voltage after N steps at the held current (5.36) [V]."""
-        p = self.params
-        ndt = p.horizon_steps * p.dt_s
-        aN = math.exp(-ndt / (r1 * c1))
-        soc_n = soc - i_a * ndt / (3600.0 * p.capacity_ah)
-        return self.tables.ocv(soc_n) - i_a * rs - aN * v1 - i_a * r1 * (1.0 - aN)
+        d, ix = self._tabs
+        return _voltage_after(d, ix, self._k, float(i_a), float(soc), float(v1), float(rs), float(r1), float(c1))
 
     def compute(self, soc: float, v1: float, rs: float, r1: float, c1: float, t_mean_c: float, gamma: float,
                 h_w_m2k: float, t_amb_c: float) -> PowerLimits:
         """Current and power limits from the estimated states (SOC as a fraction, cell quantities)."""
-        if self.compiled:
-            hr = round(h_w_m2k, 3)
-            th = self._hcache_nb.get(hr)
-            if th is None:
-                import numpy as np
-                th = np.array(self._thermal_coeffs(hr))
-                if len(self._hcache_nb) >= _CACHE_MAX:
-                    self._hcache_nb.clear()
-                self._hcache_nb[hr] = th
-            d, ix = self._tabs
-            r = _compute_nb(d, ix, self._k, th, float(soc), float(v1), float(rs), float(r1), float(c1),
-                            float(t_mean_c), float(gamma), float(t_amb_c), self.last_i_max_a, self.last_i_min_a)
-            self.last_i_max_a = r[0]
-            self.last_i_min_a = r[1]
-            return PowerLimits(*r)
-        p = self.params
-        i_smin, i_smax, i_vmin, i_vmax = electrical_current_limits(soc, v1, rs, r1, c1, p, self.tables)
-        i_td, i_tc = self.thermal_current_limits(soc, v1, rs, r1, c1, t_mean_c, gamma, h_w_m2k, t_amb_c)
-        i_max = min(i_smin, i_vmin, i_td, p.i_cell_max_a)
-        i_min = max(i_smax, i_vmax, i_tc, -p.i_cell_max_a)
-        v_d = self.voltage_after(i_max, soc, v1, rs, r1, c1)
-        v_c = self.voltage_after(i_min, soc, v1, rs, r1, c1)
-        p_max = i_max * v_d * self._npack
-        p_min = i_min * v_c * self._npack
-        self.last_i_max_a = i_max
-        self.last_i_min_a = i_min
-        return PowerLimits(i_max, i_min, p_max if p_max > 0.0 else 0.0, p_min if p_min < 0.0 else 0.0,
-                           i_smin, i_smax, i_vmin, i_vmax, i_td, i_tc, v_d, v_c)
+        d, ix = self._tabs
+        r = self._limits(d, ix, self._k, self._thermal_coeffs(h_w_m2k), float(soc), float(v1), float(rs),
+                         float(r1), float(c1), float(t_mean_c), float(gamma), float(t_amb_c), self.last_i_max_a,
+                         self.last_i_min_a)
+        self.last_i_max_a = r[0]
+        self.last_i_min_a = r[1]
+        return PowerLimits(*r)

@@ -25,6 +25,12 @@ measurement of sample k.  The first call only corrects the initial state.
 
 Discretisation: ``"zoh"`` (exact, closed-form 2x2 matrix exponential, default) or ``"euler"``
 (the seed's A_bar = I + A dt, B_bar = B dt).
+
+One source: the model (:func:`two_state_a` - the one place A(h), hence B, is written -,
+:func:`two_state_ad_bd`, :func:`two_state_out`, ...) and the three filter steps (:func:`kf_step`,
+:func:`dkf_step`, :func:`jekf_step`) are pure numba-compatible functions; each is compiled from its
+source, and ``f.py_func`` is the same source run by Python (``compiled=False``).  The filter classes
+only hold the state array and the constants and call the step.
 """
 from __future__ import annotations
 
@@ -35,18 +41,11 @@ import numpy as np
 
 from shevsim.battery.thermal import ThermalParams
 from shevsim.core.errors import SimulationError
-
-try:  # numba is a dependency; without it the Python reference path runs
-    from numba import njit as _njit
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover
-    HAVE_NUMBA = False
-
-    def _njit(*args, **kwargs):
-        return lambda f: f
+from shevsim.core.lookup import HAVE_NUMBA, _njit
 
 __all__ = ["ThermalEstimate", "ThermalKF", "ThermalDKF", "ThermalJEKF", "TwoStateDiscretiser", "tuning",
-           "run_stage", "table_3_3", "uac_proxy_profile", "tile_profile"]
+           "run_stage", "table_3_3", "uac_proxy_profile", "tile_profile", "two_state_a", "two_state_ad_bd",
+           "two_state_d_ad_bd", "two_state_out", "two_state_dout", "kf_step", "dkf_step", "jekf_step"]
 
 
 def tuning(table: str = "3.2", kind: str = "dkf", dt_s: float = 1.0, dt_ref_s: float = 1.0) -> dict:
@@ -88,138 +87,56 @@ class ThermalEstimate(NamedTuple):
     h_w_m2k: float
 
 
-class TwoStateDiscretiser:
-    """Closed-form (pure-float) discretisation of the two-state model as a function of h.
-
-    ``ad_bd(h)`` returns ``(a00, a01, a10, a11, b00, b01, b10, b11)``; ``out(h)`` returns the
-    surface/core output rows ``(cs0, cs1, ds, cc0, cc1, dc)`` and ``dout(h)`` their h-derivatives
-    (analytic).  ``d_ad_bd(h)`` returns the h-derivative of ``ad_bd`` by central differences.
-    """
-
-    def __init__(self, params: ThermalParams, dt_s: float, method: str = "zoh"):
-        if not (math.isfinite(dt_s) and dt_s > 0):
-            raise SimulationError(f"thermal estimator: dt_s must be > 0 s, got {dt_s!r}")
-        if method not in ("zoh", "euler"):
-            raise SimulationError(f"thermal estimator: discretisation must be 'zoh' or 'euler', got {method!r}")
-        self.p = params
-        self.dt = float(dt_s)
-        self.method = method
-        self._R = params.radius_m
-        self._k = params.kt_w_mk
-        self._a = params.alpha_m2_s
-        self._bq = self._a / (self._k * params.volume_m3)   # 1/(rho c_p V)
-        self._last_h = None
-        self._last = None
-        k, a, R = self._k, self._a, self._R
-        # h-independent factors of a_mat, grouped as Python evaluates them (left to right)
-        self._consts = (-48.0 * a, -15.0 * a, -320.0 * a, -120.0 * a, 24.0 * k, 4.0 * k, R * R)
-
-    def a_mat(self, h: float):
-        R, k, a = self._R, self._k, self._a
-        den = 24.0 * k + R * h
-        a00 = -48.0 * a * h / (R * den)
-        a01 = -15.0 * a * h / den
-        a10 = -320.0 * a * h / (R * R * den)
-        a11 = -120.0 * a * (4.0 * k + R * h) / (R * R * den)
-        return a00, a01, a10, a11
-
-    def _zoh(self, h: float):
-        """Closed-form ZOH of the two-state model at ``h`` (the arithmetic of :meth:`a_mat` and the
-        2x2 matrix exponential written out with the h-independent factors hoisted; bit-identical to
-        evaluating them step by step)."""
-        R, dt = self._R, self.dt
-        c48, c15, c320, c120, k24, k4, rr = self._consts
-        den = k24 + R * h
-        a00 = c48 * h / (R * den)
-        a01 = c15 * h / den
-        a10 = c320 * h / (rr * den)
-        a11 = c120 * (k4 + R * h) / (rr * den)
-        bq = self._bq
-        tr = a00 + a11
-        det = a00 * a11 - a01 * a10
-        disc = 0.25 * tr * tr - det
-        sq = math.sqrt(disc if disc > 0.0 else 0.0)
-        l1 = 0.5 * tr + sq
-        l2 = 0.5 * tr - sq
-        l1dt = l1 * dt
-        l2dt = l2 * dt
-        e1 = math.exp(l1dt)
-        e2 = math.exp(l2dt)
-        f1 = (math.expm1(l1dt) / l1) if abs(l1dt) > 1e-12 else dt * (1.0 + 0.5 * l1dt)
-        f2 = (math.expm1(l2dt) / l2) if abs(l2dt) > 1e-12 else dt * (1.0 + 0.5 * l2dt)
-        dl = l1 - l2
-        if dl > 1e-12 * (abs(l1) + abs(l2) + 1e-300):
-            c1 = (e1 - e2) / dl
-            c0 = (l1 * e2 - l2 * e1) / dl
-            d1 = (f1 - f2) / dl
-            d0 = (l1 * f2 - l2 * f1) / dl
-        else:  # repeated eigenvalue (does not occur for h >= 0; kept for safety)
-            c1 = dt * e1
-            c0 = e1 - l1 * c1
-            d1 = (dt * e1 - f1) / l1 if l1 != 0.0 else 0.5 * dt * dt
-            d0 = f1 - l1 * d1
-        # Ad = c0 I + c1 A;  G = d0 I + d1 A;  Bd = G B with B = [[bq, -a00], [0, -a10]]
-        g00 = d0 + d1 * a00
-        g01 = d1 * a01
-        g10 = d1 * a10
-        g11 = d0 + d1 * a11
-        return (c0 + c1 * a00, c1 * a01, c1 * a10, c0 + c1 * a11,
-                g00 * bq, -(g00 * a00 + g01 * a10),
-                g10 * bq, -(g10 * a00 + g11 * a10))
-
-    def ad_bd(self, h: float):
-        if h == self._last_h:
-            return self._last
-        if self.method == "euler":
-            a00, a01, a10, a11 = self.a_mat(h)
-            bq = self._bq
-            # B = [[bq, -a00], [0, -a10]]  (uniform T = T_amb is an equilibrium)
-            dt = self.dt
-            r = (1.0 + a00 * dt, a01 * dt, a10 * dt, 1.0 + a11 * dt, bq * dt, -a00 * dt, 0.0, -a10 * dt)
-        else:
-            r = self._zoh(h)
-        self._last_h = h
-        self._last = r
-        return r
-
-    def d_ad_bd(self, h: float):
-        """Central-difference h-derivative of :meth:`ad_bd` (step ``1e-5 (|h| + 1)``, one-sided at 0)."""
-        dh = 1e-5 * (abs(h) + 1.0)
-        if self.method == "euler":
-            hp = self.ad_bd(h + dh)
-            hm = self.ad_bd(h - dh if h - dh > 0.0 else 0.0)
-        else:   # not through the one-entry cache of ad_bd (it would evict h)
-            hp = self._zoh(h + dh)
-            hm = self._zoh(h - dh if h - dh > 0.0 else 0.0)
-        span = dh + (dh if h - dh > 0.0 else h)
-        return ((hp[0] - hm[0]) / span, (hp[1] - hm[1]) / span, (hp[2] - hm[2]) / span, (hp[3] - hm[3]) / span,
-                (hp[4] - hm[4]) / span, (hp[5] - hm[5]) / span, (hp[6] - hm[6]) / span, (hp[7] - hm[7]) / span)
-
-    def out(self, h: float):
-        R, k = self._R, self._k
-        den = 24.0 * k + R * h
-        return (24.0 * k / den, 7.5 * R * k / den, R * h / den,
-                (24.0 * k - 3.0 * R * h) / den, -(120.0 * R * k + 15.0 * R * R * h) / (8.0 * den), 4.0 * R * h / den)
-
-    def dout(self, h: float):
-        """Derivatives of (cs0, cs1, ds) w.r.t. h."""
-        R, k = self._R, self._k
-        den2 = (24.0 * k + R * h) ** 2
-        return (-24.0 * k * R / den2, -7.5 * R * R * k / den2, 24.0 * k * R / den2)
-
-
 # ---------------------------------------------------------------------------------
-# compiled DKF step (the same arithmetic, in the same order, as ThermalDKF._update_py with
-# the closed-form ZOH of TwoStateDiscretiser._zoh: bit-identical results, see
-# tests/unit/test_thermal_estimators.py::test_dkf_compiled_step_is_bit_identical)
+# the two-state model and the three filters, each written ONCE as a numba-compatible pure function
+# (floats and float arrays in, tuples out, filter state updated in place).  ``f`` is the compiled
+# function, ``f.py_func`` the same source run by Python (the reference; :func:`_py`).
 # ---------------------------------------------------------------------------------
+# constants vector ``c`` shared by the three filters (built by :meth:`_Base._constants`)
+_R, _K, _ALPHA, _BQ, _DT, _EULER, _TWO, _Q, _RV, _QH, _HMIN, _HMAX, _TOTAL = range(13)
+# filter state ``st`` (one float array; :class:`ThermalDKF` / :class:`ThermalJEKF` name slots 6-8)
+_X0, _X1, _P00, _P01, _P11, _H, _S6, _S7, _S8, _HAS_U, _UQ, _UT = range(12)
+
+
+def _py(f):
+    """The uncompiled (reference) form of a compiled function: the same source, run by Python."""
+    return getattr(f, "py_func", f)
+
+
 @_njit(cache=True)
-def _zoh_nb(h, R, dt, bq, c48, c15, c320, c120, k24, k4, rr):  # pragma: no cover - compiled
-    den = k24 + R * h
-    a00 = c48 * h / (R * den)
-    a01 = c15 * h / den
-    a10 = c320 * h / (rr * den)
-    a11 = c120 * (k4 + R * h) / (rr * den)
+def two_state_a(h, R, k, alpha):
+    """``(a00, a01, a10, a11)`` of the continuous two-state A(h) (seed 2.24 / 3.3); the one place the
+    matrix is written.  ``B = [[bq, -a00], [0, -a10]]`` with ``bq = alpha / (k V)`` (uniform T = T_amb is an
+    equilibrium), so A and B both come from here."""
+    den = 24.0 * k + R * h
+    return (-48.0 * alpha * h / (R * den), -15.0 * alpha * h / den,
+            -320.0 * alpha * h / (R * R * den), -120.0 * alpha * (4.0 * k + R * h) / (R * R * den))
+
+
+@_njit(cache=True)
+def two_state_out(h, R, k):
+    """Surface and core output rows ``(cs0, cs1, ds, cc0, cc1, dc)``: ``T_s = cs x + ds T_amb``,
+    ``T_c = cc x + dc T_amb`` (seed 2.25)."""
+    den = 24.0 * k + R * h
+    return (24.0 * k / den, 7.5 * R * k / den, R * h / den,
+            (24.0 * k - 3.0 * R * h) / den, -(120.0 * R * k + 15.0 * R * R * h) / (8.0 * den), 4.0 * R * h / den)
+
+
+@_njit(cache=True)
+def two_state_dout(h, R, k, two):
+    """Analytic h-derivatives of ``(cs0, cs1, ds)``.  ``two`` = 2.0: ``den ** 2`` through libm ``pow``
+    (as CPython's ``**``) with a run-time exponent, so that LLVM cannot turn it into a product."""
+    den2 = math.pow(24.0 * k + R * h, two)
+    return (-24.0 * k * R / den2, -7.5 * R * R * k / den2, 24.0 * k * R / den2)
+
+
+@_njit(cache=True)
+def two_state_ad_bd(h, R, k, alpha, bq, dt, euler):
+    """``(a00, a01, a10, a11, b00, b01, b10, b11)`` of the discretised model at ``h``: the seed's Euler
+    (``euler``: ``I + A dt``, ``B dt``) or the exact ZOH (closed-form 2x2 matrix exponential)."""
+    a00, a01, a10, a11 = two_state_a(h, R, k, alpha)
+    if euler:
+        return (1.0 + a00 * dt, a01 * dt, a10 * dt, 1.0 + a11 * dt, bq * dt, -a00 * dt, 0.0, -a10 * dt)
     tr = a00 + a11
     det = a00 * a11 - a01 * a10
     disc = 0.25 * tr * tr - det
@@ -238,11 +155,12 @@ def _zoh_nb(h, R, dt, bq, c48, c15, c320, c120, k24, k4, rr):  # pragma: no cove
         c0 = (l1 * e2 - l2 * e1) / dl
         d1 = (f1 - f2) / dl
         d0 = (l1 * f2 - l2 * f1) / dl
-    else:
+    else:  # repeated eigenvalue (does not occur for h >= 0; kept for safety)
         c1 = dt * e1
         c0 = e1 - l1 * c1
         d1 = (dt * e1 - f1) / l1 if l1 != 0.0 else 0.5 * dt * dt
         d0 = f1 - l1 * d1
+    # Ad = c0 I + c1 A;  G = d0 I + d1 A;  Bd = G B with B = [[bq, -a00], [0, -a10]]
     g00 = d0 + d1 * a00
     g01 = d1 * a01
     g10 = d1 * a10
@@ -253,121 +171,238 @@ def _zoh_nb(h, R, dt, bq, c48, c15, c320, c120, k24, k4, rr):  # pragma: no cove
 
 
 @_njit(cache=True)
-def _dkf_step_nb(st, c, y, ta, q_w):  # pragma: no cover - compiled
-    """One ThermalDKF.update on ``st = [x0, x1, p00, p01, p11, h, ph, dx0, dx1, has_u, uq, ut]`` (in
-    place) with ``c = [R, k, dt, bq, c48, c15, c320, c120, k24, k4, rr, q, r, qh, h_min, h_max, total, 2.0]``;
-    returns ``(T_mean, gamma, T_core, T_surface, h)`` of the a-posteriori estimate."""
-    R = c[0]
-    k = c[1]
-    dt = c[2]
-    bq = c[3]
-    c48 = c[4]
-    c15 = c[5]
-    c320 = c[6]
-    c120 = c[7]
-    k24 = c[8]
-    k4 = c[9]
-    rr = c[10]
-    total = c[16] > 0.5
-    x0 = st[0]
-    x1 = st[1]
-    p00 = st[2]
-    p01 = st[3]
-    p11 = st[4]
-    h = st[5]
-    ph = st[6] + c[13]
-    dx0 = st[7]
-    dx1 = st[8]
-    if st[9] > 0.5:
-        uq = st[10]
-        ut = st[11]
-        xp0 = x0
-        xp1 = x1
-        a00, a01, a10, a11, b00, b01, b10, b11 = _zoh_nb(h, R, dt, bq, c48, c15, c320, c120, k24, k4, rr)
-        x0 = a00 * xp0 + a01 * xp1 + b00 * uq + b01 * ut
-        x1 = a10 * xp0 + a11 * xp1 + b10 * uq + b11 * ut
-        m00 = a00 * p00 + a01 * p01
-        m01 = a00 * p01 + a01 * p11
-        m10 = a10 * p00 + a11 * p01
-        m11 = a10 * p01 + a11 * p11
-        p00 = m00 * a00 + m01 * a01 + c[11]
-        p01 = m00 * a10 + m01 * a11
-        p11 = m10 * a10 + m11 * a11 + c[11]
+def two_state_d_ad_bd(h, R, k, alpha, bq, dt, euler):
+    """Central-difference h-derivative of :func:`two_state_ad_bd` (step ``1e-5 (|h| + 1)``, one-sided at 0)."""
+    dh = 1e-5 * (abs(h) + 1.0)
+    hp = two_state_ad_bd(h + dh, R, k, alpha, bq, dt, euler)
+    hm = two_state_ad_bd(h - dh if h - dh > 0.0 else 0.0, R, k, alpha, bq, dt, euler)
+    span = dh + (dh if h - dh > 0.0 else h)
+    return ((hp[0] - hm[0]) / span, (hp[1] - hm[1]) / span, (hp[2] - hm[2]) / span, (hp[3] - hm[3]) / span,
+            (hp[4] - hm[4]) / span, (hp[5] - hm[5]) / span, (hp[6] - hm[6]) / span, (hp[7] - hm[7]) / span)
+
+
+class TwoStateDiscretiser:
+    """The two-state model at sample time ``dt_s`` as functions of h (wraps the pure functions above).
+
+    ``ad_bd(h)`` returns ``(a00, a01, a10, a11, b00, b01, b10, b11)``; ``out(h)`` returns the
+    surface/core output rows ``(cs0, cs1, ds, cc0, cc1, dc)`` and ``dout(h)`` their h-derivatives
+    (analytic).  ``d_ad_bd(h)`` returns the h-derivative of ``ad_bd`` by central differences.
+    """
+
+    def __init__(self, params: ThermalParams, dt_s: float, method: str = "zoh"):
+        if not (math.isfinite(dt_s) and dt_s > 0):
+            raise SimulationError(f"thermal estimator: dt_s must be > 0 s, got {dt_s!r}")
+        if method not in ("zoh", "euler"):
+            raise SimulationError(f"thermal estimator: discretisation must be 'zoh' or 'euler', got {method!r}")
+        self.p = params
+        self.dt = float(dt_s)
+        self.method = method
+        self._R = params.radius_m
+        self._k = params.kt_w_mk
+        self._a = params.alpha_m2_s
+        self._bq = self._a / (self._k * params.volume_m3)   # 1/(rho c_p V)
+        self._args = (self._R, self._k, self._a, self._bq, self.dt, method == "euler")
+        self._last_h = None
+        self._last = None
+
+    def a_mat(self, h: float):
+        return two_state_a(h, self._R, self._k, self._a)
+
+    def ad_bd(self, h: float):
+        if h != self._last_h:
+            self._last = two_state_ad_bd(h, *self._args)
+            self._last_h = h
+        return self._last
+
+    def d_ad_bd(self, h: float):
+        """Central-difference h-derivative of :meth:`ad_bd` (step ``1e-5 (|h| + 1)``, one-sided at 0)."""
+        return two_state_d_ad_bd(h, *self._args)
+
+    def out(self, h: float):
+        return two_state_out(h, self._R, self._k)
+
+    def dout(self, h: float):
+        """Derivatives of (cs0, cs1, ds) w.r.t. h."""
+        return two_state_dout(h, self._R, self._k, 2.0)
+
+
+@_njit(cache=True)
+def _predict_state(st, c, h):
+    """``x <- Ad x + Bd u_prev`` (3.12a); returns ``Ad, Bd`` (8) and the prior ``x`` (2)."""
+    a00, a01, a10, a11, b00, b01, b10, b11 = two_state_ad_bd(h, c[_R], c[_K], c[_ALPHA], c[_BQ], c[_DT],
+                                                             c[_EULER] > 0.5)
+    x0 = st[_X0]
+    x1 = st[_X1]
+    uq = st[_UQ]
+    ut = st[_UT]
+    st[_X0] = a00 * x0 + a01 * x1 + b00 * uq + b01 * ut
+    st[_X1] = a10 * x0 + a11 * x1 + b10 * uq + b11 * ut
+    return a00, a01, a10, a11, x0, x1
+
+
+@_njit(cache=True)
+def _predict_cov(st, a00, a01, a10, a11, q):
+    """``P <- Ad P Ad' + q I`` of the 2x2 state covariance (3.12b)."""
+    p00 = st[_P00]
+    p01 = st[_P01]
+    p11 = st[_P11]
+    m00 = a00 * p00 + a01 * p01
+    m01 = a00 * p01 + a01 * p11
+    m10 = a10 * p00 + a11 * p01
+    m11 = a10 * p01 + a11 * p11
+    st[_P00] = m00 * a00 + m01 * a01 + q
+    st[_P01] = m00 * a10 + m01 * a11
+    st[_P11] = m10 * a10 + m11 * a11 + q
+
+
+@_njit(cache=True)
+def _correct_state(st, e, cs0, cs1, r):
+    """Measurement update of (x, P) with the surface row ``[cs0, cs1]`` (3.13); returns the gain."""
+    p00 = st[_P00]
+    p01 = st[_P01]
+    p11 = st[_P11]
+    v0 = p00 * cs0 + p01 * cs1
+    v1 = p01 * cs0 + p11 * cs1
+    s = cs0 * v0 + cs1 * v1 + r
+    k0 = v0 / s
+    k1 = v1 / s
+    st[_X0] += k0 * e
+    st[_X1] += k1 * e
+    st[_P00] = p00 - k0 * v0
+    st[_P01] = p01 - k0 * v1
+    st[_P11] = p11 - k1 * v1
+    return k0, k1
+
+
+@_njit(cache=True)
+def _finish(st, c, h, ta, q_w):
+    """Store ``h`` (clipped to [h_min, h_max]) and the inputs for the next prediction; return the
+    a-posteriori ``(T_mean, gamma, T_core, T_surface, h)``."""
+    h = c[_HMIN] if h < c[_HMIN] else (c[_HMAX] if h > c[_HMAX] else h)
+    st[_H] = h
+    st[_HAS_U] = 1.0
+    st[_UQ] = q_w
+    st[_UT] = ta
+    cs0, cs1, ds, cc0, cc1, dc = two_state_out(h, c[_R], c[_K])
+    x0 = st[_X0]
+    x1 = st[_X1]
+    return x0, x1, cc0 * x0 + cc1 * x1 + dc * ta, cs0 * x0 + cs1 * x1 + ds * ta, h
+
+
+@_njit(cache=True)
+def kf_step(st, c, y, ta, q_w):
+    """One :class:`ThermalKF` update (h = ``st[5]`` given, not clipped) on the state ``st`` (in place)."""
+    h = st[_H]
+    if st[_HAS_U] > 0.5:
+        a00, a01, a10, a11, _, _ = _predict_state(st, c, h)
+        _predict_cov(st, a00, a01, a10, a11, c[_Q])
+    cs0, cs1, ds, _, _, _ = two_state_out(h, c[_R], c[_K])
+    _correct_state(st, y - (cs0 * st[_X0] + cs1 * st[_X1] + ds * ta), cs0, cs1, c[_RV])
+    return _finish(st, c, h, ta, q_w)
+
+
+@_njit(cache=True)
+def dkf_step(st, c, y, ta, q_w):
+    """One :class:`ThermalDKF` update (3.10-3.15) on ``st = [x0, x1, p00, p01, p11, h, ph, dx0, dx1, has_u,
+    uq, ut]`` (in place); ``dx = d x^+ / d h`` is the recursive sensitivity of the total derivative."""
+    total = c[_TOTAL] > 0.5
+    h = st[_H]
+    ph = st[_S6] + c[_QH]                        # parameter time update (3.11)
+    dx0 = st[_S7]
+    dx1 = st[_S8]
+    if st[_HAS_U] > 0.5:
+        a00, a01, a10, a11, xp0, xp1 = _predict_state(st, c, h)     # (3.12) with A(h^-)
+        _predict_cov(st, a00, a01, a10, a11, c[_Q])
         if total:
-            dh = 1e-5 * (abs(h) + 1.0)
-            hp = _zoh_nb(h + dh, R, dt, bq, c48, c15, c320, c120, k24, k4, rr)
-            hm = _zoh_nb(h - dh if h - dh > 0.0 else 0.0, R, dt, bq, c48, c15, c320, c120, k24, k4, rr)
-            span = dh + (dh if h - dh > 0.0 else h)
-            da0 = (hp[0] - hm[0]) / span
-            da1 = (hp[1] - hm[1]) / span
-            da2 = (hp[2] - hm[2]) / span
-            da3 = (hp[3] - hm[3]) / span
-            da4 = (hp[4] - hm[4]) / span
-            da5 = (hp[5] - hm[5]) / span
-            da6 = (hp[6] - hm[6]) / span
-            da7 = (hp[7] - hm[7]) / span
-            g0 = da0 * xp0 + da1 * xp1 + da4 * uq + da5 * ut
-            g1 = da2 * xp0 + da3 * xp1 + da6 * uq + da7 * ut
+            da = two_state_d_ad_bd(h, c[_R], c[_K], c[_ALPHA], c[_BQ], c[_DT], c[_EULER] > 0.5)
+            uq = st[_UQ]
+            ut = st[_UT]
+            g0 = da[0] * xp0 + da[1] * xp1 + da[4] * uq + da[5] * ut
+            g1 = da[2] * xp0 + da[3] * xp1 + da[6] * uq + da[7] * ut
             d0 = dx0
             d1 = dx1
             dx0 = g0 + a00 * d0 + a01 * d1
             dx1 = g1 + a10 * d0 + a11 * d1
-    # out(h), dout(h)
-    den = 24.0 * k + R * h
-    cs0 = 24.0 * k / den
-    cs1 = 7.5 * R * k / den
-    ds = R * h / den
-    # CPython evaluates ``x ** 2`` with libm pow (not always x * x to the last bit): call pow with a
-    # run-time exponent (c[17] = 2.0) so that LLVM cannot rewrite it as a multiplication
-    den2 = math.pow(24.0 * k + R * h, c[17])
-    dcs0 = -24.0 * k * R / den2
-    dcs1 = -7.5 * R * R * k / den2
-    dds = 24.0 * k * R / den2
+    cs0, cs1, ds, _, _, _ = two_state_out(h, c[_R], c[_K])
+    dcs0, dcs1, dds = two_state_dout(h, c[_R], c[_K], c[_TWO])
+    x0 = st[_X0]
+    x1 = st[_X1]
     e = y - (cs0 * x0 + cs1 * x1 + ds * ta)
-    ch = dcs0 * x0 + dcs1 * x1 + dds * ta
+    ch = dcs0 * x0 + dcs1 * x1 + dds * ta                     # partial dy/dh (3.15c)
     if total:
         ch += cs0 * dx0 + cs1 * dx1
-    # state measurement update
-    v0 = p00 * cs0 + p01 * cs1
-    v1 = p01 * cs0 + p11 * cs1
-    s = cs0 * v0 + cs1 * v1 + c[12]
-    k0 = v0 / s
-    k1 = v1 / s
-    x0 += k0 * e
-    x1 += k1 * e
-    p00 = p00 - k0 * v0
-    p01 = p01 - k0 * v1
-    p11 = p11 - k1 * v1
+    k0, k1 = _correct_state(st, e, cs0, cs1, c[_RV])           # state measurement update (3.13)
     if total:
         dx0 -= k0 * ch
         dx1 -= k1 * ch
-    # parameter measurement update
-    s = ch * ch * ph + c[12]
+    s = ch * ch * ph + c[_RV]                                  # parameter measurement update (3.14)
     lg = ph * ch / s
-    hn = h + lg * e
-    ph = (1.0 - lg * ch) * ph
-    h = c[14] if hn < c[14] else (c[15] if hn > c[15] else hn)
-    st[0] = x0
-    st[1] = x1
-    st[2] = p00
-    st[3] = p01
-    st[4] = p11
-    st[5] = h
-    st[6] = ph
-    st[7] = dx0
-    st[8] = dx1
-    st[9] = 1.0
-    st[10] = q_w
-    st[11] = ta
-    # estimate at the new h: out(h)
-    den = 24.0 * k + R * h
-    cs0 = 24.0 * k / den
-    cs1 = 7.5 * R * k / den
-    ds = R * h / den
-    cc0 = (24.0 * k - 3.0 * R * h) / den
-    cc1 = -(120.0 * R * k + 15.0 * R * R * h) / (8.0 * den)
-    dc = 4.0 * R * h / den
-    return x0, x1, cc0 * x0 + cc1 * x1 + dc * ta, cs0 * x0 + cs1 * x1 + ds * ta, h
+    st[_S6] = (1.0 - lg * ch) * ph
+    st[_S7] = dx0
+    st[_S8] = dx1
+    return _finish(st, c, h + lg * e, ta, q_w)
+
+
+@_njit(cache=True)
+def jekf_step(st, c, y, ta, q_w):
+    """One :class:`ThermalJEKF` update (3.16-3.20) on ``st = [x0, x1, p00, p01, p11, h, p22, p02, p12, has_u,
+    uq, ut]`` (in place): the EKF of the augmented state (T_mean, gamma, h)."""
+    h = st[_H]
+    p22 = st[_S6]
+    p02 = st[_S7]
+    p12 = st[_S8]
+    if st[_HAS_U] > 0.5:
+        # F = [[Ad, g], [0, 1]],  g = dAd/dh x + dBd/dh u  (3.20a)
+        da = two_state_d_ad_bd(h, c[_R], c[_K], c[_ALPHA], c[_BQ], c[_DT], c[_EULER] > 0.5)
+        a00, a01, a10, a11, x0, x1 = _predict_state(st, c, h)
+        uq = st[_UQ]
+        ut = st[_UT]
+        g0 = da[0] * x0 + da[1] * x1 + da[4] * uq + da[5] * ut
+        g1 = da[2] * x0 + da[3] * x1 + da[6] * uq + da[7] * ut
+        p00 = st[_P00]
+        p01 = st[_P01]
+        p11 = st[_P11]
+        # M = Ad Pxx ; w = Ad pxh
+        m00 = a00 * p00 + a01 * p01
+        m01 = a00 * p01 + a01 * p11
+        m10 = a10 * p00 + a11 * p01
+        m11 = a10 * p01 + a11 * p11
+        w0 = a00 * p02 + a01 * p12
+        w1 = a10 * p02 + a11 * p12
+        n00 = m00 * a00 + m01 * a01 + w0 * g0 + g0 * w0 + p22 * g0 * g0
+        n01 = m00 * a10 + m01 * a11 + w0 * g1 + g0 * w1 + p22 * g0 * g1
+        n11 = m10 * a10 + m11 * a11 + w1 * g1 + g1 * w1 + p22 * g1 * g1
+        st[_P00] = n00 + c[_Q]
+        st[_P01] = n01
+        st[_P11] = n11 + c[_Q]
+        p02 = w0 + g0 * p22
+        p12 = w1 + g1 * p22
+        p22 = p22 + c[_QH]
+    cs0, cs1, ds, _, _, _ = two_state_out(h, c[_R], c[_K])
+    dcs0, dcs1, dds = two_state_dout(h, c[_R], c[_K], c[_TWO])
+    x0 = st[_X0]
+    x1 = st[_X1]
+    c2 = dcs0 * x0 + dcs1 * x1 + dds * ta              # (3.20b)
+    e = y - (cs0 * x0 + cs1 * x1 + ds * ta)
+    p00 = st[_P00]
+    p01 = st[_P01]
+    p11 = st[_P11]
+    v0 = p00 * cs0 + p01 * cs1 + p02 * c2
+    v1 = p01 * cs0 + p11 * cs1 + p12 * c2
+    v2 = p02 * cs0 + p12 * cs1 + p22 * c2
+    s = cs0 * v0 + cs1 * v1 + c2 * v2 + c[_RV]
+    k0 = v0 / s
+    k1 = v1 / s
+    k2 = v2 / s
+    st[_X0] = x0 + k0 * e
+    st[_X1] = x1 + k1 * e
+    st[_P00] = p00 - k0 * v0
+    st[_P01] = p01 - k0 * v1
+    st[_P11] = p11 - k1 * v1
+    st[_S7] = p02 - k0 * v2
+    st[_S8] = p12 - k1 * v2
+    st[_S6] = p22 - k2 * v2
+    return _finish(st, c, h + k2 * e, ta, q_w)
 
 
 def _st_property(i: int, doc: str):
@@ -380,7 +415,35 @@ def _st_property(i: int, doc: str):
 
 
 class _Base:
-    def __init__(self, params, dt_s, h0, x0_c, discretisation, sigma_c, beta1, p0, h_min, h_max):
+    """Wrapper shared by the three filters: the state is one float array ``_st`` (read and written by
+    the attributes below), the constants one array ``_c``; :meth:`update` runs the filter's pure step
+    (``_STEP``, compiled, or its ``py_func`` with ``compiled=False``)."""
+
+    _STEP = None
+    x0 = _st_property(_X0, "a-posteriori T_mean [degC]")
+    x1 = _st_property(_X1, "a-posteriori gamma [K/m]")
+    p00 = _st_property(_P00, "state covariance")
+    p01 = _st_property(_P01, "state covariance")
+    p11 = _st_property(_P11, "state covariance")
+    h = _st_property(_H, "h estimate (ThermalKF: the assumed h) [W/m^2/K]")
+
+    @property
+    def _u(self):
+        """(q_w, t_amb_c) of the previous sample, None before the first update."""
+        st = self._st
+        return (float(st[_UQ]), float(st[_UT])) if st[_HAS_U] > 0.5 else None
+
+    @_u.setter
+    def _u(self, v):
+        st = self._st
+        if v is None:
+            st[_HAS_U] = 0.0
+        else:
+            st[_HAS_U], st[_UQ], st[_UT] = 1.0, v[0], v[1]
+
+    def __init__(self, params, dt_s, h0, x0_c, discretisation, sigma_c, beta1, p0, h_min, h_max, compiled,
+                 beta2=0.0, total=False):
+        self._st = np.zeros(12)
         self.params = params if params is not None else ThermalParams()
         self.disc = TwoStateDiscretiser(self.params, dt_s, discretisation)
         self.dt_s = float(dt_s)
@@ -392,51 +455,32 @@ class _Base:
         self.x1 = float(x0_c[1])
         self.r = float(sigma_c) ** 2
         self.q = float(beta1) ** 2
+        self.qh = float(beta2) ** 2
         self.p00, self.p01, self.p11 = float(p0[0]), 0.0, float(p0[1])
         self.h_min = float(h_min)
         self.h_max = float(h_max)
+        self.total = bool(total)
         self._u = None   # (q_w, t_amb_c) of the previous sample
+        self.compiled = bool(compiled and HAVE_NUMBA)
+        self._step = self._STEP if self.compiled else _py(self._STEP)
+        d = self.disc
+        c = [0.0] * 13
+        c[_R], c[_K], c[_ALPHA], c[_BQ], c[_DT], c[_EULER], c[_TWO] = \
+            d._R, d._k, d._a, d._bq, d.dt, 1.0 if d.method == "euler" else 0.0, 2.0
+        c[_Q], c[_RV], c[_QH], c[_HMIN], c[_HMAX], c[_TOTAL] = \
+            self.q, self.r, self.qh, self.h_min, self.h_max, 1.0 if self.total else 0.0
+        self._c = np.array(c)
 
-    def _check(self, y, ta, q):
-        if not (math.isfinite(y) and math.isfinite(ta) and math.isfinite(q)):
-            raise SimulationError(f"{type(self).__name__}.update: non-finite input t_surface_meas_c={y!r}, "
-                                  f"t_amb_c={ta!r}, q_w={q!r}")
+    def update(self, t_surface_meas_c: float, t_amb_c: float, q_w: float) -> ThermalEstimate:
+        """Predict with the previous sample's inputs, correct with this sample's measurement.
 
-    def _estimate(self, ta: float) -> ThermalEstimate:
-        cs0, cs1, ds, cc0, cc1, dc = self.disc.out(self.h)
-        return ThermalEstimate(self.x0, self.x1, cc0 * self.x0 + cc1 * self.x1 + dc * ta,
-                               cs0 * self.x0 + cs1 * self.x1 + ds * ta, self.h)
-
-    def _predict_state(self, h):
-        """x <- Ad x + Bd u_prev; P <- Ad P Ad' + Q (state part)."""
-        a00, a01, a10, a11, b00, b01, b10, b11 = self.disc.ad_bd(h)
-        uq, ut = self._u
-        x0, x1 = self.x0, self.x1
-        self.x0 = a00 * x0 + a01 * x1 + b00 * uq + b01 * ut
-        self.x1 = a10 * x0 + a11 * x1 + b10 * uq + b11 * ut
-        p00, p01, p11 = self.p00, self.p01, self.p11
-        m00 = a00 * p00 + a01 * p01
-        m01 = a00 * p01 + a01 * p11
-        m10 = a10 * p00 + a11 * p01
-        m11 = a10 * p01 + a11 * p11
-        self.p00 = m00 * a00 + m01 * a01 + self.q
-        self.p01 = m00 * a10 + m01 * a11
-        self.p11 = m10 * a10 + m11 * a11 + self.q
-        return a00, a01, a10, a11
-
-    def _correct_state(self, e, cs0, cs1):
-        p00, p01, p11 = self.p00, self.p01, self.p11
-        v0 = p00 * cs0 + p01 * cs1
-        v1 = p01 * cs0 + p11 * cs1
-        s = cs0 * v0 + cs1 * v1 + self.r
-        k0 = v0 / s
-        k1 = v1 / s
-        self.x0 += k0 * e
-        self.x1 += k1 * e
-        self.p00 = p00 - k0 * v0
-        self.p01 = p01 - k0 * v1
-        self.p11 = p11 - k1 * v1
-        return k0, k1
+        ``t_surface_meas_c``, ``t_amb_c`` [degC], ``q_w`` [W per cell, + heat generated].
+        """
+        if not (math.isfinite(t_surface_meas_c) and math.isfinite(t_amb_c) and math.isfinite(q_w)):
+            raise SimulationError(f"{type(self).__name__}.update: non-finite input "
+                                  f"t_surface_meas_c={t_surface_meas_c!r}, t_amb_c={t_amb_c!r}, q_w={q_w!r}")
+        return ThermalEstimate(*self._step(self._st, self._c, float(t_surface_meas_c), float(t_amb_c),
+                                           float(q_w)))
 
 
 class ThermalKF(_Base):
@@ -458,6 +502,8 @@ class ThermalKF(_Base):
         State process-noise std per step (seed 5e-4).
     p0 : (float, float)
         Initial state variances (seed (1, 1)).
+    compiled : bool
+        Run the step :func:`kf_step` compiled (default) or its ``py_func`` (the same source in Python).
 
     Notes
     -----
@@ -465,22 +511,12 @@ class ThermalKF(_Base):
     :class:`ThermalEstimate`.
     """
 
+    _STEP = staticmethod(kf_step)
+
     def __init__(self, params: ThermalParams | None = None, h_w_m2k: float = 56.2, dt_s: float = 1.0,
                  x0_c=(30.0, 0.0), sigma_c: float = 0.05, beta1: float = 5e-4, p0=(1.0, 1.0),
-                 discretisation: str = "zoh"):
-        super().__init__(params, dt_s, h_w_m2k, x0_c, discretisation, sigma_c, beta1, p0, 0.0, math.inf)
-
-    def update(self, t_surface_meas_c: float, t_amb_c: float, q_w: float) -> ThermalEstimate:
-        self._check(t_surface_meas_c, t_amb_c, q_w)
-        h = self.h
-        if self._u is not None:
-            self._predict_state(h)
-        cs0, cs1, ds, cc0, cc1, dc = self.disc.out(h)
-        e = t_surface_meas_c - (cs0 * self.x0 + cs1 * self.x1 + ds * t_amb_c)
-        self._correct_state(e, cs0, cs1)
-        self._u = (q_w, t_amb_c)
-        return ThermalEstimate(self.x0, self.x1, cc0 * self.x0 + cc1 * self.x1 + dc * t_amb_c,
-                               cs0 * self.x0 + cs1 * self.x1 + ds * t_amb_c, h)
+                 discretisation: str = "zoh", compiled: bool = True):
+        super().__init__(params, dt_s, h_w_m2k, x0_c, discretisation, sigma_c, beta1, p0, 0.0, math.inf, compiled)
 
 
 class ThermalDKF(_Base):
@@ -488,100 +524,21 @@ class ThermalDKF(_Base):
 
     Parameters as :class:`ThermalKF`, plus ``beta2`` (h random-walk std per step, seed 7e-3),
     ``s0`` (initial h variance, seed 0.05), ``h_min``/``h_max`` (clip of the h estimate) and
-    ``total_derivative`` (see module docstring) and ``compiled`` (default True: with the exact ZOH the step
-    runs as one numba kernel, :func:`_dkf_step_nb`, with the arithmetic of :meth:`_update_py` - bit-identical;
-    False runs the Python reference).  The filter state is one float array ``_st``; ``x0``, ``h``, ... read it.
+    ``total_derivative`` (see module docstring); the step is :func:`dkf_step`.
     """
 
-    # the filter state lives in one float array (the compiled step updates it in place); the
-    # attributes below read and write it
-    x0 = _st_property(0, "a-posteriori T_mean [degC]")
-    x1 = _st_property(1, "a-posteriori gamma [K/m]")
-    p00 = _st_property(2, "state covariance")
-    p01 = _st_property(3, "state covariance")
-    p11 = _st_property(4, "state covariance")
-    h = _st_property(5, "h estimate [W/m^2/K]")
-    ph = _st_property(6, "h variance")
-    dx0 = _st_property(7, "d x0^+ / d h")
-    dx1 = _st_property(8, "d x1^+ / d h")
-
-    @property
-    def _u(self):
-        """(q_w, t_amb_c) of the previous sample, None before the first update."""
-        st = self._st
-        return (float(st[10]), float(st[11])) if st[9] > 0.5 else None
-
-    @_u.setter
-    def _u(self, v):
-        st = self._st
-        if v is None:
-            st[9] = 0.0
-        else:
-            st[9], st[10], st[11] = 1.0, v[0], v[1]
+    _STEP = staticmethod(dkf_step)
+    ph = _st_property(_S6, "h variance")
+    dx0 = _st_property(_S7, "d x0^+ / d h")
+    dx1 = _st_property(_S8, "d x1^+ / d h")
 
     def __init__(self, params: ThermalParams | None = None, h0_w_m2k: float = 56.2, dt_s: float = 1.0,
                  x0_c=(30.0, 0.0), sigma_c: float = 0.05, beta1: float = 5e-4, beta2: float = 7e-3,
                  p0=(1.0, 1.0), s0: float = 0.05, discretisation: str = "zoh", h_min: float = 0.5,
                  h_max: float = 1000.0, total_derivative: bool = True, compiled: bool = True):
-        self._st = np.zeros(12)
-        super().__init__(params, dt_s, h0_w_m2k, x0_c, discretisation, sigma_c, beta1, p0, h_min, h_max)
+        super().__init__(params, dt_s, h0_w_m2k, x0_c, discretisation, sigma_c, beta1, p0, h_min, h_max, compiled,
+                         beta2, total_derivative)
         self.ph = float(s0)
-        self.qh = float(beta2) ** 2
-        self.total = bool(total_derivative)
-        self.dx0 = 0.0   # d x^+ / d h
-        self.dx1 = 0.0
-        # compiled step (numba, exact ZOH only): same arithmetic as _update_py, bit-identical
-        self.compiled = bool(compiled and HAVE_NUMBA and discretisation == "zoh")
-        d = self.disc
-        self._c = np.array((d._R, d._k, d.dt, d._bq) + d._consts
-                           + (self.q, self.r, self.qh, self.h_min, self.h_max, 1.0 if self.total else 0.0, 2.0))
-
-    def update(self, t_surface_meas_c: float, t_amb_c: float, q_w: float) -> ThermalEstimate:
-        if self.compiled:
-            if not (math.isfinite(t_surface_meas_c) and math.isfinite(t_amb_c) and math.isfinite(q_w)):
-                self._check(t_surface_meas_c, t_amb_c, q_w)
-            return ThermalEstimate(*_dkf_step_nb(self._st, self._c, float(t_surface_meas_c), float(t_amb_c),
-                                                 float(q_w)))
-        return self._update_py(t_surface_meas_c, t_amb_c, q_w)
-
-    def _update_py(self, t_surface_meas_c: float, t_amb_c: float, q_w: float) -> ThermalEstimate:
-        """The reference (Python) step; :meth:`update` runs the same arithmetic compiled."""
-        self._check(t_surface_meas_c, t_amb_c, q_w)
-        h = self.h
-        # parameter time update (3.11)
-        self.ph += self.qh
-        if self._u is not None:
-            xp0, xp1 = self.x0, self.x1
-            a00, a01, a10, a11 = self._predict_state(h)       # (3.12) with A(h^-)
-            if self.total:
-                da = self.disc.d_ad_bd(h)
-                uq, ut = self._u
-                g0 = da[0] * xp0 + da[1] * xp1 + da[4] * uq + da[5] * ut
-                g1 = da[2] * xp0 + da[3] * xp1 + da[6] * uq + da[7] * ut
-                d0, d1 = self.dx0, self.dx1
-                self.dx0 = g0 + a00 * d0 + a01 * d1
-                self.dx1 = g1 + a10 * d0 + a11 * d1
-        cs0, cs1, ds, cc0, cc1, dc = self.disc.out(h)
-        dcs0, dcs1, dds = self.disc.dout(h)
-        x0, x1 = self.x0, self.x1
-        e = t_surface_meas_c - (cs0 * x0 + cs1 * x1 + ds * t_amb_c)
-        ch = dcs0 * x0 + dcs1 * x1 + dds * t_amb_c                # partial dy/dh (3.15c)
-        if self.total:
-            ch += cs0 * self.dx0 + cs1 * self.dx1
-        # state measurement update (3.13)
-        k0, k1 = self._correct_state(e, cs0, cs1)
-        if self.total:
-            self.dx0 -= k0 * ch
-            self.dx1 -= k1 * ch
-        # parameter measurement update (3.14)
-        ph = self.ph
-        s = ch * ch * ph + self.r
-        lg = ph * ch / s
-        hn = h + lg * e
-        self.ph = (1.0 - lg * ch) * ph
-        self.h = self.h_min if hn < self.h_min else (self.h_max if hn > self.h_max else hn)
-        self._u = (q_w, t_amb_c)
-        return self._estimate(t_amb_c)
 
 
 class ThermalJEKF(_Base):
@@ -589,73 +546,22 @@ class ThermalJEKF(_Base):
 
     Parameters as :class:`ThermalDKF`; seed defaults ``beta2 = 6e-3``, ``P(0) = diag(1, 1, 0.05)``.
     The initial h variance is ``s0`` when given, else ``p0[2]`` (``p0`` may then have 2 entries).
+    The step is :func:`jekf_step`.
     """
+
+    _STEP = staticmethod(jekf_step)
+    p22 = _st_property(_S6, "h variance")
+    p02 = _st_property(_S7, "T_mean-h covariance")
+    p12 = _st_property(_S8, "gamma-h covariance")
 
     def __init__(self, params: ThermalParams | None = None, h0_w_m2k: float = 56.2, dt_s: float = 1.0,
                  x0_c=(30.0, 0.0), sigma_c: float = 0.05, beta1: float = 5e-4, beta2: float = 6e-3,
                  p0=(1.0, 1.0, 0.05), discretisation: str = "zoh", h_min: float = 0.5, h_max: float = 1000.0,
-                 s0: float | None = None):
-        super().__init__(params, dt_s, h0_w_m2k, x0_c, discretisation, sigma_c, beta1, p0[:2], h_min, h_max)
-        self.qh = float(beta2) ** 2
-        self.p02 = 0.0
-        self.p12 = 0.0
+                 s0: float | None = None, compiled: bool = True):
+        super().__init__(params, dt_s, h0_w_m2k, x0_c, discretisation, sigma_c, beta1, p0[:2], h_min, h_max, compiled,
+                         beta2)
         # initial h variance: s0 if given (same keyword as the DKF), else the third entry of p0
         self.p22 = float(s0) if s0 is not None else (float(p0[2]) if len(p0) > 2 else 0.05)
-
-    def update(self, t_surface_meas_c: float, t_amb_c: float, q_w: float) -> ThermalEstimate:
-        self._check(t_surface_meas_c, t_amb_c, q_w)
-        h = self.h
-        if self._u is not None:
-            # F = [[Ad, g], [0, 1]],  g = dAd/dh x + dBd/dh u  (3.20a)
-            a00, a01, a10, a11, b00, b01, b10, b11 = self.disc.ad_bd(h)
-            da = self.disc.d_ad_bd(h)
-            uq, ut = self._u
-            x0, x1 = self.x0, self.x1
-            g0 = da[0] * x0 + da[1] * x1 + da[4] * uq + da[5] * ut
-            g1 = da[2] * x0 + da[3] * x1 + da[6] * uq + da[7] * ut
-            self.x0 = a00 * x0 + a01 * x1 + b00 * uq + b01 * ut
-            self.x1 = a10 * x0 + a11 * x1 + b10 * uq + b11 * ut
-            p00, p01, p11, p02, p12, p22 = self.p00, self.p01, self.p11, self.p02, self.p12, self.p22
-            # M = Ad Pxx ; m = Ad pxh + g phh
-            m00 = a00 * p00 + a01 * p01
-            m01 = a00 * p01 + a01 * p11
-            m10 = a10 * p00 + a11 * p01
-            m11 = a10 * p01 + a11 * p11
-            w0 = a00 * p02 + a01 * p12        # Ad pxh
-            w1 = a10 * p02 + a11 * p12
-            n00 = m00 * a00 + m01 * a01 + w0 * g0 + g0 * w0 + p22 * g0 * g0
-            n01 = m00 * a10 + m01 * a11 + w0 * g1 + g0 * w1 + p22 * g0 * g1
-            n11 = m10 * a10 + m11 * a11 + w1 * g1 + g1 * w1 + p22 * g1 * g1
-            self.p00 = n00 + self.q
-            self.p01 = n01
-            self.p11 = n11 + self.q
-            self.p02 = w0 + g0 * p22
-            self.p12 = w1 + g1 * p22
-            self.p22 = p22 + self.qh
-        cs0, cs1, ds, cc0, cc1, dc = self.disc.out(h)
-        dcs0, dcs1, dds = self.disc.dout(h)
-        x0, x1 = self.x0, self.x1
-        c2 = dcs0 * x0 + dcs1 * x1 + dds * t_amb_c              # (3.20b)
-        e = t_surface_meas_c - (cs0 * x0 + cs1 * x1 + ds * t_amb_c)
-        p00, p01, p11, p02, p12, p22 = self.p00, self.p01, self.p11, self.p02, self.p12, self.p22
-        v0 = p00 * cs0 + p01 * cs1 + p02 * c2
-        v1 = p01 * cs0 + p11 * cs1 + p12 * c2
-        v2 = p02 * cs0 + p12 * cs1 + p22 * c2
-        s = cs0 * v0 + cs1 * v1 + c2 * v2 + self.r
-        k0, k1, k2 = v0 / s, v1 / s, v2 / s
-        self.x0 = x0 + k0 * e
-        self.x1 = x1 + k1 * e
-        hn = h + k2 * e
-        self.p00 = p00 - k0 * v0
-        self.p01 = p01 - k0 * v1
-        self.p11 = p11 - k1 * v1
-        self.p02 = p02 - k0 * v2
-        self.p12 = p12 - k1 * v2
-        self.p22 = p22 - k2 * v2
-        self.h = self.h_min if hn < self.h_min else (self.h_max if hn > self.h_max else hn)
-        self._u = (q_w, t_amb_c)
-        return self._estimate(t_amb_c)
-
 
 # ---------------------------------------------------------------------------------
 # study: seed Table 3.3 analogue on simulated data
