@@ -357,6 +357,25 @@ def step(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g,
             e_el, fuel, soot, soot_meas / h + c[13])
 
 
+@_njit(cache=True)
+def run_record(md, mi, c, p_max, x, t, p_cmd, rate_up_wps, elec_max_w, out):  # pragma: no cover - compiled
+    """:func:`step` through a record (the calibration's loop, :mod:`shevsim.calibrate.engine`): state ``x``
+    (order of :data:`STATE`) at ``t[0]``; step ``k`` runs from ``t[k-1]`` to ``t[k]`` with ``p_cmd[k]`` held
+    (the ``profile`` source's convention under the Gauss-Seidel master) and writes its mean analyser reading
+    [mg/s] to ``out[k]`` (``out[0]`` is left as given).  Kept in this file so that numba's cache of it is
+    renewed whenever :func:`step` changes."""
+    s = (x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[10], x[11], x[12], x[13], x[14], x[15],
+         x[16], x[17], x[18], x[19], x[20])
+    for k in range(1, t.shape[0]):
+        r = step(md, mi, c, p_max, s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8], s[9], s[10], s[11],
+                 s[12], s[13], s[14], s[15], s[16], s[17], s[18], s[19], s[20],
+                 p_cmd[k], rate_up_wps, t[k] - t[k - 1], elec_max_w)
+        s = (r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11], r[12], r[13], r[14], r[15],
+             r[16], r[17], r[18], r[19], r[20])
+        out[k] = r[24]
+    return 0
+
+
 step_py = getattr(step, "py_func", step)
 """The same source as :func:`step`, run by the Python interpreter (reference; ``compiled=False``)."""
 
