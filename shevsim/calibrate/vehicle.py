@@ -1,109 +1,279 @@
-"""vehicle.py - calibration model of a vehicle (see models.py for the interface)."""
+"""vehicle.py - calibration model of the vehicle: the simulator's own vehicle, motor and bus, speed-following.
+
+The model is the replay arrangement itself (see :meth:`VehicleModel.replay`)::
+
+    cycle (measured speed) -> vehicle (input_mode = "speed") -> motor -> bus.demand_power_w = power_w
+
+The measured speed prescribes the motion; the vehicle computes the wheel force that drives each step with
+:func:`shevsim.powertrain.vehicle.traction_force_n` (the exact inverse of the forward step, same
+:func:`~shevsim.powertrain.vehicle.road_forces` and road-grade law); the motor turns it into electrical
+power with :func:`shevsim.powertrain.motor.motor_step` (efficiency map, heat-index torque limit,
+regenerative limits); the bus adds the auxiliary load.  :meth:`VehicleModel.simulate` runs exactly that
+chain in one compiled loop that calls the same compiled functions the components call, on the same
+input trace (the ``cycle`` component itself is stepped in :meth:`~VehicleModel.prepare`), so the replay
+through :class:`~shevsim.core.master.Master` reproduces the calibration to round-off.
+
+Parameters are the components' own (names, units, defaults from ``components/vehicle/matv.toml``,
+``components/motor/default.toml``, ``components/bus/default.toml``): every parameter of those files is a
+*known* parameter (``--params`` may override it); fitted:
+
+* declared: ``efficiency_scale_frac`` (motor: actual / map efficiency);
+* effects (each a switchable term of a component, off at its parameter file's value):
+  ``road_grade`` (vehicle ``grade_frac`` at 6 knots ``grade_distance_m`` spread evenly over the record's
+  distance; reported as ``grade_frac[0]`` .. ``grade_frac[5]``), ``aux_load`` (bus ``aux_power_w``),
+  ``mass_error`` (vehicle ``mass_kg``), ``rolling_error`` (vehicle ``rolling_coefficient``),
+  ``aero_error`` (vehicle ``drag_coefficient``), ``regen_limit`` (motor ``regen_power_max_w``).
+
+Time base.  The data's sample period ``dt`` (median; a non-uniform record is interpolated onto the
+uniform grid) is cut into ``n = ceil(dt / substep_s)`` steps ``h = dt / n`` (``substep_s`` = 0.1 s,
+known): the model and the replay step at ``h`` with the cycle interpolating the measured speed linearly.
+``power_w`` at sample ``k`` is the mean electrical power over the sample period ending at it,
+``(t_{k-1}, t_k]`` (an energy-integrating logger; at 10 Hz with ``h = dt`` it is the power of that
+interval); the first sample is the bus power at the start.
+"""
 from __future__ import annotations
 
+import dataclasses
 import math
-from typing import Any, Mapping
+import tempfile
+import tomllib
+from pathlib import Path
+from typing import Mapping
 
 import numpy as np
-from numba import njit
 
 from ..core.errors import DataError
+from ..core.lookup import _njit
+from ..powertrain.motor import motor_step
+from ..powertrain.vehicle import grade_rad_at, traction_force_n
 from .models import CalibrationModel, Effect, Param
 
-T0_K = 273.15
+ROOT = Path(__file__).resolve().parents[2]
+PARAM_FILES = {"vehicle": ROOT / "components" / "vehicle" / "matv.toml",
+               "motor": ROOT / "components" / "motor" / "default.toml",
+               "bus": ROOT / "components" / "bus" / "default.toml"}
+N_GRADE = 6
+SUBSTEP_S = 0.1
+#: parameters of the files that are not known parameters of the calibration
+_NOT_KNOWN = {"input_mode", "speed_init_mps", "grade_distance_m", "grade_frac", "efficiency_scale_frac"}
+
+
+def _component_classes():
+    from ..components import get_component_class
+    return {n: get_component_class(n) for n in PARAM_FILES}
+
+
+def _file_params() -> dict:
+    """{component: params dataclass} loaded from the default parameter files."""
+    from ..core.params import load_params
+    return {n: load_params(cls.Params, PARAM_FILES[n]) for n, cls in _component_classes().items()}
+
+
+def _owners(files: dict) -> dict:
+    """parameter name -> component name (the three files share no parameter name)."""
+    out = {}
+    for comp, p in files.items():
+        for f in dataclasses.fields(p):
+            out[f.name] = comp
+    return out
+
+
+_FILES = _file_params()
+_OWNER = _owners(_FILES)
+
+
+# ----------------------------------------------------------------------------------- the trace
+
+def _trace(data, substep_s: float):
+    """Uniform speed trace of the record: ``(t_grid, v_grid, dt, n_sub, h)``."""
+    df = data.df
+    t = df["time_s"].to_numpy(float)
+    v = df["speed_mps"].to_numpy(float)
+    dt = float(np.median(np.diff(t)))
+    if not dt > 0:
+        raise DataError(f"{data.path}: time_s must increase")
+    n_g = int(math.floor((t[-1] - t[0]) / dt + 1e-6)) + 1
+    tg = t[0] + np.arange(n_g) * dt
+    vg = np.maximum(np.interp(tg, t, v), 0.0)
+    n_sub = max(1, int(math.ceil(dt / substep_s - 1e-9)))
+    return tg, vg, dt, n_sub, dt / n_sub
+
+
+def _write_cycle(path: Path, vg: np.ndarray, dt: float) -> None:
+    lines = ["# measured speed trace (calibration replay)", "time_s,speed_mps"]
+    lines += [f"{k * dt!r},{float(x)!r}" for k, x in enumerate(vg)]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _sample(rec: np.ndarray, n_sub: int, n_g: int) -> np.ndarray:
+    """Per-substep bus power (record j covers ``[j h, (j+1) h]``) -> per-sample mean over the period ending at it."""
+    out = np.empty(n_g)
+    out[0] = rec[0]
+    out[1:] = rec[:(n_g - 1) * n_sub].reshape(n_g - 1, n_sub).mean(axis=1)
+    return out
+
+
+@_njit(cache=True)
+def _speed_following_power(vr, ar, h, kd, kg, m, c, fr, g, md, mi, k_w, k_tau, extrapolate, v_regen, p_regen,
+                           eff_scale, heat_rate, gamma0, aux):  # pragma: no cover - compiled
+    """Bus power [W] at every master step of cycle -> vehicle (speed mode) -> motor -> bus (index 0 = initialise).
+
+    The order and arithmetic of :class:`~shevsim.components.vehicle.Vehicle` (speed mode),
+    :class:`~shevsim.components.motor.Motor` and :class:`~shevsim.components.bus.PowerBus` stepped by the
+    master with the motor's bus limits unconnected; ``vr``/``ar`` are the cycle's outputs at each step.
+    """
+    n = vr.shape[0] - 1
+    rec = np.empty(n + 1)
+    has_knots = kd.shape[0] > 0
+    v = vr[0] if vr[0] > 0.0 else 0.0
+    dist = 0.0
+    v_prev = v
+    h_prev = 1.0
+    gamma = gamma0
+    rec[0] = 0.0 + aux
+    for k in range(n):
+        v0 = v
+        v1 = vr[k + 1] if vr[k + 1] > 0.0 else 0.0
+        dist += 0.5 * (v0 + v1) * h
+        th = 0.0 + grade_rad_at(dist, kd, kg) if has_knots else 0.0
+        vn = v1 + ar[k + 1] * h
+        f = traction_force_n(v1, vn if vn > 0.0 else 0.0, h, th, m, c, fr, g)
+        v = v1
+        res = motor_step(md, mi, f, v1, 1e12, -1e12, h, v_prev, h_prev, gamma, k_w, k_tau, extrapolate,
+                         v_regen, p_regen, eff_scale, heat_rate)
+        gamma = res[6]
+        v_prev = res[7]
+        h_prev = h
+        rec[k + 1] = res[2] + (0.0 + aux)
+    return rec
+
+
+# ----------------------------------------------------------------------------------- the model
 
 class VehicleModel(CalibrationModel):
-    """Road-load / electrical power model of a vehicle.
+    """Electrical power drawn from the bus by a vehicle following the measured speed (module docstring).
 
     Channel: ``power_w`` [W, + drawn from the bus, traction + auxiliaries].  Input: ``speed_mps``.
     """
     name = "vehicle"
+    component = "vehicle"
+    component_name = "vehicle"
     channels = ("power_w",)
     inputs = ("speed_mps",)
-    known_defaults = {
-        "mass_kg": 15554.0,          # nominal vehicle mass (M-ATV class SHEV)
-        "cd_a_m2": 4.1,              # drag coefficient x frontal area
-        "crr": 0.01,                 # rolling-resistance coefficient
-        "rho_kg_m3": 1.2,
-        "g_mps2": 9.81,
-        "rot_inertia_frac": 0.05,    # equivalent rotating mass / mass
-        "p_aux_w": 0.0,              # known auxiliary load
-        "regen_frac": 1.0,           # fraction of braking wheel power the controller routes to the motor
-        "accel_window_s": 2.0,       # centred-difference window for acceleration
-    }
-    N_GRADE = 6
+    known_defaults = dict({k: getattr(p, k) for p in _FILES.values() for k in (f.name for f in dataclasses.fields(p))
+                           if k not in _NOT_KNOWN}, substep_s=SUBSTEP_S)
 
     def _declared_for(self, known):
-        return (Param("eta_drive_frac", "-", 0.4, 1.0, 0.85,
-                      "motor + inverter + transmission efficiency (both directions)"),)
+        return (Param("efficiency_scale_frac", "-", 0.8, 1.08, _FILES["motor"].efficiency_scale_frac,
+                      "motor: actual / map efficiency (motor + inverter)"),)
 
     def _make_effects(self):
-        g = tuple(Param(f"grade_{k}_frac", "-", -0.15, 0.15, 0.0, f"road grade at distance knot {k}")
-                  for k in range(self.N_GRADE))
+        k = self.known
+        g = tuple(Param(f"grade_frac[{j}]", "-", -0.15, 0.15, 0.0, f"vehicle: road grade tan(theta) at knot {j}")
+                  for j in range(N_GRADE))
 
         def regen_starts(ctx, base):
             pm = ctx["power_meas"]
             neg = -pm[pm < 0]
             if neg.size < 10:
                 return []
-            return [{"p_regen_max_w": float(np.quantile(neg, q))} for q in (0.5, 0.8, 0.95)]
+            return [{"regen_power_max_w": float(np.quantile(neg, q))} for q in (0.5, 0.8, 0.95)]
 
+        m0 = float(k["mass_kg"])
         effs = [
-            Effect("road_grade", f"road grade, piecewise linear in distance ({self.N_GRADE} knots)", g,
-                   {p.name: 0.0 for p in g}, ("power_w",)),
-            Effect("aux_load", "constant auxiliary electrical load (HVAC, cooling fans, electronics)",
-                   (Param("p_aux_extra_w", "W", -2e4, 1e5, 1000.0, "extra auxiliary load"),),
-                   {"p_aux_extra_w": 0.0}, ("power_w",)),
-            Effect("mass_error", "vehicle mass differs from the nominal (payload)",
-                   (Param("mass_scale", "-", 0.5, 2.0, 1.0, "actual / nominal mass"),),
-                   {"mass_scale": 1.0}, ("power_w",)),
+            Effect("road_grade", f"road grade, piecewise linear in distance ({N_GRADE} knots; vehicle grade_frac)",
+                   g, {p.name: 0.0 for p in g}, ("power_w",)),
+            Effect("aux_load", "constant auxiliary electrical load (HVAC, cooling fans, electronics; bus aux_power_w)",
+                   (Param("aux_power_w", "W", -2e4, 1e5, float(k["aux_power_w"]) + 1000.0, "constant auxiliary load"),),
+                   {"aux_power_w": float(k["aux_power_w"])}, ("power_w",)),
+            Effect("mass_error", "vehicle mass differs from the nominal (payload; vehicle mass_kg)",
+                   (Param("mass_kg", "kg", 0.5 * m0, 2.0 * m0, m0, "vehicle mass"),),
+                   {"mass_kg": m0}, ("power_w",)),
             Effect("rolling_error", "rolling-resistance coefficient differs from the nominal (tyres, surface)",
-                   (Param("crr_scale", "-", 0.1, 5.0, 1.0, "actual / nominal Crr", log=True),),
-                   {"crr_scale": 1.0}, ("power_w",)),
-            Effect("aero_error", "aerodynamic drag area differs from the nominal (body, wind)",
-                   (Param("cda_scale", "-", 0.2, 5.0, 1.0, "actual / nominal CdA", log=True),),
-                   {"cda_scale": 1.0}, ("power_w",)),
-            Effect("regen_limit", "regenerative braking power limited (machine/battery limit)",
-                   (Param("p_regen_max_w", "W", 0.0, 2e6, 5e4, "maximum regenerative power"),),
-                   {"p_regen_max_w": 1e12}, ("power_w",), regen_starts),
+                   (Param("rolling_coefficient", "-", 0.002, 0.06, float(k["rolling_coefficient"]),
+                          "rolling coefficient f_r", log=True),),
+                   {"rolling_coefficient": float(k["rolling_coefficient"])}, ("power_w",)),
+            Effect("aero_error", "aerodynamic drag differs from the nominal (body, wind; vehicle drag_coefficient)",
+                   (Param("drag_coefficient", "-", 0.1, 3.0, float(k["drag_coefficient"]), "drag coefficient C_d",
+                          log=True),),
+                   {"drag_coefficient": float(k["drag_coefficient"])}, ("power_w",)),
+            Effect("regen_limit", "regenerative braking power limited (machine/inverter limit; motor regen_power_max_w)",
+                   (Param("regen_power_max_w", "W", 1e3, 2e6, 5e4, "most regenerative electrical power"),),
+                   {"regen_power_max_w": float(k["regen_power_max_w"])}, ("power_w",), regen_starts),
         ]
         return {e.name: e for e in effs}
 
+    # -- the components' parameter sets for a full value dictionary
+    def _params(self, values: Mapping[str, float] | None = None, grade_d=None) -> dict:
+        """{component: params dataclass}: the files, the known parameters, then ``values`` (full)."""
+        over = {n: {} for n in PARAM_FILES}
+        for key, val in self.known.items():
+            if key in _OWNER and val != getattr(_FILES[_OWNER[key]], key):
+                over[_OWNER[key]][key] = val
+        for key, val in (values or {}).items():
+            if key in _OWNER:
+                over[_OWNER[key]][key] = val
+        gk = [float((values or {}).get(f"grade_frac[{j}]", 0.0)) for j in range(N_GRADE)]
+        if any(x != 0.0 for x in gk) and grade_d is not None:
+            over["vehicle"]["grade_distance_m"] = tuple(float(x) for x in grade_d)
+            over["vehicle"]["grade_frac"] = tuple(gk)
+        return over
+
+    def _built(self, over: dict) -> dict:
+        return {n: dataclasses.replace(_FILES[n], **over[n]) for n in PARAM_FILES}
+
     def prepare(self, data) -> dict:
+        from ..components.cycle import CycleParams, CycleSource
+        tg, vg, dt, n_sub, h = _trace(data, float(self.known["substep_s"]))
+        n_steps = (tg.size - 1) * n_sub
+        # the cycle component itself produces the input trace (same values as in the replay's master)
+        with tempfile.TemporaryDirectory() as tmp:
+            f = Path(tmp) / "trace.csv"
+            _write_cycle(f, vg, dt)
+            cyc = CycleSource("cycle", CycleParams(cycle_file=str(f)))
+        cyc.initialize(0.0)
+        vr = np.empty(n_steps + 1)
+        ar = np.empty(n_steps + 1)
+        vr[0], ar[0] = cyc.y["speed_ref_mps"], cyc.y["accel_ref_mps2"]
+        for k in range(n_steps):
+            cyc.do_step(0.0 + k * h, h)
+            vr[k + 1], ar[k + 1] = cyc.y["speed_ref_mps"], cyc.y["accel_ref_mps2"]
+        dist = float(np.sum(0.5 * (vr[1:] + vr[:-1]) * h))
+        grade_d = np.linspace(0.0, max(dist, 1.0), N_GRADE)
+        self._grade_d = grade_d          # knot distances of the last prepared record (used by overlay())
+        # the motor's maps once (they do not depend on fitted parameters)
+        base = self._built(self._params())
+        motor = _component_classes()["motor"]("motor", base["motor"])
         df = data.df
         t = df["time_s"].to_numpy(float)
         v = df["speed_mps"].to_numpy(float)
-        w = float(self.known["accel_window_s"])
-        a = (np.interp(t + w / 2, t, v) - np.interp(t - w / 2, t, v)) / w
-        # at the ends the window is truncated by interp clamping: correct the divisor
-        span = np.minimum(t + w / 2, t[-1]) - np.maximum(t - w / 2, t[0])
-        a = a * w / np.maximum(span, 1e-9)
-        dt = np.diff(t, prepend=t[0])
-        d = np.cumsum(v * dt)
-        dn = d / max(d[-1], 1e-9) * (self.N_GRADE - 1)
-        knot = np.clip(np.floor(dn).astype(int), 0, self.N_GRADE - 2)
-        frac = dn - knot
-        return {"t": t, "v": v, "a": a, "d": d, "knot": knot, "frac": frac,
-                "power_meas": df["power_w"].to_numpy(float), "n": t.size, "df": df}
+        slope = np.diff(vg) / dt
+        a = np.interp(t, tg[:-1] + 0.5 * dt, slope) if slope.size else np.zeros_like(t)
+        return {"t": t, "tg": tg, "dt": dt, "n_sub": n_sub, "h": h, "vr": vr, "ar": ar, "grade_d": grade_d,
+                "md": motor._md, "mi": motor._mi, "power_meas": df["power_w"].to_numpy(float), "v": v, "a": a,
+                "d": np.interp(t, tg, np.concatenate([[0.0], np.cumsum(0.5 * (vg[1:] + vg[:-1]) * dt)])),
+                "n": t.size, "df": df}
 
     def simulate(self, ctx, values):
         p = self.full_values(values)
-        k = self.known
-        v, a = ctx["v"], ctx["a"]
-        m = k["mass_kg"] * p["mass_scale"]
-        gk = np.array([p[f"grade_{j}_frac"] for j in range(self.N_GRADE)])
-        if np.any(gk != 0.0):
-            grade = gk[ctx["knot"]] * (1 - ctx["frac"]) + gk[ctx["knot"] + 1] * ctx["frac"]
-        else:
-            grade = 0.0
-        moving = v > 0.05
-        f = (m * (1 + k["rot_inertia_frac"]) * a + 0.5 * k["rho_kg_m3"] * k["cd_a_m2"] * p["cda_scale"] * v * v
-             + m * k["g_mps2"] * (k["crr"] * p["crr_scale"] * moving + grade))
-        pw = f * v
-        eta = p["eta_drive_frac"]
-        pe = np.where(pw > 0, pw / eta, pw * eta * k["regen_frac"])
-        pe = np.maximum(pe, -p["p_regen_max_w"])
-        return {"power_w": pe + k["p_aux_w"] + p["p_aux_extra_w"]}
+        prm = self._built(self._params(p, ctx["grade_d"]))
+        vp, mp, bp = prm["vehicle"], prm["motor"], prm["bus"]
+        kd = np.array(vp.grade_distance_m, dtype=float)
+        kg = np.array(vp.grade_frac, dtype=float)
+        rec = _speed_following_power(
+            ctx["vr"], ctx["ar"], ctx["h"], kd, kg, float(vp.mass_kg), float(vp.c_aero), float(vp.rolling_coefficient),
+            float(vp.gravity_mps2),
+            ctx["md"], ctx["mi"], mp.gear_ratio / mp.wheel_radius_m, mp.wheel_radius_m / mp.gear_ratio,
+            bool(mp.extrapolate_speed), float(mp.regen_speed_min_mps), float(mp.regen_power_max_w),
+            float(mp.efficiency_scale_frac), float(mp.heat_rate_per_s), float(mp.heat_index_init_frac),
+            float(bp.aux_power_w))
+        pg = _sample(rec, ctx["n_sub"], ctx["tg"].size)
+        return {"power_w": np.interp(ctx["t"], ctx["tg"], pg)}
+
+    def param_bounds(self, ctx):
+        pm = ctx["power_meas"]
+        neg = float(np.max(-pm)) if pm.size else 0.0
+        return {"regen_power_max_w": (1e3, max(2.0 * neg, 2e3))}
 
     def regressors(self, ctx):
         v, a = ctx["v"], ctx["a"]
@@ -111,4 +281,53 @@ class VehicleModel(CalibrationModel):
                 "accel_mps2": a, "inertial_power": a * v, "distance_m": ctx["d"],
                 "braking": (a * v < 0).astype(float) * np.abs(a * v)}
 
+    # -- closing the loop in the simulator
+    def overlay(self, values, out_dir=None) -> dict:
+        """``{"vehicle": {...}, "motor": {...}, "bus": {...}}``: the fitted values (and known parameters that
+        differ from the parameter files) in the components' own names; road-grade knots as the lists
+        ``grade_distance_m`` (from the last :meth:`prepare`d record) / ``grade_frac``. Only values that
+        differ from the parameter files are written; components without a change are left out."""
+        over = self._params(values, getattr(self, "_grade_d", None))
+        out = {}
+        for comp, d in over.items():
+            d = {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items() if v != getattr(_FILES[comp], k)}
+            if d:
+                out[comp] = d
+        return out
 
+    def replay(self, data, overlay_file) -> dict:
+        """Replay the measured speed through the components stepped by the master (module docstring).
+
+        ``overlay_file``: TOML with one table per component (``[vehicle]``, ``[motor]``, ``[bus]``) of
+        parameters merged over the default parameter files.  Returns ``{"power_w": array}`` at the data's
+        sample times and, for inspection, ``"result"`` (the master's :class:`~shevsim.core.results.Result`).
+        """
+        from ..core.master import Connection, Master, MasterSettings
+        from ..core.params import load_params
+        doc = tomllib.loads(Path(overlay_file).read_text(encoding="utf-8")) if overlay_file is not None else {}
+        unknown = set(doc) - set(PARAM_FILES) - {"meta"}
+        if unknown:
+            raise DataError(f"{overlay_file}: unknown component table(s) {sorted(unknown)}; "
+                            f"expected {sorted(PARAM_FILES)}")
+        tg, vg, dt, n_sub, h = _trace(data, float(self.known["substep_s"]))
+        classes = _component_classes()
+        from ..components import get_component_class
+        cyc_cls = get_component_class("cycle")
+        with tempfile.TemporaryDirectory() as tmp:
+            f = Path(tmp) / "trace.csv"
+            _write_cycle(f, vg, dt)
+            comps = [cyc_cls("cycle", load_params(cyc_cls.Params, None, {"cycle_file": str(f)}))]
+        for n in ("vehicle", "motor", "bus"):
+            ov = dict(doc.get(n, {}))
+            if n == "vehicle":
+                ov["input_mode"] = "speed"
+            comps.append(classes[n](n, load_params(classes[n].Params, PARAM_FILES[n], ov)))
+        conns = [Connection.parse(a, b) for a, b in (
+            ("vehicle.speed_ref_mps", "cycle.speed_ref_mps"), ("vehicle.accel_ref_mps2", "cycle.accel_ref_mps2"),
+            ("motor.force_req_n", "vehicle.force_req_n"), ("motor.speed_mps", "vehicle.speed_mps"),
+            ("bus.motor_power_w", "motor.elec_power_w"))]
+        master = Master(comps, conns, MasterSettings(step_s=h), order=["cycle", "vehicle", "motor", "bus"])
+        res = master.run((tg.size - 1) * n_sub * h)
+        pg = _sample(np.asarray(res["bus.demand_power_w"], float), n_sub, tg.size)
+        t = data.df["time_s"].to_numpy(float)
+        return {"power_w": np.interp(t, tg, pg), "result": res}

@@ -119,10 +119,10 @@ def test_vehicle_names_small_effects(effect):
 
 def test_vehicle_recovers_parameters():
     rep, truth = _vehicle(["mass_error"])
-    assert rep["final_parameters"]["mass_scale"] == pytest.approx(truth["mass_scale"], rel=0.05)
-    assert rep["final_parameters"]["eta_drive_frac"] == pytest.approx(truth["eta_drive_frac"], abs=0.03)
+    assert rep["final_parameters"]["mass_kg"] == pytest.approx(truth["mass_kg"], rel=0.05)
+    assert rep["final_parameters"]["efficiency_scale_frac"] == pytest.approx(truth["efficiency_scale_frac"], abs=0.02)
     rep, truth = _vehicle(["regen_limit"])
-    assert rep["final_parameters"]["p_regen_max_w"] == pytest.approx(truth["p_regen_max_w"], rel=0.1)
+    assert rep["final_parameters"]["regen_power_max_w"] == pytest.approx(truth["regen_power_max_w"], rel=0.1)
 
 
 def test_vehicle_nothing_missing_selects_nothing():
@@ -173,15 +173,22 @@ def test_cell_model_ohmic_limit_and_energy_balance():
 
 
 def test_vehicle_model_cruise_power():
-    """Constant speed on the flat: P = (1/2 rho CdA v^2 + m g Crr) v / eta."""
+    """Constant speed on the flat: the motor component's electrical power for the road load (1/2 rho Cd A v^2
+    + f_r M g) at that speed, with the efficiency map scaled by efficiency_scale_frac."""
+    from shevsim.components.motor import Motor, MotorParams
+    from shevsim.components.vehicle import VehicleParams
     t = np.arange(0.0, 100.0, 0.5)
     v = np.full(t.size, 20.0)
     df = pd.DataFrame({"time_s": t, "speed_mps": v, "power_w": 1e5})
     m = get_model("vehicle")
-    out = m.simulate(m.prepare(as_measured(df, "vehicle")), {"eta_drive_frac": 0.9})
-    k = m.known
-    exp = (0.5 * k["rho_kg_m3"] * k["cd_a_m2"] * 400.0 + k["mass_kg"] * k["g_mps2"] * k["crr"]) * 20.0 / 0.9
-    assert out["power_w"][50] == pytest.approx(exp, rel=1e-9)
+    out = m.simulate(m.prepare(as_measured(df, "vehicle")), {"efficiency_scale_frac": 0.9})
+    vp = VehicleParams()
+    mot = Motor("motor", MotorParams(efficiency_scale_frac=0.9))
+    mot.u["speed_mps"] = 20.0
+    mot.initialize(0.0)
+    mot.u["force_req_n"] = vp.c_aero * 400.0 + vp.rolling_coefficient * vp.mass_kg * vp.gravity_mps2
+    mot.do_step(0.0, 0.1)
+    assert out["power_w"][50] == pytest.approx(mot.y["elec_power_w"], rel=1e-9)
 
 
 def test_split_blocks_and_tail():
@@ -210,7 +217,7 @@ def test_cli_end_to_end_report(tmp_path):
     df["extra_signal"] = np.sin(df["time_s"] / 50.0)
     csv = _write(df, tmp_path / "veh.csv")
     params = tmp_path / "p.toml"
-    params.write_text('[meta]\nsource = "test"\n[params]\nmass_kg = 15554.0\neta_drive_frac = 0.8\n')
+    params.write_text('[meta]\nsource = "test"\n[params]\nmass_kg = 15554.0\nefficiency_scale_frac = 0.9\n')
     out = tmp_path / "out"
     rc = main_calibrate(["vehicle", str(csv), "--out", str(out), "--params", str(params), "--map", "power_w=P_bus",
                          "--map", "speed_mps=v", "--power-sign", "delivered-positive", "--holdout", "0.3", "-q"])
