@@ -241,15 +241,25 @@ def _predict_state(st, c, h):
 
 
 @_njit(cache=True)
-def _predict_cov(st, a00, a01, a10, a11, q):
-    """``P <- Ad P Ad' + q I`` of the 2x2 state covariance (3.12b)."""
+def _ad_p(st, a00, a01, a10, a11):
+    """``M = Ad P`` of the 2x2 state covariance ``P`` in ``st``: ``(m00, m01, m10, m11)``."""
     p00 = st[_P00]
     p01 = st[_P01]
     p11 = st[_P11]
-    m00 = a00 * p00 + a01 * p01
-    m01 = a00 * p01 + a01 * p11
-    m10 = a10 * p00 + a11 * p01
-    m11 = a10 * p01 + a11 * p11
+    return (a00 * p00 + a01 * p01, a00 * p01 + a01 * p11, a10 * p00 + a11 * p01, a10 * p01 + a11 * p11)
+
+
+@_njit(cache=True)
+def _g_dh(da, x0, x1, uq, ut):
+    """``g = dAd/dh x + dBd/dh u`` (``da`` = :func:`two_state_d_ad_bd`): the h-sensitivity of the prediction."""
+    return (da[0] * x0 + da[1] * x1 + da[4] * uq + da[5] * ut,
+            da[2] * x0 + da[3] * x1 + da[6] * uq + da[7] * ut)
+
+
+@_njit(cache=True)
+def _predict_cov(st, a00, a01, a10, a11, q):
+    """``P <- Ad P Ad' + q I`` of the 2x2 state covariance (3.12b)."""
+    m00, m01, m10, m11 = _ad_p(st, a00, a01, a10, a11)
     st[_P00] = m00 * a00 + m01 * a01 + q
     st[_P01] = m00 * a10 + m01 * a11
     st[_P11] = m10 * a10 + m11 * a11 + q
@@ -315,10 +325,7 @@ def dkf_step(st, c, y, ta, q_w):
         _predict_cov(st, a00, a01, a10, a11, c[_Q])
         if total:
             da = two_state_d_ad_bd(h, c[_R], c[_K], c[_ALPHA], c[_BQ], c[_DT], c[_EULER] > 0.5)
-            uq = st[_UQ]
-            ut = st[_UT]
-            g0 = da[0] * xp0 + da[1] * xp1 + da[4] * uq + da[5] * ut
-            g1 = da[2] * xp0 + da[3] * xp1 + da[6] * uq + da[7] * ut
+            g0, g1 = _g_dh(da, xp0, xp1, st[_UQ], st[_UT])
             d0 = dx0
             d1 = dx1
             dx0 = g0 + a00 * d0 + a01 * d1
@@ -355,18 +362,9 @@ def jekf_step(st, c, y, ta, q_w):
         # F = [[Ad, g], [0, 1]],  g = dAd/dh x + dBd/dh u  (3.20a)
         da = two_state_d_ad_bd(h, c[_R], c[_K], c[_ALPHA], c[_BQ], c[_DT], c[_EULER] > 0.5)
         a00, a01, a10, a11, x0, x1 = _predict_state(st, c, h)
-        uq = st[_UQ]
-        ut = st[_UT]
-        g0 = da[0] * x0 + da[1] * x1 + da[4] * uq + da[5] * ut
-        g1 = da[2] * x0 + da[3] * x1 + da[6] * uq + da[7] * ut
-        p00 = st[_P00]
-        p01 = st[_P01]
-        p11 = st[_P11]
+        g0, g1 = _g_dh(da, x0, x1, st[_UQ], st[_UT])
         # M = Ad Pxx ; w = Ad pxh
-        m00 = a00 * p00 + a01 * p01
-        m01 = a00 * p01 + a01 * p11
-        m10 = a10 * p00 + a11 * p01
-        m11 = a10 * p01 + a11 * p11
+        m00, m01, m10, m11 = _ad_p(st, a00, a01, a10, a11)
         w0 = a00 * p02 + a01 * p12
         w1 = a10 * p02 + a11 * p12
         n00 = m00 * a00 + m01 * a01 + w0 * g0 + g0 * w0 + p22 * g0 * g0
