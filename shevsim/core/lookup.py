@@ -19,7 +19,7 @@ except ImportError:  # pragma: no cover
         return lambda f: f
 
 
-@_njit(cache=True)
+@_njit(cache=True, error_model="numpy")
 def _bisect_right(d, o, n, x):  # pragma: no cover - compiled
     lo = 0
     hi = n
@@ -32,7 +32,7 @@ def _bisect_right(d, o, n, x):  # pragma: no cover - compiled
     return lo
 
 
-@_njit(cache=True)
+@_njit(cache=True, error_model="numpy")
 def _t1_value(d, o, n, x):  # pragma: no cover - compiled
     if x <= d[o]:
         return d[o + n]
@@ -42,7 +42,7 @@ def _t1_value(d, o, n, x):  # pragma: no cover - compiled
     return d[o + n + k] + d[o + 2 * n + k] * (x - d[o + k])
 
 
-@_njit(cache=True)
+@_njit(cache=True, error_model="numpy")
 def _t1_slope(d, o, n, x):  # pragma: no cover - compiled
     if x <= d[o]:
         k = 0
@@ -53,7 +53,7 @@ def _t1_slope(d, o, n, x):  # pragma: no cover - compiled
     return d[o + 2 * n + k]
 
 
-@_njit(cache=True)
+@_njit(cache=True, error_model="numpy")
 def _t1_integral(d, o, n, x):  # pragma: no cover - compiled
     oc = o + 3 * n - 1
     if x <= d[o]:
@@ -65,7 +65,7 @@ def _t1_integral(d, o, n, x):  # pragma: no cover - compiled
     return d[oc + k] + d[o + n + k] * dx + 0.5 * d[o + 2 * n + k] * dx * dx
 
 
-@_njit(cache=True)
+@_njit(cache=True, error_model="numpy")
 def _g2_locate(d, o, n, x):  # pragma: no cover - compiled
     if x <= d[o]:
         return 0, 0.0
@@ -75,7 +75,7 @@ def _g2_locate(d, o, n, x):  # pragma: no cover - compiled
     return j, (x - d[o + j]) / (d[o + j + 1] - d[o + j])
 
 
-@_njit(cache=True)
+@_njit(cache=True, error_model="numpy")
 def _curve_nb(d, o, n, x):  # pragma: no cover - compiled
     """Clamped curve at ``d[o:o+n]`` (x) / ``d[o+n:o+2n]`` (y), as ``Curve.__call__``; NaN for NaN x."""
     if x != x:
@@ -94,7 +94,7 @@ def _curve_nb(d, o, n, x):  # pragma: no cover - compiled
     return y0 + f * (d[o + n + i + 1] - y0)
 
 
-@_njit(cache=True)
+@_njit(cache=True, error_model="numpy")
 def _grid_nb(d, o, nx, ny, x, y):  # pragma: no cover - compiled
     """Clamped bilinear map: axes ``d[o:o+nx]``, ``d[o+nx:o+nx+ny]``, values row-major after them."""
     if x != x or y != y:
@@ -134,7 +134,7 @@ import math  # noqa: E402
 EXTRAPOLATION_CODES = {"clamp": 0, "linear": 1, "error": 2}
 
 
-@_njit(cache=True)
+@_njit(cache=True, error_model="numpy")
 def _axis_ex(d, o, n, mode, x):  # pragma: no cover - compiled
     """Cell index and fraction of ``x`` on the axis ``d[o:o+n]`` with extrapolation ``mode`` (0 clamp,
     1 linear, 2 error), as ``maps._locate``; a NaN fraction where ``_locate`` raises (NaN ``x``, or
@@ -157,23 +157,27 @@ def _axis_ex(d, o, n, mode, x):  # pragma: no cover - compiled
     return j, (x - d[o + j]) / (d[o + j + 1] - d[o + j])
 
 
-@_njit(cache=True)
-def _curve_ex(d, o, n, mode, x):  # pragma: no cover - compiled
-    """:func:`_curve_nb` with the extrapolation ``mode`` of ``Curve`` (0 clamp, 1 linear, 2 error -> NaN
-    outside the axis); for mode 0 it *is* ``_curve_nb``, so clamped maps keep their bits."""
-    if mode == 0 or x != x or (d[o] < x < d[o + n - 1]):
-        return _curve_nb(d, o, n, x)
+@_njit(cache=True, error_model="numpy")
+def _curve_out(d, o, n, mode, x):  # pragma: no cover - compiled
+    """Value of the curve outside its axis (or NaN ``x``) with extrapolation ``mode`` (cold path of
+    :func:`_curve_ex`)."""
     i, f = _axis_ex(d, o, n, mode, x)
     y0 = d[o + n + i]
     return y0 + f * (d[o + n + i + 1] - y0)
 
 
-@_njit(cache=True)
-def _grid_ex(d, o, nx, ny, mx, my, x, y):  # pragma: no cover - compiled
-    """:func:`_grid_nb` with per-axis extrapolation modes of ``Grid2D`` (0 clamp, 1 linear, 2 error ->
-    NaN outside the axis); for modes (0, 0) it *is* ``_grid_nb``."""
-    if (mx == 0 and my == 0) or x != x or y != y:
-        return _grid_nb(d, o, nx, ny, x, y)
+@_njit(cache=True, inline="always")   # inlined at numba IR level: keeps the clamp path as fast as _curve_nb
+def _curve_ex(d, o, n, mode, x):  # pragma: no cover - compiled
+    """:func:`_curve_nb` with the extrapolation ``mode`` of ``Curve`` (0 clamp, 1 linear, 2 error -> NaN
+    outside the axis); inside the axis, or in mode 0, it *is* ``_curve_nb``, so clamped maps keep their bits."""
+    if mode != 0 and not (d[o] <= x <= d[o + n - 1]):
+        return _curve_out(d, o, n, mode, x)
+    return _curve_nb(d, o, n, x)
+
+
+@_njit(cache=True, error_model="numpy")
+def _grid_out(d, o, nx, ny, mx, my, x, y):  # pragma: no cover - compiled
+    """Bilinear value with per-axis extrapolation modes (cold path of :func:`_grid_ex`)."""
     i, fx = _axis_ex(d, o, nx, mx, x)
     j, fy = _axis_ex(d, o + nx, ny, my, y)
     r0 = o + nx + ny + i * ny
@@ -181,3 +185,12 @@ def _grid_ex(d, o, nx, ny, mx, my, x, y):  # pragma: no cover - compiled
     a = d[r0 + j] + fy * (d[r0 + j + 1] - d[r0 + j])
     b = d[r1 + j] + fy * (d[r1 + j + 1] - d[r1 + j])
     return a + fx * (b - a)
+
+
+@_njit(cache=True, inline="always")
+def _grid_ex(d, o, nx, ny, mx, my, x, y):  # pragma: no cover - compiled
+    """:func:`_grid_nb` with per-axis extrapolation modes of ``Grid2D`` (0 clamp, 1 linear, 2 error -> NaN
+    outside the axis); inside the grid, or in modes (0, 0), it *is* ``_grid_nb``."""
+    if (mx != 0 and not (d[o] <= x <= d[o + nx - 1])) or (my != 0 and not (d[o + nx] <= y <= d[o + nx + ny - 1])):
+        return _grid_out(d, o, nx, ny, mx, my, x, y)
+    return _grid_nb(d, o, nx, ny, x, y)

@@ -428,8 +428,7 @@ class EngineGenStep:
                     st.fuel_cmd, st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j, st.gen_loss_j,
                     st.elec_j, st.soot_mg, st.soot_tr_mg, st.gen_sat, st.shed, st.shed_n, st.shed_s, st.soot_lag,
                     float(p_cmd_w), float(rate_up_wps), float(h), float(elec_max_w))
-        if not (math.isfinite(r[21]) and math.isfinite(r[22]) and math.isfinite(r[24])
-                and math.isfinite(r[1]) and math.isfinite(r[5])):
+        if not math.isfinite(r[21] + r[22] + r[24] + r[1] + r[5]):     # one test for all (NaN/inf propagate)
             modes = [m.name for m in (self.maps.ool_speed, self.maps.ool_shaft, self.maps.tmax, self.maps.fmax)
                      if m.mode == "error"]
             modes += [g.name for g in (self.maps.torque, self.maps.geff, self.maps.soot)
