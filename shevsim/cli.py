@@ -2,7 +2,7 @@
 
 Sub-commands::
 
-    shevsim run [SCENARIO] [--out DIR] [--set comp.param=value ...] [--no-plots] [--quiet]
+    shevsim run [SCENARIO] [--out DIR] [--set comp.param=value ...] [--params [COMP=]FILE ...] [--no-plots] [--quiet]
     shevsim info SCENARIO|FMU
     shevsim cycles [FOLDER]
     shevsim study {thermal,bms,tradeoff,powerrate-map} ...
@@ -23,7 +23,7 @@ from .core.errors import ShevsimError
 def _cmd_run(a) -> int:
     from .run import DEFAULT_SCENARIO, run_scenario
     res, metrics, out = run_scenario(a.scenario or DEFAULT_SCENARIO, a.out, a.set or (), progress=not a.quiet,
-                                     plots=not a.no_plots)
+                                     plots=not a.no_plots, overlays=a.params or ())
     if not a.quiet:
         print(f"scenario {res.meta['scenario']}: {res.termination}, {len(res.time_s)} points, "
               f"wall {res.meta['wall_s']:.2f} s")
@@ -93,6 +93,9 @@ def main(argv=None) -> int:
     r.add_argument("scenario", nargs="?")
     r.add_argument("--out", help="output folder (default results/<scenario name>)")
     r.add_argument("--set", action="append", metavar="COMP.PARAM=VALUE", help="parameter override")
+    r.add_argument("--params", action="append", metavar="[COMPONENT=]FILE",
+                   help="parameter overlay (e.g. a calibration's DIR/params.toml) merged over the component's "
+                        "parameters; without COMPONENT= every table applies to the component of that name")
     r.add_argument("--no-plots", action="store_true")
     r.add_argument("--quiet", action="store_true")
     i = sub.add_parser("info", help="describe a scenario or an FMU")

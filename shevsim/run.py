@@ -61,9 +61,10 @@ def compute_run_metrics(res: Result, scenario: Scenario) -> dict:
 
 
 def run_scenario(path: str | Path | None = None, out: str | Path | None = None, sets=(), progress: bool = False,
-                 plots: bool = True, save: bool = True) -> tuple[Result, dict, Path | None]:
-    """Run a scenario file; save under ``out`` (default ``results/<name>/``)."""
-    scenario = load_scenario(path or DEFAULT_SCENARIO, sets)
+                 plots: bool = True, save: bool = True, overlays=()) -> tuple[Result, dict, Path | None]:
+    """Run a scenario file; save under ``out`` (default ``results/<name>/``); ``overlays`` are
+    ``COMPONENT=FILE`` parameter overlays (``--params``)."""
+    scenario = load_scenario(path or DEFAULT_SCENARIO, sets, overlays=overlays)
     res = simulate(scenario, progress=progress)
     metrics = compute_run_metrics(res, scenario)
     metrics["wall_s"] = res.meta["wall_s"]
@@ -76,7 +77,10 @@ def run_scenario(path: str | Path | None = None, out: str | Path | None = None, 
             plot_fn = scenario_plots
         res.meta["git_commit"] = git_commit()
         res.meta["sets"] = list(scenario.sets)
+        res.meta["overlays"] = list(scenario.overlays)
         text = scenario.text
+        if scenario.overlays:
+            text = "".join(f"# run with --params {o}\n" for o in scenario.overlays) + text
         if scenario.sets:   # the scenario as run: the command-line overrides on top of the file
             text = "".join(f"# run with --set {s}\n" for s in scenario.sets) + text
         save_result(res, out_dir, scenario_text=text, metrics=metrics, plots=plot_fn)

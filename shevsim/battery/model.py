@@ -249,17 +249,29 @@ def _thermal_outputs(c, st, t_amb, h_eff, y):
     y[Y_HEFF] = h_eff
 
 
-def _cell_step(d, ix, c, st, p_in, t, h, t_amb, h_conv, y):
+def _thermal_coeffs(c, h_eff, h, th):
+    """Two-state ZOH/output coefficients for ``(h_eff, h)`` into the workspace ``th`` (16 floats; the last
+    two hold the key): recomputed only when the key changes."""
+    if th[14] != h_eff or th[15] != h:
+        co = two_state_coeffs(c[C_RAD], c[C_LEN], c[C_RHO], c[C_CP], c[C_KT], h_eff, h)
+        for k in range(14):
+            th[k] = co[k]
+        th[14] = h_eff
+        th[15] = h
+
+
+def _cell_step(d, ix, c, st, p_in, t, h, t_amb, h_conv, th, y):
     """One step ``[t, t + h]`` of a cell with the two-state thermal model; ``y`` = outputs at ``t + h``.
 
     ``h_conv`` is the convection input [W/(m2.K)] (the component's ``h_conv_w_m2k``); the effective
-    coefficient over the step is taken at the step's midpoint (:func:`_effective_h`).
+    coefficient over the step is taken at the step's midpoint (:func:`_effective_h`).  ``th`` is the
+    caller's 16-float workspace of thermal coefficients (start it with NaN keys).
     """
     h_eff = _effective_h(c, t + 0.5 * h, h_conv)
     x0 = st[S_X0]
     x1 = st[S_X1]
     q = _cell_electrical(d, ix, c, st, p_in, h, x0, y)
-    th = two_state_coeffs(c[C_RAD], c[C_LEN], c[C_RHO], c[C_CP], c[C_KT], h_eff, h)
+    _thermal_coeffs(c, h_eff, h, th)
     x0n = th[0] * x0 + th[1] * x1 + th[4] * q + th[5] * t_amb
     x1n = th[2] * x0 + th[3] * x1 + th[6] * q + th[7] * t_amb
     st[S_X0] = x0n
@@ -283,16 +295,15 @@ def _run_profile(d, ix, c, st, t, p_in, t_amb, h_conv, out_v, out_ts, out_tc):
     """
     n = t.shape[0]
     y = np.zeros(N_OUT)
+    th = np.full(16, np.nan)
     bad = 0
-    # initial outputs (no step): the voltage with the first input applied through R_s
-    st0 = st.copy()
-    _cell_electrical(d, ix, c, st0, p_in[0], 1e-9, st[S_X0], y)
+    # initial outputs (no step, as the component's initialize): the open-circuit voltage
+    out_v[0] = _t1_value(d, ix[0], ix[1], st[S_SOC]) + c[C_HYST_M] * st[S_HY]
     _thermal_outputs(c, st, t_amb[0], _effective_h(c, t[0], h_conv), y)
-    out_v[0] = y[Y_V]
     out_ts[0] = y[Y_TSURF]
     out_tc[0] = y[Y_TCORE]
     for k in range(1, n):
-        _cell_step(d, ix, c, st, p_in[k], t[k - 1], t[k] - t[k - 1], t_amb[k], h_conv, y)
+        _cell_step(d, ix, c, st, p_in[k], t[k - 1], t[k] - t[k - 1], t_amb[k], h_conv, th, y)
         out_v[k] = y[Y_V]
         out_ts[k] = y[Y_TSURF]
         out_tc[k] = y[Y_TCORE]
@@ -301,16 +312,23 @@ def _run_profile(d, ix, c, st, t, p_in, t_amb, h_conv, out_v, out_ts, out_tc):
     return bad
 
 
-_effective_h = _njit(cache=True)(_effective_h)
-_dudt = _njit(cache=True)(_dudt)
-_ecm = _njit(cache=True)(_ecm)
-_rc_branch = _njit(cache=True)(_rc_branch)
-cell_electrical = _njit(cache=True)(_cell_electrical)
+def _jit(f):
+    """Compile one source.  ``error_model="numpy"``: IEEE division (no Python zero-division check and its
+    branch on every ``/``), the same results for every finite, non-zero divisor."""
+    return _njit(cache=True, error_model="numpy")(f)
+
+
+_effective_h = _jit(_effective_h)
+_dudt = _jit(_dudt)
+_ecm = _jit(_ecm)
+_rc_branch = _jit(_rc_branch)
+cell_electrical = _jit(_cell_electrical)
 _cell_electrical = cell_electrical
-_thermal_outputs = _njit(cache=True)(_thermal_outputs)
-cell_step = _njit(cache=True)(_cell_step)
+_thermal_outputs = _jit(_thermal_outputs)
+_thermal_coeffs = _jit(_thermal_coeffs)
+cell_step = _jit(_cell_step)
 _cell_step = cell_step
-run_profile = _njit(cache=True)(_run_profile)
+run_profile = _jit(_run_profile)
 effective_h = _effective_h
 thermal_outputs = _thermal_outputs
 

@@ -232,9 +232,9 @@ def _two_state_coeffs(radius_m, length_m, density_kg_m3, cp_j_kgk, kt_w_mk, h_w_
 
 try:
     from numba import njit as _njit
-    _two_state_abcd = _njit(cache=True)(_two_state_abcd)
-    _phi = _njit(cache=True)(_phi)
-    two_state_coeffs = _njit(cache=True)(_two_state_coeffs)
+    _two_state_abcd = _njit(cache=True, error_model="numpy")(_two_state_abcd)
+    _phi = _njit(cache=True, error_model="numpy")(_phi)
+    two_state_coeffs = _njit(cache=True, error_model="numpy")(_two_state_coeffs)
 except ImportError:  # pragma: no cover - numba is a dependency
     two_state_coeffs = _two_state_coeffs
 

@@ -1,266 +1,424 @@
-"""cell.py - calibration model of a cell (see models.py for the interface)."""
+"""cell.py - calibration of the battery component's own cell model against measured cell data.
+
+The model fitted here IS the battery component's model: :func:`shevsim.battery.model.run_profile` steps
+:func:`shevsim.battery.model.cell_step` - the function the ``battery`` component runs - through the
+measured current profile (compiled).  Every fitted quantity is a parameter of
+:class:`shevsim.components.battery.BatteryPackParams` (same name, unit and default), so what the
+calibration finds is written as a parameter overlay (``params.toml``, table ``[battery]``) that
+``shevsim run SCENARIO --params battery=DIR/params.toml`` uses, and :meth:`CellModel.replay` steps the
+battery component with that overlay through :class:`shevsim.core.master.Master` to show that the simulator
+reproduces the fit.
+
+Nominal model
+-------------
+``--params`` gives either a battery parameter file (``[params]`` with BatteryPackParams names; its
+``*_file`` tables are used) or the short form (``[params]`` ``capacity_ah``, ``soc0_frac``, ... and
+``[ocv]`` ``soc_frac``/``ocv_v``).  In the short form the cell is foreign to the project's tables: the
+OCV comes from ``[ocv]`` (written to ``ocv.csv`` beside the overlay), the ECM tables are the
+project's A123 tables looked up at 25 degC (their SOC shape; magnitudes fitted through the scale
+factors), no entropic heat and one RC branch (``rc_pairs = 2`` keeps the second).  Either way the data
+fix the cell layout (1 s x 1 p), the input mode (current) and the initial temperature (first surface
+sample); the initial SOC is ``soc0_frac`` or, when negative (default), the OCV inverse of the first
+rest voltage.
+
+Declared (fitted) parameters: ``rs_scale, r1_scale, c1_scale`` (and ``r2_scale, c2_scale`` when the
+nominal has the second branch), ``kt_w_mk``, ``cp_j_kgk``, ``h_conv_factor``.
+
+Effects: :data:`CELL_EFFECTS`, a list of functions ``f(model) -> Effect | None`` (None: does not apply
+to this nominal model).  Add an effect with one function and one entry; its parameters must be
+battery parameters (or ``name[k]`` elements of a list parameter).
+"""
 from __future__ import annotations
 
-import math
+import dataclasses
+from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
-from numba import njit
 
+from ..battery import model as bm
+from ..battery.cell import CellTables
+from ..components.battery import BatteryPackParams
 from ..core.errors import DataError
 from .models import CalibrationModel, Effect, Param
 
 T0_K = 273.15
+_FIELDS = {f.name for f in dataclasses.fields(BatteryPackParams)}
+# legacy short-form keys of --params (the calibration's own keys before the one-source model)
+_LEGACY = {"soc0_frac", "ocv_soc_frac", "ocv_v", "rc_pairs", "change_width_s", "h_conv_w_m2k", "t_ref_c"}
+# parameter -> index in the packed parameter vector of shevsim.battery.model
+_CIDX = {"rs_scale": bm.C_RS, "r1_scale": bm.C_R1, "c1_scale": bm.C_C1, "r2_scale": bm.C_R2,
+         "c2_scale": bm.C_C2, "arrhenius_ea_r_k": bm.C_EA, "arrhenius_t_ref_c": bm.C_TREF,
+         "hyst_max_v": bm.C_HYST_M, "hyst_rate": bm.C_HYST_G, "current_offset_a": bm.C_IOFF,
+         "lowsoc_r_gain": bm.C_LS_G, "lowsoc_r_scale_frac": bm.C_LS_S, "h_conv_factor": bm.C_HFAC,
+         "h_change_time_s": bm.C_HCH_T, "h_change_factor": bm.C_HCH_F, "h_change_width_s": bm.C_HCH_W,
+         "kt_w_mk": bm.C_KT, "cp_j_kgk": bm.C_CP, "density_kg_m3": bm.C_RHO, "radius_m": bm.C_RAD,
+         "length_m": bm.C_LEN}
+N_DUDT_KNOTS = 4
 
-# ----------------------------------------------------------------------------------------------- cell
 
-# generic NCA 18650 open-circuit voltage (approximate shape; give the cell's own curve with --params)
-DEFAULT_OCV_SOC = (0.0, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
-DEFAULT_OCV_V = (3.0, 3.3, 3.42, 3.52, 3.6, 3.66, 3.73, 3.81, 3.9, 3.99, 4.08, 4.19)
-OCV_GRID_N = 401
+# ------------------------------------------------------------------------------------------ effects
+
+def entropic_heat(model) -> Effect:
+    """Reversible heat ``-i T dU/dT(SOC)``, dU/dT piecewise linear through knots over the SOC range visited."""
+    ks = model.dudt_knots
+    ps = tuple(Param(f"dudt_v_k[{k}]", "V/K", -2e-3, 2e-3, 0.0, f"dU/dT at SOC {s:.3f}") for k, s in enumerate(ks))
+    return Effect("entropic_heat", "reversible (entropic) heat -i T dU/dT with dU/dT a function of SOC "
+                  f"({len(ks)} knots; sign changes allowed)", ps, {p.name: 0.0 for p in ps}, ("t_surface_c",))
 
 
-@njit(cache=True)
-def _cell_kernel(t, i_meas, t_amb, ts_meas, ocv_tab, soc0, tc0, ts0, cap_as, lumped,
-                 r0, r1, tau1, r2, tau2, cc, cs, rc, ru,
-                 dudt, ea_r, t_ref_k, t_chg, h_fac, chg_w, m_hyst, g_hyst, cap_scale, i_off,
-                 ls_gain, ls_scale, anchor, out_v, out_tc, out_ts):  # pragma: no cover - compiled
-    n = t.shape[0]
-    ng = ocv_tab.shape[0]
-    soc = soc0
-    v1 = 0.0
-    v2 = 0.0
-    h = 0.0
-    tc = tc0
-    ts = ts0
-    cap = cap_as * cap_scale
-    t_ref_c = t_ref_k - 273.15
-    for k in range(n):
-        i = i_meas[k] - i_off
-        x = soc * (ng - 1)
-        if x <= 0.0:
-            ocv = ocv_tab[0] + (ocv_tab[1] - ocv_tab[0]) * x
-        elif x >= ng - 1:
-            ocv = ocv_tab[ng - 1] + (ocv_tab[ng - 1] - ocv_tab[ng - 2]) * (x - (ng - 1))
-        else:
-            j = int(x)
-            f = x - j
-            ocv = ocv_tab[j] * (1.0 - f) + ocv_tab[j + 1] * f
-        ocv += dudt * (tc - t_ref_c)
-        tck = tc + 273.15
-        if ea_r != 0.0:
-            # core temperature anchored to the measured surface: T_s,meas + (T_c - T_s)_model
-            tak = (ts_meas[k] + (tc - ts) + 273.15) if anchor else tck
-            if tak < 200.0:
-                tak = 200.0
-            sr = math.exp(ea_r * (1.0 / tak - 1.0 / t_ref_k))
-        else:
-            sr = 1.0
-        if ls_gain != 0.0:
-            sr *= 1.0 + ls_gain * math.exp(-soc / ls_scale)
-        v = ocv - r0 * sr * i - v1 - v2 + m_hyst * h
-        out_v[k] = v
-        out_tc[k] = tc
-        out_ts[k] = ts
-        if k == n - 1:
-            break
-        dt = t[k + 1] - t[k]
-        q = i * (ocv - v) - i * tck * dudt
-        # convection (possibly changed after t_chg)
-        if h_fac != 1.0:
-            z = (t[k] - t_chg) / chg_w
-            if z > 40.0:
-                sg = 1.0
-            elif z < -40.0:
-                sg = 0.0
-            else:
-                sg = 1.0 / (1.0 + math.exp(-z))
-            ru_e = ru / (1.0 + (h_fac - 1.0) * sg)
-        else:
-            ru_e = ru
-        ta = t_amb[k]
-        if lumped:
-            # C dT/dt = Q + (Ta - T)/Ru  (backward Euler)
-            tc = (tc + dt / cc * (q + ta / ru_e)) / (1.0 + dt / (cc * ru_e))
-            ts = tc
-        else:
-            # [cc/dt + 1/rc, -1/rc; -1/rc, cs/dt + 1/rc + 1/ru] [Tc; Ts] = [cc/dt Tc + Q; cs/dt Ts + Ta/ru]
-            a11 = cc / dt + 1.0 / rc
-            a12 = -1.0 / rc
-            a22 = cs / dt + 1.0 / rc + 1.0 / ru_e
-            b1 = cc / dt * tc + q
-            b2 = cs / dt * ts + ta / ru_e
-            det = a11 * a22 - a12 * a12
-            tc = (b1 * a22 - a12 * b2) / det
-            ts = (a11 * b2 - a12 * b1) / det
-        e1 = math.exp(-dt / tau1)
-        v1 = v1 * e1 + r1 * sr * (1.0 - e1) * i
-        if r2 > 0.0:
-            e2 = math.exp(-dt / tau2)
-            v2 = v2 * e2 + r2 * sr * (1.0 - e2) * i
-        soc -= dt * i / cap
-        if g_hyst > 0.0 and m_hyst != 0.0:
-            eh = math.exp(-abs(g_hyst * i * dt / cap_as))
-            sgn = 1.0 if i > 0.0 else (-1.0 if i < 0.0 else 0.0)
-            h = eh * h - (1.0 - eh) * sgn
-    return 0
+def arrhenius_resistance(model) -> Effect:
+    def starts(ctx, base):
+        return [{"arrhenius_ea_r_k": ea} for ea in (1500.0, 4000.0, 8000.0)]
+    return Effect("arrhenius_resistance", "all resistances x exp(Ea/R (1/T - 1/T_ref)) of the cell mean "
+                  "temperature (T_ref: the record's mean surface temperature)",
+                  (Param("arrhenius_ea_r_k", "K", 0.0, 15000.0, 3000.0, "activation energy / gas constant"),),
+                  {"arrhenius_ea_r_k": 0.0}, ("voltage_v", "t_surface_c"), starts)
+
+
+def cooling_change(model) -> Effect:
+    def starts(ctx, base):
+        t = ctx["t"]
+        return [{"h_change_time_s": t[0] + f * (t[-1] - t[0]), "h_change_factor": hf}
+                for f in (0.15, 0.35, 0.55, 0.75) for hf in (0.4, 2.5)]
+    return Effect("cooling_change", "convection coefficient multiplied by a factor after an unknown time "
+                  "(cooling fault, airflow change)",
+                  (Param("h_change_time_s", "s", -1e12, 1e12, 0.0, "time of the change"),
+                   Param("h_change_factor", "1", 0.05, 20.0, 1.0, "h after / h before", log=True)),
+                  {"h_change_time_s": 0.0, "h_change_factor": 1.0}, ("t_surface_c",), starts)
+
+
+def ocv_hysteresis(model) -> Effect:
+    def starts(ctx, base):
+        return [{"hyst_max_v": 0.01, "hyst_rate": g} for g in (3.0, 30.0, 300.0)]
+    return Effect("ocv_hysteresis", "one-state OCV hysteresis M h, h driven by the charge passed (Plett)",
+                  (Param("hyst_max_v", "V", -0.1, 0.1, 0.01, "maximum hysteresis voltage"),
+                   Param("hyst_rate", "1", 0.1, 3000.0, 30.0, "rate per unit SOC", log=True)),
+                  {"hyst_max_v": 0.0, "hyst_rate": 30.0}, ("voltage_v",), starts)
+
+
+def capacity(model) -> Effect:
+    rated = model.base.capacity_ah
+    return Effect("capacity", "the cell's capacity differs from the rated one (ageing, rating)",
+                  (Param("capacity_ah", "A.h", 0.3 * rated, 1.5 * rated, rated, "capacity"),),
+                  {"capacity_ah": rated}, ("voltage_v",))
+
+
+def current_offset(model) -> Effect:
+    return Effect("current_offset", "current-sensor offset: true current = logged current - offset",
+                  (Param("current_offset_a", "A", -1.0, 1.0, 0.0, "sensor offset"),),
+                  {"current_offset_a": 0.0}, ("voltage_v",))
+
+
+def low_soc_resistance(model) -> Effect:
+    return Effect("low_soc_resistance", "resistances rise at low SOC: R x (1 + g exp(-SOC / s))",
+                  (Param("lowsoc_r_gain", "1", 0.0, 50.0, 1.0, "gain g"),
+                   Param("lowsoc_r_scale_frac", "1", 0.02, 0.3, 0.08, "SOC scale s")),
+                  {"lowsoc_r_gain": 0.0, "lowsoc_r_scale_frac": 0.1}, ("voltage_v",))
+
+
+def second_rc_branch(model) -> Effect | None:
+    if model.base.r2_scale > 0.0:
+        return None     # the nominal model has it already
+    def starts(ctx, base):
+        return [{"r2_scale": r, "c2_scale": c} for r in (0.3, 1.0, 3.0) for c in (0.1, 1.0)]
+    return Effect("second_rc_branch", "a second, slow RC branch (diffusion)",
+                  (Param("r2_scale", "1", 0.01, 100.0, 1.0, "factor on the R2 table", log=True),
+                   Param("c2_scale", "1", 0.01, 100.0, 1.0, "factor on the C2 table", log=True)),
+                  {"r2_scale": 0.0, "c2_scale": 1.0}, ("voltage_v",), starts)
+
+
+#: the cell effect library: functions model -> Effect (or None when it does not apply); extend with one entry
+CELL_EFFECTS = [entropic_heat, arrhenius_resistance, cooling_change, ocv_hysteresis, capacity, current_offset,
+                low_soc_resistance, second_rc_branch]
+
+
+# ------------------------------------------------------------------------------------------ model
+
+def _ocv_csv_text(soc, v) -> str:
+    lines = ["# OCV curve given to the calibration with --params [ocv] (written by shevsim calibrate)",
+             "soc_frac,ocv_v"] + [f"{a:.10g},{b:.10g}" for a, b in zip(soc, v)]
+    return "\n".join(lines) + "\n"
 
 
 class CellModel(CalibrationModel):
-    """Cell OCV-R-RC (optional second RC) with two-state (default) or lumped thermal model.
+    """The battery component's cell model (see the module docstring).
 
     Channels: ``voltage_v`` [V], ``t_surface_c`` [degC], optional ``t_core_c`` [degC].
     Inputs: ``current_a`` [A, + discharge], ``t_ambient_c`` [degC].
     """
     name = "cell"
+    component = "battery"
+    component_name = "battery"
     channels = ("voltage_v", "t_surface_c")
     optional_channels = ("t_core_c",)
     inputs = ("current_a", "t_ambient_c")
-    known_defaults = {
-        "capacity_ah": 2.9,          # rated capacity [Ah]
-        "soc0_frac": -1.0,           # initial SOC; < 0: from the first voltage sample by inverting the OCV
-        "t_ref_c": 25.0,             # reference temperature of R and dU/dT [degC]
-        "thermal": "two-state",      # or "lumped"
-        "rc_pairs": 1,               # 1 or 2
-        "change_width_s": 20.0,      # time scale of the smooth cooling_change step [s]
-        "arrhenius_anchor": True,    # Arrhenius temperature = measured surface + modelled core-surface gradient
-        "ocv_soc_frac": DEFAULT_OCV_SOC,
-        "ocv_v": DEFAULT_OCV_V,
-    }
+    known_defaults = {"soc0_frac": -1.0, "h_conv_w_m2k": 20.0, "change_width_s": 20.0}
+    cause_hints = {"discharged_ah": "capacity differs from the rated one, or the OCV curve is wrong",
+                   "current_a": "resistance level wrong, or the current is in other units (mA?) or sign",
+                   "current_sq_a2": "heat generation / resistance level wrong",
+                   "abs_current_a": "resistance level or hysteresis",
+                   "time_s": "a slow drift: temperature, ageing or a sensor drift",
+                   "t_ambient_c": "ambient coupling (convection coefficient) wrong",
+                   "t_surface_meas_c": "temperature dependence of the resistances (Arrhenius) missing"}
 
+    def __init__(self, known: Mapping[str, Any] | None = None, where: str = "<params>"):
+        known = dict(known or {})
+        self.where = where
+        self.known = dict(self.known_defaults)
+        self.initial: dict[str, float] = {}
+        comp: dict[str, Any] = {}
+        short_form = "ocv_soc_frac" in known or "__component_file__" not in known
+        base_dir = Path(known.pop("__base_dir__", "."))
+        known.pop("__component_file__", None)
+        for k, v in known.items():
+            if k in _LEGACY or k in self.known_defaults:
+                self.known[k] = v
+            elif k in _FIELDS:
+                comp[k] = v
+            elif k in ("r0_ohm", "r1_ohm", "tau1_s", "cc_j_k", "cs_j_k", "rc_k_w", "ru_k_w", "thermal"):
+                raise DataError(f"{where}: '{k}' belonged to the calibration's former side model; the cell is now "
+                                f"the battery component's model - give battery parameters (e.g. rs_scale, "
+                                f"kt_w_mk, cp_j_kgk, h_conv_factor) instead")
+            else:
+                import difflib
+                opts = sorted(_FIELDS | set(self.known_defaults) | _LEGACY)
+                best = difflib.get_close_matches(k, opts, n=1)
+                hint = f" (did you mean '{best[0]}'?)" if best else ""
+                raise DataError(f"{where}: unknown parameter '{k}' for the cell model{hint}")
+        self.ocv_table = None
+        if "ocv_soc_frac" in self.known:
+            soc = tuple(float(x) for x in self.known["ocv_soc_frac"])
+            v = tuple(float(x) for x in self.known["ocv_v"])
+            if len(soc) != len(v) or len(soc) < 2 or any(b <= a for a, b in zip(soc, soc[1:])):
+                raise DataError(f"{where}: [ocv] soc_frac must increase strictly and match ocv_v in length")
+            if any(b <= a for a, b in zip(v, v[1:])):
+                raise DataError(f"{where}: [ocv] ocv_v must increase strictly with soc_frac")
+            self.ocv_table = (soc, v)
+        defaults = {}
+        if short_form:
+            defaults = {"entropic_heat": False, "temperature_dependent": False,
+                        "r2_scale": 1.0 if int(self.known.get("rc_pairs", 1)) == 2 else 0.0}
+        for k, v in list(comp.items()):
+            if k.endswith("_file") and isinstance(v, str) and v and not Path(v).is_absolute():
+                comp[k] = str((base_dir / v).resolve())
+        self.user_params = comp
+        fixed = {"n_series": 1, "n_parallel": 1, "input_mode": "current", "sigma_current_a": 0.0,
+                 "sigma_voltage_v": 0.0, "sigma_temperature_c": 0.0, "thermal_model": "two_state",
+                 "h_change_width_s": float(self.known["change_width_s"])}
+        try:
+            self.base = dataclasses.replace(BatteryPackParams(), **{**defaults, **comp, **fixed})
+        except (TypeError, ValueError, Exception) as exc:
+            if isinstance(exc, DataError):
+                raise
+            raise DataError(f"{where}: {exc}") from exc
+        self.tables_ocv_file = ""
+        self.dudt_knots = tuple(np.linspace(0.1, 0.9, N_DUDT_KNOTS))
+        self.declared = self._declared_for(self.known)
+        self.effects = self._make_effects()
+
+    # -- declared parameters and effects
     def _declared_for(self, known):
-        ps = [Param("r0_ohm", "ohm", 1e-3, 0.5, 0.02, "series resistance at t_ref", log=True),
-              Param("r1_ohm", "ohm", 1e-4, 0.5, 0.015, "RC pair 1 resistance", log=True),
-              Param("tau1_s", "s", 0.5, 500.0, 20.0, "RC pair 1 time constant", log=True)]
-        if int(known.get("rc_pairs", 1)) == 2:
-            ps += [Param("r2_ohm", "ohm", 1e-4, 0.5, 0.01, "RC pair 2 resistance", log=True),
-                   Param("tau2_s", "s", 10.0, 5000.0, 300.0, "RC pair 2 time constant", log=True)]
-        if known.get("thermal", "two-state") == "lumped":
-            ps += [Param("cc_j_k", "J/K", 5.0, 1000.0, 45.0, "lumped heat capacity", log=True),
-                   Param("ru_k_w", "K/W", 0.5, 100.0, 10.0, "surface-to-ambient thermal resistance", log=True)]
-        else:
-            ps += [Param("cc_j_k", "J/K", 5.0, 1000.0, 40.0, "core heat capacity", log=True),
-                   Param("cs_j_k", "J/K", 0.5, 200.0, 5.0, "surface (case) heat capacity", log=True),
-                   Param("rc_k_w", "K/W", 0.05, 50.0, 2.0, "core-to-surface thermal resistance", log=True),
-                   Param("ru_k_w", "K/W", 0.5, 100.0, 10.0, "surface-to-ambient thermal resistance", log=True)]
+        b = self.base
+        ps = [Param("rs_scale", "1", 0.02, 50.0, 1.0, "factor on the R_s table", log=True),
+              Param("r1_scale", "1", 0.02, 50.0, 1.0, "factor on the R_1 table", log=True),
+              Param("c1_scale", "1", 0.01, 100.0, 1.0, "factor on the C_1 table", log=True)]
+        if b.r2_scale > 0.0:
+            ps += [Param("r2_scale", "1", 0.01, 100.0, b.r2_scale, "factor on the R_2 table", log=True),
+                   Param("c2_scale", "1", 0.01, 100.0, b.c2_scale, "factor on the C_2 table", log=True)]
+        ps += [Param("kt_w_mk", "W/(m.K)", 0.05, 20.0, b.kt_w_mk, "radial thermal conductivity", log=True),
+               Param("cp_j_kgk", "J/(kg.K)", 200.0, 5000.0, b.cp_j_kgk, "specific heat capacity", log=True),
+               Param("h_conv_factor", "1", 0.05, 20.0, b.h_conv_factor, "factor on the convection coefficient",
+                     log=True)]
         return tuple(ps)
 
     def _make_effects(self):
-        def arr_starts(ctx, base):
-            # keep the mean resistance of the current fit: R_ref = R_fit / s(T_mean)
-            tm = float(np.mean(ctx["df"]["t_surface_c"].to_numpy(float))) + T0_K
-            tr = float(self.known["t_ref_c"]) + T0_K
-            out = []
-            for ea in (1500.0, 4000.0, 8000.0):
-                sc = math.exp(ea * (1.0 / tm - 1.0 / tr))
-                st = {"ea_r_k": ea}
-                for name in ("r0_ohm", "r1_ohm", "r2_ohm"):
-                    if name in base:
-                        p = next(q for q in self.declared if q.name == name)
-                        st[name] = min(max(base[name] / sc, p.lo * 1.01), p.hi * 0.99)
-                out.append(st)
-            return out
+        out = {}
+        for f in CELL_EFFECTS:
+            e = f(self)
+            if e is not None:
+                out[e.name] = e
+        return out
 
-        def chg_starts(ctx, base):
-            t = ctx["t"]
-            return [{"t_change_s": t[0] + f * (t[-1] - t[0]), "h_factor": hf}
-                    for f in (0.15, 0.35, 0.55, 0.75) for hf in (0.4, 2.5)]
-
-        def hyst_starts(ctx, base):
-            return [{"m_hyst_v": 0.01, "gamma_hyst": g} for g in (3.0, 30.0, 300.0)]
-
-        effs = [
-            Effect("entropic_heat", "reversible (entropic) heat -i T dU/dT and OCV temperature shift",
-                   (Param("dudt_v_k", "V/K", -1e-3, 1e-3, 0.0, "entropic coefficient dOCV/dT"),),
-                   {"dudt_v_k": 0.0}, ("t_surface_c", "voltage_v")),
-            Effect("arrhenius_resistance", "R0, R1, R2 scale with exp(Ea/R (1/T - 1/T_ref)) of core temperature",
-                   (Param("ea_r_k", "K", 0.0, 12000.0, 3000.0, "activation energy over gas constant"),),
-                   {"ea_r_k": 0.0}, ("voltage_v", "t_surface_c"), arr_starts),
-            Effect("cooling_change", "convection coefficient h multiplied by h_factor after an unknown time "
-                   "(cooling fault or airflow change)",
-                   (Param("t_change_s", "s", -1e12, 1e12, 0.0, "time of the change"),
-                    Param("h_factor", "-", 0.1, 10.0, 1.0, "h after / h before", log=True)),
-                   {"t_change_s": 0.0, "h_factor": 1.0}, ("t_surface_c",), chg_starts),
-            Effect("ocv_hysteresis", "one-state OCV hysteresis M h, dh driven by |i| (Plett)",
-                   (Param("m_hyst_v", "V", -0.1, 0.1, 0.01, "maximum hysteresis voltage"),
-                    Param("gamma_hyst", "-", 0.1, 2000.0, 30.0, "hysteresis rate per unit charge", log=True)),
-                   {"m_hyst_v": 0.0, "gamma_hyst": 0.0}, ("voltage_v",), hyst_starts),
-            Effect("capacity_fade", "effective capacity differs from the rated one (aging)",
-                   (Param("capacity_scale", "-", 0.3, 1.5, 1.0, "effective / rated capacity"),),
-                   {"capacity_scale": 1.0}, ("voltage_v",)),
-            Effect("current_offset", "current sensor offset: true current = measured - offset",
-                   (Param("current_offset_a", "A", -1.0, 1.0, 0.0, "sensor offset"),),
-                   {"current_offset_a": 0.0}, ("voltage_v",)),
-            Effect("low_soc_resistance", "resistances rise at low SOC: R x (1 + g exp(-SOC / s)) "
-                   "(electrode depletion / diffusion limitation near the end of discharge)",
-                   (Param("r_lowsoc_gain", "-", 0.0, 50.0, 1.0, "gain g"),
-                    Param("r_lowsoc_scale_frac", "-", 0.02, 0.3, 0.08, "SOC scale s")),
-                   {"r_lowsoc_gain": 0.0, "r_lowsoc_scale_frac": 0.1}, ("voltage_v",)),
-        ]
-        return {e.name: e for e in effs}
-
+    # -- data
     def prepare(self, data) -> dict:
         df = data.df
         t = df["time_s"].to_numpy(float)
         i = df["current_a"].to_numpy(float)
         ta = df["t_ambient_c"].to_numpy(float)
-        soc_tab = np.asarray(self.known["ocv_soc_frac"], float)
-        v_tab = np.asarray(self.known["ocv_v"], float)
-        if soc_tab.shape != v_tab.shape or soc_tab.size < 2 or np.any(np.diff(soc_tab) <= 0):
-            raise DataError(f"{self.where}: ocv_soc_frac must increase strictly and match ocv_v in length")
-        grid = np.linspace(0.0, 1.0, OCV_GRID_N)
-        # linear extrapolation outside the table
-        ocv_tab = np.interp(grid, soc_tab, v_tab)
-        lo, hi = soc_tab[0], soc_tab[-1]
-        s_lo = (v_tab[1] - v_tab[0]) / (soc_tab[1] - soc_tab[0])
-        s_hi = (v_tab[-1] - v_tab[-2]) / (soc_tab[-1] - soc_tab[-2])
-        ocv_tab = np.where(grid < lo, v_tab[0] + s_lo * (grid - lo), ocv_tab)
-        ocv_tab = np.where(grid > hi, v_tab[-1] + s_hi * (grid - hi), ocv_tab)
+        ts_meas = df["t_surface_c"].to_numpy(float)
+        tables = self._tables()
+        d, ix = tables.packed()
         soc0 = float(self.known["soc0_frac"])
         if soc0 < 0:
-            # invert the OCV at the start (assumes the record starts at rest): mean voltage over the
-            # initial low-current samples (at most 60 s) to average out sensor noise
+            # invert the OCV at the start (the record starts at rest): mean voltage over the initial
+            # low-current samples (at most 60 s)
             low = np.abs(i) <= 0.02 * max(float(np.abs(i).max()), 1e-9)
             n0 = int(np.argmin(low)) if not low.all() else low.size
             n0 = max(1, min(n0, int(np.searchsorted(t, t[0] + 60.0))))
-            v0 = float(np.mean(df["voltage_v"].to_numpy(float)[:n0])) + float(np.mean(i[:n0])) * 0.02
-            soc0 = float(np.interp(v0, ocv_tab, grid)) if np.all(np.diff(ocv_tab) > 0) else 0.5
-        ts0 = float(df["t_surface_c"].iloc[0])
-        return {"t": t, "i": i, "ta": ta, "ts_meas": df["t_surface_c"].to_numpy(float), "ocv_tab": ocv_tab, "soc0": soc0, "ts0": ts0,
-                "tc0": float(df["t_core_c"].iloc[0]) if "t_core_c" in df else ts0,
-                "has_core": "t_core_c" in df, "cap_as": float(self.known["capacity_ah"]) * 3600.0,
-                "n": t.size, "df": df}
+            v0 = float(np.mean(df["voltage_v"].to_numpy(float)[:n0]))
+            xs = np.linspace(0.0, 1.0, 2001)
+            ocv = np.array([tables.ocv(x) for x in xs])
+            soc0 = float(np.interp(v0, ocv, xs)) if np.all(np.diff(ocv) > 0) else 0.5
+        self.soc0 = soc0
+        self.t_init_c = float(ts_meas[0])
+        # Arrhenius reference: the record's mean temperature (decouples Ea from the resistance scales)
+        self.t_ref_c = float(np.mean(ts_meas))
+        # entropic-heat knots over the SOC range the record visits (nominal capacity)
+        dt = np.diff(t, prepend=t[0])
+        soc = soc0 - np.cumsum(i * dt) / (3600.0 * self.base.capacity_ah)
+        lo, hi = float(np.clip(soc.min(), 0.0, 1.0)), float(np.clip(soc.max(), 0.0, 1.0))
+        if hi - lo < 0.05:
+            lo, hi = max(0.0, lo - 0.025), min(1.0, hi + 0.025)
+        self.dudt_knots = tuple(float(x) for x in np.linspace(lo, hi, N_DUDT_KNOTS))
+        self.effects = self._make_effects()
+        base = self._component_params({})
+        return {"t": t, "i": i, "ta": ta, "d": d, "ix": ix, "c0": bm.pack_params(base), "n": t.size, "df": df,
+                "h_conv": float(self.known["h_conv_w_m2k"]), "has_core": "t_core_c" in df,
+                "soc_range": (lo, hi)}
+
+    def _tables(self) -> CellTables:
+        b = self.base
+        ocv_file = b.ocv_file or None
+        if self.ocv_table is not None:
+            import tempfile
+            fd = tempfile.NamedTemporaryFile("w", suffix="_ocv.csv", delete=False)
+            fd.write(_ocv_csv_text(*self.ocv_table))
+            fd.close()
+            ocv_file = fd.name
+            self.tables_ocv_file = fd.name
+        try:
+            return CellTables(ocv_file, b.entropy_file or None, b.discharge_file or None, b.charge_file or None)
+        except Exception as exc:
+            raise DataError(f"{self.where}: {exc}") from exc
+
+    # -- parameters of the component
+    def _component_params(self, values: Mapping[str, float]) -> BatteryPackParams:
+        """The battery parameters (nominal + ``values``) that the simulation of this record uses."""
+        full = self.full_values(values)
+        kw: dict[str, Any] = {"soc_init_pct": 100.0 * min(max(getattr(self, "soc0", 0.5), 0.0), 1.0),
+                              "t_init_c": getattr(self, "t_init_c", self.base.t_init_c),
+                              "arrhenius_t_ref_c": getattr(self, "t_ref_c", 25.0)}
+        knots = [full.get(f"dudt_v_k[{k}]", 0.0) for k in range(len(self.dudt_knots))]
+        if any(v != 0.0 for v in knots):
+            kw["dudt_soc_frac"] = self.dudt_knots
+            kw["dudt_v_k"] = tuple(knots)
+        for k, v in full.items():
+            if k in _FIELDS:
+                kw[k] = v
+        if self.tables_ocv_file:
+            kw["ocv_file"] = self.tables_ocv_file
+        return dataclasses.replace(self.base, **kw)
 
     def simulate(self, ctx, values):
         p = self.full_values(values)
+        c = ctx["c0"].copy()
+        for k, v in p.items():
+            j = _CIDX.get(k)
+            if j is not None:
+                c[j] = v
+        if "capacity_ah" in p:
+            c[bm.C_QAS] = 3600.0 * p["capacity_ah"]
+        knots = [p.get(f"dudt_v_k[{k}]", 0.0) for k in range(len(self.dudt_knots))]
+        if any(v != 0.0 for v in knots):
+            c = np.concatenate([c[:bm.C_KNOTS], np.asarray(self.dudt_knots), np.asarray(knots)])
+            c[bm.C_NDUDT] = len(knots)
         n = ctx["n"]
-        ov, otc, ots = np.empty(n), np.empty(n), np.empty(n)
-        lumped = self.known.get("thermal", "two-state") == "lumped"
-        two = int(self.known.get("rc_pairs", 1)) == 2
-        _cell_kernel(ctx["t"], ctx["i"], ctx["ta"], ctx["ts_meas"], ctx["ocv_tab"], ctx["soc0"], ctx["tc0"], ctx["ts0"],
-                     ctx["cap_as"], lumped,
-                     p["r0_ohm"], p["r1_ohm"], p["tau1_s"], p["r2_ohm"] if two else 0.0,
-                     p["tau2_s"] if two else 1.0, p["cc_j_k"], p.get("cs_j_k", 1.0), p.get("rc_k_w", 1.0),
-                     p["ru_k_w"], p["dudt_v_k"], p["ea_r_k"], float(self.known["t_ref_c"]) + T0_K,
-                     p["t_change_s"], p["h_factor"], float(self.known["change_width_s"]), p["m_hyst_v"], p["gamma_hyst"],
-                     p["capacity_scale"], p["current_offset_a"], p["r_lowsoc_gain"], p["r_lowsoc_scale_frac"],
-                     bool(self.known["arrhenius_anchor"]), ov, otc, ots)
-        out = {"voltage_v": ov, "t_surface_c": ots}
+        st = np.zeros(bm.N_STATE)
+        st[bm.S_SOC] = c0soc = min(max(self.soc0, 0.0), 1.0)
+        st[bm.S_X0] = self.t_init_c
+        ov, ots, otc = np.empty(n), np.empty(n), np.empty(n)
+        bm.run_profile(ctx["d"], ctx["ix"], c, st, ctx["t"], ctx["i"], ctx["ta"], ctx["h_conv"], ov, ots, otc)
+        del c0soc
+        out = {"voltage_v": ov, "t_surface_c": ots, "_t_core_c": otc}
         if ctx["has_core"]:
             out["t_core_c"] = otc
-        out["_t_core_c"] = otc
         return out
 
     def param_bounds(self, ctx):
         t = ctx["t"]
-        return {"t_change_s": (float(t[0]), float(t[-1]))}
+        return {"h_change_time_s": (float(t[0]), float(t[-1]))}
 
     def regressors(self, ctx):
         t, i = ctx["t"], ctx["i"]
-        dt = np.diff(t, append=t[-1])
+        dt = np.diff(t, prepend=t[0])
         ah = np.cumsum(i * dt) / 3600.0
         return {"time_s": t - t[0], "current_a": i, "abs_current_a": np.abs(i), "current_sq_a2": i * i,
                 "discharged_ah": ah, "t_ambient_c": ctx["ta"],
                 "t_surface_meas_c": ctx["df"]["t_surface_c"].to_numpy(float)}
 
+    # -- closing the loop
+    def overlay(self, values, out_dir) -> dict:
+        """Battery parameters that carry the fit into a scenario (``[battery]`` of ``params.toml``)."""
+        p = self._component_params(values)
+        ov: dict[str, Any] = {}
+        for prm in self.declared:
+            ov[prm.name] = getattr(p, prm.name)
+        for name, e in self.effects.items():
+            for prm in e.params:
+                key = prm.name.split("[")[0]
+                if key == "dudt_v_k":
+                    if p.dudt_v_k:
+                        ov["dudt_soc_frac"] = list(p.dudt_soc_frac)
+                        ov["dudt_v_k"] = list(p.dudt_v_k)
+                    continue
+                val = getattr(p, key)
+                if val != getattr(self.base, key):
+                    ov[key] = val
+        if p.arrhenius_ea_r_k != 0.0:
+            ov["arrhenius_t_ref_c"] = p.arrhenius_t_ref_c
+        if p.h_change_factor != 1.0:
+            ov["h_change_width_s"] = p.h_change_width_s
+        # what the nominal model fixed for this (foreign) cell travels with the overlay
+        for k in ("entropic_heat", "temperature_dependent", "capacity_ah", "r2_scale", "radius_m", "length_m",
+                  "density_kg_m3"):
+            ov.setdefault(k, getattr(p, k))
+        for k in ("entropy_file", "discharge_file", "charge_file"):
+            if k in self.user_params:
+                ov[k] = self.user_params[k]
+        if self.ocv_table is not None:
+            (Path(out_dir) / "ocv.csv").write_text(_ocv_csv_text(*self.ocv_table))
+            ov["ocv_file"] = "ocv.csv"
+        elif "ocv_file" in self.user_params:
+            ov["ocv_file"] = self.user_params["ocv_file"]
+        return {self.component_name: ov}
 
+    def replay(self, data, overlay_file) -> dict:
+        """Step the ``battery`` component, parameters = overlay, through the master over the record."""
+        from ..components.battery import BatteryPack
+        from ..components.profile import ProfileParams, ProfileSource
+        from ..core.master import Connection, Master, MasterSettings
+        from ..core.params import load_params
+        from ..core.overlay import overlay_values, resolve_files
+        df = data.df
+        t = df["time_s"].to_numpy(float)
+        ov = overlay_values(overlay_file, self.component_name)
+        run_specific = {"n_series": 1, "n_parallel": 1, "input_mode": "current", "sigma_current_a": 0.0,
+                        "sigma_voltage_v": 0.0, "sigma_temperature_c": 0.0,
+                        "soc_init_pct": 100.0 * min(max(self.soc0, 0.0), 1.0), "t_init_c": self.t_init_c}
+        prm = load_params(BatteryPackParams, None, {**resolve_files(ov), **run_specific})
+        h = float(np.median(np.diff(t)))
+        tg = t[0] + h * np.arange(int(round((t[-1] - t[0]) / h)) + 1)
+        src = ProfileSource("profile", ProfileParams(
+            time_s=tuple(tg), current_a=tuple(np.interp(tg, t, df["current_a"].to_numpy(float))),
+            t_ambient_c=tuple(np.interp(tg, t, df["t_ambient_c"].to_numpy(float))),
+            h_conv_w_m2k=tuple(np.full(tg.size, float(self.known["h_conv_w_m2k"])))))
+        if np.allclose(tg, t, rtol=0, atol=1e-9 * max(1.0, abs(t[-1]))):
+            src = ProfileSource("profile", ProfileParams(
+                time_s=tuple(t), current_a=tuple(df["current_a"].to_numpy(float)),
+                t_ambient_c=tuple(df["t_ambient_c"].to_numpy(float)),
+                h_conv_w_m2k=tuple(np.full(t.size, float(self.known["h_conv_w_m2k"])))))
+        bat = BatteryPack("battery", prm)
+        conns = [Connection("profile", "current_a", "battery", "current_cmd_a"),
+                 Connection("profile", "t_ambient_c", "battery", "t_ambient_c"),
+                 Connection("profile", "h_conv_w_m2k", "battery", "h_conv_w_m2k")]
+        m = Master([src, bat], conns, MasterSettings(step_s=h), order=["profile", "battery"])
+        res = m.run(float(tg[-1]), t0=float(t[0]))
+        rt = np.asarray(res.time_s)
+        out = {}
+        for ch, port in (("voltage_v", "battery.voltage_v"), ("t_surface_c", "battery.t_surface_c"),
+                         ("t_core_c", "battery.t_core_c")):
+            out[ch] = np.interp(t, rt, np.asarray(res[port], float))
+        if "t_core_c" not in df:
+            out.pop("t_core_c")
+        return out

@@ -85,6 +85,10 @@ def main_calibrate(argv=None) -> int:
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
     try:
         known = load_params_toml(args.params) if args.params else {}
+        if args.model == "cell" and args.params:
+            known["__base_dir__"] = str(Path(args.params).resolve().parent)
+            if "ocv_soc_frac" not in known:
+                known["__component_file__"] = True
         data = load_measured(args.data, args.model, parse_mapping(args.map), current_sign=args.current_sign,
                              power_sign=args.power_sign, drop_duplicate_rows=args.drop_duplicate_rows)
         for n in data.notes:

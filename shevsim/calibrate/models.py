@@ -159,6 +159,21 @@ class CalibrationModel:
         """
         raise NotImplementedError
 
+    #: correlated signal -> likely cause, for the baseline-failure report
+    cause_hints: dict = {}
+
+    def likely_causes(self, channel: str, diag: dict) -> list[str]:
+        """Likely causes of a failing nominal model on ``channel`` from its held-out diagnostics."""
+        out = []
+        if abs(diag["bias"]) > 0.5 * diag["rmse"]:
+            out.append(f"a constant offset ({diag['bias']:+.4g}): sensor offset or a shifted curve/map")
+        for c in diag["correlations"][:3]:
+            hint = self.cause_hints.get(c["signal"].replace("measured:", ""))
+            if hint and abs(c["r"]) > 0.3 and hint not in out:
+                out.append(f"{hint} (residual correlates with {c['signal']}, r = {c['r']:+.2f})")
+        out.append("units or sign of an input column (check --map, --current-sign / --power-sign)")
+        return out
+
     def param_bounds(self, ctx: dict) -> dict:
         """Data-dependent bounds overriding the declared ones (name -> (lo, hi))."""
         return {}

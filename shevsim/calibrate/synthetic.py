@@ -3,8 +3,8 @@
 The truth differs from the calibration library in ways a real plant would:
 
 * declared parameters are NOT at the library's defaults (``CELL_TRUTH``, ``VEHICLE_TRUTH``);
-* the cell truth runs at a finer time step (0.1 s) than the output samples, its cooling change is a hard
-  step (0.1 s wide instead of the library's 20 s sigmoid), sensors add Gaussian noise (current 10 mA,
+* the cell truth is the battery COMPONENT stepped by the master at 0.1 s (finer than the samples); its cooling change is a hard
+  step (a fault on its convection input, not the 20 s logistic the calibration fits), sensors add Gaussian noise (current 10 mA,
   voltage 2 mV, temperature 0.05 K) and the model only sees the noisy measured current;
 * the vehicle truth is the co-simulation plant itself (cycle -> PI driver -> motor -> vehicle, bus,
   stepped by the master at 0.1 s) with the effect switched on through the components' parameters; the
@@ -21,17 +21,22 @@ import numpy as np
 import pandas as pd
 
 from .data import MeasuredData
-from .cell import CellModel
 
-CELL_TRUTH = {"r0_ohm": 0.031, "r1_ohm": 0.022, "tau1_s": 38.0, "cc_j_k": 52.0, "cs_j_k": 3.5,
-              "rc_k_w": 2.8, "ru_k_w": 8.5}
+# the plant: the battery component (one A123 cell) with parameters away from the nominal's defaults
+CELL_TRUTH = {"rs_scale": 1.3, "r1_scale": 0.8, "c1_scale": 1.5, "kt_w_mk": 0.5, "cp_j_kgk": 1000.0,
+              "h_conv_factor": 0.75}
+# nominal model the calibration starts from (the plant without any effect; scale factors free)
+CELL_NOMINAL = {"soc0_frac": 0.95, "entropic_heat": False, "temperature_dependent": False, "r2_scale": 0.0}
+# effect -> battery parameters that switch it on in the plant (cooling_change: a fault on the h input)
 CELL_EFFECTS = {
-    "entropic_heat": {"dudt_v_k": -0.8e-3},
-    "arrhenius_resistance": {"ea_r_k": 4000.0},
-    "cooling_change": {"t_change_s": None, "h_factor": 0.25},   # None: at 40 % of the record
-    "ocv_hysteresis": {"m_hyst_v": 0.025, "gamma_hyst": 40.0},
-    "capacity_fade": {"capacity_scale": 0.8},
-    "current_offset": {"current_offset_a": 0.12},
+    "entropic_heat": {"dudt_soc_frac": (0.1, 0.45, 0.9), "dudt_v_k": (-1.2e-3, 2e-4, 6e-4)},
+    "arrhenius_resistance": {"arrhenius_ea_r_k": 4000.0, "arrhenius_t_ref_c": 25.0},
+    "cooling_change": {"h_factor": 0.2, "at_frac": 0.4},
+    "ocv_hysteresis": {"hyst_max_v": 0.025, "hyst_rate": 40.0},
+    "capacity": {"capacity_ah": 1.85},
+    "current_offset": {"offset_a": 0.15},
+    "low_soc_resistance": {"lowsoc_r_gain": 3.0, "lowsoc_r_scale_frac": 0.08},
+    "second_rc_branch": {"r2_scale": 1.0, "c2_scale": 1.0},
 }
 VEHICLE_TRUTH = {"efficiency_scale_frac": 0.96}
 VEHICLE_EFFECTS = {   # component parameters of the plant (vehicle / motor / bus), see synth_vehicle
@@ -64,15 +69,29 @@ def _cell_current(duration_s: float, dt: float, rng, quantum_s: float) -> np.nda
 
 
 def synth_cell(effects: dict | None = None, duration_s: float = 2400.0, dt_s: float = 1.0,
-               ambient: str = "constant", seed: int = 0, truth: dict | None = None):
-    """Synthetic cell record (DataFrame with canonical columns) and the truth used.
+               ambient: str = "constant", seed: int = 0, truth: dict | None = None, soc0: float = 0.95,
+               discharge_frac: float = 0.6):
+    """Synthetic cell record from the co-simulation plant, and the truth used.
 
-    ``ambient``: ``"constant"`` (25 degC) or ``"warmup"`` (chamber from -10 to +25 degC, like the
-    Panasonic -20 degC warm-up runs).
+    The ``battery`` component (one cell, current input) is stepped by the master at 0.1 s with
+    ``CELL_TRUTH`` plus the effects' parameters (``{"name": {param: value}}``, ``{}`` = the defaults in
+    :data:`CELL_EFFECTS`); a cooling change is a fault on its convection input (the master's fault
+    mechanism, a hard step), a current-sensor offset is added to the logged current.  A logger samples
+    every ``dt_s``: current of the interval starting at the sample, voltage and temperatures 0.1 s later
+    (after the step change), with Gaussian noise (10 mA, 2 mV, 0.05 K, ambient 0.1 K).
+    ``ambient``: ``"constant"`` (25 degC) or ``"warmup"`` (chamber from -10 to +25 degC).  The cell starts at
+    ``soc0`` and the discharge pulses are scaled so the record's net discharge is ``discharge_frac`` of 2.3 Ah.
     """
+    from ..components.battery import BatteryPack, BatteryPackParams
+    from ..components.profile import ProfileParams, ProfileSource
+    from ..core.master import Connection, Fault, Master, MasterSettings
     rng = np.random.default_rng(seed)
     fine = 0.1
     i_true = _cell_current(duration_s, fine, rng, dt_s)
+    # net discharge: discharge_frac of the rated capacity (the SOC must stay inside [0, 1])
+    net = float(np.sum(i_true) * fine / 3600.0)
+    if net > 0:
+        i_true = np.where(i_true > 0, i_true * discharge_frac * 2.3 / net, i_true)
     n = i_true.size
     t = np.arange(n) * fine
     if ambient == "constant":
@@ -82,28 +101,40 @@ def synth_cell(effects: dict | None = None, duration_s: float = 2400.0, dt_s: fl
     else:
         raise ValueError(ambient)
     vals = dict(CELL_TRUTH, **(truth or {}))
+    faults, offset = [], 0.0
     for name, over in (effects or {}).items():
         e = dict(CELL_EFFECTS[name], **(over or {}))
-        if name == "cooling_change" and e.get("t_change_s") is None:
-            e["t_change_s"] = 0.4 * t[-1]
-        vals.update(e)
-    off = vals.get("current_offset_a", 0.0)
-    model = CellModel({"soc0_frac": 0.95, "change_width_s": 0.1, "arrhenius_anchor": False})
-    df_true = pd.DataFrame({"time_s": t, "current_a": i_true + off, "voltage_v": 4.0,
-                            "t_surface_c": ta[0], "t_ambient_c": ta})
-    # truth: the current the cell sees is i_true; the kernel subtracts the offset from the "measured" one
-    ctx = model.prepare(MeasuredData(df_true, "<truth>", "cell"))
-    ctx["tc0"] = ctx["ts0"] = float(ta[0])
-    out = model.simulate(ctx, vals)
+        if name == "cooling_change":
+            faults.append(Fault(round(e["at_frac"] * t[-1]), "battery", "h_conv_w_m2k", 20.0 * e["h_factor"]))
+            vals["_cooling_change"] = e
+        elif name == "current_offset":
+            offset = e["offset_a"]
+            vals["_current_offset_a"] = offset
+        else:
+            vals.update(e)
+    plant = {k: v for k, v in vals.items() if not k.startswith("_")}
+    base = dict(n_series=1, n_parallel=1, input_mode="current", soc_init_pct=100.0 * soc0, t_init_c=float(ta[0]),
+                entropic_heat=False, temperature_dependent=False, r2_scale=0.0, seed=seed,
+                sigma_current_a=0.0, sigma_voltage_v=0.0, sigma_temperature_c=0.0)
+    base.update({k: (tuple(v) if isinstance(v, (list, tuple)) else v) for k, v in plant.items()})
+    prm = BatteryPackParams(**base)
+    src = ProfileSource("profile", ProfileParams(time_s=tuple(t), current_a=tuple(i_true), t_ambient_c=tuple(ta)))
+    conns = [Connection("profile", "current_a", "battery", "current_cmd_a"),
+             Connection("profile", "t_ambient_c", "battery", "t_ambient_c")]
+    res = Master([src, BatteryPack("battery", prm)], conns, MasterSettings(step_s=fine), faults=faults,
+                 order=["profile", "battery"]).run(float(t[-1]) + fine)
     step = int(round(dt_s / fine))
-    sl = slice(None, None, step)
-    m = t[sl].size
+    ks = np.arange(0, n, step)
+    m = ks.size
+    # the plant's outputs at t_k + 0.1 are the state just after the interval's current was applied
+    v = np.asarray(res["battery.voltage_v"])[ks + 1]
+    ts = np.asarray(res["battery.t_surface_c"])[ks + 1]
     df = pd.DataFrame({
-        "time_s": t[sl],
-        "current_a": (i_true + off)[sl] + rng.normal(0, 0.01, m),
-        "voltage_v": out["voltage_v"][sl] + rng.normal(0, 0.002, m),
-        "t_surface_c": out["t_surface_c"][sl] + rng.normal(0, 0.05, m),
-        "t_ambient_c": ta[sl] + rng.normal(0, 0.1, m),
+        "time_s": t[ks],
+        "current_a": i_true[ks] + offset + rng.normal(0, 0.01, m),
+        "voltage_v": v + rng.normal(0, 0.002, m),
+        "t_surface_c": ts + rng.normal(0, 0.05, m),
+        "t_ambient_c": ta[ks] + rng.normal(0, 0.1, m),
     })
     return df, vals
 

@@ -53,13 +53,16 @@ from pathlib import Path
 import numpy as np
 
 from ..core.atomic import write_bytes_atomic, write_text_atomic
+from ..core.overlay import write_overlay
 from scipy import optimize, stats
 
-from ..core.errors import DataError
+from ..core.errors import DataError, ShevsimError
 from .models import CalibrationModel, Param, get_model
 
 MIN_GAIN = 0.10
 MAX_WORSEN = 0.10
+HALVING = 0.5          # an effect that halves a channel's held-out RMSE (and worsens none > MAX_WORSEN) passes
+BASELINE_FAILURE_RATIO = 20.0   # baseline held-out RMSE / noise floor above which the nominal model "fails"
 MIN_DBIC = 10.0
 TIE = 0.02
 N_BLOCKS = 10
@@ -375,8 +378,18 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
                 why.append(f"a channel's held-out RMSE rises {fr.worsen:.1%}")
             if fr.dbic > -MIN_DBIC:
                 why.append(f"dBIC {fr.dbic:+.1f} > -{MIN_DBIC:g}")
-            fr.passed = not why
-            fr.reason = "; ".join(why) if why else "passes"
+            halved = [c for c in fitter.channels
+                      if fr.rmse[c]["holdout"] <= HALVING * current.rmse[c]["holdout"]]
+            fr.passed = not why or (bool(halved) and fr.worsen <= MAX_WORSEN)
+            if not why:
+                fr.reason = "passes"
+            elif fr.passed:
+                # held-out evidence decides: the autocorrelation-corrected BIC has few effective samples
+                # exactly when a systematic residual (a missing effect) makes the residual autocorrelated
+                fr.reason = (f"passes: halves the held-out RMSE of {', '.join(halved)} (the BIC rule alone would "
+                             f"veto: {'; '.join(why)})")
+            else:
+                fr.reason = "; ".join(why)
             say(f"round {rnd + 1}: {'+'.join(effs)}: score {fr.score:.3f} gain {fr.gain:+.1%} dBIC {fr.dbic:+.1f} "
                 f"{'PASS' if fr.passed else ''}")
             return fr
@@ -429,6 +442,53 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
                                 "top_correlation": top,
                                 "note": "residual well above the noise floor and not white: structure the "
                                         "selected model does not explain"})
+    baseline_failure = []
+    for c in fitter.channels:
+        dh = diag_before[c]["holdout"]
+        nf = dh["noise_floor"]
+        ratio = dh["rmse"] / nf if nf > 0 else float("inf")
+        if ratio > BASELINE_FAILURE_RATIO:
+            baseline_failure.append({
+                "channel": c, "holdout_rmse": dh["rmse"], "noise_floor": nf, "ratio_to_noise_floor": ratio,
+                "bias": dh["bias"], "drift_per_hour": dh["drift_per_hour"],
+                "correlated_signals": dh["correlations"][:4],
+                "likely_causes": model.likely_causes(c, dh),
+                "fixed_by_selected_effects": bool(diag_after[c]["holdout"]["rmse"]
+                                                  <= BASELINE_FAILURE_RATIO * max(diag_after[c]["holdout"]["noise_floor"], 1e-300))})
+    for b in baseline_failure:
+        say(f"baseline failure: {b['channel']} held-out RMSE {b['holdout_rmse']:.4g} = {b['ratio_to_noise_floor']:.0f}x "
+            f"the noise floor; likely: {'; '.join(b['likely_causes'][:2])}")
+    # close the loop: the overlay in the component's own parameters, replayed through the simulator
+    full_final = model.full_values(final.params)
+    own_tmp = out_dir is None
+    odir = Path(tempfile.mkdtemp(prefix="shevsim_calibration_")) if own_tmp else Path(out_dir)
+    odir.mkdir(parents=True, exist_ok=True)
+    replay, overlay = None, None
+    try:
+        overlay = model.overlay(full_final, odir)
+        write_overlay(odir / "params.toml", overlay, meta={
+            "source": f"shevsim calibrate {model_name} {data.path}",
+            "selected_effects": ", ".join(selected) or "none",
+            "use": f"shevsim run SCENARIO --params {model.component_name}=params.toml (path of this file)"})
+        pred = model.replay(data, odir / "params.toml")
+        replay = {}
+        for c in fitter.channels:
+            r = pred[c] - fitter.meas[c]
+            rt, rh = r[train], r[hold]
+            replay[c] = {"train": float(np.sqrt(np.mean(rt * rt))), "holdout": float(np.sqrt(np.mean(rh * rh)))}
+        say("replay through the simulator: " + ", ".join(
+            f"{c} held-out {replay[c]['holdout']:.4g} (fit {final.rmse[c]['holdout']:.4g})" for c in replay))
+    except NotImplementedError:
+        replay = None
+    except ShevsimError as exc:       # e.g. the replayed plant leaves its range (SOC < 0): said, not hidden
+        replay = {"error": f"the replay through the simulator stopped: {exc}"}
+        say(replay["error"])
+    finally:
+        if own_tmp:
+            import shutil
+            shutil.rmtree(odir, ignore_errors=True)   # our own temporary folder, nothing of the user's
+    replay_dev = (max(abs(replay[c][part] / max(final.rmse[c][part], 1e-300) - 1.0)
+                      for c in replay for part in ("train", "holdout")) if replay and "error" not in replay else None)
     elapsed = time.perf_counter() - t_start
     report = {
         "model": model_name,
@@ -438,7 +498,8 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
         "known_parameters": {k: (list(v) if isinstance(v, tuple) else v) for k, v in model.known.items()},
         "split": split_info,
         "selection_rule": {"min_holdout_gain": MIN_GAIN, "max_channel_worsening": MAX_WORSEN,
-                           "min_bic_drop": MIN_DBIC, "tie_fraction": TIE, "bic": "autocorrelation-corrected"},
+                           "min_bic_drop": MIN_DBIC, "tie_fraction": TIE, "bic": "autocorrelation-corrected",
+                           "halving_passes": HALVING},
         "baseline_parameters": base.params,
         "selected_effects": selected,
         "final_parameters": final.params,
@@ -451,6 +512,11 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
         "diagnostics_after": diag_after,
         "unexplained": unexplained,
         "nothing_found": not selected,
+        "baseline_failure": baseline_failure,
+        "overlay": {"file": "params.toml" if out_dir is not None else None, "component": model.component_name,
+                    "tables": overlay},
+        "replay": replay,
+        "replay_max_relative_deviation": replay_dev,
         "n_simulations": fitter.nsim,
         "elapsed_s": elapsed,
     }
@@ -558,6 +624,26 @@ def render_markdown(rep: dict) -> str:
         a = rep["rmse_after"][c]
         ch = a["holdout"] / b["holdout"] - 1 if b["holdout"] > 0 else float("nan")
         L.append(f"| {c} | {_g(b['train'])} | {_g(b['holdout'])} | {_g(a['train'])} | {_g(a['holdout'])} | {ch:+.1%} |")
+    if rep.get("baseline_failure"):
+        L += ["", "**The nominal model fails on this record** (fitted, its held-out error stays far above the "
+              "noise floor; read the selected effects as a partial repair, not a diagnosis):"]
+        for b in rep["baseline_failure"]:
+            cs = ", ".join(f"`{x['signal']}` (r = {x['r']:+.2f})" for x in b["correlated_signals"][:3])
+            L.append(f"- `{b['channel']}`: held-out RMSE {_g(b['holdout_rmse'])} = {b['ratio_to_noise_floor']:.0f}x the "
+                     f"noise floor {_g(b['noise_floor'])}; most correlated with {cs or 'nothing'}; likely causes: "
+                     + "; ".join(b["likely_causes"])
+                     + (" (the selected effects bring it within range)" if b["fixed_by_selected_effects"] else ""))
+    if rep.get("replay") and "error" in rep["replay"]:
+        L += ["", f"Replay through the simulator: {rep['replay']['error']}"]
+    elif rep.get("replay"):
+        L += ["", f"Replay through the simulator (the `{rep['overlay']['component']}` component stepped by the master "
+              f"with the overlay `params.toml`; use it with `shevsim run SCENARIO --params "
+              f"{rep['overlay']['component']}=params.toml`):", "",
+              "| channel | fit train | replay train | fit held-out | replay held-out |", "|---|---|---|---|---|"]
+        for c, r in rep["replay"].items():
+            a = rep["rmse_after"][c]
+            L.append(f"| {c} | {_g(a['train'])} | {_g(r['train'])} | {_g(a['holdout'])} | {_g(r['holdout'])} |")
+        L.append(f"\nLargest relative deviation replay vs fit: {rep['replay_max_relative_deviation']:.2e}.")
     if rep["unexplained"]:
         L += ["", "Not explained by the selected model:"]
         for u in rep["unexplained"]:
@@ -568,7 +654,8 @@ def render_markdown(rep: dict) -> str:
     r = rep["selection_rule"]
     L += ["", "## Evidence", "",
           f"Rule: held-out score gain >= {r['min_holdout_gain']:.0%}, no channel worse by > {r['max_channel_worsening']:.0%}, "
-          f"autocorrelation-corrected BIC drop >= {r['min_bic_drop']:g}.", ""]
+          f"autocorrelation-corrected BIC drop >= {r['min_bic_drop']:g}; or a held-out RMSE halved on some channel "
+          f"with no channel worse by > {r['max_channel_worsening']:.0%}.", ""]
     for rd in rep["rounds"]:
         L += [f"Round {rd['round']} (on top of: {', '.join(rd['on_top_of']) or 'baseline'}; current score "
               f"{rd['current_score']:.3f}; selected: {rd.get('selected', 'none')})", "",

@@ -12,6 +12,7 @@ from ..core.errors import ScenarioError
 
 REGISTRY: dict[str, str] = {
     "cycle": "shevsim.components.cycle:CycleSource",
+    "profile": "shevsim.components.profile:ProfileSource",
     "driver": "shevsim.components.driver:Driver",
     "vehicle": "shevsim.components.vehicle:Vehicle",
     "motor": "shevsim.components.motor:Motor",

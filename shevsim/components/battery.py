@@ -349,6 +349,7 @@ class BatteryPack(Component):
         yv[_m.Y_VOC] = self.tables.ocv(float(st[_m.S_SOC]))
         yv[_m.Y_V] = yv[_m.Y_VOC]
         self.yv = yv
+        self._th = np.full(16, np.nan)     # thermal-coefficient cache of the compiled step
         self._publish(t_amb)
 
     @property
@@ -370,7 +371,7 @@ class BatteryPack(Component):
         saved = st.copy()
         if self._fd_w is None:
             self._step(self._d, self._ix, self._c, st, float(p_pack), float(t), float(h), float(t_amb),
-                       float(h_conv), self.yv)
+                       float(h_conv), self._th, self.yv)
         else:
             x = self._x_fd
             t_mean = float(np.dot(self._fd_w, x))

@@ -49,13 +49,14 @@ from typing import Any
 
 from .errors import ScenarioError, ShevsimError
 from .master import Connection, Fault, Master, MasterSettings
+from .overlay import overlay_tables, overlay_values, resolve_files
 from .params import load_params
 
 PROJECT_ROOT = Path(__file__).resolve().parents[2]
 
 _TOP = {"scenario", "components", "connections", "faults", "record", "metrics"}
 _SCEN = {"name", "description", "step_s", "stop_s", "t0_s", "method", "seed", "order"}
-_COMP = {"type", "params", "set", "start", "step_multiple", "fmu", "map", "replaces"}
+_COMP = {"type", "params", "set", "start", "step_multiple", "fmu", "map", "replaces", "overlay"}
 _FAULT = {"at_s", "port", "value"}
 _RECORD = {"signals"}
 
@@ -131,6 +132,7 @@ class Scenario:
     metrics: dict[str, Any]
     order: list[str] | None = None
     sets: list[str] = field(default_factory=list)     # command-line ``component.param=value`` overrides
+    overlays: list[str] = field(default_factory=list)  # command-line ``--params COMPONENT=FILE`` overlays
 
     def resolved(self) -> dict:
         """A plain-dict view of what will run (saved with results)."""
@@ -145,8 +147,10 @@ class Scenario:
                 "faults": [dataclasses.asdict(f) for f in self.faults]}
 
 
-def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), text: str | None = None) -> Scenario:
-    """Read and validate a scenario file; ``sets`` are ``component.param=value`` overrides."""
+def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), text: str | None = None,
+                  overlays: list[str] | tuple = ()) -> Scenario:
+    """Read and validate a scenario file; ``sets`` are ``component.param=value`` overrides, ``overlays``
+    are ``COMPONENT=FILE`` or ``FILE`` parameter overlays (:mod:`shevsim.core.overlay`)."""
     spath = Path(path) if path is not None else None
     where = str(spath) if spath else "<scenario>"
     if text is None:
@@ -213,10 +217,33 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
         rep = cd.get("replaces")
         if rep is not None and (cd["type"] != "fmu" or not isinstance(rep, str)):
             raise ScenarioError(f"{w}: field 'replaces' (a native component TYPE) is only for type = \"fmu\"")
-        over = {key: _file_value(key, v, spath) for key, v in cd.get("set", {}).items()}
+        over = {}
+        if "overlay" in cd:
+            if not isinstance(cd["overlay"], str):
+                raise ScenarioError(f"{w}: field 'overlay' must be a file path string")
+            try:
+                over.update(resolve_files(overlay_values(resolve_path(cd["overlay"], spath), cname)))
+            except ScenarioError as exc:
+                raise ScenarioError(f"{w}: field 'overlay': {exc}") from None
+        over.update({key: _file_value(key, v, spath) for key, v in cd.get("set", {}).items()})
         specs.append(ComponentSpec(cname, cd["type"], pf, over, dict(cd.get("start", {})),
                                    k, fmu, dict(cd.get("map", {})), rep))
     names = {s.name for s in specs}
+    for item in overlays:
+        comp, _, f = str(item).rpartition("=")
+        fpath = Path(f)
+        try:
+            targets = [comp] if comp else [n for n in overlay_tables(fpath) if n in names]
+            if comp and comp not in names:
+                raise ScenarioError(f"unknown component '{comp}'{_hint(comp, names)}")
+            if not targets:
+                raise ScenarioError(f"{fpath}: no table names a component of this scenario "
+                                    f"({', '.join(sorted(names))}); give COMPONENT=FILE")
+            for cname in targets:
+                vals = resolve_files(overlay_values(fpath, cname))
+                next(c for c in specs if c.name == cname).overrides.update(vals)
+        except ScenarioError as exc:
+            raise ScenarioError(f"--params '{item}': {exc}") from None
     for s in sets:
         if "=" not in s or "." not in s.split("=", 1)[0]:
             raise ScenarioError(f"--set '{s}': expected component.param=value")
@@ -286,7 +313,7 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
                                 + (f"(repeated: {rep})" if rep else f"(missing: {sorted(names - set(order))})"))
     return Scenario(spath, text, name, str(sc.get("description", "")), settings,
                     stop_s, t0_s, seed, specs, conns, faults, signals, dict(doc.get("metrics", {})), order,
-                    list(sets))
+                    list(sets), [str(o) for o in overlays])
 
 
 def _file_value(key: str, value: Any, scenario_path: Path | None) -> Any:

@@ -42,7 +42,7 @@ def plant_run():
     rows = []
     for k in range(n):
         b.u["power_w"] = prof[k]
-        t_mean = b._t_mean(b.x_th)
+        t_mean = b.y["t_mean_c"]
         soc0 = b.soc
         b.do_step(k * DT, DT)
         y = b.y
@@ -163,7 +163,7 @@ def aged_run(tmp_path_factory):
     rows = []
     for k in range(n):
         b.u["power_w"] = prof[k]
-        t_mean = b._t_mean(b.x_th)
+        t_mean = b.y["t_mean_c"]
         b.do_step(k * DT, DT)
         rs_true = b.tables.params(b.soc, t_mean, b.i_cell)[0]
         f.step(b.y["cell_current_meas_a"], b.y["cell_voltage_meas_v"], DT, t_mean)

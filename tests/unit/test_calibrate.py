@@ -9,7 +9,6 @@ message naming file and column/line.  The seed (7) is not the one used while dev
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -20,27 +19,14 @@ from shevsim.calibrate.cli import main_calibrate
 from shevsim.calibrate.data import load_measured
 from shevsim.calibrate.models import get_model
 from shevsim.calibrate.synthetic import as_measured, synth_cell, synth_engine, synth_vehicle
-from shevsim.calibrate.workflow import MIN_GAIN, make_split, run_workflow
+from shevsim.calibrate.workflow import make_split, run_workflow
 from shevsim.core.errors import DataError
 
 SEED = 7
 ROOT = Path(__file__).resolve().parents[2]
 
-CELL_CASES = {  # effect -> affected channel
-    "arrhenius_resistance": "voltage_v",
-    "cooling_change": "t_surface_c",
-    "current_offset": "voltage_v",
-    "ocv_hysteresis": "voltage_v",
-}
-CELL_SLOW = {"entropic_heat": "t_surface_c", "capacity_fade": "voltage_v"}
 VEHICLE_CASES = ["road_grade", "mass_error", "rolling_error", "regen_limit"]
 VEHICLE_SLOW_NAMED = ["aux_load", "aero_error"]
-
-
-def _cell(effects, **kw):
-    amb = "warmup" if "arrhenius_resistance" in effects else "constant"
-    df, truth = synth_cell({e: {} for e in effects}, ambient=amb, seed=kw.pop("seed", SEED), **kw)
-    return run_workflow("cell", as_measured(df, "cell")), truth
 
 
 def _vehicle(effects, **kw):
@@ -56,48 +42,7 @@ def _check_single(rep, effect, channel):
     assert after <= 0.5 * before, (channel, before, after)
 
 
-# ---------------------------------------------------------------------------------- synthetic: cell
-
-@pytest.mark.parametrize("effect", sorted(CELL_CASES))
-def test_cell_names_single_undeclared_effect(effect):
-    rep, _ = _cell([effect])
-    _check_single(rep, effect, CELL_CASES[effect])
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("effect", sorted(CELL_SLOW))
-def test_cell_names_single_undeclared_effect_slow(effect):
-    rep, _ = _cell([effect], duration_s=3600.0)
-    _check_single(rep, effect, CELL_SLOW[effect])
-
-
-def test_cell_recovers_effect_parameters():
-    """The fitted effect parameter is the truth's, within a physically meaningful tolerance."""
-    rep, truth = _cell(["current_offset"])
-    assert rep["final_parameters"]["current_offset_a"] == pytest.approx(truth["current_offset_a"], abs=0.02)
-    assert rep["final_parameters"]["r0_ohm"] == pytest.approx(truth["r0_ohm"], rel=0.1)
-    rep, truth = _cell(["cooling_change"])
-    assert rep["final_parameters"]["h_factor"] == pytest.approx(truth["h_factor"], rel=0.25)
-    assert rep["final_parameters"]["t_change_s"] == pytest.approx(truth["t_change_s"], abs=120.0)
-
-
-def test_cell_nothing_missing_selects_nothing():
-    rep, _ = _cell([])
-    assert rep["selected_effects"] == [] and rep["nothing_found"]
-    for c in rep["candidates"]:
-        assert not c["passed"]
-    # baseline residual at the sensor noise (2 mV, 0.05 K): nothing left to explain
-    assert rep["rmse_before"]["voltage_v"]["holdout"] < 0.003
-    assert rep["rmse_before"]["t_surface_c"]["holdout"] < 0.07
-
-
-def test_cell_two_effects_found_or_reported():
-    rep, _ = _cell(["cooling_change", "current_offset"])
-    sel = set(rep["selected_effects"])
-    assert sel <= {"cooling_change", "current_offset"}, sel
-    assert sel == {"cooling_change", "current_offset"} or rep["unexplained"], rep
-    for ch in ("voltage_v", "t_surface_c"):
-        assert rep["rmse_after"][ch]["holdout"] <= 0.5 * rep["rmse_before"][ch]["holdout"]
+# (cell calibration: tests/unit/test_calibrate_cell.py)
 
 
 # ------------------------------------------------------------------------------- synthetic: vehicle
@@ -157,20 +102,6 @@ def test_engine_nothing_missing_selects_nothing():
 
 
 # ------------------------------------------------------------------------------------- model physics
-
-def test_cell_model_ohmic_limit_and_energy_balance():
-    """Constant current, R1 -> tiny: V = OCV - R0 I; steady lumped temperature rise = I^2 R0 Ru."""
-    t = np.arange(0.0, 20000.0, 1.0)
-    i = np.full(t.size, 1.0)
-    df = pd.DataFrame({"time_s": t, "current_a": i, "voltage_v": 4.0, "t_surface_c": 25.0, "t_ambient_c": 25.0})
-    m = get_model("cell", {"thermal": "lumped", "soc0_frac": 0.9, "capacity_ah": 100.0})
-    ctx = m.prepare(as_measured(df, "cell"))
-    out = m.simulate(ctx, {"r0_ohm": 0.05, "r1_ohm": 1e-4, "tau1_s": 1.0, "cc_j_k": 50.0, "ru_k_w": 10.0})
-    soc_end = 0.9 - t[-1] * 1.0 / (100.0 * 3600.0)
-    ocv_end = np.interp(soc_end, m.known["ocv_soc_frac"], m.known["ocv_v"])
-    assert out["voltage_v"][-1] == pytest.approx(ocv_end - 0.05 - 1e-4, abs=2e-4)
-    assert out["t_surface_c"][-1] - 25.0 == pytest.approx(1.0 * (0.05 + 1e-4) * 10.0, rel=0.01)
-
 
 def test_vehicle_model_cruise_power():
     """Constant speed on the flat: the motor component's electrical power for the road load (1/2 rho Cd A v^2
@@ -364,7 +295,9 @@ def test_real_panasonic_us06(tmp_path, name):
     for rd in rep["rounds"]:
         for c in rd["candidates"]:
             if c["name"] == rd.get("selected"):
-                assert c["passed"] and c["gain"] >= MIN_GAIN
+                assert c["passed"]
     for ch, b in rep["rmse_before"].items():
         assert rep["rmse_after"][ch]["holdout"] <= 1.1 * b["holdout"]
-    assert rep["elapsed_s"] < 300.0   # ~40-50 s here with the machine shared; generous bound against load
+        # the simulator (battery component + overlay, stepped by the master) reproduces the fit
+        assert rep["replay"][ch]["holdout"] == pytest.approx(rep["rmse_after"][ch]["holdout"], rel=0.01)
+    assert (out / "params.toml").is_file() and (out / "ocv.csv").is_file()

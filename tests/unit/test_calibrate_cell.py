@@ -1,0 +1,133 @@
+"""Cell calibration on the battery component's own model: undeclared effects in data from the plant
+(the battery component stepped by the master), named, halved, carried by an overlay and replayed through
+the simulator."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from shevsim.calibrate.cell import CELL_EFFECTS, CellModel
+from shevsim.calibrate.cli import main_calibrate
+from shevsim.calibrate.synthetic import CELL_NOMINAL, as_measured, synth_cell
+from shevsim.calibrate.workflow import run_workflow
+from shevsim.core.overlay import overlay_values
+
+SEED = 7
+# effect -> (channel it acts on, synth_cell options)
+CASES = {
+    "entropic_heat": ("t_surface_c", {}),
+    "arrhenius_resistance": ("voltage_v", {"ambient": "warmup"}),
+    "cooling_change": ("t_surface_c", {}),
+    "ocv_hysteresis": ("voltage_v", {}),
+    "capacity": ("voltage_v", {}),
+    "current_offset": ("voltage_v", {}),
+    "low_soc_resistance": ("voltage_v", {"soc0": 0.85, "discharge_frac": 0.7}),
+    "second_rc_branch": ("voltage_v", {}),
+}
+
+
+def _run(effects, seed=SEED, nominal=None, out=None, restrict=None, **kw):
+    df, truth = synth_cell({e: {} for e in effects}, seed=seed, **kw)
+    rep = run_workflow("cell", as_measured(df, "cell"), dict(nominal or CELL_NOMINAL), out_dir=out,
+                       effects=restrict, plots=False)
+    return rep, truth
+
+
+def _check_replay(rep):
+    assert rep["replay"] is not None
+    for c, r in rep["replay"].items():
+        for part in ("train", "holdout"):
+            assert r[part] == pytest.approx(rep["rmse_after"][c][part], rel=0.01), (c, part, r, rep["rmse_after"][c])
+
+
+def test_every_effect_of_the_library_has_a_case():
+    m = CellModel(dict(CELL_NOMINAL))
+    assert set(m.effects) == set(CASES)
+    assert len(CELL_EFFECTS) == len(CASES)
+
+
+@pytest.mark.parametrize("effect", sorted(CASES))
+def test_single_undeclared_effect_is_named_halved_and_replayed(effect):
+    channel, kw = CASES[effect]
+    rep, _ = _run([effect], **kw)
+    assert effect in rep["selected_effects"], [(c["name"], c["score"], c["reason"]) for c in rep["candidates"]]
+    assert len(rep["selected_effects"]) <= 2
+    before, after = rep["rmse_before"][channel]["holdout"], rep["rmse_after"][channel]["holdout"]
+    assert after <= 0.5 * before, (channel, before, after)
+    _check_replay(rep)
+
+
+def test_no_missing_effect_selects_nothing_and_baseline_sits_at_the_noise():
+    rep, _ = _run([])
+    assert rep["selected_effects"] == [] and rep["nothing_found"]
+    assert not any(c["passed"] for c in rep["candidates"])
+    assert rep["rmse_before"]["voltage_v"]["holdout"] < 0.0025        # sensor noise 2 mV
+    assert rep["rmse_before"]["t_surface_c"]["holdout"] < 0.07        # sensor noise 0.05 K
+    assert rep["baseline_failure"] == []
+    _check_replay(rep)
+
+
+def test_two_effects_are_both_found_or_the_remainder_reported():
+    rep, _ = _run(["cooling_change", "ocv_hysteresis"])
+    sel = set(rep["selected_effects"])
+    assert sel == {"cooling_change", "ocv_hysteresis"} or rep["unexplained"], rep["selected_effects"]
+    for ch in ("voltage_v", "t_surface_c"):
+        assert rep["rmse_after"][ch]["holdout"] <= 0.5 * rep["rmse_before"][ch]["holdout"]
+    _check_replay(rep)
+
+
+def test_failing_baseline_is_said(tmp_path):
+    """A nominal whose capacity is 70 % of the cell's cannot follow the voltage; with the capacity effect
+    withheld, the report says the baseline fails (channel, ratio, correlations, causes) in JSON and words."""
+    nominal = dict(CELL_NOMINAL, capacity_ah=1.6)
+    rep, _ = _run([], nominal=nominal, out=tmp_path, restrict=["entropic_heat", "cooling_change"])
+    bf = {b["channel"]: b for b in rep["baseline_failure"]}
+    assert "voltage_v" in bf, rep["baseline_failure"]
+    b = bf["voltage_v"]
+    assert b["ratio_to_noise_floor"] > 20.0 and b["correlated_signals"] and b["likely_causes"]
+    assert any("capacity" in c for c in b["likely_causes"]), b["likely_causes"]
+    md = (tmp_path / "report.md").read_text()
+    assert "nominal model fails" in md
+
+
+def test_overlay_is_a_battery_parameter_set_and_shevsim_run_uses_it(tmp_path):
+    rep, truth = _run(["current_offset"], out=tmp_path)
+    ov = overlay_values(tmp_path / "params.toml", "battery")
+    assert ov.values["current_offset_a"] == pytest.approx(0.15, abs=0.03)
+    assert ov.values["rs_scale"] == pytest.approx(truth["rs_scale"], rel=0.1)
+    # the overlay in a whole-vehicle scenario: the battery component takes it
+    from shevsim.core.scenario import build_master, load_scenario
+    root = Path(__file__).resolve().parents[2]
+    sc = load_scenario(root / "scenarios" / "hd_udds_rule.toml", ["cycle.repeat=1"],
+                       overlays=[f"battery={tmp_path / 'params.toml'}"])
+    m = build_master(sc)
+    bat = m.components["battery"]
+    assert bat.params.current_offset_a == ov.values["current_offset_a"]
+    assert bat.params.rs_scale == ov.values["rs_scale"]
+    assert bat.params.n_series == 130          # the rest of the pack's parameters are the scenario's
+
+
+def test_cli_accepts_a_component_parameter_file(tmp_path):
+    df, _ = synth_cell({"capacity": {}}, seed=SEED, duration_s=1200.0)
+    csv = tmp_path / "cell.csv"
+    df.to_csv(csv, index=False)
+    p = tmp_path / "battery.toml"
+    p.write_text('[meta]\nsource = "test"\n[params]\ncapacity_ah = 2.3\nentropic_heat = false\n'
+                 'temperature_dependent = false\nr2_scale = 0.0\nsoc_init_pct = 95.0\n')
+    out = tmp_path / "out"
+    assert main_calibrate(["cell", str(csv), "--out", str(out), "--params", str(p), "--no-plots", "-q"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert "capacity" in rep["selected_effects"]
+    assert (out / "params.toml").is_file()
+    assert rep["replay"]["voltage_v"]["holdout"] == pytest.approx(rep["rmse_after"]["voltage_v"]["holdout"], rel=0.01)
+
+
+@pytest.mark.slow
+def test_false_selection_rate_over_twenty_noise_realisations():
+    """Data with no missing effect, 20 noise/profile realisations: at most one false selection."""
+    false = [s for s in range(20) if _run([], seed=100 + s, duration_s=1200.0)[0]["selected_effects"]]
+    assert len(false) <= 1, false
