@@ -403,7 +403,7 @@ class CellModel(CalibrationModel):
             time_s=tuple(tg), current_a=tuple(np.interp(tg, t, df["current_a"].to_numpy(float))),
             t_ambient_c=tuple(np.interp(tg, t, df["t_ambient_c"].to_numpy(float))),
             h_conv_w_m2k=tuple(np.full(tg.size, float(self.known["h_conv_w_m2k"])))))
-        if np.allclose(tg, t, rtol=0, atol=1e-9 * max(1.0, abs(t[-1]))):
+        if tg.size == t.size and np.allclose(tg, t, rtol=0, atol=1e-9 * max(1.0, abs(t[-1]))):
             src = ProfileSource("profile", ProfileParams(
                 time_s=tuple(t), current_a=tuple(df["current_a"].to_numpy(float)),
                 t_ambient_c=tuple(df["t_ambient_c"].to_numpy(float)),

@@ -37,8 +37,6 @@ component's "off"):
 from __future__ import annotations
 
 import dataclasses
-import math
-from pathlib import Path
 from typing import Mapping
 
 import numpy as np
@@ -207,50 +205,15 @@ def _default_params() -> EngineGeneratorParams:
 
 
 def _overlay_values(path, component: str) -> dict:
-    """The overlay's values for ``component`` (``[component]`` table, else ``[params]``), ``*_file`` paths
-    resolved against the overlay's folder."""
-    try:
-        from ..core.overlay import overlay_values, resolve_files
-    except ImportError:  # pragma: no cover - before shevsim.core.overlay existed
-        import tomllib
-        path = Path(path)
-        doc = tomllib.loads(path.read_text(encoding="utf-8-sig"))
-        vals = dict(doc.get(component, doc.get("params", {})))
-        return {k: (str((path.parent / v).resolve()) if k.endswith("_file") and isinstance(v, str)
-                    and not Path(v).is_absolute() else v) for k, v in vals.items()}
+    """The overlay's values for ``component``, ``*_file`` paths resolved against the overlay's folder."""
+    from ..core.overlay import overlay_values, resolve_files
     return resolve_files(overlay_values(path, component))
 
 
 def _power_source(t: np.ndarray, p: np.ndarray):
-    """A sample-and-hold source of ``power_w`` (the registry's ``profile`` component when present)."""
-    from ..components import REGISTRY, get_component_class
-    if "profile" in REGISTRY:
-        cls = get_component_class("profile")
-        return cls("profile", cls.Params(time_s=tuple(map(float, t)), power_w=tuple(map(float, p))))
-    return _HoldSource(t, p)  # pragma: no cover - before the profile component existed
-
-
-from ..core.component import Component  # noqa: E402
-from ..core.variables import out as _out  # noqa: E402
-
-
-class _HoldSource(Component):  # pragma: no cover - replaced by the registry's ``profile`` component
-    """Sample-and-hold ``power_w``: the value of the last sample with ``t_k <= t`` (the profile convention)."""
-    VARIABLES = (_out("power_w", "W", 0.0, "sampled power"),)
-
-    def __init__(self, t, p):
-        super().__init__("profile")
-        self._t, self._p = np.asarray(t, float), np.asarray(p, float)
-
-    def _at(self, t):
-        k = int(np.searchsorted(self._t, t + 1e-9 * max(1.0, abs(t)), side="right")) - 1
-        self.y["power_w"] = float(self._p[min(max(k, 0), self._p.size - 1)])
-
-    def initialize(self, t0):
-        self._at(t0)
-
-    def do_step(self, t, h):
-        self._at(t + h)
+    """The sample-and-hold ``profile`` source of ``power_w``."""
+    from ..components.profile import ProfileParams, ProfileSource
+    return ProfileSource("profile", ProfileParams(time_s=tuple(map(float, t)), power_w=tuple(map(float, p))))
 
 
 # the old name of this model in shevsim.calibrate.models.MODELS

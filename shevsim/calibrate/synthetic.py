@@ -238,56 +238,49 @@ def as_measured(df: pd.DataFrame, model: str) -> MeasuredData:
     return MeasuredData(df=df.reset_index(drop=True), path="<synthetic>", model=model)
 
 
-ENGINE_TRUTH = {"soot_a_mgps": 0.8, "soot_b_mgps_kw": 0.021, "soot_c_mgps_kw2": 1.3e-4}
-ENGINE_EFFECTS = {
-    "transient_soot": {"k_transient_mgps_kw": 0.12, "tau_turbo_s": 3.0},
-    "analyzer_lag": {"tau_analyzer_s": 4.0},
-    "analyzer_offset": {"soot_offset_mgps": 1.5},
+# the engine-generator plant: the component's default parameters, soot scale away from 1, no effect
+ENGINE_TRUTH = {"soot_scale_frac": 1.3, "transient_soot_mg_per_g": 0.0}
+ENGINE_EFFECTS = {  # effect -> the plant's component parameters switching it on
+    "transient_soot": {"transient_soot_mg_per_g": 10.0},
+    "analyzer_lag": {"soot_analyzer_tau_s": 4.0},
+    "analyzer_offset": {"soot_analyzer_offset_mgps": 1.5},
 }
 
 
-def synth_engine(effects: dict | None = None, duration_s: float = 1800.0, dt_s: float = 1.0,
-                 seed: int = 0, truth: dict | None = None):
-    """Synthetic engine-generator record (``time_s``, ``power_w``, ``soot_rate_mgps``) and the truth.
-
-    Power: a genset following supervisor commands - steps between random levels (0-300 kW) every 5-60 s,
-    rate-limited to 50 kW/s; the engine is off (no soot) at zero power.  Truth runs at 0.1 s with its own first-order lags; analyzer noise 2 % + 0.05 mg/s.
-    """
-    rng = np.random.default_rng(seed)
-    dt = 0.1
+def _engine_command(duration_s: float, dt: float, rng):
+    """Supervisor-like power command [W]: random levels (off, part load, high load) held 5-40 s."""
     n = int(round(duration_s / dt)) + 1
-    t = np.arange(n) * dt
-    cmd = np.zeros(n)
+    p = np.zeros(n)
     k = 0
     while k < n:
-        seg = int(rng.uniform(5, 60) / dt)
-        cmd[k:k + seg] = rng.choice([0.0, rng.uniform(30, 300)], p=[0.2, 0.8])
+        seg = max(1, int(rng.uniform(5, 40) / dt))
+        p[k:k + seg] = rng.choice([0.0, rng.uniform(20e3, 100e3), rng.uniform(100e3, 230e3)], p=[0.15, 0.45, 0.4])
         k += seg
-    p = np.zeros(n)
-    for j in range(1, n):
-        p[j] = p[j - 1] + np.clip(cmd[j] - p[j - 1], -50.0 * dt, 50.0 * dt)
+    return np.arange(n) * dt, p
+
+
+def synth_engine(effects: dict | None = None, duration_s: float = 900.0, dt_s: float = 1.0,
+                 seed: int = 0, truth: dict | None = None, rate_wps: float = 1e12):
+    """Synthetic engine-generator record (``time_s``, ``power_w`` = power command, ``soot_rate_mgps``) from
+    the ``engine_generator`` component stepped by the master behind a sample-and-hold command source,
+    with ``ENGINE_TRUTH`` (+ ``truth``) and the effects' component parameters; analyser noise 2 % +
+    0.05 mg/s on the component's measured soot output.  Returns the DataFrame and the parameters used."""
+    from ..components import get_component_class
+    from ..core.master import Connection, Master, MasterSettings
+    from ..core.params import load_params
+    from .engine import _DEFAULT_PARAMS_FILE, _power_source
+    rng = np.random.default_rng(seed)
+    t, p = _engine_command(duration_s, dt_s, rng)
     vals = dict(ENGINE_TRUTH, **(truth or {}))
     for name, over in (effects or {}).items():
         vals.update(dict(ENGINE_EFFECTS[name], **(over or {})))
-    s = (vals["soot_a_mgps"] + vals["soot_b_mgps_kw"] * p + vals["soot_c_mgps_kw2"] * p * p) * (p > 0.5)
-    if vals.get("k_transient_mgps_kw", 0.0):
-        a = dt / vals["tau_turbo_s"]
-        p_air = np.empty(n)
-        p_air[0] = p[0]
-        for j in range(1, n):  # forward Euler at the fine step (independent of the library's exact lag)
-            p_air[j] = p_air[j - 1] + a * (p[j - 1] - p_air[j - 1])
-        s = s + vals["k_transient_mgps_kw"] * np.maximum(p - p_air, 0.0)
-    if vals.get("tau_analyzer_s", 0.0):
-        a = dt / vals["tau_analyzer_s"]
-        y = np.empty(n)
-        y[0] = s[0]
-        for j in range(1, n):
-            y[j] = y[j - 1] + a * (s[j - 1] - y[j - 1])
-        s = y
-    s = s + vals.get("soot_offset_mgps", 0.0)
-    step = int(round(dt_s / dt))
-    sl = slice(None, None, step)
-    m = t[sl].size
-    df = pd.DataFrame({"time_s": t[sl], "power_w": p[sl] * 1000.0,
-                       "soot_rate_mgps": s[sl] * (1 + rng.normal(0, 0.02, m)) + rng.normal(0, 0.05, m)})
-    return df, vals
+    cls = get_component_class("engine_generator")
+    eg = cls("engine_generator", load_params(cls.Params, _DEFAULT_PARAMS_FILE, vals))
+    eg.u["power_rate_max_wps"] = rate_wps
+    src = _power_source(t, p)
+    m = Master([src, eg], [Connection(src.name, "power_w", "engine_generator", "power_cmd_w")],
+               MasterSettings(step_s=dt_s), order=[src.name, "engine_generator"])
+    res = m.run(float(t[-1]))
+    s = np.asarray(res["engine_generator.soot_rate_meas_mgps"], float)
+    s = s * (1.0 + rng.normal(0.0, 0.02, s.size)) + rng.normal(0.0, 0.05, s.size)
+    return pd.DataFrame({"time_s": t, "power_w": p, "soot_rate_mgps": s}), vals

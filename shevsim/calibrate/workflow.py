@@ -61,6 +61,7 @@ from .models import CalibrationModel, Param, get_model
 
 MIN_GAIN = 0.10
 MAX_WORSEN = 0.10
+DROP_TOL = 0.03        # backward elimination: drop an effect when removing it costs < 3 % held-out score
 HALVING = 0.5          # an effect that halves a channel's held-out RMSE (and worsens none > MAX_WORSEN) passes
 BASELINE_FAILURE_RATIO = 20.0   # baseline held-out RMSE / noise floor above which the nominal model "fails"
 MIN_DBIC = 10.0
@@ -403,7 +404,8 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
         if not ok and not selected and len(remaining) >= 2:
             # no single effect passes: two effects may each fix part of the residual while spoiling
             # another part; test pairs of the PAIR_TOP candidates with the best training BIC
-            top = [e for e, fr in sorted(results, key=lambda x: x[1].dbic) if fr.dbic < 0][:PAIR_TOP]
+            # (ranked by held-out gain: the BIC can veto each of two effects that only work together)
+            top = [e for e, fr in sorted(results, key=lambda x: x[1].score) if fr.gain > 0.0][:PAIR_TOP]
             single = dict(results)
             pairs = []
             for a_i in range(len(top)):
@@ -429,6 +431,26 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
     if selected:
         final = fitter.fit(tuple(selected), start=current.params)
         final.score = _score(final, ref)
+    # backward elimination: an effect chosen early can become redundant once later ones are in
+    # (its parameters drift back towards neutral); drop it when the model without it is as good
+    dropped = []
+    while len(selected) >= 2:
+        trials = []
+        for e in selected:
+            rest = tuple(x for x in selected if x != e)
+            fr = fitter.fit(rest, start={k: v for k, v in final.params.items()
+                                         if k not in {p.name for p in model.effects[e].params}})
+            fr.score = _score(fr, ref)
+            worse = max(fr.rmse[c]["holdout"] / max(final.rmse[c]["holdout"], 1e-300) - 1.0 for c in fitter.channels)
+            trials.append((fr.score, e, fr, worse))
+        score, e, fr, worse = min(trials, key=lambda x: x[0])
+        if score <= final.score * (1.0 + DROP_TOL) and worse <= DROP_TOL:
+            say(f"backward elimination: dropping {e} (held-out score {final.score:.3f} -> {score:.3f})")
+            selected.remove(e)
+            dropped.append({"effect": e, "score_with": final.score, "score_without": score})
+            final = fr
+        else:
+            break
 
     diag_before, diag_after = diag(base), diag(final)
     unexplained = []
@@ -512,6 +534,7 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
         "diagnostics_after": diag_after,
         "unexplained": unexplained,
         "nothing_found": not selected,
+        "dropped_by_backward_elimination": dropped,
         "baseline_failure": baseline_failure,
         "overlay": {"file": "params.toml" if out_dir is not None else None, "component": model.component_name,
                     "tables": overlay},

@@ -290,3 +290,14 @@ def test_voltage_and_soc_limits_match_a_step_by_step_simulation(soc):
         for _ in range(p.horizon_steps):
             s -= p.dt_s * i / (3600.0 * p.capacity_ah)
         assert s == pytest.approx(s_lim, abs=1e-12)
+
+
+def test_dkf_rejects_non_finite_measurements_in_both_forms():
+    import math as _m
+
+    from shevsim.bms.thermal_estimators import ThermalDKF
+    from shevsim.core.errors import SimulationError
+    for compiled in (True, False):
+        f = ThermalDKF(dt_s=0.1, compiled=compiled)
+        with pytest.raises(SimulationError, match="non-finite"):
+            f.update(_m.nan, 25.0, 0.0)

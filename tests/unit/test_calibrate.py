@@ -18,7 +18,7 @@ import pytest
 from shevsim.calibrate.cli import main_calibrate
 from shevsim.calibrate.data import load_measured
 from shevsim.calibrate.models import get_model
-from shevsim.calibrate.synthetic import as_measured, synth_cell, synth_engine, synth_vehicle
+from shevsim.calibrate.synthetic import as_measured, synth_cell, synth_vehicle
 from shevsim.calibrate.workflow import make_split, run_workflow
 from shevsim.core.errors import DataError
 
@@ -84,21 +84,7 @@ def test_vehicle_two_effects_found_or_reported():
     assert rep["rmse_after"]["power_w"]["holdout"] <= 0.5 * rep["rmse_before"]["power_w"]["holdout"]
 
 
-# -------------------------------------------------------------------------------- synthetic: engine
-
-@pytest.mark.parametrize("effect", ["transient_soot", "analyzer_lag", "analyzer_offset"])
-def test_engine_names_single_undeclared_effect(effect):
-    df, truth = synth_engine({effect: {}}, seed=SEED)
-    rep = run_workflow("engine", as_measured(df, "engine"))
-    _check_single(rep, effect, "soot_rate_mgps")
-    if effect == "transient_soot":   # seed App. A.2: transient soot is a large share; k and tau recovered
-        assert rep["final_parameters"]["tau_turbo_s"] == pytest.approx(truth["tau_turbo_s"], rel=0.2)
-
-
-def test_engine_nothing_missing_selects_nothing():
-    df, _ = synth_engine({}, seed=SEED)
-    rep = run_workflow("engine", as_measured(df, "engine"))
-    assert rep["selected_effects"] == []
+# (engine calibration: tests/unit/test_calibrate_engine.py)
 
 
 # ------------------------------------------------------------------------------------- model physics

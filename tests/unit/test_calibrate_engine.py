@@ -11,7 +11,6 @@ through the Master, must reproduce its RMSE within 1 %.  The seed (11) is not on
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 import pandas as pd
@@ -19,12 +18,9 @@ import pytest
 
 from shevsim.calibrate import engine as ce
 from shevsim.calibrate.models import Effect, Param, get_model
-from shevsim.calibrate.synthetic import as_measured
+from shevsim.calibrate.synthetic import as_measured, synth_engine
 from shevsim.calibrate.workflow import make_split, run_workflow
-from shevsim.components import get_component_class
 from shevsim.components.engine_generator import EngineGeneratorParams
-from shevsim.core.master import Connection, Master, MasterSettings
-from shevsim.core.params import load_params
 
 SEED = 11
 NOMINAL = {"soot_scale_frac": 1.3, "transient_soot_mg_per_g": 0.0}   # the plant without any effect
@@ -35,33 +31,10 @@ EFFECTS = {  # effect -> the plant's component parameters switching it on
 }
 
 
-def _command(duration_s: float, dt: float, rng) -> tuple[np.ndarray, np.ndarray]:
-    """Supervisor-like power command [W]: random levels (off, part load, high load) held 5-40 s."""
-    n = int(round(duration_s / dt)) + 1
-    p = np.zeros(n)
-    k = 0
-    while k < n:
-        seg = max(1, int(rng.uniform(5, 40) / dt))
-        p[k:k + seg] = rng.choice([0.0, rng.uniform(20e3, 100e3), rng.uniform(100e3, 230e3)], p=[0.15, 0.45, 0.4])
-        k += seg
-    return np.arange(n) * dt, p
-
-
 def plant_record(component_params: dict, duration_s: float = 900.0, dt_s: float = 1.0, seed: int = SEED,
                  rate_wps: float = 1e12) -> pd.DataFrame:
     """``time_s, power_w, soot_rate_mgps`` from the engine_generator component stepped by the Master."""
-    rng = np.random.default_rng(seed)
-    t, p = _command(duration_s, dt_s, rng)
-    cls = get_component_class("engine_generator")
-    eg = cls("engine_generator", load_params(cls.Params, ce._DEFAULT_PARAMS_FILE, component_params))
-    eg.u["power_rate_max_wps"] = rate_wps
-    src = ce._power_source(t, p)
-    m = Master([src, eg], [Connection(src.name, "power_w", "engine_generator", "power_cmd_w")],
-               MasterSettings(step_s=dt_s), order=[src.name, "engine_generator"])
-    res = m.run(float(t[-1]))
-    s = np.asarray(res["engine_generator.soot_rate_meas_mgps"], float)
-    s = s * (1.0 + rng.normal(0.0, 0.02, s.size)) + rng.normal(0.0, 0.05, s.size)
-    return pd.DataFrame({"time_s": t, "power_w": p, "soot_rate_mgps": s})
+    return synth_engine(None, duration_s, dt_s, seed, truth=component_params, rate_wps=rate_wps)[0]
 
 
 def _write_overlay(path, tables: dict) -> None:

@@ -191,21 +191,9 @@ def test_nothing_missing_selects_nothing(tmp_path):
     assert replay["holdout"] == pytest.approx(rep["rmse_after"]["power_w"]["holdout"], rel=0.01)
 
 
-_GREEDY = pytest.mark.xfail(strict=False, reason=(
-    "selection rule (workflow.py): greedy forward selection without backward elimination - on 600 s "
-    "rolling_error is taken first and kept after aux_load + aero_error bring its coefficient back to the "
-    "nominal 0.0122; on 1800 s the 6-knot road_grade absorbs both and nothing else passes, unreported"))
-
-
-_BIC_VETO = pytest.mark.xfail(strict=False, reason=(
-    "selection rule (workflow.py): the autocorrelation-corrected BIC vetoes both (regen_limit alone: held-out "
-    "score -34 %, dBIC +1.4; road_grade alone: -22 %, dBIC +1.6), so no pair is tried and nothing is selected"))
-
-
 @pytest.mark.parametrize("pair", [("mass_error", "regen_limit"), ("aux_load", "regen_limit"),
                                   ("mass_error", "rolling_error"),
-                                  pytest.param(("road_grade", "regen_limit"), marks=_BIC_VETO),
-                                  pytest.param(("aux_load", "aero_error"), marks=_GREEDY)])
+                                  ("road_grade", "regen_limit"), ("aux_load", "aero_error")])
 def test_two_effects_found_or_reported(pair, tmp_path):
     data, _ = _data(list(pair))
     rep = run_workflow("vehicle", data, plots=False)
