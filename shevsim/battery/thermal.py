@@ -132,26 +132,106 @@ def _check_dt(dt: float, where: str) -> float:
     return d
 
 
-def _two_state_abcd(radius_m, length_m, density_kg_m3, cp_j_kgk, kt_w_mk, h_w_m2k):
-    """The 16 entries of the two-state model's (A, B, C, D), row-major (seed 2.24-2.25 / 3.3).
+try:
+    from numba import njit as _njit
+except ImportError:  # pragma: no cover - numba is a dependency
+    def _njit(*args, **kwargs):
+        return lambda f: f
 
-    Pure scalar arithmetic (numba-compatible): the ONE place the two-state matrices are written; used
-    by :func:`two_state_matrices` and compiled into :func:`two_state_coeffs`.
-    """
+
+# ---------------------------------------------------------------------------------------------
+# the two-state model written ONCE (numba-compatible pure functions, compiled; ``f.py_func`` is the
+# reference): the plant (battery component), the BMS estimators (shevsim.bms.thermal_estimators) and
+# the calibration all call these.
+# ---------------------------------------------------------------------------------------------
+@_njit(cache=True)
+def two_state_a(h, R, k, alpha):
+    """``(a00, a01, a10, a11)`` of the continuous two-state A(h) (seed 2.24 / 3.3); the one place the
+    matrix is written.  ``B = [[bq, -a00], [0, -a10]]`` with ``bq = alpha / (k V)`` (uniform T = T_amb is an
+    equilibrium), so A and B both come from here."""
+    den = 24.0 * k + R * h
+    return (-48.0 * alpha * h / (R * den), -15.0 * alpha * h / den,
+            -320.0 * alpha * h / (R * R * den), -120.0 * alpha * (4.0 * k + R * h) / (R * R * den))
+
+
+@_njit(cache=True)
+def two_state_out(h, R, k):
+    """Surface and core output rows ``(cs0, cs1, ds, cc0, cc1, dc)``: ``T_s = cs x + ds T_amb``,
+    ``T_c = cc x + dc T_amb`` (seed 2.25)."""
+    den = 24.0 * k + R * h
+    return (24.0 * k / den, 7.5 * R * k / den, R * h / den,
+            (24.0 * k - 3.0 * R * h) / den, -(120.0 * R * k + 15.0 * R * R * h) / (8.0 * den), 4.0 * R * h / den)
+
+
+@_njit(cache=True)
+def two_state_dout(h, R, k, two):
+    """Analytic h-derivatives of ``(cs0, cs1, ds)``.  ``two`` = 2.0: ``den ** 2`` through libm ``pow``
+    (as CPython's ``**``) with a run-time exponent, so that LLVM cannot turn it into a product."""
+    den2 = math.pow(24.0 * k + R * h, two)
+    return (-24.0 * k * R / den2, -7.5 * R * R * k / den2, 24.0 * k * R / den2)
+
+
+@_njit(cache=True)
+def two_state_ad_bd(h, R, k, alpha, bq, dt, euler):
+    """``(a00, a01, a10, a11, b00, b01, b10, b11)`` of the discretised model at ``h``: the seed's Euler
+    (``euler``: ``I + A dt``, ``B dt``) or the exact ZOH (closed-form 2x2 matrix exponential)."""
+    a00, a01, a10, a11 = two_state_a(h, R, k, alpha)
+    if euler:
+        return (1.0 + a00 * dt, a01 * dt, a10 * dt, 1.0 + a11 * dt, bq * dt, -a00 * dt, 0.0, -a10 * dt)
+    tr = a00 + a11
+    det = a00 * a11 - a01 * a10
+    disc = 0.25 * tr * tr - det
+    sq = math.sqrt(disc if disc > 0.0 else 0.0)
+    l1 = 0.5 * tr + sq
+    l2 = 0.5 * tr - sq
+    l1dt = l1 * dt
+    l2dt = l2 * dt
+    e1 = math.exp(l1dt)
+    e2 = math.exp(l2dt)
+    f1 = (math.expm1(l1dt) / l1) if abs(l1dt) > 1e-12 else dt * (1.0 + 0.5 * l1dt)
+    f2 = (math.expm1(l2dt) / l2) if abs(l2dt) > 1e-12 else dt * (1.0 + 0.5 * l2dt)
+    dl = l1 - l2
+    if dl > 1e-12 * (abs(l1) + abs(l2) + 1e-300):
+        c1 = (e1 - e2) / dl
+        c0 = (l1 * e2 - l2 * e1) / dl
+        d1 = (f1 - f2) / dl
+        d0 = (l1 * f2 - l2 * f1) / dl
+    else:  # repeated eigenvalue (does not occur for h >= 0; kept for safety)
+        c1 = dt * e1
+        c0 = e1 - l1 * c1
+        d1 = (dt * e1 - f1) / l1 if l1 != 0.0 else 0.5 * dt * dt
+        d0 = f1 - l1 * d1
+    # Ad = c0 I + c1 A;  G = d0 I + d1 A;  Bd = G B with B = [[bq, -a00], [0, -a10]]
+    g00 = d0 + d1 * a00
+    g01 = d1 * a01
+    g10 = d1 * a10
+    g11 = d0 + d1 * a11
+    return (c0 + c1 * a00, c1 * a01, c1 * a10, c0 + c1 * a11,
+            g00 * bq, -(g00 * a00 + g01 * a10),
+            g10 * bq, -(g10 * a00 + g11 * a10))
+
+
+@_njit(cache=True)
+def two_state_d_ad_bd(h, R, k, alpha, bq, dt, euler):
+    """Central-difference h-derivative of :func:`two_state_ad_bd` (step ``1e-5 (|h| + 1)``, one-sided at 0)."""
+    dh = 1e-5 * (abs(h) + 1.0)
+    hp = two_state_ad_bd(h + dh, R, k, alpha, bq, dt, euler)
+    hm = two_state_ad_bd(h - dh if h - dh > 0.0 else 0.0, R, k, alpha, bq, dt, euler)
+    span = dh + (dh if h - dh > 0.0 else h)
+    return ((hp[0] - hm[0]) / span, (hp[1] - hm[1]) / span, (hp[2] - hm[2]) / span, (hp[3] - hm[3]) / span,
+            (hp[4] - hm[4]) / span, (hp[5] - hm[5]) / span, (hp[6] - hm[6]) / span, (hp[7] - hm[7]) / span)
+
+
+def _two_state_abcd(radius_m, length_m, density_kg_m3, cp_j_kgk, kt_w_mk, h_w_m2k):
+    """The 16 entries of the two-state model's (A, B, C, D), row-major (seed 2.24-2.25 / 3.3), from
+    :func:`two_state_a` and :func:`two_state_out` (``B = [[bq, -a00], [0, -a10]]``, ``bq = alpha / (k V)``)."""
     R = radius_m
     k = kt_w_mk
-    V = math.pi * radius_m * radius_m * length_m
-    a = kt_w_mk / (density_kg_m3 * cp_j_kgk)
-    h = h_w_m2k
-    den = 24.0 * k + R * h
-    return (-48.0 * a * h / (R * den), -15.0 * a * h / den,
-            -320.0 * a * h / (R * R * den), -120.0 * a * (4.0 * k + R * h) / (R * R * den),
-            a / (k * V), 48.0 * a * h / (R * den),
-            0.0, 320.0 * a * h / (R * R * den),
-            (24.0 * k - 3.0 * R * h) / den, -(120.0 * R * k + 15.0 * R * R * h) / (8.0 * den),
-            24.0 * k / den, 15.0 * R * k / (2.0 * den),
-            0.0, 4.0 * R * h / den,
-            0.0, R * h / den)
+    alpha = kt_w_mk / (density_kg_m3 * cp_j_kgk)
+    bq = alpha / (k * (math.pi * R ** 2 * length_m))
+    a00, a01, a10, a11 = two_state_a(h_w_m2k, R, k, alpha)
+    cs0, cs1, ds, cc0, cc1, dc = two_state_out(h_w_m2k, R, k)
+    return (a00, a01, a10, a11, bq, -a00, 0.0, -a10, cc0, cc1, cs0, cs1, 0.0, dc, 0.0, ds)
 
 
 def two_state_matrices(p: ThermalParams, h_w_m2k: float):
@@ -176,67 +256,22 @@ def two_state_matrices(p: ThermalParams, h_w_m2k: float):
             np.array(e[8:12]).reshape(2, 2), np.array(e[12:16]).reshape(2, 2))
 
 
-def _phi(lam, dt):
-    """``(e^{lam dt} - 1) / lam`` (= dt at lam = 0), without cancellation."""
-    x = lam * dt
-    if abs(x) < 1e-8:
-        return dt * (1.0 + 0.5 * x)
-    return math.expm1(x) / lam
-
-
 def _two_state_coeffs(radius_m, length_m, density_kg_m3, cp_j_kgk, kt_w_mk, h_w_m2k, dt):
     """Exact ZOH and output coefficients of the two-state model, 14 floats:
     ``(a00, a01, a10, a11, b00, b01, b10, b11, c00, c01, d0, c10, c11, d1)`` with
-    ``x+ = Ad x + Bd [q, T_amb]``, ``[T_core, T_surface] = C x + D [q, T_amb]``.
-
-    ``Ad = e^{A dt}`` and ``Bd = int_0^dt e^{A s} ds B`` in closed form from the two (real, distinct:
-    the radial model's A has a positive discriminant for every h >= 0) eigenvalues
-    ``l1,2 = s +- q``: ``e^{At} = (e^{l1 t} (A - l2 I) - e^{l2 t} (A - l1 I)) / (l1 - l2)``.
-    """
-    e = _two_state_abcd(radius_m, length_m, density_kg_m3, cp_j_kgk, kt_w_mk, h_w_m2k)
-    a00, a01, a10, a11 = e[0], e[1], e[2], e[3]
-    b00, b01, b10, b11 = e[4], e[5], e[6], e[7]
-    s = 0.5 * (a00 + a11)
-    dd = 0.25 * (a00 - a11) * (a00 - a11) + a01 * a10
-    q = math.sqrt(dd) if dd > 0.0 else 0.0
-    l1 = s + q
-    l2 = s - q
-    e1 = math.exp(l1 * dt)
-    e2 = math.exp(l2 * dt)
-    p1 = _phi(l1, dt)
-    p2 = _phi(l2, dt)
-    if q > 1e-12 * abs(s):
-        w = 1.0 / (l1 - l2)
-        # f(A) = alpha I + beta A, with f(l) = e^{l dt} (Ad) or phi(l) (integral)
-        ba = (e1 - e2) * w
-        aa = e1 - ba * l1
-        bi = (p1 - p2) * w
-        ai = p1 - bi * l1
-    else:  # repeated eigenvalue (not reached by the radial model; kept for completeness)
-        ba = dt * e1
-        aa = e1 - ba * l1
-        bi = (dt * e1 - p1) / l1 if l1 != 0.0 else 0.5 * dt * dt
-        ai = p1 - bi * l1
-    ad00 = aa + ba * a00
-    ad01 = ba * a01
-    ad10 = ba * a10
-    ad11 = aa + ba * a11
-    i00 = ai + bi * a00
-    i01 = bi * a01
-    i10 = bi * a10
-    i11 = ai + bi * a11
-    return (ad00, ad01, ad10, ad11,
-            i00 * b00 + i01 * b10, i00 * b01 + i01 * b11, i10 * b00 + i11 * b10, i10 * b01 + i11 * b11,
-            e[8], e[9], e[13], e[10], e[11], e[15])
+    ``x+ = Ad x + Bd [q, T_amb]``, ``[T_core, T_surface] = C x + D [q, T_amb]`` (:func:`two_state_ad_bd`,
+    the closed-form 2x2 matrix exponential, and :func:`two_state_out`)."""
+    R = radius_m
+    k = kt_w_mk
+    alpha = kt_w_mk / (density_kg_m3 * cp_j_kgk)
+    bq = alpha / (k * (math.pi * R ** 2 * length_m))
+    ad = two_state_ad_bd(h_w_m2k, R, k, alpha, bq, dt, False)
+    cs0, cs1, ds, cc0, cc1, dc = two_state_out(h_w_m2k, R, k)
+    return (ad[0], ad[1], ad[2], ad[3], ad[4], ad[5], ad[6], ad[7], cc0, cc1, dc, cs0, cs1, ds)
 
 
-try:
-    from numba import njit as _njit
-    _two_state_abcd = _njit(cache=True, error_model="numpy")(_two_state_abcd)
-    _phi = _njit(cache=True, error_model="numpy")(_phi)
-    two_state_coeffs = _njit(cache=True, error_model="numpy")(_two_state_coeffs)
-except ImportError:  # pragma: no cover - numba is a dependency
-    two_state_coeffs = _two_state_coeffs
+_two_state_abcd = _njit(cache=True, error_model="numpy")(_two_state_abcd)
+two_state_coeffs = _njit(cache=True, error_model="numpy")(_two_state_coeffs)
 
 
 def _zoh(A: np.ndarray, B: np.ndarray, dt: float):

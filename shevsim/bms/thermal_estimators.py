@@ -39,7 +39,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from shevsim.battery.thermal import ThermalParams
+from shevsim.battery.thermal import (ThermalParams, two_state_a, two_state_ad_bd, two_state_d_ad_bd,  # noqa: F401
+                                     two_state_dout, two_state_out)  # the one two-state model
 from shevsim.core.errors import SimulationError
 from shevsim.core.lookup import HAVE_NUMBA, _njit
 
@@ -101,84 +102,6 @@ _X0, _X1, _P00, _P01, _P11, _H, _S6, _S7, _S8, _HAS_U, _UQ, _UT = range(12)
 def _py(f):
     """The uncompiled (reference) form of a compiled function: the same source, run by Python."""
     return getattr(f, "py_func", f)
-
-
-@_njit(cache=True)
-def two_state_a(h, R, k, alpha):
-    """``(a00, a01, a10, a11)`` of the continuous two-state A(h) (seed 2.24 / 3.3); the one place the
-    matrix is written.  ``B = [[bq, -a00], [0, -a10]]`` with ``bq = alpha / (k V)`` (uniform T = T_amb is an
-    equilibrium), so A and B both come from here."""
-    den = 24.0 * k + R * h
-    return (-48.0 * alpha * h / (R * den), -15.0 * alpha * h / den,
-            -320.0 * alpha * h / (R * R * den), -120.0 * alpha * (4.0 * k + R * h) / (R * R * den))
-
-
-@_njit(cache=True)
-def two_state_out(h, R, k):
-    """Surface and core output rows ``(cs0, cs1, ds, cc0, cc1, dc)``: ``T_s = cs x + ds T_amb``,
-    ``T_c = cc x + dc T_amb`` (seed 2.25)."""
-    den = 24.0 * k + R * h
-    return (24.0 * k / den, 7.5 * R * k / den, R * h / den,
-            (24.0 * k - 3.0 * R * h) / den, -(120.0 * R * k + 15.0 * R * R * h) / (8.0 * den), 4.0 * R * h / den)
-
-
-@_njit(cache=True)
-def two_state_dout(h, R, k, two):
-    """Analytic h-derivatives of ``(cs0, cs1, ds)``.  ``two`` = 2.0: ``den ** 2`` through libm ``pow``
-    (as CPython's ``**``) with a run-time exponent, so that LLVM cannot turn it into a product."""
-    den2 = math.pow(24.0 * k + R * h, two)
-    return (-24.0 * k * R / den2, -7.5 * R * R * k / den2, 24.0 * k * R / den2)
-
-
-@_njit(cache=True)
-def two_state_ad_bd(h, R, k, alpha, bq, dt, euler):
-    """``(a00, a01, a10, a11, b00, b01, b10, b11)`` of the discretised model at ``h``: the seed's Euler
-    (``euler``: ``I + A dt``, ``B dt``) or the exact ZOH (closed-form 2x2 matrix exponential)."""
-    a00, a01, a10, a11 = two_state_a(h, R, k, alpha)
-    if euler:
-        return (1.0 + a00 * dt, a01 * dt, a10 * dt, 1.0 + a11 * dt, bq * dt, -a00 * dt, 0.0, -a10 * dt)
-    tr = a00 + a11
-    det = a00 * a11 - a01 * a10
-    disc = 0.25 * tr * tr - det
-    sq = math.sqrt(disc if disc > 0.0 else 0.0)
-    l1 = 0.5 * tr + sq
-    l2 = 0.5 * tr - sq
-    l1dt = l1 * dt
-    l2dt = l2 * dt
-    e1 = math.exp(l1dt)
-    e2 = math.exp(l2dt)
-    f1 = (math.expm1(l1dt) / l1) if abs(l1dt) > 1e-12 else dt * (1.0 + 0.5 * l1dt)
-    f2 = (math.expm1(l2dt) / l2) if abs(l2dt) > 1e-12 else dt * (1.0 + 0.5 * l2dt)
-    dl = l1 - l2
-    if dl > 1e-12 * (abs(l1) + abs(l2) + 1e-300):
-        c1 = (e1 - e2) / dl
-        c0 = (l1 * e2 - l2 * e1) / dl
-        d1 = (f1 - f2) / dl
-        d0 = (l1 * f2 - l2 * f1) / dl
-    else:  # repeated eigenvalue (does not occur for h >= 0; kept for safety)
-        c1 = dt * e1
-        c0 = e1 - l1 * c1
-        d1 = (dt * e1 - f1) / l1 if l1 != 0.0 else 0.5 * dt * dt
-        d0 = f1 - l1 * d1
-    # Ad = c0 I + c1 A;  G = d0 I + d1 A;  Bd = G B with B = [[bq, -a00], [0, -a10]]
-    g00 = d0 + d1 * a00
-    g01 = d1 * a01
-    g10 = d1 * a10
-    g11 = d0 + d1 * a11
-    return (c0 + c1 * a00, c1 * a01, c1 * a10, c0 + c1 * a11,
-            g00 * bq, -(g00 * a00 + g01 * a10),
-            g10 * bq, -(g10 * a00 + g11 * a10))
-
-
-@_njit(cache=True)
-def two_state_d_ad_bd(h, R, k, alpha, bq, dt, euler):
-    """Central-difference h-derivative of :func:`two_state_ad_bd` (step ``1e-5 (|h| + 1)``, one-sided at 0)."""
-    dh = 1e-5 * (abs(h) + 1.0)
-    hp = two_state_ad_bd(h + dh, R, k, alpha, bq, dt, euler)
-    hm = two_state_ad_bd(h - dh if h - dh > 0.0 else 0.0, R, k, alpha, bq, dt, euler)
-    span = dh + (dh if h - dh > 0.0 else h)
-    return ((hp[0] - hm[0]) / span, (hp[1] - hm[1]) / span, (hp[2] - hm[2]) / span, (hp[3] - hm[3]) / span,
-            (hp[4] - hm[4]) / span, (hp[5] - hm[5]) / span, (hp[6] - hm[6]) / span, (hp[7] - hm[7]) / span)
 
 
 class TwoStateDiscretiser:
