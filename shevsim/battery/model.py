@@ -52,7 +52,7 @@ import math
 import numpy as np
 
 from shevsim.battery.thermal import two_state_coeffs
-from shevsim.core.lookup import _g2_locate, _njit, _t1_integral, _t1_slope, _t1_value
+from shevsim.core.lookup import _njit, _t1_integral, _t1_slope, _t1_value, ecm_lookup
 
 FARADAY_C_MOL = 96485.3365
 
@@ -116,32 +116,6 @@ def _dudt(c, soc):
     return c[o + n + k] + (c[o + n + k + 1] - c[o + n + k]) * (soc - x0) / (c[o + k + 1] - x0)
 
 
-def _ecm(d, ix, soc, t_look, sign):
-    """``(rs, r1, c1, r2, c2)`` from the packed tables (bilinear, clamped); discharge table for sign >= 0."""
-    if sign >= 0.0:
-        og, ns, nt = ix[4], ix[5], ix[6]
-    else:
-        og, ns, nt = ix[7], ix[8], ix[9]
-    nq = ix[10]
-    i_s, ws = _g2_locate(d, og, ns, soc)
-    j_t, wt = _g2_locate(d, og + ns, nt, t_look)
-    ov = og + ns + nt
-    pa = ov + (j_t * ns + i_s) * nq
-    pb = pa + nq
-    pc = ov + ((j_t + 1) * ns + i_s) * nq
-    pd = pc + nq
-    w00 = (1.0 - ws) * (1.0 - wt)
-    w01 = ws * (1.0 - wt)
-    w10 = (1.0 - ws) * wt
-    w11 = ws * wt
-    rs = w00 * d[pa] + w01 * d[pb] + w10 * d[pc] + w11 * d[pd]
-    r1 = w00 * d[pa + 1] + w01 * d[pb + 1] + w10 * d[pc + 1] + w11 * d[pd + 1]
-    c1 = w00 * d[pa + 2] + w01 * d[pb + 2] + w10 * d[pc + 2] + w11 * d[pd + 2]
-    r2 = w00 * d[pa + 3] + w01 * d[pb + 3] + w10 * d[pc + 3] + w11 * d[pd + 3]
-    c2 = w00 * d[pa + 4] + w01 * d[pb + 4] + w10 * d[pc + 4] + w11 * d[pd + 4]
-    return rs, r1, c1, r2, c2
-
-
 def _rc_branch(v0, i, r, tau, ex, g, h):
     """Exact ``(v_end, int v dt, int v^2 dt)`` of an RC branch over ``h`` (current held); ``g = tau (1 - ex)``."""
     vinf = r * i
@@ -163,7 +137,7 @@ def _cell_electrical(d, ix, c, st, p_in, h, t_mean, y):
     v1 = st[S_V1]
     v2 = st[S_V2]
     t_look = t_mean if c[C_TDEP] > 0.5 else 25.0
-    rs, r1, c1, r2, c2 = _ecm(d, ix, soc, t_look, p_cell)
+    rs, r1, c1, r2, c2 = ecm_lookup(d, ix, soc, t_look, p_cell)
     sr = 1.0
     if c[C_EA] != 0.0:
         sr = math.exp(c[C_EA] * (1.0 / (t_mean + 273.15) - 1.0 / (c[C_TREF] + 273.15)))
@@ -320,7 +294,6 @@ def _jit(f):
 
 _effective_h = _jit(_effective_h)
 _dudt = _jit(_dudt)
-_ecm = _jit(_ecm)
 _rc_branch = _jit(_rc_branch)
 cell_electrical = _jit(_cell_electrical)
 _cell_electrical = cell_electrical

@@ -79,7 +79,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
-from shevsim.core.lookup import HAVE_NUMBA, _g2_locate, _njit, _t1_slope, _t1_value
+from shevsim.core.lookup import HAVE_NUMBA, _njit, _t1_slope, _t1_value, ecm_lookup
 from shevsim.core.errors import SimulationError
 
 __all__ = ["DEKFParams", "DEKF", "dekf_step", "cell_heat"]
@@ -160,26 +160,9 @@ class DEKFParams:
 
 @_njit(cache=True)
 def _ecm_nom(d, ix, soc, t_c, i_a):
-    """``(R_s, R1, C1)`` of the nominal maps (``CellTables.params(soc, t_c, i_a)[:3]``, same arithmetic)."""
-    if i_a >= 0.0:
-        og, ns, nt = ix[4], ix[5], ix[6]
-    else:
-        og, ns, nt = ix[7], ix[8], ix[9]
-    nq = ix[10]
-    i_s, ws = _g2_locate(d, og, ns, soc)
-    j_t, wt = _g2_locate(d, og + ns, nt, t_c)
-    ov = og + ns + nt
-    pa = ov + (j_t * ns + i_s) * nq
-    pb = pa + nq
-    pc = ov + ((j_t + 1) * ns + i_s) * nq
-    pd = pc + nq
-    w00 = (1.0 - ws) * (1.0 - wt)
-    w01 = ws * (1.0 - wt)
-    w10 = (1.0 - ws) * wt
-    w11 = ws * wt
-    return (w00 * d[pa] + w01 * d[pb] + w10 * d[pc] + w11 * d[pd],
-            w00 * d[pa + 1] + w01 * d[pb + 1] + w10 * d[pc + 1] + w11 * d[pd + 1],
-            w00 * d[pa + 2] + w01 * d[pb + 2] + w10 * d[pc + 2] + w11 * d[pd + 2])
+    """``(R_s, R1, C1)`` of the nominal maps (``CellTables.params(soc, t_c, i_a)[:3]``; the one lookup)."""
+    rs, r1, c1, _r2, _c2 = ecm_lookup(d, ix, soc, t_c, i_a)
+    return rs, r1, c1
 
 
 @_njit(cache=True)

@@ -194,3 +194,31 @@ def _grid_ex(d, o, nx, ny, mx, my, x, y):  # pragma: no cover - compiled
     if (mx != 0 and not (d[o] <= x <= d[o + nx - 1])) or (my != 0 and not (d[o + nx] <= y <= d[o + nx + ny - 1])):
         return _grid_out(d, o, nx, ny, mx, my, x, y)
     return _grid_nb(d, o, nx, ny, x, y)
+
+
+@_njit(cache=True, error_model="numpy")
+def ecm_lookup(d, ix, soc, t_c, sign):
+    """``(rs, r1, c1, r2, c2)`` of the cell ECM tables packed by ``CellTables.packed()`` at SOC [1] and
+    temperature [degC]: bilinear, clamped at the edges; discharge table for ``sign >= 0``, charge below."""
+    if sign >= 0.0:
+        og, ns, nt = ix[4], ix[5], ix[6]
+    else:
+        og, ns, nt = ix[7], ix[8], ix[9]
+    nq = ix[10]
+    i_s, ws = _g2_locate(d, og, ns, soc)
+    j_t, wt = _g2_locate(d, og + ns, nt, t_c)
+    ov = og + ns + nt
+    pa = ov + (j_t * ns + i_s) * nq
+    pb = pa + nq
+    pc = ov + ((j_t + 1) * ns + i_s) * nq
+    pd = pc + nq
+    w00 = (1.0 - ws) * (1.0 - wt)
+    w01 = ws * (1.0 - wt)
+    w10 = (1.0 - ws) * wt
+    w11 = ws * wt
+    rs = w00 * d[pa] + w01 * d[pb] + w10 * d[pc] + w11 * d[pd]
+    r1 = w00 * d[pa + 1] + w01 * d[pb + 1] + w10 * d[pc + 1] + w11 * d[pd + 1]
+    c1 = w00 * d[pa + 2] + w01 * d[pb + 2] + w10 * d[pc + 2] + w11 * d[pd + 2]
+    r2 = w00 * d[pa + 3] + w01 * d[pb + 3] + w10 * d[pc + 3] + w11 * d[pd + 3]
+    c2 = w00 * d[pa + 4] + w01 * d[pb + 4] + w10 * d[pc + 4] + w11 * d[pd + 4]
+    return rs, r1, c1, r2, c2
