@@ -65,6 +65,14 @@ def test_names_the_single_undeclared_effect_and_halves_the_holdout_error(effect)
     for k, v in EFFECTS[effect].items():       # the plant's own parameters are found
         assert rep["final_parameters"][k] == pytest.approx(v, rel=0.1)
     assert rep["final_parameters"]["soot_scale_frac"] == pytest.approx(1.3, rel=0.03)
+    _check_report_replay(rep)
+
+
+def _check_report_replay(rep):
+    """The workflow's own replay (overlay -> engine_generator component stepped by the master) = the fit."""
+    for part in ("train", "holdout"):
+        assert rep["replay"]["soot_rate_mgps"][part] == pytest.approx(rep["rmse_after"]["soot_rate_mgps"][part],
+                                                                      rel=0.01)
 
 
 def test_nothing_missing_selects_nothing():
@@ -72,6 +80,7 @@ def test_nothing_missing_selects_nothing():
     rep = run_workflow("engine", as_measured(df, "engine"))
     assert rep["selected_effects"] == []
     assert rep["final_parameters"]["soot_scale_frac"] == pytest.approx(1.3, rel=0.03)
+    _check_report_replay(rep)
 
 
 @pytest.mark.parametrize("effect", ["transient_soot", "analyzer_lag"])

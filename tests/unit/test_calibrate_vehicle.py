@@ -173,6 +173,8 @@ def test_names_single_undeclared_effect_and_replay_agrees(effect, tmp_path):
     replay, ov = _replay_rmse(data, rep, tmp_path)
     for part in ("train", "holdout"):
         assert replay[part] == pytest.approx(rep["rmse_after"]["power_w"][part], rel=0.01)
+        # and the workflow's own replay (its params.toml through the master) in the report
+        assert rep["replay"]["power_w"][part] == pytest.approx(rep["rmse_after"]["power_w"][part], rel=0.01)
     # the found value sits in the component's own parameter
     for k, v in VEHICLE_EFFECTS[effect].items():
         if k in ("amplitude_frac", "offset_frac"):
