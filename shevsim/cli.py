@@ -108,7 +108,7 @@ def main(argv=None) -> int:
     f = sub.add_parser("fmu", help="FMU tools")
     fsub = f.add_subparsers(dest="fmu_cmd", required=True)
     fe = fsub.add_parser("export", help="export a native component as a co-simulation FMU")
-    fe.add_argument("type", help="component type name (e.g. vehicle) or module:Class")
+    fe.add_argument("type", help="registered component type name (e.g. vehicle)")
     fe.add_argument("--params", help="parameter file")
     fe.add_argument("-o", "--output", required=True)
     fe.add_argument("--fmi-version", default="2", choices=["2", "3"])

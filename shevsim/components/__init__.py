@@ -1,7 +1,8 @@
 """Native co-simulation components, found by their scenario ``type`` name.
 
 The registry maps a type name to ``"module:Class"`` and imports lazily, so a
-scenario only pays for the components it uses.
+scenario only pays for the components it uses.  Plugins add types through the entry-point group
+``shevsim.components``; a scenario names a type, never a module path.
 """
 from __future__ import annotations
 
@@ -30,17 +31,49 @@ REGISTRY: dict[str, str] = {
 }
 
 
-def get_component_class(type_name: str, where: str = "scenario"):
-    """Return the component class registered as ``type_name`` (or a ``module:Class`` string)."""
-    target = REGISTRY.get(type_name)
-    if target is None and ":" in type_name:
-        target = type_name
-    if target is None:
-        best = difflib.get_close_matches(type_name, list(REGISTRY), n=1)
-        hint = f" (did you mean '{best[0]}'?)" if best else f" (known: {', '.join(sorted(REGISTRY))})"
-        raise ScenarioError(f"{where}: unknown component type '{type_name}'{hint}")
-    mod, cls = target.split(":")
+ENTRY_POINT_GROUP = "shevsim.components"
+
+
+def _plugins() -> dict:
+    """Component types declared by installed packages as entry points (group ``shevsim.components``,
+    ``name = "package.module:Class"``); loaded only when a scenario names one."""
+    from importlib.metadata import entry_points
     try:
+        return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+    except Exception:  # pragma: no cover - a broken installation must not break the built-in types
+        return {}
+
+
+def registered_types() -> list[str]:
+    """Names of every component type: the package's own and the installed plugins'."""
+    return sorted(set(REGISTRY) | set(_plugins()))
+
+
+def get_component_class(type_name: str, where: str = "scenario"):
+    """Return the component class registered as ``type_name``.
+
+    Only registered names are accepted: the package's own registry and installed plugins declared as
+    entry points.  A scenario can never name a module path (``module:Class``), so no file a user hands
+    us makes us import code.
+    """
+    if not isinstance(type_name, str):
+        raise ScenarioError(f"{where}: component type must be a registered name, got {type_name!r}")
+    target = REGISTRY.get(type_name)
+    plugin = None if target is not None else _plugins().get(type_name)
+    if target is None and plugin is None:
+        names = registered_types()
+        if ":" in type_name or "." in type_name:
+            raise ScenarioError(f"{where}: component type '{type_name}' looks like a module path; a scenario names "
+                                f"a registered type ({', '.join(names)}); other components are installed as "
+                                f"plugins (entry point group '{ENTRY_POINT_GROUP}')")
+        best = difflib.get_close_matches(type_name, names, n=1)
+        hint = f" (did you mean '{best[0]}'?)" if best else f" (known: {', '.join(names)})"
+        raise ScenarioError(f"{where}: unknown component type '{type_name}'{hint}")
+    try:
+        if plugin is not None:
+            return plugin.load()
+        mod, cls = target.split(":")
         return getattr(importlib.import_module(mod), cls)
-    except (ImportError, AttributeError) as exc:
-        raise ScenarioError(f"{where}: component type '{type_name}' cannot be loaded ({target}): {exc}") from exc
+    except Exception as exc:
+        raise ScenarioError(f"{where}: component type '{type_name}' cannot be loaded: "
+                            f"{type(exc).__name__}: {exc}") from exc

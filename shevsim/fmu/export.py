@@ -4,7 +4,7 @@
 ``shevsim fmu export TYPE --params FILE -o OUT.fmu [--fmi-version 3]``):
 
 1. finds the class by its registry TYPE (``shevsim.components.REGISTRY``) or a
-   ``module:Class`` string (or takes the class itself);
+   class passed from Python (a command line names a registered type only);
 2. loads and checks the parameter file with the class's ``Params`` dataclass
    and stores the values as JSON in the FMU's ``resources/`` (files named by
    ``*_file`` parameters are copied into the FMU too);
@@ -46,23 +46,11 @@ __all__ = ["export_component", "resolve_component_class"]
 
 
 def resolve_component_class(type_name_or_class: Any):
-    """A component class from a class, a registry TYPE name or a ``module:Class`` string."""
+    """A component class from a class (Python API) or a registered TYPE name (never a module path)."""
     if isinstance(type_name_or_class, type):
         return type_name_or_class
-    name = str(type_name_or_class)
-    try:
-        from ..components import get_component_class
-    except ImportError:
-        get_component_class = None
-    if get_component_class is not None:
-        return get_component_class(name, "fmu export")
-    if ":" not in name:
-        raise ScenarioError(f"fmu export: unknown component type '{name}' (give a registry TYPE or module:Class)")
-    from .slave import import_class
-    try:
-        return import_class(name)
-    except (ImportError, AttributeError) as exc:
-        raise ScenarioError(f"fmu export: cannot import '{name}': {exc}") from exc
+    from ..components import get_component_class
+    return get_component_class(str(type_name_or_class), "fmu export")
 
 
 def _jsonable(value: Any) -> Any:
@@ -84,7 +72,7 @@ def export_component(type_name_or_class: Any, params_path: str | Path | None, ou
     Parameters
     ----------
     type_name_or_class : str or type
-        Registry TYPE (``"vehicle"``), ``"module:Class"``, or the class.
+        Registry TYPE (``"vehicle"``) or the class.
     params_path : path or None
         TOML parameter file (``[params]`` table) of the component; None = defaults.
     out_path : path

@@ -79,7 +79,7 @@ def node_params_file(fmu_dir):
 @pytest.fixture(scope="session", params=[2, 3], ids=["fmi2", "fmi3"])
 def exported_node(request, fmu_dir, node_params_file):
     v = request.param
-    return v, export_component("shevsim.fmu.reference:RCThermalNode", node_params_file,
+    return v, export_component(RCThermalNode, node_params_file,
                                fmu_dir / f"node_fmi{v}.fmu", fmi_version=v)
 
 
