@@ -40,7 +40,7 @@ from ..battery import model as bm
 from ..battery.cell import CellTables
 from ..components.battery import BatteryPackParams
 from ..core.errors import DataError
-from .models import CalibrationModel, Effect, Param
+from .models import CalibrationModel, Effect, Param, sampling_grid
 
 T0_K = 273.15
 _FIELDS = {f.name for f in dataclasses.fields(BatteryPackParams)}
@@ -139,18 +139,6 @@ def _ocv_csv_text(soc, v) -> str:
     lines = ["# OCV curve given to the calibration with --params [ocv] (written by shevsim calibrate)",
              "soc_frac,ocv_v"] + [f"{a:.10g},{b:.10g}" for a, b in zip(soc, v)]
     return "\n".join(lines) + "\n"
-
-
-def sampling_grid(t: np.ndarray, i: np.ndarray, ta: np.ndarray):
-    """The fixed-step grid the master replays a record on (step = the median sample interval) and the inputs
-    on it (linear interpolation); the record itself when it is already regular.  The calibration simulates
-    on the same grid, so fit and replay are one computation on any record (loggers jitter: the Panasonic
-    records' 0.1 s steps vary by +-6 %)."""
-    h = float(np.median(np.diff(t)))
-    tg = t[0] + h * np.arange(int(round((t[-1] - t[0]) / h)) + 1)
-    if tg.size == t.size and np.allclose(tg, t, rtol=0.0, atol=1e-9 * max(1.0, abs(float(t[-1])))):
-        return t, i, ta, h, False
-    return tg, np.interp(tg, t, i), np.interp(tg, t, ta), h, True
 
 
 class CellModel(CalibrationModel):
@@ -285,7 +273,7 @@ class CellModel(CalibrationModel):
         self.dudt_knots = tuple(float(x) for x in np.linspace(lo, hi, N_DUDT_KNOTS))
         self.effects = self._make_effects()
         base = self._component_params({})
-        tg, ig, tag, _h, resampled = sampling_grid(t, i, ta)
+        tg, (ig, tag), _h, resampled = sampling_grid(t, i, ta)
         return {"t": t, "i": i, "ta": ta, "tg": tg, "ig": ig, "tag": tag, "resampled": resampled, "d": d, "ix": ix, "c0": bm.pack_params(base), "n": t.size, "df": df,
                 "h_conv": float(self.known["h_conv_w_m2k"]), "has_core": "t_core_c" in df,
                 "soc_range": (lo, hi)}
@@ -413,7 +401,7 @@ class CellModel(CalibrationModel):
                         "sigma_voltage_v": 0.0, "sigma_temperature_c": 0.0,
                         "soc_init_pct": 100.0 * min(max(self.soc0, 0.0), 1.0), "t_init_c": self.t_init_c}
         prm = load_params(BatteryPackParams, None, {**resolve_files(ov), **run_specific})
-        tg, ig, tag, h, _ = sampling_grid(t, df["current_a"].to_numpy(float), df["t_ambient_c"].to_numpy(float))
+        tg, (ig, tag), h, _ = sampling_grid(t, df["current_a"].to_numpy(float), df["t_ambient_c"].to_numpy(float))
         src = ProfileSource("profile", ProfileParams(
             time_s=tuple(tg), current_a=tuple(ig), t_ambient_c=tuple(tag),
             h_conv_w_m2k=tuple(np.full(tg.size, float(self.known["h_conv_w_m2k"])))))

@@ -1,54 +1,25 @@
-"""models.py - fast calibration models with declared parameters and a library of candidate effects.
+"""models.py - the calibration-model interface: declared parameters, effects, simulate, overlay, replay.
 
-Each model (``cell``, ``vehicle``, ``engine`` soot - see :class:`EngineSootModel`) declares
+A calibration model fits the simulator's OWN physics (the functions the components run) through the
+components' own parameter names.  Each model (``cell`` -> :mod:`shevsim.calibrate.cell`, ``vehicle`` ->
+:mod:`shevsim.calibrate.vehicle`, ``engine`` -> :mod:`shevsim.calibrate.engine`) declares
 
-* ``channels``: the measured channels it predicts (compared with the data);
-* ``declared``: the parameters fitted from data (:class:`Param`: name with unit suffix, bounds, default);
-* ``known``: parameters the data cannot determine (capacity, OCV curve, vehicle mass...) that come from
-  ``--params`` (defaults below);
-* ``effects``: named, physically meaningful extensions (:class:`Effect`), each with its own parameters.
-  An effect that is not active takes its *neutral* parameter values, which make it vanish exactly.
+* ``channels``: the measured channels it predicts;
+* ``declared``: the component parameters fitted on every run (:class:`Param`: name, unit, bounds, default);
+* ``known``: what the data cannot determine, from ``--params`` (a component parameter file, or the
+  model's short form);
+* ``effects``: named model terms (:class:`Effect`), each a set of component parameters; the neutral
+  values switch the term off (the component's default: today's behaviour).  Each model keeps its effect
+  library as a list of functions ``f(model) -> Effect`` - one function and one entry per effect;
 
-``model.prepare(data)`` precomputes arrays once; ``model.simulate(ctx, values)`` returns the predicted
-channels for a full parameter dictionary (declared + effect parameters; missing ones take defaults /
-neutral values).  Simulations are a compiled tight loop (cell, numba) or vectorised NumPy (vehicle),
-so a 1-hour, 10 Hz data set simulates in about a millisecond.
-
-Cell model (equivalent circuit OCV-R-RC[-RC] + two-state or lumped thermal)
---------------------------------------------------------------------------
-Current ``i`` positive = discharge, SI units, zero-order hold between samples (exact RC discretisation):
-
-* SOC:        ``dz/dt = -i / (3600 * capacity_ah * capacity_scale)``
-* RC pair k:  ``v_k[n+1] = v_k[n] exp(-dt/tau_k) + R_k s(T) (1 - exp(-dt/tau_k)) i[n]``
-* terminal:   ``V = OCV(z) + dUdT (T_core - T_ref) - R0 s(T) i - sum v_k + M h``
-* heat:       ``Q = i (OCV - V) - i T_core[K] dUdT``  (Bernardi: irreversible + reversible/entropic)
-* two-state thermal (Lin/Kim; seed Ch. III):
-  ``C_c dT_c/dt = Q + (T_s - T_c)/R_c``,  ``C_s dT_s/dt = (T_amb - T_s)/R_u - (T_s - T_c)/R_c``
-  (integrated backward-Euler with Q explicit).  Lumped: ``C dT/dt = Q + (T_amb - T)/R_u``, T_s = T_c = T.
-
-Cell effects: ``entropic_heat`` (dUdT != 0), ``arrhenius_resistance``
-(``s(T) = exp(Ea/R (1/T - 1/T_ref))`` with the core temperature anchored to the measurement,
-``T = T_s,measured + (T_c - T_s)_model``, so that errors of the thermal model do not enter the
-resistance), ``cooling_change`` (convection coefficient multiplied by
-``h_factor`` after an unknown time, smooth 20 s step: ``R_u -> R_u / (1 + (h_factor-1) sigmoid)``),
-``ocv_hysteresis`` (one-state Plett: ``h[n+1] = e^{-g|i|dt/Q} h[n] - (1-e^{-g|i|dt/Q}) sign(i)``),
-``capacity_fade`` (``capacity_scale``), ``current_offset`` (true current = measured - offset),
-``low_soc_resistance`` (all resistances x ``1 + g exp(-SOC/s)``).
-
-Vehicle model (road load, electrical power drawn from the bus)
--------------------------------------------------------------
-``F = m (1 + f_rot) a + 1/2 rho CdA v^2 + m g Crr + m g theta(d)``, ``P_w = F v`` (v, a from the measured
-speed, a by a centred difference over ``accel_window_s``), ``P = P_w / eta`` when ``P_w > 0`` else
-``P_w eta regen_frac`` (one drive efficiency both ways: separate traction/regen efficiencies would make a
-mass error indistinguishable from an aero error); regenerative power limited to ``-p_regen_max_w``;
-plus auxiliary load.
-Vehicle effects: ``road_grade`` (grade piecewise-linear in distance, 6 knots), ``aux_load``,
-``mass_error``, ``rolling_error``, ``aero_error``, ``regen_limit``.
+and implements ``prepare(data)`` (arrays once), ``simulate(ctx, values)`` (the compiled loop over the
+component's one-source step, on :func:`sampling_grid`), ``overlay(values, out_dir)`` (the fit as a partial
+component parameter set) and ``replay(data, overlay_file)`` (the component(s) with the overlay stepped by
+:class:`shevsim.core.master.Master` over the record).
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
@@ -208,3 +179,21 @@ def get_model(name: str, known: Mapping[str, Any] | None = None, where: str = "<
     import importlib
     mod, cls = MODELS[name].split(":")
     return getattr(importlib.import_module(mod), cls)(known, where)
+
+
+def sampling_grid(t: np.ndarray, *columns: np.ndarray):
+    """The fixed-step grid a record is simulated and replayed on, and its input columns on that grid.
+
+    Step = the median sample interval; inputs by linear interpolation.  A record that is already regular
+    (every time within 1e-9 of ``t0 + k h``) is returned as it is.  Every calibration model simulates on
+    this grid and replays on it through the master, so fit and replay are one computation on any record
+    (loggers jitter: the Panasonic records' 0.1 s steps vary by +-6 %).
+
+    Returns ``(tg, [column on tg, ...], h, resampled)``.
+    """
+    t = np.asarray(t, float)
+    h = float(np.median(np.diff(t)))
+    tg = t[0] + h * np.arange(int(round((t[-1] - t[0]) / h)) + 1)
+    if tg.size == t.size and np.allclose(tg, t, rtol=0.0, atol=1e-9 * max(1.0, abs(float(t[-1])))):
+        return t, [np.asarray(c, float) for c in columns], h, False
+    return tg, [np.interp(tg, t, np.asarray(c, float)) for c in columns], h, True

@@ -88,10 +88,21 @@ def synth_cell(effects: dict | None = None, duration_s: float = 2400.0, dt_s: fl
     rng = np.random.default_rng(seed)
     fine = 0.1
     i_true = _cell_current(duration_s, fine, rng, dt_s)
-    # net discharge: discharge_frac of the rated capacity (the SOC must stay inside [0, 1])
+    # discharge pulses scaled (x0.3 .. x2) towards a net discharge of discharge_frac of 2.3 Ah, then down
+    # until the SOC stays within [0.03, 0.98] along the whole record
     net = float(np.sum(i_true) * fine / 3600.0)
-    if net > 0:
-        i_true = np.where(i_true > 0, i_true * discharge_frac * 2.3 / net, i_true)
+    scale = min(max(discharge_frac * 2.3 / net, 0.3), 2.0) if net > 0 else 1.0
+    scale_c = 1.0
+    for _ in range(100):
+        i_try = np.where(i_true > 0, i_true * scale, i_true * scale_c)
+        soc = soc0 - np.cumsum(i_try) * fine / (3600.0 * 2.3)
+        if soc.min() >= 0.03 and soc.max() <= 0.98:
+            break
+        if soc.min() < 0.03:
+            scale *= 0.9
+        else:
+            scale_c *= 0.8
+    i_true = i_try
     n = i_true.size
     t = np.arange(n) * fine
     if ambient == "constant":
