@@ -17,12 +17,41 @@ Data (:data:`shevsim.calibrate.data.REQUIRED` ``["engine"]``)
     command ``power_w[k]`` and its result is the mean reading over that step, compared with
     ``soot_rate_mgps[k]``; the record starts in steady operation at ``power_w[0]``.
 
+Sampling grid
+    Fit and replay run on one fixed-step grid, :func:`shevsim.calibrate.models.sampling_grid`: step = the
+    median sample interval, the power command interpolated onto it when the record is irregular (logger
+    jitter), the analyser reading computed on the grid and interpolated back to the sample times.  A
+    regular record is used as it is.  :meth:`EngineModel.simulate` (the compiled record loop) and
+    :meth:`EngineModel.replay` (the component stepped by the master) are therefore one computation on
+    any record.
+
 Nominal model
-    The component's default parameters (``components/engine_generator/default.toml``), overridden by
-    ``--params`` (any engine-generator parameter that is neither declared nor an effect parameter, plus the
-    held inputs ``power_rate_max_wps`` and ``elec_power_max_w``), with every effect at its neutral value -
-    in particular the transient soot term off (``transient_soot_mg_per_g = 0``: the quasi-static map only,
-    as in the thesis simulation), whatever the component's default.
+    Default (no ``--params``): the component's default parameters
+    (``components/engine_generator/default.toml``) with every effect at its neutral value - in
+    particular the **quasi-static soot map only**: the transient soot term is off
+    (``transient_soot_mg_per_g = 0``, as in the thesis's simulations), although the component's default
+    file sets it to 10 mg/g.  The transient term is then a candidate effect the data must earn.
+
+    ``--params FILE`` accepts
+
+    * the component's own parameter file (``[params]`` with any
+      :class:`~shevsim.components.engine_generator.EngineGeneratorParams` field; relative ``*_file``
+      paths are resolved against the file's folder), e.g. ``components/engine_generator/default.toml``;
+    * an overlay with an ``[engine_generator]`` table (e.g. a previous calibration's ``params.toml``,
+      so that one calibration's result seeds the next; other component tables are ignored);
+    * the held inputs ``power_rate_max_wps`` and ``elec_power_max_w`` (not parameters of the component:
+      the supervisor's limits during the record; default 1e12 = none).
+
+    What a value does depends on its kind: a declared parameter (``soot_scale_frac``) gives the fit's
+    starting value; an effect parameter set to a **non-neutral** value puts that effect into the nominal
+    model at that value - it is held there and **not** a candidate (listed under
+    ``effects_in_nominal`` in the report's known parameters); an effect parameter at its neutral value
+    changes nothing (the effect stays a candidate); every other parameter is part of the nominal.  So
+    with the component's ``default.toml`` a user gets the simulator's default engine as it runs in a
+    scenario: maps and dynamics as in the file, the transient soot term **on** at 10 mg/g (nominal, not
+    refitted), ``soot_scale_frac`` fitted from 1.0, and the analyser lag and offset (0 in that file) as
+    the candidate effects.  With a previous calibration's ``params.toml`` the effects it selected are
+    nominal and its ``soot_scale_frac`` is the starting value.
 
 Declared (fitted) parameter: ``soot_scale_frac`` (multiplier of the quasi-static soot map).
 
@@ -37,14 +66,15 @@ component's "off"):
 from __future__ import annotations
 
 import dataclasses
-from typing import Mapping
+from pathlib import Path
+from typing import Any, Mapping
 
 import numpy as np
 
 from ..components.engine_generator import EngineGeneratorParams
 from ..core.errors import DataError
 from ..powertrain import engine as eng
-from .models import CalibrationModel, Effect, Param
+from .models import CalibrationModel, Effect, Param, sampling_grid
 
 _FIELDS = {f.name: f for f in dataclasses.fields(EngineGeneratorParams)}
 _DEFAULT_PARAMS_FILE = eng.EG_DIR / "default.toml"
@@ -99,19 +129,49 @@ class EngineModel(CalibrationModel):
     component_name = "engine_generator"
     effect_functions = ENGINE_EFFECTS
 
-    def __init__(self, known: Mapping | None = None, where: str = "<params>"):
-        # the nominal: every engine-generator parameter that is neither declared nor an effect parameter,
-        # at the component's default, plus the held inputs
-        fitted = {p.name for p in self._declared_for({})}
-        fitted |= {p.name for f in self.effect_functions for p in f(self).params}
+    def __init__(self, known: Mapping[str, Any] | None = None, where: str = "<params>"):
+        vals = _user_values(known, where)
         base = _default_params()
-        self.known_defaults = {k: getattr(base, k) for k in _FIELDS if k not in fitted}
+        self.base = base
+        self.where = where
+        declared = {p.name for p in self._declared_for({})}
+        all_effects = [f(self) for f in self.effect_functions]
+        effect_params = {p.name: e for e in all_effects for p in e.params}
+        # the nominal: every engine-generator parameter that is neither declared nor an effect parameter,
+        # at the component's default (or the user's value), plus the held inputs
+        self.known_defaults = {k: getattr(base, k) for k in _FIELDS if k not in declared and k not in effect_params}
         self.known_defaults.update(_INPUTS)
-        super().__init__(known, where)
+        opts = [k for k in _FIELDS if k not in effect_params] + list(_INPUTS) + list(effect_params)
+        for k, v in vals.items():
+            if k not in opts:
+                import difflib
+                best = difflib.get_close_matches(k, opts, n=1)
+                hint = f" (did you mean '{best[0]}'?)" if best else ""
+                raise DataError(f"{where}: unknown parameter '{k}' for model 'engine'{hint}; "
+                                f"expected an engine_generator parameter or {', '.join(_INPUTS)}")
+            if k in effect_params and not (isinstance(v, (int, float)) and not isinstance(v, bool)):
+                raise DataError(f"{where}: parameter '{k}' must be a number, got {v!r}")
+        # an effect parameter set by the user away from its neutral value puts the effect into the nominal
+        self.nominal_effects: dict[str, dict] = {}
+        for e in all_effects:
+            given = {p.name: float(vals[p.name]) for p in e.params if p.name in vals}
+            if any(v != float(e.neutral[k]) for k, v in given.items()):
+                self.nominal_effects[e.name] = {p.name: given.get(p.name, float(e.neutral[p.name])) for p in e.params}
+        generic = {k: v for k, v in vals.items() if k not in effect_params}
+        super().__init__(generic, where)
+        if self.nominal_effects:
+            self.known["effects_in_nominal"] = {
+                n: {**v, "note": "set by --params: part of the nominal model (held), not a candidate effect"}
+                for n, v in self.nominal_effects.items()}
+        # the nominal's component parameters: known values, candidate effects neutral, nominal effects as given
+        nominal = {k: v for k, v in self.known.items() if k in _FIELDS}
+        for e in all_effects:
+            nominal.update(self.nominal_effects.get(e.name, e.neutral))
         try:
-            self.base = dataclasses.replace(base, **{k: v for k, v in self.known.items() if k in _FIELDS})
+            self.base = dataclasses.replace(base, **nominal)
         except (TypeError, ValueError) as exc:
             raise DataError(f"{where}: engine-generator parameters: {exc}") from exc
+        self._effect_param_names = tuple(effect_params)
 
     def _declared_for(self, known):
         return (Param("soot_scale_frac", "-", 0.05, 20.0, 1.0, "multiplier of the quasi-static soot map",
@@ -124,7 +184,8 @@ class EngineModel(CalibrationModel):
             bad = [p.name for p in e.params if p.name not in _FIELDS]
             if bad:
                 raise DataError(f"engine effect '{e.name}': parameter(s) {bad} are not engine-generator parameters")
-            effs[e.name] = e
+            if e.name not in getattr(self, "nominal_effects", {}):
+                effs[e.name] = e
         return effs
 
     # -- the fit
@@ -137,21 +198,26 @@ class EngineModel(CalibrationModel):
         df = data.df
         t = df["time_s"].to_numpy(float)
         p = df["power_w"].to_numpy(float)
+        tg, (pg,), h, resampled = sampling_grid(t, p)
         maps = eng.EngineGenMaps(self.base.fuel_map_file, self.base.torque_map_file, self.base.max_torque_file,
                                  self.base.soot_map_file, self.base.generator_eff_file,
                                  self.base.generator_max_torque_file, self.base.ool_file)
         md, mi = eng.pack_maps(maps)
         return {"t": np.ascontiguousarray(t), "p_cmd": np.ascontiguousarray(p), "n": t.size, "df": df,
+                "tg": np.ascontiguousarray(tg), "pg": np.ascontiguousarray(pg), "h": h, "resampled": resampled,
                 "maps": maps, "md": md, "mi": mi, "p_max": float(maps.p_max_w)}
 
     def simulate(self, ctx, values):
+        """The analyser reading at the sample times: the compiled record loop on the sampling grid."""
         prm = self.params_for(values)
-        st = eng.steady_state(ctx["maps"], float(ctx["p_cmd"][0]), soot_scale_frac=prm.soot_scale_frac)
-        out = np.empty(ctx["n"])
+        tg, pg = ctx["tg"], ctx["pg"]
+        st = eng.steady_state(ctx["maps"], float(pg[0]), soot_scale_frac=prm.soot_scale_frac)
+        out = np.empty(tg.size)
         out[0] = eng.measured_soot_rate(st, prm)
         eng.run_record(ctx["md"], ctx["mi"], eng.pack_params(prm), ctx["p_max"], np.array(st.values()),
-                   ctx["t"], ctx["p_cmd"], float(self.known["power_rate_max_wps"]),
-                   float(self.known["elec_power_max_w"]), out)
+                       tg, pg, float(self.known["power_rate_max_wps"]), float(self.known["elec_power_max_w"]), out)
+        if ctx["resampled"]:
+            out = np.interp(ctx["t"], tg, out)
         return {"soot_rate_mgps": out}
 
     def regressors(self, ctx):
@@ -161,34 +227,31 @@ class EngineModel(CalibrationModel):
 
     # -- closing the loop in the simulator
     def overlay(self, values: Mapping[str, float], out_dir=None) -> dict:
-        """``{"engine_generator": {...}}``: the fitted declared and effect parameters (neutral ones included,
-        e.g. ``transient_soot_mg_per_g = 0`` when that effect was not selected) and the nominal parameters
-        given with ``--params`` that differ from the component's defaults."""
+        """``{"engine_generator": {...}}``: the declared and every effect parameter (candidate effects fitted
+        or neutral, e.g. ``transient_soot_mg_per_g = 0`` when that effect was not selected; effects of the
+        nominal at their given value) and the nominal parameters that differ from the component's
+        defaults (e.g. given with ``--params``)."""
         prm = self.params_for(values)
         dflt = _default_params()
-        names = [p.name for p in self.declared] + [p.name for e in self.effects.values() for p in e.params]
+        names = [p.name for p in self.declared] + list(self._effect_param_names)
         tab = {k: getattr(prm, k) for k in _FIELDS if k not in names and getattr(prm, k) != getattr(dflt, k)}
         tab.update({k: float(getattr(prm, k)) for k in dict.fromkeys(names)})
         return {self.component_name: tab}
 
     def replay(self, data, overlay_file) -> dict:
         """Step the ``engine_generator`` component (registry), parameters = its defaults with the overlay
-        merged over them, through the master over the measured power command; ``{channel: array}``."""
+        merged over them, through the master over the measured power command on the sampling grid
+        (:func:`~shevsim.calibrate.models.sampling_grid`, as :meth:`simulate`); ``{channel: array}`` at the
+        sample times."""
         from ..components import get_component_class
         from ..core.master import Connection, Master, MasterSettings
         from ..core.params import load_params
         df = data.df
         t = df["time_s"].to_numpy(float)
-        p = df["power_w"].to_numpy(float)
+        tg, (pg,), h, resampled = sampling_grid(t, df["power_w"].to_numpy(float))
         cls = get_component_class(self.component)
         prm = load_params(cls.Params, _DEFAULT_PARAMS_FILE, _overlay_values(overlay_file, self.component_name))
-        h = float(np.median(np.diff(t)))
-        tg = t[0] + h * np.arange(int(round((t[-1] - t[0]) / h)) + 1)
-        if not np.allclose(tg, t, rtol=0.0, atol=1e-9 * max(1.0, abs(t[-1]))):
-            p = np.interp(tg, t, p)            # irregular record: replay on a regular grid, read back at t
-        else:
-            tg = t
-        src = _power_source(tg, p)
+        src = _power_source(tg, pg)
         eg = cls(self.component_name, prm)
         eg.u["power_rate_max_wps"] = float(self.known["power_rate_max_wps"])
         eg.u["elec_power_max_w"] = float(self.known["elec_power_max_w"])
@@ -196,12 +259,46 @@ class EngineModel(CalibrationModel):
                    MasterSettings(step_s=h), order=[src.name, eg.name])
         res = m.run(float(tg[-1]), t0=float(tg[0]))
         y = np.asarray(res[f"{eg.name}.soot_rate_meas_mgps"], float)
-        return {"soot_rate_mgps": y if tg is t else np.interp(t, np.asarray(res.time_s), y)}
+        return {"soot_rate_mgps": np.interp(t, np.asarray(res.time_s), y) if resampled else y}
 
 
 def _default_params() -> EngineGeneratorParams:
     from ..core.params import load_params
     return load_params(EngineGeneratorParams, _DEFAULT_PARAMS_FILE)
+
+
+def _user_values(known: Mapping[str, Any] | None, where: str) -> dict:
+    """The ``--params`` values as one flat dict of engine-generator parameters and held inputs.
+
+    ``known`` is the flat ``[params]`` dict of :func:`shevsim.calibrate.cli.load_params_toml`, optionally
+    with ``"__base_dir__"`` (folder of the ``--params`` file: relative ``*_file`` paths are resolved
+    against it) and ``"__tables__"`` (``{table: {param: value}}`` of a file with component tables; the
+    ``[engine_generator]`` table is merged over ``[params]``, other components' tables are ignored).
+    """
+    known = dict(known or {})
+    base_dir = known.pop("__base_dir__", None)
+    tables = known.pop("__tables__", None) or {}
+    known.pop("__component_file__", None)
+    if not isinstance(tables, Mapping):
+        raise DataError(f"{where}: '__tables__' must map table names to tables")
+    if tables and "engine_generator" not in tables and not known:
+        raise DataError(f"{where}: no [engine_generator] or [params] table "
+                        f"(tables: {', '.join(sorted(map(str, tables)))})")
+    tab = tables.get("engine_generator", {})
+    if not isinstance(tab, Mapping):
+        raise DataError(f"{where}: [engine_generator] must be a table of name = value")
+    vals = {**known, **tab}
+    for k, v in list(vals.items()):
+        if k.endswith("_file") and k in _FIELDS:
+            if not isinstance(v, str) or not v:
+                raise DataError(f"{where}: '{k}' must be a path string, got {v!r}")
+            fp = Path(v)
+            if not fp.is_absolute() and base_dir is not None:
+                fp = Path(base_dir) / fp
+            vals[k] = str(fp.resolve())
+            if not fp.is_file():
+                raise DataError(f"{where}: {k} = {v!r}: file not found ({fp})")
+    return vals
 
 
 def _overlay_values(path, component: str) -> dict:

@@ -156,3 +156,111 @@ def test_an_effect_is_one_function_and_one_entry():
         class Bad(ce.EngineModel):
             effect_functions = [lambda model: Effect("x", "", (Param("k_x", "-", 0, 1, 0),), {"k_x": 0.0}, ())]
         Bad()
+
+
+# ------------------------------------------------------------------------- irregular records (logger jitter)
+
+@pytest.mark.parametrize("jitter_s", [0.06, 0.004])
+def test_jittered_record_fit_and_replay_are_one_computation(jitter_s):
+    """Fit and replay run on the same fixed-step grid (models.sampling_grid): on a 1 s record with +-60 ms
+    jitter the replay used to crash (arrays of different lengths), with +-4 ms it was 2.3 % off the fit."""
+    df = plant_record(dict(NOMINAL, **EFFECTS["transient_soot"]), duration_s=600.0)
+    rng = np.random.default_rng(SEED + 1)
+    df["time_s"] = df["time_s"].to_numpy(float) + rng.uniform(-jitter_s, jitter_s, len(df))
+    data = as_measured(df, "engine")
+    rep = run_workflow("engine", data)
+    assert rep["selected_effects"] == ["transient_soot"], rep["candidates"]
+    assert "error" not in rep["replay"], rep["replay"]
+    _check_report_replay(rep)
+    # and sample by sample at the record's own (irregular) times
+    m = get_model("engine")
+    ctx = m.prepare(data)
+    assert ctx["resampled"] and ctx["tg"].size == ctx["t"].size
+    sim = m.simulate(ctx, rep["final_parameters"])["soot_rate_mgps"]
+    assert sim.shape == (len(df),)
+
+
+# ------------------------------------------------------------------------------------- --params files
+
+def _component_file_known(path) -> dict:
+    """What ``shevsim calibrate engine DATA --params PATH`` passes for a component parameter file."""
+    from pathlib import Path
+
+    from shevsim.calibrate.cli import load_params_toml
+    known = load_params_toml(path)
+    known["__base_dir__"] = str(Path(path).resolve().parent)
+    return known
+
+
+def test_params_accepts_the_component_default_file():
+    """``--params components/engine_generator/default.toml``: the simulator's default engine is the nominal,
+    its transient soot term (10 mg/g, set in that file) included and held; the analyser effects stay
+    candidates; the map paths are resolved against the file's folder."""
+    from shevsim.powertrain.engine import EG_DIR
+    m = get_model("engine", _component_file_known(EG_DIR / "default.toml"))
+    assert "transient_soot" not in m.effects
+    assert set(m.effects) == {"analyzer_lag", "analyzer_offset"}
+    assert m.known["effects_in_nominal"]["transient_soot"]["transient_soot_mg_per_g"] == 10.0
+    assert m.params_for({}).transient_soot_mg_per_g == 10.0
+    assert m.params_for({}) == dataclasses.replace(EngineGeneratorParams(), soot_scale_frac=1.0)
+    assert m.defaults() == {"soot_scale_frac": 1.0}
+    # the calibration of a plant with the transient term on: soot_scale_frac found, nothing missing
+    df = plant_record(dict(NOMINAL, **EFFECTS["transient_soot"]), duration_s=600.0)
+    rep = run_workflow("engine", as_measured(df, "engine"), _component_file_known(EG_DIR / "default.toml"))
+    assert rep["selected_effects"] == []
+    assert rep["final_parameters"]["soot_scale_frac"] == pytest.approx(1.3, rel=0.03)
+    assert rep["overlay"]["tables"]["engine_generator"]["transient_soot_mg_per_g"] == 10.0
+    assert "transient_soot" in rep["known_parameters"]["effects_in_nominal"]
+    _check_report_replay(rep)
+
+
+def test_params_effect_at_its_neutral_value_leaves_the_effect_a_candidate():
+    m = get_model("engine", {"transient_soot_mg_per_g": 0.0, "soot_analyzer_tau_s": 0.0})
+    assert set(m.effects) == set(ce.EngineModel().effects) and "effects_in_nominal" not in m.known
+    m = get_model("engine", {"soot_analyzer_tau_s": 3.0})
+    assert "analyzer_lag" not in m.effects and m.params_for({}).soot_analyzer_tau_s == 3.0
+    assert m.overlay({"soot_scale_frac": 1.0})["engine_generator"]["soot_analyzer_tau_s"] == 3.0
+    with pytest.raises(Exception, match="must be >= 0"):
+        get_model("engine", {"transient_soot_mg_per_g": -1.0})
+    with pytest.raises(Exception, match="did you mean 'soot_analyzer_tau_s'"):
+        get_model("engine", {"soot_analyser_tau_s": 1.0})
+
+
+def test_params_relative_files_resolve_against_the_params_folder(tmp_path):
+    import shutil
+
+    from shevsim.powertrain.engine import EG_DIR
+    shutil.copy(EG_DIR / "soot_map.csv", tmp_path / "my_soot.csv")
+    known = {"soot_map_file": "my_soot.csv", "__base_dir__": str(tmp_path)}
+    m = get_model("engine", known)
+    assert m.base.soot_map_file == str((tmp_path / "my_soot.csv").resolve())
+    with pytest.raises(Exception, match="file not found"):
+        get_model("engine", {"soot_map_file": "missing.csv", "__base_dir__": str(tmp_path)})
+
+
+def test_a_calibration_result_seeds_the_next(tmp_path):
+    """The calibration's own ``params.toml`` (table ``[engine_generator]``) as ``--params``: the effects it
+    selected are part of the next nominal, its declared values the starting point."""
+    import tomllib
+    df = plant_record(dict(NOMINAL, **EFFECTS["transient_soot"]), duration_s=600.0)
+    data = as_measured(df, "engine")
+    first = run_workflow("engine", data, out_dir=tmp_path / "first", plots=False)
+    assert first["selected_effects"] == ["transient_soot"]
+    doc = tomllib.loads((tmp_path / "first" / "params.toml").read_text())
+    known = {"__base_dir__": str(tmp_path / "first"),
+             "__tables__": {k: v for k, v in doc.items() if k != "meta"}}
+    m = get_model("engine", known)
+    assert "transient_soot" not in m.effects
+    assert m.params_for({}).transient_soot_mg_per_g == pytest.approx(
+        first["final_parameters"]["transient_soot_mg_per_g"])
+    assert m.defaults()["soot_scale_frac"] == pytest.approx(first["final_parameters"]["soot_scale_frac"])
+    nxt = run_workflow("engine", data, known, out_dir=tmp_path / "next", plots=False)
+    assert nxt["selected_effects"] == []
+    assert nxt["rmse_after"]["soot_rate_mgps"]["holdout"] == pytest.approx(
+        first["rmse_after"]["soot_rate_mgps"]["holdout"], rel=0.01)
+    _check_report_replay(nxt)
+    # other components' tables are ignored; a file without an engine_generator table is refused
+    assert get_model("engine", {"__tables__": {"battery": {"rs_scale": 2.0}, **known["__tables__"]}}).effects.keys() \
+        == m.effects.keys()
+    with pytest.raises(Exception, match=r"no \[engine_generator\]"):
+        get_model("engine", {"__tables__": {"battery": {"rs_scale": 2.0}}})
