@@ -44,8 +44,8 @@ import numpy as np
 
 from ..core.errors import DataError
 from ..core.lookup import _njit
-from ..powertrain.motor import motor_step
-from ..powertrain.vehicle import grade_rad_at, traction_force_n
+from ..powertrain.motor import bus_balance, motor_step
+from ..powertrain.vehicle import grade_total_rad, speed_follow_step
 from .models import CalibrationModel, Effect, Param
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -113,38 +113,37 @@ def _sample(rec: np.ndarray, n_sub: int, n_g: int) -> np.ndarray:
     return out
 
 
-@_njit(cache=True)
+@_njit(cache=True, error_model="numpy")
 def _speed_following_power(vr, ar, h, kd, kg, m, c, fr, g, md, mi, k_w, k_tau, extrapolate, v_regen, p_regen,
                            eff_scale, heat_rate, gamma0, aux):  # pragma: no cover - compiled
     """Bus power [W] at every master step of cycle -> vehicle (speed mode) -> motor -> bus (index 0 = initialise).
 
-    The order and arithmetic of :class:`~shevsim.components.vehicle.Vehicle` (speed mode),
-    :class:`~shevsim.components.motor.Motor` and :class:`~shevsim.components.bus.PowerBus` stepped by the
-    master with the motor's bus limits unconnected; ``vr``/``ar`` are the cycle's outputs at each step.
+    The components' own steps in the master's order: :func:`~shevsim.powertrain.vehicle.speed_follow_step`
+    (:class:`~shevsim.components.vehicle.Vehicle`, speed mode), :func:`~shevsim.powertrain.motor.motor_step`
+    (:class:`~shevsim.components.motor.Motor`, bus limits unconnected) and
+    :func:`~shevsim.powertrain.motor.bus_balance` (:class:`~shevsim.components.bus.PowerBus`, no generator,
+    aux input 0); ``vr``/``ar`` are the cycle's outputs at each step.  Only the state passes between them here.
     """
     n = vr.shape[0] - 1
     rec = np.empty(n + 1)
-    has_knots = kd.shape[0] > 0
+    # initialise (grade input 0, at distance 0; the motor and bus start with 0 force / power)
     v = vr[0] if vr[0] > 0.0 else 0.0
+    th = grade_total_rad(0.0, 0.0, kd, kg)
     dist = 0.0
+    f_req = 0.0
     v_prev = v
     h_prev = 1.0
     gamma = gamma0
-    rec[0] = 0.0 + aux
+    rec[0] = bus_balance(0.0, 0.0, 0.0, aux)[1]
     for k in range(n):
-        v0 = v
-        v1 = vr[k + 1] if vr[k + 1] > 0.0 else 0.0
-        dist += 0.5 * (v0 + v1) * h
-        th = 0.0 + grade_rad_at(dist, kd, kg) if has_knots else 0.0
-        vn = v1 + ar[k + 1] * h
-        f = traction_force_n(v1, vn if vn > 0.0 else 0.0, h, th, m, c, fr, g)
-        v = v1
-        res = motor_step(md, mi, f, v1, 1e12, -1e12, h, v_prev, h_prev, gamma, k_w, k_tau, extrapolate,
+        st = speed_follow_step(v, th, dist, vr[k + 1], ar[k + 1], 0.0, h, kd, kg, m, c, fr, g)
+        v, dist, th, f_req = st[0], st[1], st[2], st[3]
+        res = motor_step(md, mi, f_req, v, 1e12, -1e12, h, v_prev, h_prev, gamma, k_w, k_tau, extrapolate,
                          v_regen, p_regen, eff_scale, heat_rate)
         gamma = res[6]
         v_prev = res[7]
         h_prev = h
-        rec[k + 1] = res[2] + (0.0 + aux)
+        rec[k + 1] = bus_balance(res[2], 0.0, 0.0, aux)[1]
     return rec
 
 

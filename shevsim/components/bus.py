@@ -5,7 +5,8 @@
 ``aux_power_w`` is the input plus the parameter ``aux_power_w`` (a constant auxiliary load: HVAC,
 fans, electronics; default 0 = off). Wherever this docstring says ``aux`` it means that total.
 
-A lossless node (converter losses are inside the motor and generator maps). Cumulative energies
+The balance is :func:`shevsim.powertrain.motor.bus_balance` (compiled; the vehicle calibration's loop
+sums the bus with it too). A lossless node (converter losses are inside the motor and generator maps). Cumulative energies
 are the inputs integrated with the same zero-order hold the master applies, so
 ``battery_energy_j = motor_energy_j + aux_energy_j - gen_energy_j`` exactly.
 
@@ -35,6 +36,7 @@ from dataclasses import dataclass
 from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
+from shevsim.powertrain.motor import bus_aux_w, bus_balance
 
 _ALL = ("motor_power_w", "gen_power_w", "aux_power_w")
 
@@ -87,8 +89,7 @@ class PowerBus(Component):
     )
 
     def _aux(self) -> float:
-        pa = self.u["aux_power_w"]
-        return pa + self.params.aux_power_w if self.params.aux_power_w else pa
+        return bus_aux_w(self.u["aux_power_w"], self._aux_w)
 
     def _limits(self) -> None:
         u, y = self.u, self.y
@@ -103,23 +104,28 @@ class PowerBus(Component):
             y["motor_power_min_w"] = -1e12
             y["gen_power_max_w"] = 1e12
 
+    def __init__(self, name: str = "bus", params: BusParams | None = None):
+        super().__init__(name, params)
+        self._aux_w = float(self.params.aux_power_w)
+
+    _static = ("name", "params", "_aux_w")
+
     def initialize(self, t0: float) -> None:
         self.e = [0.0, 0.0, 0.0, 0.0]
         self._limits()
         u, y = self.u, self.y
-        y["demand_power_w"] = u["motor_power_w"] + self._aux()
-        y["battery_power_w"] = y["demand_power_w"] - u["gen_power_w"]
+        _pa, y["demand_power_w"], y["battery_power_w"] = bus_balance(u["motor_power_w"], u["gen_power_w"],
+                                                                     u["aux_power_w"], self._aux_w)
         for k in ("aux_energy_j", "motor_energy_j", "gen_energy_j", "battery_energy_j"):
             y[k] = 0.0
 
     def do_step(self, t: float, h: float) -> None:
         u, y, e = self.u, self.y, self.e
-        pm, pg, pa = u["motor_power_w"], u["gen_power_w"], self._aux()
+        pm, pg = u["motor_power_w"], u["gen_power_w"]
+        pa, d, b = bus_balance(pm, pg, u["aux_power_w"], self._aux_w)
         if pm != pm or pg != pg or pa != pa:
             raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
                                   f"(motor_power_w={pm}, gen_power_w={pg}, aux_power_w={pa})")
-        d = pm + pa
-        b = d - pg
         e[0] += pa * h
         e[1] += pm * h
         e[2] += pg * h

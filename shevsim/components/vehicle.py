@@ -42,7 +42,7 @@ import numpy as np
 from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.vehicle import G_MPS2, grade_rad_at, road_forces, step_vehicle, traction_force_n
+from shevsim.powertrain.vehicle import G_MPS2, grade_total_rad, speed_follow_step, step_vehicle
 
 INPUT_MODES = ("force", "speed")
 
@@ -156,7 +156,7 @@ class Vehicle(Component):
         return self.VARIABLES_SPEED if p is not None and p.input_mode == "speed" else self.VARIABLES
 
     def _grade(self, th_in: float) -> float:
-        return th_in + grade_rad_at(self.dist, self._kd, self._kg) if self._knots else th_in
+        return grade_total_rad(th_in, self.dist, self._kd, self._kg) if self._knots else th_in
 
     def initialize(self, t0: float) -> None:
         self.e = [0.0, 0.0, 0.0, 0.0, 0.0]
@@ -176,24 +176,17 @@ class Vehicle(Component):
         y["kinetic_energy_j"] = 0.5 * self._m * self.v * self.v
 
     def _step_speed(self, t: float, h: float):
-        """Speed mode: follow ``speed_ref_mps``; book the works; output the force for the next step."""
+        """Speed mode: follow ``speed_ref_mps`` (:func:`~shevsim.powertrain.vehicle.speed_follow_step`, the
+        calibration's step too); book the works; output the force for the next step."""
         u = self.u
         vr, ar, th_in = u["speed_ref_mps"], u["accel_ref_mps2"], u["grade_rad"]
         if vr != vr or ar != ar or th_in != th_in:
             raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
                                   f"(speed_ref_mps={vr}, accel_ref_mps2={ar}, grade_rad={th_in})")
-        v0 = self.v
-        v1 = vr if vr > 0.0 else 0.0
-        m, c, fr, g = self._m, self._c, self._fr, self._g
-        th = self.th
-        f = traction_force_n(v0, v1, h, th, m, c, fr, g)
-        dist = 0.5 * (v0 + v1) * h
-        f_g, f_rr = road_forces(th, m, fr, g) if dist > 0.0 else (0.0, 0.0)
-        self.dist += dist
-        self.th = self._grade(th_in)
-        v_next = v1 + ar * h
-        self.y["force_req_n"] = traction_force_n(v1, v_next if v_next > 0.0 else 0.0, h, self.th, m, c, fr, g)
-        return v1, dist, f * dist, 0.0, f_rr * dist, c * v0 * v1 * dist, f_g * dist
+        v1, self.dist, self.th, f_req, dist, wp, wr, wa, wg = speed_follow_step(
+            self.v, self.th, self.dist, vr, ar, th_in, h, self._kd, self._kg, self._m, self._c, self._fr, self._g)
+        self.y["force_req_n"] = f_req
+        return v1, dist, wp, 0.0, wr, wa, wg
 
     def do_step(self, t: float, h: float) -> None:
         v0 = self.v
@@ -206,7 +199,7 @@ class Vehicle(Component):
                 raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
                                       f"(traction_force_n={f_t}, brake_force_n={f_b}, grade_rad={th})")
             if self._knots:
-                th = th + grade_rad_at(self.dist, self._kd, self._kg)
+                th = grade_total_rad(th, self.dist, self._kd, self._kg)
             v1, dist, wp, wb, wr, wa, wg = step_vehicle(v0, f_t, f_b, th, h, self._m, self._c, self._fr, self._g)
         self.v = v1
         e = self.e

@@ -29,7 +29,9 @@ One step of the machine (:func:`motor_step`): force request -> torque -> heat-in
 regenerative limits (speed threshold, bus power limits, ``regen_power_max_w``: the most electrical
 power the drive returns, default inf = off) -> electrical power. It is the whole physics of the
 ``motor`` component (:mod:`shevsim.components.motor`, which only holds the state and books energies)
-and of the vehicle calibration's model (:mod:`shevsim.calibrate.vehicle`); every function here is
+and of the vehicle calibration's model (:mod:`shevsim.calibrate.vehicle`). The DC bus's power balance
+(:func:`bus_balance`, motor + auxiliaries) lives here too, for the ``bus`` component and the same
+calibration loop. Every function here is
 compiled with numba (``f.py_func`` is the Python source) and looks its maps up with the compiled
 lookups of :mod:`shevsim.core.lookup` on :meth:`MotorMaps.packed` arrays (bit-identical to the maps'
 Python lookups).
@@ -153,6 +155,22 @@ def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: floa
     p_m = tau * w_mid
     gamma1 = heat_index_step(gamma, tau, t_cont, h, heat_rate)
     return tau, brake, p_el, p_m, w, t_lim, gamma1, v
+
+
+@_njit(cache=True, error_model="numpy")
+def bus_aux_w(aux_in_w: float, aux_param_w: float) -> float:
+    """Auxiliary load on the bus [W]: the ``aux_power_w`` input plus the constant ``aux_power_w`` parameter
+    (the input unchanged when the parameter is 0)."""
+    return aux_in_w + aux_param_w if aux_param_w != 0.0 else aux_in_w
+
+
+@_njit(cache=True, error_model="numpy")
+def bus_balance(motor_w: float, gen_w: float, aux_in_w: float, aux_param_w: float):
+    """Power balance of the DC bus (:class:`shevsim.components.bus.PowerBus`; the vehicle calibration's loop
+    sums the bus with it too): ``(aux, demand = motor + aux, battery = demand - gen)`` [W]."""
+    pa = bus_aux_w(aux_in_w, aux_param_w)
+    d = motor_w + pa
+    return pa, d, d - gen_w
 
 
 class MotorMaps:

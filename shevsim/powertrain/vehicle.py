@@ -29,13 +29,17 @@ Speed-following (backward) use: :func:`traction_force_n` is the exact inverse of
 
     F = M (v1 - v0)/h + c v0 v1 + F_rr + M g sin(theta)          (0 when at rest at both ends)
 
-Both go through :func:`road_forces`, so the forward plant, the speed-following vehicle and the
-calibration (:mod:`shevsim.calibrate.vehicle`) share one set of force laws. Road grade along distance
-(:func:`grade_rad_at`): piecewise-linear grade ``tan(theta)`` between knots ``(d_j, g_j)``, held beyond
+Both go through :func:`road_forces`, the one road-load law (there is no other). One step of the
+speed-following vehicle is :func:`speed_follow_step` (prescribed speed -> works, distance, grade, the
+force request for the next step): the ``vehicle`` component in ``input_mode = "speed"`` and the vehicle
+calibration's compiled loop (:mod:`shevsim.calibrate.vehicle`) both call it, so the calibration IS the
+component. Road grade along distance (:func:`grade_rad_at`, added to the ``grade_rad`` input by
+:func:`grade_total_rad`): piecewise-linear grade ``tan(theta)`` between knots ``(d_j, g_j)``, held beyond
 the end knots.
 
-Every function here is compiled with numba (``f.py_func`` is the Python source); the components call
-the compiled functions, the calibration calls them from its compiled loop.
+Every function here except the analytical coast-down references is compiled with numba (``f.py_func``
+is the Python source); the components call the compiled functions, the calibration calls them from its
+compiled loop.
 """
 from __future__ import annotations
 
@@ -82,6 +86,46 @@ def traction_force_n(v0: float, v1: float, h: float, grade_rad: float, mass_kg: 
             return 0.0
     f_g, f_rr = road_forces(grade_rad, mass_kg, f_roll_coeff, g)
     return mass_kg * (v1 - v0) / h + c_aero * v0 * v1 + f_rr + f_g
+
+
+@_njit(cache=True, error_model="numpy")
+def grade_total_rad(grade_in: float, d: float, knot_d, knot_frac) -> float:
+    """Road grade [rad] a vehicle sees at distance ``d``: the ``grade_rad`` input plus the knots' grade
+    (:func:`grade_rad_at`); the input unchanged without knots."""
+    if knot_d.shape[0] > 0:
+        return grade_in + grade_rad_at(d, knot_d, knot_frac)
+    return grade_in
+
+
+@_njit(cache=True, error_model="numpy")
+def speed_follow_step(v0: float, grade0: float, d0: float, v_ref: float, a_ref: float, grade_in: float, h: float,
+                      knot_d, knot_frac, mass_kg: float, c_aero: float, f_roll_coeff: float, g: float = G_MPS2):
+    """One step of the speed-following (``input_mode = "speed"``) vehicle: the whole physics of
+    :class:`shevsim.components.vehicle.Vehicle` in speed mode and of the vehicle calibration's loop.
+
+    The vehicle at ``v0`` (grade ``grade0`` [rad] held over the step, distance ``d0``) moves to
+    ``v1 = max(v_ref, 0)`` over ``h``; the works are those of the force :func:`traction_force_n` that
+    produced that change.  Then the grade at the new distance (:func:`grade_total_rad` of ``grade_in``) and
+    the wheel force that drives the next step to ``v1 + a_ref h`` (clipped at 0).
+
+    Returns
+    -------
+    v1, d1, grade1, f_req, dist, w_prop, w_roll, w_aero, w_grade : float
+        Speed [m/s], distance [m], grade for the next step [rad], force request for the next step [N], distance
+        covered [m] and the works of propulsion, rolling, aero and grade over the step [J].
+    """
+    v1 = v_ref if v_ref > 0.0 else 0.0
+    f = traction_force_n(v0, v1, h, grade0, mass_kg, c_aero, f_roll_coeff, g)
+    dist = 0.5 * (v0 + v1) * h
+    if dist > 0.0:
+        f_g, f_rr = road_forces(grade0, mass_kg, f_roll_coeff, g)
+    else:
+        f_g, f_rr = 0.0, 0.0
+    d1 = d0 + dist
+    grade1 = grade_total_rad(grade_in, d1, knot_d, knot_frac)
+    v_next = v1 + a_ref * h
+    f_req = traction_force_n(v1, v_next if v_next > 0.0 else 0.0, h, grade1, mass_kg, c_aero, f_roll_coeff, g)
+    return v1, d1, grade1, f_req, dist, f * dist, f_rr * dist, c_aero * v0 * v1 * dist, f_g * dist
 
 
 @_njit(cache=True)
@@ -132,13 +176,6 @@ def step_vehicle(v0: float, f_prop: float, f_brk: float, grade_rad: float, h: fl
             return 0.0, dist, f_prop * dist, f_brk * dist, f_rr * dist, 0.0, f_g * dist
     dist = 0.5 * (v0 + v1) * h
     return v1, dist, f_prop * dist, f_brk * dist, f_rr * dist, f_a * dist, f_g * dist
-
-
-def road_load_n(v: float, mass_kg: float, c_aero: float, f_roll_coeff: float, grade_rad: float = 0.0,
-                g: float = G_MPS2) -> float:
-    """Steady road load ``F_rr + F_wr + M g sin(theta)`` at speed ``v`` [N] (rolling only if v > 0)."""
-    f_rr = f_roll_coeff * mass_kg * g * math.cos(grade_rad) if v > 0.0 else 0.0
-    return f_rr + c_aero * v * v + mass_kg * g * math.sin(grade_rad)
 
 
 def coast_down_aero_only(v0: float, t: float, mass_kg: float, c_aero: float) -> float:
