@@ -46,14 +46,6 @@ T0_K = 273.15
 _FIELDS = {f.name for f in dataclasses.fields(BatteryPackParams)}
 # legacy short-form keys of --params (the calibration's own keys before the one-source model)
 _LEGACY = {"soc0_frac", "ocv_soc_frac", "ocv_v", "rc_pairs", "change_width_s", "h_conv_w_m2k", "t_ref_c"}
-# parameter -> index in the packed parameter vector of shevsim.battery.model
-_CIDX = {"rs_scale": bm.C_RS, "r1_scale": bm.C_R1, "c1_scale": bm.C_C1, "r2_scale": bm.C_R2,
-         "c2_scale": bm.C_C2, "arrhenius_ea_r_k": bm.C_EA, "arrhenius_t_ref_c": bm.C_TREF,
-         "hyst_max_v": bm.C_HYST_M, "hyst_rate": bm.C_HYST_G, "current_offset_a": bm.C_IOFF,
-         "lowsoc_r_gain": bm.C_LS_G, "lowsoc_r_scale_frac": bm.C_LS_S, "h_conv_factor": bm.C_HFAC,
-         "h_change_time_s": bm.C_HCH_T, "h_change_factor": bm.C_HCH_F, "h_change_width_s": bm.C_HCH_W,
-         "kt_w_mk": bm.C_KT, "cp_j_kgk": bm.C_CP, "density_kg_m3": bm.C_RHO, "radius_m": bm.C_RAD,
-         "length_m": bm.C_LEN}
 N_DUDT_KNOTS = 4
 
 
@@ -168,15 +160,26 @@ class CellModel(CalibrationModel):
         self.known = dict(self.known_defaults)
         self.initial: dict[str, float] = {}
         comp: dict[str, Any] = {}
-        short_form = "ocv_soc_frac" in known or "__component_file__" not in known
         base_dir = Path(known.pop("__base_dir__", "."))
         known.pop("__component_file__", None)
+        tables = known.pop("__tables__", None) or {}
+        for tname, vals in tables.items():     # an overlay / component file with a [battery] table
+            if tname != self.component_name:
+                raise DataError(f"{where}: table [{tname}] is not for the cell model (expected [battery] or [params])")
+            known.update(vals)
+        short_form = any(k in _LEGACY or k in ("thermal", "arrhenius_anchor") for k in known)
         for k, v in known.items():
             if k in _LEGACY or k in self.known_defaults:
                 self.known[k] = v
             elif k in _FIELDS:
                 comp[k] = v
-            elif k in ("r0_ohm", "r1_ohm", "tau1_s", "cc_j_k", "cs_j_k", "rc_k_w", "ru_k_w", "thermal"):
+            elif k == "thermal":
+                if str(v).replace("_", "-") != "two-state":
+                    raise DataError(f"{where}: thermal = {v!r}: the battery component's model is the two-state radial "
+                                    f"model (the former lumped side model is gone)")
+            elif k == "arrhenius_anchor":
+                pass   # former side-model option: the component's Arrhenius law uses its own mean temperature
+            elif k in ("r0_ohm", "r1_ohm", "tau1_s", "cc_j_k", "cs_j_k", "rc_k_w", "ru_k_w"):
                 raise DataError(f"{where}: '{k}' belonged to the calibration's former side model; the cell is now "
                                 f"the battery component's model - give battery parameters (e.g. rs_scale, "
                                 f"kt_w_mk, cp_j_kgk, h_conv_factor) instead")
@@ -212,7 +215,6 @@ class CellModel(CalibrationModel):
             if isinstance(exc, DataError):
                 raise
             raise DataError(f"{where}: {exc}") from exc
-        self.tables_ocv_file = ""
         self.dudt_knots = tuple(np.linspace(0.1, 0.9, N_DUDT_KNOTS))
         self.declared = self._declared_for(self.known)
         self.effects = self._make_effects()
@@ -263,7 +265,7 @@ class CellModel(CalibrationModel):
         self.soc0 = soc0
         self.t_init_c = float(ts_meas[0])
         # Arrhenius reference: the record's mean temperature (decouples Ea from the resistance scales)
-        self.t_ref_c = float(np.mean(ts_meas))
+        self.t_ref_c = float(self.known["t_ref_c"]) if "t_ref_c" in self.known else float(np.mean(ts_meas))
         # entropic-heat knots over the SOC range the record visits (nominal capacity)
         dt = np.diff(t, prepend=t[0])
         soc = soc0 - np.cumsum(i * dt) / (3600.0 * self.base.capacity_ah)
@@ -272,26 +274,29 @@ class CellModel(CalibrationModel):
             lo, hi = max(0.0, lo - 0.025), min(1.0, hi + 0.025)
         self.dudt_knots = tuple(float(x) for x in np.linspace(lo, hi, N_DUDT_KNOTS))
         self.effects = self._make_effects()
-        base = self._component_params({})
         tg, (ig, tag), _h, resampled = sampling_grid(t, i, ta)
-        return {"t": t, "i": i, "ta": ta, "tg": tg, "ig": ig, "tag": tag, "resampled": resampled, "d": d, "ix": ix, "c0": bm.pack_params(base), "n": t.size, "df": df,
+        return {"t": t, "i": i, "ta": ta, "tg": tg, "ig": ig, "tag": tag, "resampled": resampled, "d": d, "ix": ix, "n": t.size, "df": df,
                 "h_conv": float(self.known["h_conv_w_m2k"]), "has_core": "t_core_c" in df,
                 "soc_range": (lo, hi)}
 
     def _tables(self) -> CellTables:
         b = self.base
         ocv_file = b.ocv_file or None
+        tmp = None
         if self.ocv_table is not None:
+            import os
             import tempfile
-            fd = tempfile.NamedTemporaryFile("w", suffix="_ocv.csv", delete=False)
-            fd.write(_ocv_csv_text(*self.ocv_table))
-            fd.close()
-            ocv_file = fd.name
-            self.tables_ocv_file = fd.name
+            fd, tmp = tempfile.mkstemp(suffix="_ocv.csv", prefix="shevsim_")
+            with os.fdopen(fd, "w") as fh:
+                fh.write(_ocv_csv_text(*self.ocv_table))
+            ocv_file = tmp
         try:
             return CellTables(ocv_file, b.entropy_file or None, b.discharge_file or None, b.charge_file or None)
         except Exception as exc:
             raise DataError(f"{self.where}: {exc}") from exc
+        finally:
+            if tmp is not None:
+                Path(tmp).unlink(missing_ok=True)    # our own temporary copy; the overlay writes ocv.csv
 
     # -- parameters of the component
     def _component_params(self, values: Mapping[str, float]) -> BatteryPackParams:
@@ -307,28 +312,17 @@ class CellModel(CalibrationModel):
         for k, v in full.items():
             if k in _FIELDS:
                 kw[k] = v
-        if self.tables_ocv_file:
-            kw["ocv_file"] = self.tables_ocv_file
         return dataclasses.replace(self.base, **kw)
 
     def simulate(self, ctx, values):
-        p = self.full_values(values)
-        c = ctx["c0"].copy()
-        for k, v in p.items():
-            j = _CIDX.get(k)
-            if j is not None:
-                c[j] = v
-        if "capacity_ah" in p:
-            c[bm.C_QAS] = 3600.0 * p["capacity_ah"]
-        knots = [p.get(f"dudt_v_k[{k}]", 0.0) for k in range(len(self.dudt_knots))]
-        if any(v != 0.0 for v in knots):
-            c = np.concatenate([c[:bm.C_KNOTS], np.asarray(self.dudt_knots), np.asarray(knots)])
-            c[bm.C_NDUDT] = len(knots)
+        # the very parameter vector the component packs (every effect / declared parameter is a battery field)
+        p = self._component_params(values)
+        c = bm.pack_params(p)
         tg = ctx["tg"]
         n = tg.size
         st = np.zeros(bm.N_STATE)
-        st[bm.S_SOC] = min(max(self.soc0, 0.0), 1.0)
-        st[bm.S_X0] = self.t_init_c
+        st[bm.S_SOC] = p.soc_init_pct / 100.0
+        st[bm.S_X0] = p.t_init_c
         ov, ots, otc = np.empty(n), np.empty(n), np.empty(n)
         bm.run_profile(ctx["d"], ctx["ix"], c, st, tg, ctx["ig"], ctx["tag"], ctx["h_conv"], ov, ots, otc)
         if ctx["resampled"]:
@@ -375,7 +369,7 @@ class CellModel(CalibrationModel):
             ov["h_change_width_s"] = p.h_change_width_s
         # what the nominal model fixed for this (foreign) cell travels with the overlay
         for k in ("entropic_heat", "temperature_dependent", "capacity_ah", "r2_scale", "radius_m", "length_m",
-                  "density_kg_m3"):
+                  "density_kg_m3", "thermal_model"):
             ov.setdefault(k, getattr(p, k))
         for k in ("entropy_file", "discharge_file", "charge_file"):
             if k in self.user_params:
@@ -399,7 +393,8 @@ class CellModel(CalibrationModel):
         ov = overlay_values(overlay_file, self.component_name)
         run_specific = {"n_series": 1, "n_parallel": 1, "input_mode": "current", "sigma_current_a": 0.0,
                         "sigma_voltage_v": 0.0, "sigma_temperature_c": 0.0,
-                        "soc_init_pct": 100.0 * min(max(self.soc0, 0.0), 1.0), "t_init_c": self.t_init_c}
+                        "soc_init_pct": ov.values.get("soc_init_pct", 100.0 * min(max(self.soc0, 0.0), 1.0)),
+                        "t_init_c": ov.values.get("t_init_c", self.t_init_c)}
         prm = load_params(BatteryPackParams, None, {**resolve_files(ov), **run_specific})
         tg, (ig, tag), h, _ = sampling_grid(t, df["current_a"].to_numpy(float), df["t_ambient_c"].to_numpy(float))
         src = ProfileSource("profile", ProfileParams(

@@ -5,11 +5,16 @@
 
     [meta]                      # free text, ignored
     source = "..."
-    [params]                    # known parameters (e.g. capacity_ah, mass_kg) or starting values of
-    capacity_ah = 2.9           # declared ones (e.g. r0_ohm); unknown names fail with a suggestion
-    [ocv]                       # cell only: open-circuit voltage curve
+    [params]                    # the component's own parameters (e.g. capacity_ah, mass_kg) - known
+    capacity_ah = 2.9           # values or starting values; unknown names fail with a suggestion
+    soc0_frac = 1.0             # cell short form: initial SOC (< 0: from the first rest voltage)
+    [ocv]                       # cell short form: open-circuit voltage curve
     soc_frac = [0.0, 0.1, ...]
     ocv_v = [3.0, 3.4, ...]
+
+or a component parameter file (``components/battery/default.toml``...), or a calibration's own overlay
+``params.toml`` (tables ``[battery]``, ``[vehicle]``/``[motor]``/``[bus]``, ``[engine_generator]``).
+Every run writes ``DIR/params.toml``: use it with ``shevsim run SCENARIO --params DIR/params.toml``.
 
 Exit status 0 on success, 2 on bad input (message names the file and column/row/field).
 """
@@ -26,18 +31,28 @@ from .models import MODELS
 
 
 def load_params_toml(path) -> dict:
-    """Read a ``--params`` file into a flat dict of known/initial parameters."""
+    """Read a ``--params`` file into a dict of known / initial parameters for the calibration model.
+
+    Accepted: the short form (``[params]`` and, for a cell, ``[ocv]``), a component parameter file
+    (``[meta]`` + ``[params]``), or an overlay with one table per component (``[battery]``, ``[vehicle]``,
+    ``[motor]``, ``[bus]``, ``[engine_generator]`` - a calibration's own ``params.toml``), returned under the
+    key ``"__tables__"``.  ``"__base_dir__"`` is the file's folder (relative ``*_file`` paths resolve
+    against it).
+    """
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: parameter file not found")
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        doc = tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except tomllib.TOMLDecodeError as exc:
         raise DataError(f"{path}: invalid TOML: {exc}") from exc
-    out = {}
+    out: dict = {"__base_dir__": str(path.resolve().parent)}
+    tables: dict = {}
     for sec, body in doc.items():
         if sec == "meta":
             continue
+        if not isinstance(body, dict):
+            raise DataError(f"{path}: '{sec}' must be a table [{sec}] of name = value")
         if sec == "params":
             out.update(body)
         elif sec == "ocv":
@@ -46,11 +61,22 @@ def load_params_toml(path) -> dict:
                     raise DataError(f"{path}: [ocv] unknown key '{k}' (expected soc_frac, ocv_v)")
             if "soc_frac" not in body or "ocv_v" not in body:
                 raise DataError(f"{path}: [ocv] needs both soc_frac and ocv_v")
-            out["ocv_soc_frac"] = tuple(float(x) for x in body["soc_frac"])
-            out["ocv_v"] = tuple(float(x) for x in body["ocv_v"])
+            try:
+                out["ocv_soc_frac"] = tuple(float(x) for x in body["soc_frac"])
+                out["ocv_v"] = tuple(float(x) for x in body["ocv_v"])
+            except (TypeError, ValueError) as exc:
+                raise DataError(f"{path}: [ocv] soc_frac and ocv_v must be lists of numbers ({exc})") from exc
+        elif sec in COMPONENT_TABLES:
+            tables[sec] = dict(body)
         else:
-            raise DataError(f"{path}: unknown table [{sec}] (expected [meta], [params], [ocv])")
+            raise DataError(f"{path}: unknown table [{sec}] (expected [meta], [params], [ocv] or a component "
+                            f"table: {', '.join(COMPONENT_TABLES)})")
+    if tables:
+        out["__tables__"] = tables
     return out
+
+
+COMPONENT_TABLES = ("battery", "vehicle", "motor", "bus", "engine_generator")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -85,10 +111,6 @@ def main_calibrate(argv=None) -> int:
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
     try:
         known = load_params_toml(args.params) if args.params else {}
-        if args.model == "cell" and args.params:
-            known["__base_dir__"] = str(Path(args.params).resolve().parent)
-            if "ocv_soc_frac" not in known:
-                known["__component_file__"] = True
         data = load_measured(args.data, args.model, parse_mapping(args.map), current_sign=args.current_sign,
                              power_sign=args.power_sign, drop_duplicate_rows=args.drop_duplicate_rows)
         for n in data.notes:

@@ -138,9 +138,9 @@ class CalibrationModel:
         out = []
         if abs(diag["bias"]) > 0.5 * diag["rmse"]:
             out.append(f"a constant offset ({diag['bias']:+.4g}): sensor offset or a shifted curve/map")
-        for c in diag["correlations"][:3]:
+        for c in diag["correlations"]:
             hint = self.cause_hints.get(c["signal"].replace("measured:", ""))
-            if hint and abs(c["r"]) > 0.3 and hint not in out:
+            if hint and abs(c["r"]) > 0.5 and hint not in out:
                 out.append(f"{hint} (residual correlates with {c['signal']}, r = {c['r']:+.2f})")
         out.append("units or sign of an input column (check --map, --current-sign / --power-sign)")
         return out

@@ -90,9 +90,12 @@ def synth_cell(effects: dict | None = None, duration_s: float = 2400.0, dt_s: fl
     i_true = _cell_current(duration_s, fine, rng, dt_s)
     # discharge pulses scaled (x0.3 .. x2) towards a net discharge of discharge_frac of 2.3 Ah, then down
     # until the SOC stays within [0.03, 0.98] along the whole record
-    net = float(np.sum(i_true) * fine / 3600.0)
-    scale = min(max(discharge_frac * 2.3 / net, 0.3), 2.0) if net > 0 else 1.0
-    scale_c = 1.0
+    dis = float(np.sum(np.maximum(i_true, 0.0)) * fine / 3600.0)
+    chg = float(np.sum(np.maximum(-i_true, 0.0)) * fine / 3600.0)
+    target = discharge_frac * 2.3
+    scale = min(max((target + chg) / dis, 0.3), 2.0) if dis > 0 else 1.0
+    # then the charge pulses (x0.2 .. x1) make up what the capped discharge scale could not
+    scale_c = min(max((scale * dis - target) / chg, 0.2), 1.0) if chg > 0 else 1.0
     for _ in range(100):
         i_try = np.where(i_true > 0, i_true * scale, i_true * scale_c)
         soc = soc0 - np.cumsum(i_try) * fine / (3600.0 * 2.3)

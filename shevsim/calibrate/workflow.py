@@ -29,16 +29,27 @@ Steps (:func:`run_workflow`):
 5. **Select** greedily: a candidate passes when, relative to the current model,
    (a) its combined held-out score falls by at least ``MIN_GAIN`` = 10 %,
    (b) no channel's held-out RMSE rises by more than ``MAX_WORSEN`` = 10 %, and
-   (c) its BIC falls by at least ``MIN_DBIC`` = 10 ("very strong" on the Kass-Raftery scale).
+   (c) its BIC falls by at least ``MIN_DBIC`` = 10 ("very strong" on the Kass-Raftery scale);
+   or, whatever the BIC says, when it halves (``HALVING``) some channel's held-out RMSE and (b) holds: the
+   more systematic a residual (a missing effect), the more autocorrelated it is and the fewer effective
+   samples the corrected BIC counts, so the BIC alone vetoes exactly the effects that matter most.
    Among passing candidates the lowest held-out score wins, except that a candidate within ``TIE`` = 2 %
    of it with a lower BIC is preferred (parsimony).  The winner is added, the remaining candidates are
    re-tested on top of it; this repeats until none passes ("nothing found" when none passes at first).
-   When no single effect passes in the first round, the pairs among the ``PAIR_TOP`` = 3 candidates with the best training
-   BIC are fitted together and judged by the same rule (two effects can each fix one part of the record
-   and spoil another, e.g. a temperature law and a low-SOC law in a cold discharge).
+   When no single effect passes in the first round, the pairs among the ``PAIR_TOP`` = 3 candidates with the
+   best held-out gain are fitted together and judged by the same rule (two effects can each fix one part of
+   the record and spoil another).  Backward elimination then drops a selected effect whose removal costs
+   less than ``DROP_TOL`` = 3 % of held-out score (an early choice made redundant by later ones).
+   Measured: on 20 noise/profile realisations of a cell record with no missing effect, 1 false selection.
 6. **Refit and report**: ``report.json``, ``report.md`` and PNG plots in the output directory, all
    written atomically (temp file + ``os.replace``).  Channels whose final held-out residual still exceeds
-   3x the noise floor with a significant correlation are listed under ``unexplained``.
+   3x the noise floor with a significant correlation are listed under ``unexplained``; a nominal model
+   whose held-out error is more than ``BASELINE_FAILURE_RATIO`` = 20x the noise floor is reported under
+   ``baseline_failure`` (channel, ratio, correlated signals, likely causes) and in words.
+7. **Close the loop**: the final parameters are written as a parameter overlay ``params.toml`` in the
+   components' own names (:mod:`shevsim.core.overlay`), and the record's inputs are replayed through the
+   component(s) with that overlay, stepped by the master; ``report["replay"]`` holds the replay's RMSE
+   per channel (train / held-out), which equals the fit's (same physics, same grid).
 """
 from __future__ import annotations
 
@@ -491,7 +502,8 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
         write_overlay(odir / "params.toml", overlay, meta={
             "source": f"shevsim calibrate {model_name} {data.path}",
             "selected_effects": ", ".join(selected) or "none",
-            "use": f"shevsim run SCENARIO --params {model.component_name}=params.toml (path of this file)"})
+            "use": "shevsim run SCENARIO --params params.toml (path of this file; each table goes to the "
+                   "component of that name, or --params COMPONENT=params.toml for one table)"})
         pred = model.replay(data, odir / "params.toml")
         replay = {}
         for c in fitter.channels:
@@ -659,9 +671,8 @@ def render_markdown(rep: dict) -> str:
     if rep.get("replay") and "error" in rep["replay"]:
         L += ["", f"Replay through the simulator: {rep['replay']['error']}"]
     elif rep.get("replay"):
-        L += ["", f"Replay through the simulator (the `{rep['overlay']['component']}` component stepped by the master "
-              f"with the overlay `params.toml`; use it with `shevsim run SCENARIO --params "
-              f"{rep['overlay']['component']}=params.toml`):", "",
+        L += ["", f"Replay through the simulator (the `{rep['overlay']['component']}` component(s) stepped by the master "
+              f"with the overlay `params.toml`; use it with `shevsim run SCENARIO --params params.toml`):", "",
               "| channel | fit train | replay train | fit held-out | replay held-out |", "|---|---|---|---|---|"]
         for c, r in rep["replay"].items():
             a = rep["rmse_after"][c]

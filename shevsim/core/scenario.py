@@ -230,7 +230,9 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
                                    k, fmu, dict(cd.get("map", {})), rep))
     names = {s.name for s in specs}
     for item in overlays:
-        comp, _, f = str(item).rpartition("=")
+        comp, sep, f = str(item).partition("=")
+        if not sep or (comp not in names and Path(str(item)).exists()):
+            comp, f = "", str(item)          # a bare FILE (its path may contain '=')
         fpath = Path(f)
         try:
             targets = [comp] if comp else [n for n in overlay_tables(fpath) if n in names]
