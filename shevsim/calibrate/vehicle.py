@@ -4,18 +4,28 @@ The model is the replay arrangement itself (see :meth:`VehicleModel.replay`)::
 
     cycle (measured speed) -> vehicle (input_mode = "speed") -> motor -> bus.demand_power_w = power_w
 
-The measured speed prescribes the motion; the vehicle computes the wheel force that drives each step with
-:func:`shevsim.powertrain.vehicle.traction_force_n` (the exact inverse of the forward step, same
-:func:`~shevsim.powertrain.vehicle.road_forces` and road-grade law); the motor turns it into electrical
-power with :func:`shevsim.powertrain.motor.motor_step` (efficiency map, heat-index torque limit,
-regenerative limits); the bus adds the auxiliary load.  :meth:`VehicleModel.simulate` runs exactly that
-chain in one compiled loop that calls the same compiled functions the components call, on the same
-input trace (the ``cycle`` component itself is stepped in :meth:`~VehicleModel.prepare`), so the replay
-through :class:`~shevsim.core.master.Master` reproduces the calibration to round-off.
+The measured speed prescribes the motion; one master step of the chain is the components' own compiled
+steps: :func:`shevsim.powertrain.vehicle.speed_follow_step` (the vehicle in speed mode: the works of the
+step and the wheel force that drives the next one, :func:`~shevsim.powertrain.vehicle.traction_force_n`,
+the exact inverse of the forward step, same :func:`~shevsim.powertrain.vehicle.road_forces` and road-grade
+law), :func:`shevsim.powertrain.motor.motor_step` (efficiency map, heat-index torque limit, regenerative
+limits) and :func:`shevsim.powertrain.motor.bus_balance` (the bus adds the auxiliary load).
+:meth:`VehicleModel.simulate` runs exactly that chain in one compiled loop that only passes the state
+between those functions, on the same input trace (the ``cycle`` component itself is stepped in
+:meth:`~VehicleModel.prepare`), so the replay through :class:`~shevsim.core.master.Master` reproduces the
+calibration bit for bit.
 
 Parameters are the components' own (names, units, defaults from ``components/vehicle/matv.toml``,
 ``components/motor/default.toml``, ``components/bus/default.toml``): every parameter of those files is a
-*known* parameter (``--params`` may override it); fitted:
+*known* parameter except ``input_mode``/``speed_init_mps`` (the record prescribes the motion; accepted and
+ignored) and ``efficiency_scale_frac`` (declared: a given value is its starting value).  ``--params``
+takes a parameter file of any of the three components (``[params]``; relative ``*_file`` paths resolved
+against the file's folder), the short form (``[params]`` with any of those names), or an overlay with
+tables ``[vehicle]``/``[motor]``/``[bus]`` - e.g. a previous calibration's ``params.toml``, so one
+calibration's result seeds the next (its fitted mass, drag, ... become the nominal; the effects stay
+candidates for a further change from it).  A given road grade (``grade_distance_m``/``grade_frac``) is
+the record's known grade; the ``road_grade`` effect adds its knots to it.  Unknown names fail (with a
+suggestion), as do names in another component's table and missing map files.  Fitted:
 
 * declared: ``efficiency_scale_frac`` (motor: actual / map efficiency);
 * effects (each a switchable term of a component, off at its parameter file's value):
@@ -24,12 +34,14 @@ Parameters are the components' own (names, units, defaults from ``components/veh
   ``mass_error`` (vehicle ``mass_kg``), ``rolling_error`` (vehicle ``rolling_coefficient``),
   ``aero_error`` (vehicle ``drag_coefficient``), ``regen_limit`` (motor ``regen_power_max_w``).
 
-Time base.  The data's sample period ``dt`` (median; a non-uniform record is interpolated onto the
-uniform grid) is cut into ``n = ceil(dt / substep_s)`` steps ``h = dt / n`` (``substep_s`` = 0.1 s,
-known): the model and the replay step at ``h`` with the cycle interpolating the measured speed linearly.
-``power_w`` at sample ``k`` is the mean electrical power over the sample period ending at it,
-``(t_{k-1}, t_k]`` (an energy-integrating logger; at 10 Hz with ``h = dt`` it is the power of that
-interval); the first sample is the bus power at the start.
+Time base.  The record's sampling grid (:func:`shevsim.calibrate.models.sampling_grid`, shared by every
+calibration model: step ``dt`` = the median sample interval; an irregular record, e.g. logger jitter, is
+interpolated onto it once, for the fit and the replay alike) is cut into ``n = ceil(dt / substep_s)``
+steps ``h = dt / n`` (``substep_s`` = 0.1 s, known): the model and the replay step at ``h`` with the
+cycle interpolating the speed on the grid linearly.  ``power_w`` at grid point ``k`` is the mean
+electrical power over the grid period ending at it, ``(t_{k-1}, t_k]`` (an energy-integrating logger;
+at 10 Hz with ``h = dt`` it is the power of that interval); the first is the bus power at the start;
+the grid values are read back at the sample times by linear interpolation.
 """
 from __future__ import annotations
 
@@ -38,15 +50,15 @@ import math
 import tempfile
 import tomllib
 from pathlib import Path
-from typing import Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
-from ..core.errors import DataError
+from ..core.errors import DataError, ShevsimError
 from ..core.lookup import _njit
 from ..powertrain.motor import bus_balance, motor_step
 from ..powertrain.vehicle import grade_total_rad, speed_follow_step
-from .models import CalibrationModel, Effect, Param
+from .models import CalibrationModel, Effect, Param, sampling_grid
 
 ROOT = Path(__file__).resolve().parents[2]
 PARAM_FILES = {"vehicle": ROOT / "components" / "vehicle" / "matv.toml",
@@ -54,8 +66,11 @@ PARAM_FILES = {"vehicle": ROOT / "components" / "vehicle" / "matv.toml",
                "bus": ROOT / "components" / "bus" / "default.toml"}
 N_GRADE = 6
 SUBSTEP_S = 0.1
-#: parameters of the files that are not known parameters of the calibration
-_NOT_KNOWN = {"input_mode", "speed_init_mps", "grade_distance_m", "grade_frac", "efficiency_scale_frac"}
+#: parameters of the files that are not known parameters of the calibration: the vehicle's mode and initial
+#: speed (speed mode, the record prescribes both; accepted in ``--params`` and ignored) and the declared
+#: efficiency scale (a ``--params`` value is its starting value)
+_IGNORED = ("input_mode", "speed_init_mps")
+_NOT_KNOWN = set(_IGNORED) | {"efficiency_scale_frac"}
 
 
 def _component_classes():
@@ -82,19 +97,67 @@ _FILES = _file_params()
 _OWNER = _owners(_FILES)
 
 
+def _as_dict(p) -> dict:
+    return {f.name: getattr(p, f.name) for f in dataclasses.fields(p)}
+
+
+def _user_values(known: Mapping[str, Any] | None, where: str) -> dict:
+    """The ``--params`` values as one flat dict of vehicle / motor / bus parameters (and ``substep_s``).
+
+    ``known`` is the flat ``[params]`` dict of :func:`shevsim.calibrate.cli.load_params_toml` (a component
+    parameter file of any of the three components, or the short form), optionally with ``"__base_dir__"``
+    (folder of the ``--params`` file: relative ``*_file`` paths are resolved against it) and
+    ``"__tables__"`` (``{table: {param: value}}`` of an overlay with component tables, e.g. a previous
+    calibration's ``params.toml``: ``[vehicle]``, ``[motor]``, ``[bus]`` are merged over ``[params]``;
+    other components' tables are ignored).  ``input_mode`` and ``speed_init_mps`` are accepted and ignored
+    (the record prescribes the motion).  A parameter in another component's table fails, as do unknown
+    names (with a suggestion, by the base class).
+    """
+    known = dict(known or {})
+    base_dir = known.pop("__base_dir__", None)
+    tables = known.pop("__tables__", None) or {}
+    known.pop("__component_file__", None)
+    if not isinstance(tables, Mapping):
+        raise DataError(f"{where}: '__tables__' must map table names to tables")
+    ours = [n for n in PARAM_FILES if n in tables]
+    if tables and not ours and not known:
+        raise DataError(f"{where}: no [vehicle], [motor], [bus] or [params] table "
+                        f"(tables: {', '.join(sorted(map(str, tables)))})")
+    vals = dict(known)
+    for comp in ours:
+        tab = tables[comp]
+        if not isinstance(tab, Mapping):
+            raise DataError(f"{where}: [{comp}] must be a table of name = value")
+        for k, v in tab.items():
+            if k in _OWNER and _OWNER[k] != comp:
+                raise DataError(f"{where}: [{comp}] {k}: '{k}' is a {_OWNER[k]} parameter (table [{_OWNER[k]}])")
+            vals[k] = v
+    for k in _IGNORED:
+        vals.pop(k, None)
+    for k, v in list(vals.items()):
+        if k.endswith("_file") and k in _OWNER:
+            if not isinstance(v, str) or not v:
+                raise DataError(f"{where}: '{k}' must be a path string, got {v!r}")
+            fp = Path(v)
+            if not fp.is_absolute() and base_dir is not None:
+                fp = Path(base_dir) / fp
+            vals[k] = str(fp.resolve())
+            if not fp.is_file():
+                raise DataError(f"{where}: {k} = {v!r}: map file not found ({fp})")
+    return vals
+
+
 # ----------------------------------------------------------------------------------- the trace
 
 def _trace(data, substep_s: float):
-    """Uniform speed trace of the record: ``(t_grid, v_grid, dt, n_sub, h)``."""
+    """Speed trace of the record on its sampling grid (:func:`~shevsim.calibrate.models.sampling_grid`, as every
+    calibration model; simulate and replay both use it): ``(t_grid, v_grid, dt, n_sub, h)``."""
     df = data.df
     t = df["time_s"].to_numpy(float)
-    v = df["speed_mps"].to_numpy(float)
-    dt = float(np.median(np.diff(t)))
-    if not dt > 0:
-        raise DataError(f"{data.path}: time_s must increase")
-    n_g = int(math.floor((t[-1] - t[0]) / dt + 1e-6)) + 1
-    tg = t[0] + np.arange(n_g) * dt
-    vg = np.maximum(np.interp(tg, t, v), 0.0)
+    if t.size < 2 or not float(np.median(np.diff(t))) > 0:
+        raise DataError(f"{data.path}: time_s must increase (at least two samples)")
+    tg, (vg,), dt, _resampled = sampling_grid(t, df["speed_mps"].to_numpy(float))
+    vg = np.maximum(vg, 0.0)
     n_sub = max(1, int(math.ceil(dt / substep_s - 1e-9)))
     return tg, vg, dt, n_sub, dt / n_sub
 
@@ -162,6 +225,20 @@ class VehicleModel(CalibrationModel):
     known_defaults = dict({k: getattr(p, k) for p in _FILES.values() for k in (f.name for f in dataclasses.fields(p))
                            if k not in _NOT_KNOWN}, substep_s=SUBSTEP_S)
 
+    def __init__(self, known: Mapping[str, Any] | None = None, where: str = "<params>"):
+        super().__init__(_user_values(known, where), where)
+        # the known component parameters checked and typed (lists -> tuples, int -> float) by the components'
+        # own parameter classes, once
+        from ..core.params import make_params
+        for comp, cls in _component_classes().items():
+            given = {k: v for k, v in self.known.items() if _OWNER.get(k) == comp}
+            try:
+                prm = make_params(cls.Params, {**_as_dict(_FILES[comp]), **given}, f"{where}: {comp} parameters")
+            except ShevsimError as exc:
+                raise DataError(str(exc)) from exc
+            for k in given:
+                self.known[k] = getattr(prm, k)
+
     def _declared_for(self, known):
         return (Param("efficiency_scale_frac", "-", 0.8, 1.08, _FILES["motor"].efficiency_scale_frac,
                       "motor: actual / map efficiency (motor + inverter)"),)
@@ -214,8 +291,14 @@ class VehicleModel(CalibrationModel):
                 over[_OWNER[key]][key] = val
         gk = [float((values or {}).get(f"grade_frac[{j}]", 0.0)) for j in range(N_GRADE)]
         if any(x != 0.0 for x in gk) and grade_d is not None:
-            over["vehicle"]["grade_distance_m"] = tuple(float(x) for x in grade_d)
-            over["vehicle"]["grade_frac"] = tuple(gk)
+            d0, g0 = tuple(self.known["grade_distance_m"]), tuple(self.known["grade_frac"])
+            if d0:   # a known grade profile (--params): the fitted knots add to it, on the union of the knots
+                dd = np.union1d(np.asarray(d0, float), np.asarray(grade_d, float))
+                gg = np.interp(dd, d0, g0) + np.interp(dd, grade_d, gk)
+            else:
+                dd, gg = grade_d, gk
+            over["vehicle"]["grade_distance_m"] = tuple(float(x) for x in dd)
+            over["vehicle"]["grade_frac"] = tuple(float(x) for x in gg)
         return over
 
     def _built(self, over: dict) -> dict:
@@ -302,12 +385,19 @@ class VehicleModel(CalibrationModel):
         sample times and, for inspection, ``"result"`` (the master's :class:`~shevsim.core.results.Result`).
         """
         from ..core.master import Connection, Master, MasterSettings
+        from ..core.overlay import Overlay, resolve_files
         from ..core.params import load_params
-        doc = tomllib.loads(Path(overlay_file).read_text(encoding="utf-8")) if overlay_file is not None else {}
-        unknown = set(doc) - set(PARAM_FILES) - {"meta"}
-        if unknown:
-            raise DataError(f"{overlay_file}: unknown component table(s) {sorted(unknown)}; "
-                            f"expected {sorted(PARAM_FILES)}")
+        doc = {}
+        if overlay_file is not None:
+            path = Path(overlay_file)
+            doc = tomllib.loads(path.read_text(encoding="utf-8-sig"))
+            doc.pop("meta", None)
+            unknown = set(doc) - set(PARAM_FILES)
+            if unknown:
+                raise DataError(f"{overlay_file}: unknown component table(s) {sorted(unknown)}; "
+                                f"expected {sorted(PARAM_FILES)}")
+            # relative *_file paths: against the overlay's folder
+            doc = {n: resolve_files(Overlay(dict(d), path.parent.resolve(), path)) for n, d in doc.items()}
         tg, vg, dt, n_sub, h = _trace(data, float(self.known["substep_s"]))
         classes = _component_classes()
         from ..components import get_component_class
