@@ -28,13 +28,13 @@ floats for the simulation hot path.
 """
 from __future__ import annotations
 
-import bisect
 import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 from shevsim.core.errors import DataError, SimulationError
+from shevsim.core.lookup import _t1_integral, _t1_slope, _t1_value, ecm_lookup
 
 __all__ = [
     "FARADAY_C_MOL",
@@ -90,7 +90,8 @@ def _check_increasing(xs: list[float], path: Path, col: str) -> None:
 
 
 class _Grid2:
-    """Bilinear lookup of several quantities on a regular (soc, T) grid, clamped at the edges."""
+    """A regular (soc, T) grid of several quantities (data only: looked up by
+    :func:`shevsim.core.lookup.ecm_lookup` on the packed arrays)."""
 
     def __init__(self, rows: list[list[float]], path: Path):
         socs = sorted({r[0] for r in rows})
@@ -108,31 +109,10 @@ class _Grid2:
                 raise DataError(f"{path}: resistances and capacitances must be > 0 (soc {r[0]}, T {r[1]} degC)")
         self.nq = nq
 
-    @staticmethod
-    def _locate(xs: list[float], x: float):
-        n = len(xs)
-        if x <= xs[0]:
-            return 0, 0.0
-        if x >= xs[-1]:
-            return n - 2, 1.0
-        j = bisect.bisect_right(xs, x) - 1
-        return j, (x - xs[j]) / (xs[j + 1] - xs[j])
-
-    def __call__(self, soc: float, t_c: float) -> tuple[float, ...]:
-        i, ws = self._locate(self.socs, soc)
-        j, wt = self._locate(self.temps, t_c)
-        r0 = self.vals[j]
-        r1 = self.vals[j + 1]
-        a, b, c, d = r0[i], r0[i + 1], r1[i], r1[i + 1]
-        w00 = (1.0 - ws) * (1.0 - wt)
-        w01 = ws * (1.0 - wt)
-        w10 = (1.0 - ws) * wt
-        w11 = ws * wt
-        return tuple([w00 * ak + w01 * bk + w10 * ck + w11 * dk for ak, bk, ck, dk in zip(a, b, c, d)])
-
 
 class _Table1:
-    """Piecewise-linear 1-D table with clamped ends, its slope and its exact antiderivative."""
+    """Piecewise-linear 1-D table with clamped ends (data only: its slopes and the cumulative integral at
+    the knots are precomputed for :func:`shevsim.core.lookup._t1_value` / ``_t1_slope`` / ``_t1_integral``)."""
 
     def __init__(self, xs: list[float], ys: list[float]):
         self.xs, self.ys = xs, ys
@@ -141,38 +121,6 @@ class _Table1:
         for k in range(len(xs) - 1):
             cum.append(cum[-1] + 0.5 * (ys[k] + ys[k + 1]) * (xs[k + 1] - xs[k]))
         self.cum = cum
-
-    def _seg(self, x: float) -> int:
-        xs = self.xs
-        if x <= xs[0]:
-            return 0
-        if x >= xs[-1]:
-            return len(xs) - 2
-        return bisect.bisect_right(xs, x) - 1
-
-    def __call__(self, x: float) -> float:
-        xs = self.xs
-        if x <= xs[0]:
-            return self.ys[0]
-        if x >= xs[-1]:
-            return self.ys[-1]
-        k = bisect.bisect_right(xs, x) - 1
-        return self.ys[k] + self.slopes[k] * (x - xs[k])
-
-    def slope(self, x: float) -> float:
-        """Derivative (right slope at knots; the end segments' slopes beyond the table)."""
-        return self.slopes[self._seg(x)]
-
-    def integral(self, x: float) -> float:
-        """Exact integral of the clamped interpolant from xs[0] to x (also beyond the ends)."""
-        xs, ys = self.xs, self.ys
-        if x <= xs[0]:
-            return ys[0] * (x - xs[0])
-        if x >= xs[-1]:
-            return self.cum[-1] + ys[-1] * (x - xs[-1])
-        k = bisect.bisect_right(xs, x) - 1
-        dx = x - xs[k]
-        return self.cum[k] + ys[k] * dx + 0.5 * self.slopes[k] * dx * dx
 
 
 @dataclass(frozen=True)
@@ -211,27 +159,28 @@ class CellTables:
         self._ds = _Table1(xs, [r[1] for r in rows])
         self._dch = _Grid2(_read_csv(p.discharge, _ECM_COLS), p.discharge)
         self._chg = _Grid2(_read_csv(p.charge, _ECM_COLS), p.charge)
+        self._d, self._ix = self.packed()
 
-    # -- lookups (soc as a fraction 0..1, temperature in degC) -------------------------
+    # -- lookups (soc as a fraction 0..1, temperature in degC): the one lookup module, compiled -----
     def params(self, soc: float, t_c: float, sign: float) -> tuple[float, float, float, float, float]:
         """``(rs_ohm, r1_ohm, c1_f, r2_ohm, c2_f)``; ``sign >= 0`` discharge table, ``< 0`` charge."""
-        return (self._dch if sign >= 0.0 else self._chg)(soc, t_c)
+        return ecm_lookup(self._d, self._ix, float(soc), float(t_c), float(sign))
 
     def ocv(self, soc: float) -> float:
         """Open-circuit voltage [V]."""
-        return self._ocv(soc)
+        return _t1_value(self._d, self._ix[0], self._ix[1], float(soc))
 
     def docv_dsoc(self, soc: float) -> float:
-        """dV_oc/dSOC [V per unit SOC]."""
-        return self._ocv.slope(soc)
+        """dV_oc/dSOC [V per unit SOC] (right slope at knots; the end segments' slopes beyond the table)."""
+        return _t1_slope(self._d, self._ix[0], self._ix[1], float(soc))
 
     def ocv_integral(self, soc: float) -> float:
         """Integral of V_oc from the table's first SOC to ``soc`` [V * unit SOC] (exact)."""
-        return self._ocv.integral(soc)
+        return _t1_integral(self._d, self._ix[0], self._ix[1], float(soc))
 
     def entropy_change(self, soc: float) -> float:
         """Delta S = F dU_oc/dT [J/mol/K]."""
-        return self._ds(soc)
+        return _t1_value(self._d, self._ix[2], self._ix[3], float(soc))
 
     def packed(self):
         """All tables in one float array plus int offsets, for compiled lookups.

@@ -3,9 +3,8 @@
 Used by the cell tables (:meth:`shevsim.battery.cell.CellTables.packed`), the engine-generator maps
 (:mod:`shevsim.powertrain.engine`), the BMS and the calibration.
 
-Each function repeats the arithmetic of the corresponding Python method of
-:mod:`shevsim.battery.cell` (``_Table1.__call__``, ``slope``, ``integral``, ``_Grid2._locate``) in the
-same order, so compiled callers reproduce the Python results bit for bit.
+The cell tables' Python methods (:class:`shevsim.battery.cell.CellTables` ``ocv``, ``params``...) call these
+functions too: there is no second copy of the lookup arithmetic.
 """
 from __future__ import annotations
 
