@@ -216,3 +216,201 @@ def test_names_single_undeclared_effect_long_record_other_seed(effect):
     assert rep["selected_effects"] == [effect]
     cut = 0.75 if effect == "aero_error" else 0.5
     assert rep["rmse_after"]["power_w"]["holdout"] <= cut * rep["rmse_before"]["power_w"]["holdout"]
+
+
+# ------------------------------------------------------------ one source: compiled == py_func
+
+def _rel(a, b):
+    a, b = np.atleast_1d(np.asarray(a, float)), np.atleast_1d(np.asarray(b, float))
+    assert a.shape == b.shape
+    both_inf = np.isinf(a) & np.isinf(b) & (np.sign(a) == np.sign(b))
+    d = np.where(both_inf, 0.0, np.abs(a - b) / np.maximum(np.maximum(np.abs(a), np.abs(b)), 1e-300))
+    return float(np.max(d)) if d.size else 0.0
+
+
+def _agree(f, *args):
+    fast, ref = f(*args), f.py_func(*args)
+    assert _rel(fast, ref) <= 1e-12, (f.__name__, args, fast, ref)
+    return fast
+
+
+def test_vehicle_functions_compiled_equal_py_func():
+    from shevsim.powertrain.vehicle import grade_total_rad, road_forces, speed_follow_step
+    rng = np.random.default_rng(5)
+    m, c, fr = 15554.0, VehicleParams().c_aero, 0.012
+    kd, kg = np.array([0.0, 40.0, 90.0, 200.0]), np.array([0.0, 0.05, -0.03, 0.02])
+    none = np.zeros(0)
+    for _ in range(200):
+        th = float(rng.uniform(-0.1, 0.1))
+        v0, v1 = (float(x) for x in rng.choice([0.0, 0.2, 3.0, 17.0], 2) + rng.uniform(0, 1, 2) * (rng.random() < 0.7))
+        h = float(rng.choice([0.01, 0.1, 1.0]))
+        d = float(rng.uniform(-10.0, 250.0))
+        _agree(road_forces, th, m, fr, G_MPS2)
+        _agree(traction_force_n, v0, v1, h, th, m, c, fr, G_MPS2)
+        _agree(step_vehicle, v0, float(rng.uniform(-4e4, 4e4)), float(rng.uniform(0, 2e4)), th, h, m, c, fr, G_MPS2)
+        for k_d, k_g in ((kd, kg), (none, none)):
+            _agree(grade_rad_at, d, k_d, k_g)
+            _agree(grade_total_rad, th, d, k_d, k_g)
+            _agree(speed_follow_step, v0, th, d, v1 - 0.5, float(rng.uniform(-3, 3)), th, h, k_d, k_g, m, c, fr,
+                   G_MPS2)
+
+
+def test_motor_and_bus_functions_compiled_equal_py_func():
+    from shevsim.powertrain.motor import bus_aux_w, bus_balance, motor_step
+    mot = Motor("m")
+    md, mi = mot._md, mot._mi
+    rng = np.random.default_rng(9)
+    for _ in range(300):
+        f_req = float(rng.choice([0.0, 1.0]) * rng.uniform(-9e4, 9e4))
+        v = float(rng.choice([-0.1, 0.0, 0.3, 4.0, 15.0, 30.0]) + rng.uniform(0.0, 1.0))
+        p_hi, p_lo = float(rng.choice([1e12, 50e3, -1.0])), float(rng.choice([-1e12, -20e3, 1.0]))
+        args = (md, mi, f_req, v, p_hi, p_lo, float(rng.choice([0.05, 0.1, 1.0])), float(rng.uniform(0, 30)),
+                float(rng.choice([0.1, 1.0])), float(rng.uniform(0, 1)), mot._k_w, mot._k_tau, bool(rng.random() < 0.7),
+                0.5, float(rng.choice([np.inf, 30e3])), float(rng.choice([1.0, 0.9, 1.05])), 0.3 / 180.0)
+        _agree(motor_step, *args)
+        pm, pg, pa, ax = (float(x) for x in rng.uniform(-5e4, 5e4, 4))
+        _agree(bus_aux_w, pa, ax * (rng.random() < 0.5))
+        _agree(bus_balance, pm, pg, pa, ax * (rng.random() < 0.5))
+
+
+def test_calibration_loop_compiled_equals_py_func():
+    from shevsim.calibrate.vehicle import _speed_following_power
+    data, _ = _data([], duration_s=60.0)
+    m = get_model("vehicle")
+    ctx = m.prepare(data)
+    mp = MotorParams()
+    args = (ctx["vr"], ctx["ar"], ctx["h"], np.array([0.0, 200.0, 400.0]), np.array([0.0, 0.03, -0.02]), 16000.0,
+            VehicleParams().c_aero, 0.013, G_MPS2, ctx["md"], ctx["mi"], mp.gear_ratio / mp.wheel_radius_m,
+            mp.wheel_radius_m / mp.gear_ratio, True, 0.5, 40e3, 0.95, mp.heat_rate_per_s, 0.3, 2e3)
+    assert _rel(_speed_following_power(*args), _speed_following_power.py_func(*args)) <= 1e-12
+
+
+def test_speed_mode_component_is_speed_follow_step():
+    """The component's speed-mode state is exactly the shared step's (no second copy of the physics)."""
+    from shevsim.powertrain.vehicle import grade_total_rad, speed_follow_step
+    p = VehicleParams(input_mode="speed", grade_distance_m=(0.0, 30.0), grade_frac=(0.0, 0.06))
+    veh = Vehicle("v", p)
+    veh.u["grade_rad"] = 0.01
+    veh.initialize(0.0)
+    kd, kg = np.array(p.grade_distance_m), np.array(p.grade_frac)
+    v, th, d = 0.0, grade_total_rad(0.01, 0.0, kd, kg), 0.0
+    for k in range(60):
+        vr, ar = 8.0 * math.sin(math.pi * (k + 1) / 60.0) ** 2, 0.3 * math.cos(k / 7.0)
+        veh.u.update(speed_ref_mps=vr, accel_ref_mps2=ar)
+        veh.do_step(0.1 * k, 0.1)
+        v, d, th, f, *_ = speed_follow_step.py_func(v, th, d, vr, ar, 0.01, 0.1, kd, kg, p.mass_kg, p.c_aero,
+                                                     p.rolling_coefficient, p.gravity_mps2)
+        assert (veh.y["speed_mps"], veh.y["distance_m"], veh.y["force_req_n"]) == (v, d, f)
+
+
+# ------------------------------------------------------------ sampling grid: jittered records
+
+def test_jittered_record_replay_equals_fit():
+    """1 s samples with +-5 % time jitter: fit and replay run on the same sampling grid, so the workflow's own
+    replay (its params.toml through the master) gives the fit's RMSE."""
+    df, _ = synth_vehicle({"aux_load": {}}, duration_s=DURATION_S, seed=SEED)
+    rng = np.random.default_rng(1)
+    df["time_s"] = df["time_s"] + rng.uniform(-0.05, 0.05, len(df))
+    data = as_measured(df, "vehicle")
+    rep = run_workflow("vehicle", data, plots=False)
+    assert rep["selected_effects"] == ["aux_load"]
+    for part in ("train", "holdout"):
+        assert rep["replay"]["power_w"][part] == pytest.approx(rep["rmse_after"]["power_w"][part], rel=0.01)
+    # and the model itself: simulate == replay through the master at the (jittered) sample times
+    m = get_model("vehicle")
+    ctx = m.prepare(data)
+    assert ctx["tg"].size == len(df) and np.ptp(np.diff(ctx["tg"])) < 1e-9
+    vals = {"efficiency_scale_frac": 0.95, "aux_power_w": 4e3, "grade_frac[2]": 0.02}
+    sim = m.simulate(ctx, vals)["power_w"]
+    import tempfile
+    from pathlib import Path
+    with tempfile.TemporaryDirectory() as tmp:
+        f = Path(tmp) / "p.toml"
+        _toml(f, m.overlay(m.full_values(vals), tmp))
+        np.testing.assert_allclose(m.replay(data, f)["power_w"], sim, rtol=1e-12, atol=1e-6)
+
+
+# ------------------------------------------------------------ --params: component files and overlays
+
+def _component_file(name):
+    import tomllib
+    from shevsim.calibrate.vehicle import PARAM_FILES
+    f = PARAM_FILES[name]
+    return f, dict(tomllib.loads(f.read_text())["params"])
+
+
+@pytest.mark.parametrize("comp", ["vehicle", "motor", "bus"])
+def test_params_accepts_each_chain_component_file(comp):
+    f, vals = _component_file(comp)
+    m = get_model("vehicle", {**vals, "__base_dir__": str(f.parent)}, str(f))
+    assert m.known["mass_kg"] == VehicleParams().mass_kg
+    if comp == "motor":
+        assert m.initial == {"efficiency_scale_frac": 1.0}
+        assert m.known["efficiency_map_file"] == MotorParams().efficiency_map_file   # resolved against the folder
+        m.prepare(_data([], duration_s=30.0)[0])                                     # maps load
+
+
+def test_params_component_file_relative_maps_elsewhere(tmp_path):
+    """A copied motor file with its maps beside it: the maps resolve against that folder, not the cwd."""
+    import shutil
+    f, vals = _component_file("motor")
+    for k in ("efficiency_map_file", "torque_curves_file"):
+        shutil.copy(f.parent / vals[k], tmp_path / vals[k])
+    m = get_model("vehicle", {**vals, "gear_ratio": 20, "__base_dir__": str(tmp_path)}, "p.toml")
+    assert m.known["efficiency_map_file"] == str((tmp_path / vals["efficiency_map_file"]).resolve())
+    assert m.known["gear_ratio"] == 20.0 and isinstance(m.known["gear_ratio"], float)
+    with pytest.raises(Exception, match="map file not found"):
+        get_model("vehicle", {**vals, "__base_dir__": str(tmp_path / "nowhere")}, "p.toml")
+
+
+def test_params_cli_component_files(tmp_path):
+    from shevsim.calibrate.cli import main_calibrate
+    from shevsim.calibrate.vehicle import PARAM_FILES
+    df, _ = synth_vehicle({}, seed=SEED, duration_s=120.0)
+    csv = tmp_path / "veh.csv"
+    df.to_csv(csv, index=False)
+    for comp in ("vehicle", "motor", "bus"):
+        rc = main_calibrate(["vehicle", str(csv), "--out", str(tmp_path / comp), "--params", str(PARAM_FILES[comp]),
+                             "--no-plots", "-q"])
+        assert rc == 0, comp
+
+
+def test_params_overlay_tables_seed_the_next_calibration(tmp_path):
+    """A calibration's own params.toml ([vehicle]/[motor]/[bus]) as --params: its values are the nominal."""
+    data, _ = _data(["mass_error"], duration_s=300.0)
+    rep = run_workflow("vehicle", data, plots=False, out_dir=tmp_path / "first")
+    assert rep["selected_effects"] == ["mass_error"]
+    from shevsim.calibrate.cli import load_params_toml
+    known = load_params_toml(tmp_path / "first" / "params.toml")
+    known.setdefault("__base_dir__", str(tmp_path / "first"))
+    if "__tables__" not in known:   # older cli: tables not passed through yet
+        import tomllib
+        doc = tomllib.loads((tmp_path / "first" / "params.toml").read_text())
+        known["__tables__"] = {k: v for k, v in doc.items() if k != "meta"}
+    m = get_model("vehicle", known, "first/params.toml")
+    ov = rep["overlay"]["tables"]
+    assert m.known["mass_kg"] == ov["vehicle"]["mass_kg"]
+    assert m.initial["efficiency_scale_frac"] == ov["motor"]["efficiency_scale_frac"]
+    rep2 = run_workflow("vehicle", data, known, plots=False)
+    assert rep2["selected_effects"] == []      # the first result is the nominal now
+    assert rep2["rmse_before"]["power_w"]["holdout"] == pytest.approx(rep["rmse_after"]["power_w"]["holdout"],
+                                                                      rel=0.02)
+
+
+def test_params_overlay_errors_and_known_grade():
+    with pytest.raises(Exception, match=r"did you mean 'mass_kg'"):
+        get_model("vehicle", {"__tables__": {"vehicle": {"mass_kgg": 1.0}}})
+    with pytest.raises(Exception, match=r"\[vehicle\] gear_ratio.*motor parameter"):
+        get_model("vehicle", {"__tables__": {"vehicle": {"gear_ratio": 19.0}}})
+    with pytest.raises(Exception, match="no \\[vehicle\\], \\[motor\\], \\[bus\\]"):
+        get_model("vehicle", {"__tables__": {"battery": {"capacity_ah": 2.0}}})
+    with pytest.raises(Exception, match="mass_kg"):
+        get_model("vehicle", {"mass_kg": -1.0})
+    # other components' tables are ignored; a known grade gets the fitted knots added on the union of knots
+    m = get_model("vehicle", {"__tables__": {"battery": {"capacity_ah": 2.0},
+                                             "vehicle": {"grade_distance_m": [0, 1000], "grade_frac": [0.01, 0.01],
+                                                         "input_mode": "force", "speed_init_mps": 3.0}}})
+    assert m.known["grade_distance_m"] == (0.0, 1000.0)
+    over = m._params({"grade_frac[1]": 0.02}, np.linspace(0.0, 500.0, 6))["vehicle"]
+    assert over["grade_distance_m"] == (0.0, 100.0, 200.0, 300.0, 400.0, 500.0, 1000.0)
+    assert over["grade_frac"][1] == pytest.approx(0.03) and over["grade_frac"][-1] == pytest.approx(0.01)
