@@ -8,6 +8,8 @@ functions too: there is no second copy of the lookup arithmetic.
 """
 from __future__ import annotations
 
+import numpy as np
+
 try:  # numba is a dependency; without it the Python path runs
     from numba import njit as _njit
     HAVE_NUMBA = True
@@ -221,3 +223,21 @@ def ecm_lookup(d, ix, soc, t_c, sign):
     r2 = w00 * d[pa + 3] + w01 * d[pb + 3] + w10 * d[pc + 3] + w11 * d[pd + 3]
     c2 = w00 * d[pa + 4] + w01 * d[pb + 4] + w10 * d[pc + 4] + w11 * d[pd + 4]
     return rs, r1, c1, r2, c2
+
+
+@_njit(cache=True, error_model="numpy")
+def curve_eval_array(d, n, mode, xs):  # pragma: no cover - compiled
+    """:func:`_curve_ex` over an array of ``x`` (a curve packed alone: axis ``d[:n]``, values ``d[n:2n]``)."""
+    out = np.empty(xs.size)
+    for k in range(xs.size):
+        out[k] = _curve_ex(d, 0, n, mode, xs[k])
+    return out
+
+
+@_njit(cache=True, error_model="numpy")
+def grid_eval_array(d, nx, ny, mx, my, xs, ys):  # pragma: no cover - compiled
+    """:func:`_grid_ex` over arrays of ``(x, y)`` (a map packed alone: axes then row-major values)."""
+    out = np.empty(xs.size)
+    for k in range(xs.size):
+        out[k] = _grid_ex(d, 0, nx, ny, mx, my, xs[k], ys[k])
+    return out

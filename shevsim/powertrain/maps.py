@@ -22,12 +22,12 @@ row, e.g. ``speed_radps,torque_nm,fuel_gps``; see :func:`load_grid_csv`.
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
 from pathlib import Path
 
 import numpy as np
 
 from shevsim.core.errors import DataError
+from shevsim.core.lookup import EXTRAPOLATION_CODES, _curve_ex, _grid_ex, curve_eval_array, grid_eval_array
 
 _MODES = ("clamp", "linear", "error")
 
@@ -41,29 +41,17 @@ def _check_axis(name: str, axis: np.ndarray) -> None:
         raise DataError(f"{name}: axis must be strictly increasing")
 
 
-def _locate(axis: list[float], x: float, mode: str, name: str) -> tuple[int, float]:
-    """Cell index ``i`` and fraction ``f`` (0..1 inside; outside per ``mode``)."""
-    n = len(axis)
-    if x <= axis[0]:
-        if mode == "clamp" or x == axis[0]:
-            return 0, 0.0
-        if mode == "error":
-            raise DataError(f"{name}: {x!r} below the map range [{axis[0]}, {axis[-1]}]")
-        return 0, (x - axis[0]) / (axis[1] - axis[0])
-    if x >= axis[-1]:
-        if mode == "clamp" or x == axis[-1]:
-            return n - 2, 1.0
-        if mode == "error":
-            raise DataError(f"{name}: {x!r} above the map range [{axis[0]}, {axis[-1]}]")
-        return n - 2, (x - axis[n - 2]) / (axis[n - 1] - axis[n - 2])
-    if x != x:  # NaN
-        raise DataError(f"{name}: NaN lookup")
-    i = bisect_right(axis, x) - 1
-    return i, (x - axis[i]) / (axis[i + 1] - axis[i])
+def _lookup_error(axis, x: float, mode: str, name: str) -> DataError:
+    """The error of a lookup the compiled function refused (NaN ``x``, or outside an 'error' map)."""
+    if x != x:
+        return DataError(f"{name}: NaN lookup")
+    side = "below" if x < axis[0] else "above"
+    return DataError(f"{name}: {x!r} {side} the map range [{axis[0]}, {axis[-1]}]")
 
 
 class Curve:
-    """Piecewise-linear curve ``y(x)``.
+    """Piecewise-linear curve ``y(x)``, evaluated by the one compiled lookup module
+    (:func:`shevsim.core.lookup._curve_ex`) on the packed array ``[x, y]``.
 
     Parameters
     ----------
@@ -83,63 +71,29 @@ class Curve:
         if extrapolation not in _MODES:
             raise ValueError(f"{name}: extrapolation must be one of {_MODES}")
         self.x, self.y, self.mode, self.name = x, y, extrapolation, name
-        self._xl, self._yl = x.tolist(), y.tolist()
-        self.fn = self._scalar_fn()
-
-    def _scalar_fn(self):
-        """A plain function ``fn(x)`` equal to ``self(x)`` (a closure: cheaper to call on hot paths)."""
-        xl, yl, slow = self._xl, self._yl, self._slow
-        x_lo, x_hi = xl[0], xl[-1]
-
-        def fn(x: float) -> float:
-            if x_lo < x < x_hi:
-                i = bisect_right(xl, x) - 1
-                x0 = xl[i]
-                y0 = yl[i]
-                return y0 + (x - x0) / (xl[i + 1] - x0) * (yl[i + 1] - y0)
-            return slow(x)
-        return fn
-
-    def _slow(self, x: float) -> float:
-        i, f = _locate(self._xl, x, self.mode, self.name)
-        return self._yl[i] + f * (self._yl[i + 1] - self._yl[i])
-
-    def __getstate__(self):
-        d = self.__dict__.copy()
-        d.pop("fn", None)
-        return d
-
-    def __setstate__(self, d):
-        self.__dict__.update(d)
-        self.fn = self._scalar_fn()
+        self._d = np.concatenate([x, y])
+        self._n = int(x.size)
+        self._m = EXTRAPOLATION_CODES[extrapolation]
+        self.fn = self.__call__
 
     def __call__(self, x: float) -> float:
-        xl = self._xl
-        if xl[0] < x < xl[-1]:          # interior (hot path): same arithmetic as _locate
-            i = bisect_right(xl, x) - 1
-            x0 = xl[i]
-            yl = self._yl
-            y0 = yl[i]
-            return y0 + (x - x0) / (xl[i + 1] - x0) * (yl[i + 1] - y0)
-        i, f = _locate(xl, x, self.mode, self.name)
-        return self._yl[i] + f * (self._yl[i + 1] - self._yl[i])
+        v = _curve_ex(self._d, 0, self._n, self._m, float(x))
+        if v != v:
+            raise _lookup_error(self.x, float(x), self.mode, self.name)
+        return v
 
     def eval_array(self, x) -> np.ndarray:
         x = np.asarray(x, float)
-        out = np.interp(x, self.x, self.y)
-        if self.mode == "linear":
-            lo, hi = x < self.x[0], x > self.x[-1]
-            s0 = (self.y[1] - self.y[0]) / (self.x[1] - self.x[0])
-            s1 = (self.y[-1] - self.y[-2]) / (self.x[-1] - self.x[-2])
-            out = np.where(lo, self.y[0] + s0 * (x - self.x[0]), out)
-            out = np.where(hi, self.y[-1] + s1 * (x - self.x[-1]), out)
-        elif self.mode == "error" and (np.any(x < self.x[0]) or np.any(x > self.x[-1])):
-            raise DataError(f"{self.name}: lookup outside [{self.x[0]}, {self.x[-1]}]")
+        out = curve_eval_array(self._d, self._n, self._m, np.ascontiguousarray(x.reshape(-1))).reshape(x.shape)
+        if np.isnan(out).any():
+            bad = x.reshape(-1)[np.isnan(out.reshape(-1))][0]
+            raise _lookup_error(self.x, float(bad), self.mode, self.name)
         return out
 
 
 class Grid2D:
-    """Bilinear map ``z(x, y)`` on a regular (rectilinear) grid, ``z.shape == (len(x), len(y))``.
+    """Bilinear map ``z(x, y)`` on a regular (rectilinear) grid, ``z.shape == (len(x), len(y))``, evaluated
+    by the one compiled lookup module (:func:`shevsim.core.lookup._grid_ex`) on ``[x, y, z row-major]``.
 
     Parameters
     ----------
@@ -169,67 +123,33 @@ class Grid2D:
                 raise ValueError(f"{name}: extrapolation must be one of {_MODES}, got {m!r}")
         self.x, self.y, self.z, self.name = x, y, z, name
         self.mode_x, self.mode_y = mx, my
-        self._xl, self._yl, self._zl = x.tolist(), y.tolist(), z.tolist()
-        self.fn = self._scalar_fn()
+        self._d = np.concatenate([x, y, z.reshape(-1)])
+        self._nx, self._ny = int(x.size), int(y.size)
+        self._mx, self._my = EXTRAPOLATION_CODES[mx], EXTRAPOLATION_CODES[my]
+        self.fn = self.__call__
 
-    def _scalar_fn(self):
-        """A plain function ``fn(x, y)`` equal to ``self(x, y)`` (a closure: cheaper on hot paths)."""
-        xl, yl, zl, slow = self._xl, self._yl, self._zl, self.__call__
-        x_lo, x_hi, y_lo, y_hi = xl[0], xl[-1], yl[0], yl[-1]
-
-        def fn(x: float, y: float) -> float:
-            if x_lo < x < x_hi and y_lo < y < y_hi:
-                i = bisect_right(xl, x) - 1
-                x0 = xl[i]
-                fx = (x - x0) / (xl[i + 1] - x0)
-                j = bisect_right(yl, y) - 1
-                y0 = yl[j]
-                fy = (y - y0) / (yl[j + 1] - y0)
-                r0 = zl[i]
-                r1 = zl[i + 1]
-                a = r0[j] + fy * (r0[j + 1] - r0[j])
-                b = r1[j] + fy * (r1[j + 1] - r1[j])
-                return a + fx * (b - a)
-            return slow(x, y)
-        return fn
-
-    def __getstate__(self):
-        d = self.__dict__.copy()
-        d.pop("fn", None)
-        return d
-
-    def __setstate__(self, d):
-        self.__dict__.update(d)
-        self.fn = self._scalar_fn()
+    def _error(self, x: float, y: float) -> DataError:
+        if x != x or y != y:
+            return DataError(f"{self.name}: NaN lookup")
+        if self.mode_x == "error" and not (self.x[0] <= x <= self.x[-1]):
+            return _lookup_error(self.x, x, "error", self.name)
+        return _lookup_error(self.y, y, "error", self.name)
 
     def __call__(self, x: float, y: float) -> float:
-        xl, yl = self._xl, self._yl
-        if xl[0] < x < xl[-1]:          # interior (hot path): same arithmetic as _locate
-            i = bisect_right(xl, x) - 1
-            x0 = xl[i]
-            fx = (x - x0) / (xl[i + 1] - x0)
-        else:
-            i, fx = _locate(xl, x, self.mode_x, self.name)
-        if yl[0] < y < yl[-1]:
-            j = bisect_right(yl, y) - 1
-            y0 = yl[j]
-            fy = (y - y0) / (yl[j + 1] - y0)
-        else:
-            j, fy = _locate(yl, y, self.mode_y, self.name)
-        r0 = self._zl[i]
-        r1 = self._zl[i + 1]
-        a = r0[j] + fy * (r0[j + 1] - r0[j])
-        b = r1[j] + fy * (r1[j + 1] - r1[j])
-        return a + fx * (b - a)
+        v = _grid_ex(self._d, 0, self._nx, self._ny, self._mx, self._my, float(x), float(y))
+        if v != v:
+            raise self._error(float(x), float(y))
+        return v
 
     def eval_array(self, x, y) -> np.ndarray:
         """Vectorised evaluation (broadcasting ``x`` and ``y``)."""
         x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
-        out = np.empty(x.shape)
-        flat = out.reshape(-1)
-        for k, (a, b) in enumerate(zip(x.reshape(-1), y.reshape(-1))):
-            flat[k] = self(float(a), float(b))
-        return out
+        xf, yf = np.ascontiguousarray(x.reshape(-1)), np.ascontiguousarray(y.reshape(-1))
+        out = grid_eval_array(self._d, self._nx, self._ny, self._mx, self._my, xf, yf)
+        if np.isnan(out).any():
+            k = int(np.flatnonzero(np.isnan(out))[0])
+            raise self._error(float(xf[k]), float(yf[k]))
+        return out.reshape(x.shape)
 
 
 def _read_table(path: Path) -> tuple[list[str], np.ndarray, list[str]]:
