@@ -55,10 +55,9 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -521,6 +520,21 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
         if own_tmp:
             import shutil
             shutil.rmtree(odir, ignore_errors=True)   # our own temporary folder, nothing of the user's
+    # fitted parameters that ended on a bound: not identified by this record (or the bound is wrong)
+    at_bounds = []
+    for prm in fitter._params_for(tuple(selected)):
+        lo, hi = fitter.bounds_override.get(prm.name, (prm.lo, prm.hi))
+        v = final.params.get(prm.name)
+        if v is None:
+            continue
+        span = (math.log(hi) - math.log(lo)) if prm.log else (hi - lo)
+        pos = ((math.log(max(v, 1e-300)) - math.log(lo)) if prm.log else (v - lo)) / span if span > 0 else 0.5
+        if pos <= 1e-4 or pos >= 1.0 - 1e-4:
+            at_bounds.append({"parameter": prm.name, "value": v, "bound": "lower" if pos <= 1e-4 else "upper",
+                              "bounds": [lo, hi], "unit": prm.unit})
+    for b in at_bounds:
+        say(f"parameter {b['parameter']} = {b['value']:.4g} {b['unit']} sits on its {b['bound']} bound: not "
+            f"identifiable from this record (or the bound is wrong)")
     replay_dev = (max(abs(replay[c][part] / max(final.rmse[c][part], 1e-300) - 1.0)
                       for c in replay for part in ("train", "holdout")) if replay and "error" not in replay else None)
     elapsed = time.perf_counter() - t_start
@@ -548,6 +562,7 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
         "nothing_found": not selected,
         "dropped_by_backward_elimination": dropped,
         "baseline_failure": baseline_failure,
+        "parameters_at_bounds": at_bounds,
         "overlay": {"file": "params.toml" if out_dir is not None else None, "component": model.component_name,
                     "tables": overlay},
         "replay": replay,
@@ -668,6 +683,10 @@ def render_markdown(rep: dict) -> str:
                      f"noise floor {_g(b['noise_floor'])}; most correlated with {cs or 'nothing'}; likely causes: "
                      + "; ".join(b["likely_causes"])
                      + (" (the selected effects bring it within range)" if b["fixed_by_selected_effects"] else ""))
+    if rep.get("parameters_at_bounds"):
+        L += ["", "Parameters that ended on a bound (not identifiable from this record, or the bound is wrong): "
+              + ", ".join(f"`{b['parameter']}` = {_g(b['value'])} {b['unit']} ({b['bound']})"
+                          for b in rep["parameters_at_bounds"]) + "."]
     if rep.get("replay") and "error" in rep["replay"]:
         L += ["", f"Replay through the simulator: {rep['replay']['error']}"]
     elif rep.get("replay"):
