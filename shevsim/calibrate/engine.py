@@ -66,7 +66,6 @@ component's "off"):
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
@@ -74,7 +73,7 @@ import numpy as np
 from ..components.engine_generator import EngineGeneratorParams
 from ..core.errors import DataError
 from ..powertrain import engine as eng
-from .models import CalibrationModel, Effect, Param, sampling_grid
+from .models import CalibrationModel, Effect, Param, resolve_known_files, sampling_grid
 
 _FIELDS = {f.name: f for f in dataclasses.fields(EngineGeneratorParams)}
 _DEFAULT_PARAMS_FILE = eng.EG_DIR / "default.toml"
@@ -288,16 +287,7 @@ def _user_values(known: Mapping[str, Any] | None, where: str) -> dict:
     if not isinstance(tab, Mapping):
         raise DataError(f"{where}: [engine_generator] must be a table of name = value")
     vals = {**known, **tab}
-    for k, v in list(vals.items()):
-        if k.endswith("_file") and k in _FIELDS:
-            if not isinstance(v, str) or not v:
-                raise DataError(f"{where}: '{k}' must be a path string, got {v!r}")
-            fp = Path(v)
-            if not fp.is_absolute() and base_dir is not None:
-                fp = Path(base_dir) / fp
-            vals[k] = str(fp.resolve())
-            if not fp.is_file():
-                raise DataError(f"{where}: {k} = {v!r}: file not found ({fp})")
+    resolve_known_files(vals, _FIELDS, base_dir, where, "file")
     return vals
 
 

@@ -197,3 +197,20 @@ def sampling_grid(t: np.ndarray, *columns: np.ndarray):
     if tg.size == t.size and np.allclose(tg, t, rtol=0.0, atol=1e-9 * max(1.0, abs(float(t[-1])))):
         return t, [np.asarray(c, float) for c in columns], h, False
     return tg, [np.interp(tg, t, np.asarray(c, float)) for c in columns], h, True
+
+
+def resolve_known_files(vals: dict, fields, base_dir, where: str, what: str = "file") -> dict:
+    """Make the ``*_file`` values among ``fields`` absolute (relative to ``base_dir``, the folder of the
+    ``--params`` file) and check they exist; errors name the parameter and the path."""
+    from pathlib import Path
+    for k, v in list(vals.items()):
+        if k.endswith("_file") and k in fields:
+            if not isinstance(v, str) or not v:
+                raise DataError(f"{where}: '{k}' must be a path string, got {v!r}")
+            fp = Path(v)
+            if not fp.is_absolute() and base_dir is not None:
+                fp = Path(base_dir) / fp
+            vals[k] = str(fp.resolve())
+            if not fp.is_file():
+                raise DataError(f"{where}: {k} = {v!r}: {what} not found ({fp})")
+    return vals

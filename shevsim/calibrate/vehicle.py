@@ -58,7 +58,7 @@ from ..core.errors import DataError, ShevsimError
 from ..core.lookup import _njit
 from ..powertrain.motor import bus_balance, motor_step
 from ..powertrain.vehicle import grade_total_rad, speed_follow_step
-from .models import CalibrationModel, Effect, Param, sampling_grid
+from .models import CalibrationModel, Effect, Param, resolve_known_files, sampling_grid
 
 ROOT = Path(__file__).resolve().parents[2]
 PARAM_FILES = {"vehicle": ROOT / "components" / "vehicle" / "matv.toml",
@@ -134,16 +134,7 @@ def _user_values(known: Mapping[str, Any] | None, where: str) -> dict:
             vals[k] = v
     for k in _IGNORED:
         vals.pop(k, None)
-    for k, v in list(vals.items()):
-        if k.endswith("_file") and k in _OWNER:
-            if not isinstance(v, str) or not v:
-                raise DataError(f"{where}: '{k}' must be a path string, got {v!r}")
-            fp = Path(v)
-            if not fp.is_absolute() and base_dir is not None:
-                fp = Path(base_dir) / fp
-            vals[k] = str(fp.resolve())
-            if not fp.is_file():
-                raise DataError(f"{where}: {k} = {v!r}: map file not found ({fp})")
+    resolve_known_files(vals, _OWNER, base_dir, where, "map file")
     return vals
 
 
