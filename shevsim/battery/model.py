@@ -276,8 +276,14 @@ def _run_profile(d, ix, c, st, t, p_in, t_amb, h_conv, out_v, out_ts, out_tc):
     _thermal_outputs(c, st, t_amb[0], _effective_h(c, t[0], h_conv), y)
     out_ts[0] = y[Y_TSURF]
     out_tc[0] = y[Y_TCORE]
+    hp = t[1] - t[0] if n > 1 else 0.0
     for k in range(1, n):
-        _cell_step(d, ix, c, st, p_in[k], t[k - 1], t[k] - t[k - 1], t_amb[k], h_conv, th, y)
+        dt = t[k] - t[k - 1]
+        if abs(dt - hp) <= 1e-9 * hp:
+            dt = hp          # a regular grid's steps differ in the last bits: one step (as the master's)
+        else:
+            hp = dt
+        _cell_step(d, ix, c, st, p_in[k], t[k - 1], dt, t_amb[k], h_conv, th, y)
         out_v[k] = y[Y_V]
         out_ts[k] = y[Y_TSURF]
         out_tc[k] = y[Y_TCORE]
