@@ -132,11 +132,7 @@ def _check_dt(dt: float, where: str) -> float:
     return d
 
 
-try:
-    from numba import njit as _njit
-except ImportError:  # pragma: no cover - numba is a dependency
-    def _njit(*args, **kwargs):
-        return lambda f: f
+from numba import njit as _njit
 
 
 # ---------------------------------------------------------------------------------------------

@@ -303,5 +303,3 @@ def _power_source(t: np.ndarray, p: np.ndarray):
     return ProfileSource("profile", ProfileParams(time_s=tuple(map(float, t)), power_w=tuple(map(float, p))))
 
 
-# the old name of this model in shevsim.calibrate.models.MODELS
-EngineSootModel = EngineModel

@@ -169,7 +169,7 @@ class CalibrationModel:
 
 
 MODELS = {"cell": "shevsim.calibrate.cell:CellModel", "vehicle": "shevsim.calibrate.vehicle:VehicleModel",
-          "engine": "shevsim.calibrate.engine:EngineSootModel"}
+          "engine": "shevsim.calibrate.engine:EngineModel"}
 
 
 def get_model(name: str, known: Mapping[str, Any] | None = None, where: str = "<params>") -> CalibrationModel:

@@ -10,14 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-try:  # numba is a dependency; without it the Python path runs
-    from numba import njit as _njit
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover
-    HAVE_NUMBA = False
+from numba import njit as _njit   # a hard dependency: the physics is compiled from its one source
 
-    def _njit(*args, **kwargs):
-        return lambda f: f
+HAVE_NUMBA = True    # kept for callers that still ask
 
 
 @_njit(cache=True, error_model="numpy")
