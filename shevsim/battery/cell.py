@@ -19,8 +19,8 @@ dissipate ``V_j^2/R_j``; ``i V_j - V_j^2/R_j = C_j V_j dV_j/dt`` is energy store
 ``T`` is in kelvin.  With Delta S < 0 (low SOC for LFP) discharge releases reversible heat
 (q_rev > 0) and charge absorbs it, which is the seed's 4.1c sign for discharge-positive current.
 
-Power to current (seed 5.1b corrected as in SPEC 2.1): from ``P = V i - R i^2``,
-``i = (V - sqrt(V^2 - 4 R P)) / (2 R)`` (the root that tends to ``P/V`` as ``R -> 0``).
+The model itself (step, heat, power-to-current) is written once in :mod:`shevsim.battery.model`; this
+module holds the cell tables (CSV reading, validation, packing) and their lookups.
 
 Parameter tables live in ``components/battery/`` (CSV, representative values, not measured;
 provenance in ``components/battery/make_a123_tables.py``).  Everything here is plain Python
@@ -33,7 +33,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from shevsim.core.errors import DataError, SimulationError
+from shevsim.core.errors import DataError
 from shevsim.core.lookup import _t1_integral, _t1_slope, _t1_value, ecm_lookup
 
 __all__ = [
@@ -44,11 +44,6 @@ __all__ = [
     "ocv",
     "docv_dsoc",
     "entropy_change",
-    "current_from_power",
-    "max_discharge_power",
-    "heat_generation",
-    "rc_step",
-    "rc_integrals",
     "DATA_DIR",
 ]
 
@@ -237,62 +232,3 @@ def docv_dsoc(soc: float) -> float:
 def entropy_change(soc: float) -> float:
     """Entropy change Delta S [J/mol/K] of the default cell (Fig. 5.5 shape)."""
     return default_tables().entropy_change(soc)
-
-
-def current_from_power(p_w: float, voc_eff_v: float, rs_ohm: float) -> float:
-    """Current [A] (+ discharge) drawing power ``p_w`` [W] (+ discharge) from ``V - R i``.
-
-    Solves ``p = V i - R i^2`` for the root continuous with ``p / V`` as ``R -> 0``:
-    ``i = (V - sqrt(V^2 - 4 R p)) / (2 R)`` = ``2 p / (V + sqrt(V^2 - 4 R p))`` (the second form
-    is used: it is exact at R = 0 and free of cancellation).
-
-    Raises
-    ------
-    ValueError
-        When ``V^2 - 4 R p < 0``: the source cannot deliver ``p`` (max is ``V^2 / (4 R)``).
-    """
-    disc = voc_eff_v * voc_eff_v - 4.0 * rs_ohm * p_w
-    if disc < 0.0:
-        raise ValueError(f"current_from_power: power {p_w!r} W exceeds the maximum "
-                         f"V^2/(4R) = {voc_eff_v * voc_eff_v / (4.0 * rs_ohm)!r} W")
-    den = voc_eff_v + math.sqrt(disc)
-    if den <= 0.0:
-        raise ValueError(f"current_from_power: non-positive source voltage {voc_eff_v!r} V")
-    return 2.0 * p_w / den
-
-
-def max_discharge_power(voc_eff_v: float, rs_ohm: float) -> float:
-    """Largest power [W] a source ``V - R i`` can deliver: ``V^2 / (4 R)`` (at ``i = V / (2R)``)."""
-    return voc_eff_v * voc_eff_v / (4.0 * rs_ohm)
-
-
-def heat_generation(i_a: float, rs_ohm: float, v_rc, r_rc, t_k: float, delta_s_j_molk: float) -> float:
-    """Heat generation rate [W] of one cell, seed 5.16 generalised to any number of RC branches.
-
-    ``q = i^2 R_s + sum V_j^2 / R_j - i T Delta S / F`` with ``i`` + discharge, ``T`` in kelvin.
-    """
-    q = i_a * i_a * rs_ohm - i_a * t_k * delta_s_j_molk / FARADAY_C_MOL
-    for v, r in zip(v_rc, r_rc):
-        q += v * v / r
-    return q
-
-
-def rc_step(v0: float, i_a: float, r_ohm: float, c_f: float, dt_s: float) -> float:
-    """Exact RC branch voltage after ``dt_s`` with the current held (ZOH of 4.6b)."""
-    if not (r_ohm > 0.0 and c_f > 0.0):
-        raise SimulationError(f"rc_step: R and C must be > 0 (R={r_ohm!r}, C={c_f!r})")
-    e = math.exp(-dt_s / (r_ohm * c_f))
-    return e * v0 + r_ohm * (1.0 - e) * i_a
-
-
-def rc_integrals(v0: float, i_a: float, r_ohm: float, c_f: float, dt_s: float):
-    """Exact ``(v_end, int v dt, int v^2 dt)`` of an RC branch over ``dt_s`` with the current held."""
-    tau = r_ohm * c_f
-    e = math.exp(-dt_s / tau)
-    vinf = r_ohm * i_a
-    d = v0 - vinf
-    one_e = tau * (1.0 - e)
-    v_end = vinf + d * e
-    iv = vinf * dt_s + d * one_e
-    iv2 = vinf * vinf * dt_s + 2.0 * vinf * d * one_e + d * d * 0.5 * tau * (1.0 - e * e)
-    return v_end, iv, iv2

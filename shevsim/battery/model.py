@@ -52,9 +52,9 @@ import math
 import numpy as np
 
 from shevsim.battery.thermal import two_state_coeffs
-from shevsim.core.lookup import _njit, _t1_integral, _t1_slope, _t1_value, ecm_lookup
+from shevsim.core.lookup import _njit, _t1_integral, _t1_slope, _t1_value, ecm_lookup, interp_held
 
-FARADAY_C_MOL = 96485.3365
+from shevsim.battery.cell import FARADAY_C_MOL  # noqa: E402  (one constant)
 
 # indices of the packed parameter vector
 (C_NP, C_NPACK, C_QAS, C_CURRENT_MODE, C_TDEP, C_ENTROPIC, C_F, C_RS, C_R1, C_C1, C_R2, C_C2, C_EA, C_TREF,
@@ -102,18 +102,9 @@ def _effective_h(c, t, h_conv):
 
 
 def _dudt(c, soc):
-    """dU/dT [V/K] from the knots (piecewise linear, clamped); only called when there are knots."""
+    """dU/dT [V/K] from the knots (piecewise linear, held beyond the end knots); only called with knots."""
     n = int(c[C_NDUDT])
-    o = C_KNOTS
-    if n == 1 or soc <= c[o]:
-        return c[o + n]
-    if soc >= c[o + n - 1]:
-        return c[o + 2 * n - 1]
-    k = 0
-    while soc >= c[o + k + 1]:
-        k += 1
-    x0 = c[o + k]
-    return c[o + n + k] + (c[o + n + k + 1] - c[o + n + k]) * (soc - x0) / (c[o + k + 1] - x0)
+    return interp_held(c, C_KNOTS, c, C_KNOTS + n, n, soc)
 
 
 def _rc_branch(v0, i, r, tau, ex, g, h):

@@ -236,3 +236,16 @@ def grid_eval_array(d, nx, ny, mx, my, xs, ys):  # pragma: no cover - compiled
     for k in range(xs.size):
         out[k] = _grid_ex(d, 0, nx, ny, mx, my, xs[k], ys[k])
     return out
+
+
+@_njit(cache=True, error_model="numpy")
+def interp_held(xa, ox, ya, oy, n, x):  # pragma: no cover - compiled
+    """Piecewise-linear ``y(x)`` through ``n >= 1`` knots ``xa[ox:ox+n]`` (increasing) / ``ya[oy:oy+n]``,
+    held beyond the end knots (knot lists of parameters: dU/dT(SOC), road grade along distance)."""
+    if n == 1 or x <= xa[ox]:
+        return ya[oy]
+    if x >= xa[ox + n - 1]:
+        return ya[oy + n - 1]
+    j = _bisect_right(xa, ox, n, x) - 1
+    f = (x - xa[ox + j]) / (xa[ox + j + 1] - xa[ox + j])
+    return ya[oy + j] + f * (ya[oy + j + 1] - ya[oy + j])

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 
-from shevsim.core.lookup import _njit
+from shevsim.core.lookup import _njit, interp_held
 
 G_MPS2 = 9.80665
 
@@ -63,15 +63,7 @@ def grade_rad_at(d: float, knot_d, knot_frac) -> float:
     n = knot_d.shape[0]
     if n == 0:
         return 0.0
-    if d <= knot_d[0]:
-        return math.atan(knot_frac[0])
-    if d >= knot_d[n - 1]:
-        return math.atan(knot_frac[n - 1])
-    j = 0
-    while knot_d[j + 1] < d:
-        j += 1
-    f = (d - knot_d[j]) / (knot_d[j + 1] - knot_d[j])
-    return math.atan(knot_frac[j] + f * (knot_frac[j + 1] - knot_frac[j]))
+    return math.atan(interp_held(knot_d, 0, knot_frac, 0, n, d))
 
 
 @_njit(cache=True)

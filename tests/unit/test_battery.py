@@ -49,17 +49,18 @@ def _drive_profile(n, dt, seed=3, scale=60e3):
 
 
 # -- cell functions ------------------------------------------------------------------------
-def test_current_from_power_matches_direct_root():
+def current_from_power(p_w, v, r):
+    """Independent reference (test only): the current drawing ``p_w`` from a source ``v - r i``,
+    ``i = 2 p / (v + sqrt(v^2 - 4 r p))`` (the root continuous with ``p / v``)."""
+    return 2.0 * p_w / (v + math.sqrt(v * v - 4.0 * r * p_w))
+
+
+def test_current_from_power_reference_is_the_quadratic_root():
     for p in (-2000.0, -50.0, 0.0, 30.0, 100.0, 131.9):
         v, r = 3.25, 0.02
-        i = cell.current_from_power(p, v, r)
-        # independent: the root of V i - R i^2 - p on the branch below the maximum-power current
+        i = current_from_power(p, v, r)
         i_ref = brentq(lambda x: v * x - r * x * x - p, -1e4, v / (2 * r))
         assert i == pytest.approx(i_ref, rel=1e-12, abs=1e-12)
-        assert v * i - r * i * i == pytest.approx(p, rel=1e-12, abs=1e-9)
-    assert cell.current_from_power(10.0, 3.3, 0.0) == pytest.approx(10.0 / 3.3)
-    with pytest.raises(ValueError, match="exceeds the maximum"):
-        cell.current_from_power(cell.max_discharge_power(3.3, 0.02) * 1.001, 3.3, 0.02)
 
 
 def test_ocv_lfp_shape_and_entropy_range():
@@ -88,12 +89,23 @@ def test_resistance_arrhenius_and_charge_discharge_distinct():
 
 
 def test_heat_generation_sign_convention():
-    # Delta S < 0: discharge releases reversible heat, charge absorbs it
-    q_d = cell.heat_generation(5.0, 0.0, (), (), 300.0, -20.0)
-    q_c = cell.heat_generation(-5.0, 0.0, (), (), 300.0, -20.0)
-    assert q_d == pytest.approx(5.0 * 300.0 * 20.0 / cell.FARADAY_C_MOL)
-    assert q_c == pytest.approx(-q_d)
-    assert cell.heat_generation(2.0, 0.01, (0.03,), (0.006,), 300.0, 0.0) == pytest.approx(0.04 + 0.15)
+    """The model's heat (shevsim.battery.model): with dU/dT < 0, discharge releases reversible heat and charge
+    absorbs it (q_rev = -i T dU/dT); the irreversible part is i^2 R_s + V1^2/R1 (+ V2^2/R2)."""
+    from shevsim.battery import model as bm
+    prm = BatteryPackParams(n_series=1, n_parallel=1, input_mode="current", entropic_heat=False, r2_scale=0.0,
+                            dudt_soc_frac=(0.0, 1.0), dudt_v_k=(-20.0 / cell.FARADAY_C_MOL,) * 2)
+    d, ix = cell.default_tables().packed()
+    c = bm.pack_params(prm)
+    q = {}
+    for i in (5.0, -5.0):
+        st = np.zeros(bm.N_STATE)
+        st[bm.S_SOC] = 0.5
+        y = np.zeros(bm.N_OUT)
+        q[i] = bm.cell_electrical.py_func(d, ix, c, st, i, 1e-9, 300.0 - 273.15, y)
+        rs = y[bm.Y_RS]
+        q[i] -= i * i * rs          # irreversible part (V1 ~ 0 over 1 ns)
+    assert q[5.0] == pytest.approx(5.0 * 300.0 * 20.0 / cell.FARADAY_C_MOL, rel=1e-6)
+    assert q[-5.0] == pytest.approx(-q[5.0], rel=1e-6)
 
 
 def test_bad_table_names_file_and_column(tmp_path):
@@ -197,7 +209,7 @@ def test_power_to_current_in_plant_and_clamp():
     rs = b.tables.params(b.soc, b.y["t_mean_c"], 1.0)[0]
     b.u["power_w"] = 80e3
     b.do_step(5.0, 1e-4)
-    i_direct = cell.current_from_power(80e3 / (NS * NP), voc_eff, rs)
+    i_direct = current_from_power(80e3 / (NS * NP), voc_eff, rs)
     assert b.y["current_a"] / NP == pytest.approx(i_direct, rel=1e-4)
     assert b.y["current_a"] * b.y["voltage_v"] == pytest.approx(80e3, rel=1e-4)
     # infeasible demand: clamped at the maximum-power point and counted
