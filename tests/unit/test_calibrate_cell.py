@@ -134,3 +134,20 @@ def test_false_selection_rate_over_twenty_noise_realisations():
     """Data with no missing effect, 20 noise/profile realisations: at most one false selection."""
     false = [s for s in range(20) if _run([], seed=100 + s, duration_s=1200.0)[0]["selected_effects"]]
     assert len(false) <= 1, false
+
+
+def test_scenario_field_overlay_and_precedence(tmp_path):
+    """A scenario's [components.X] overlay = FILE applies the overlay's [X] table (relative *_file paths against
+    the overlay's folder); the component's set table and --set still win over it."""
+    from shevsim.core.overlay import write_overlay
+    from shevsim.core.scenario import build_master, load_scenario
+    root = Path(__file__).resolve().parents[2]
+    (tmp_path / "ocv.csv").write_text((root / "components" / "battery" / "a123_26650_ocv.csv").read_text())
+    write_overlay(tmp_path / "params.toml", {"battery": {"rs_scale": 1.25, "hyst_max_v": 0.01, "ocv_file": "ocv.csv"}})
+    text = (root / "scenarios" / "hd_udds_rule.toml").read_text()
+    text = text.replace('[components.battery]\n', f'[components.battery]\noverlay = "{tmp_path / "params.toml"}"\n', 1)
+    sc_file = tmp_path / "s.toml"
+    sc_file.write_text(text)
+    bat = build_master(load_scenario(sc_file, ["battery.hyst_max_v=0.02"])).components["battery"]
+    assert bat.params.rs_scale == 1.25 and bat.params.hyst_max_v == 0.02
+    assert Path(bat.params.ocv_file) == (tmp_path / "ocv.csv").resolve()
