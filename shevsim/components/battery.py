@@ -78,6 +78,11 @@ from shevsim.core.variables import inp, out
 _NOISE_BLOCK = 4096
 
 
+def _py(f):
+    """The Python form of a compiled function (itself when numba's JIT is disabled)."""
+    return getattr(f, "py_func", f)
+
+
 @dataclass(frozen=True)
 class BatteryPackParams:
     """Parameters of the battery pack plant.
@@ -256,7 +261,7 @@ class BatteryPack(Component):
         self._d, self._ix = self.tables.packed()
         self._c = _m.pack_params(p)
         # the one source, compiled (or its uncompiled reference)
-        pick = (lambda f: f) if compiled else (lambda f: f.py_func)
+        pick = (lambda f: f) if compiled else (lambda f: getattr(f, "py_func", f))
         self._step = pick(_m.cell_step)
         self._elec = pick(_m.cell_electrical)
         self._touts = pick(_m.thermal_outputs)
@@ -338,7 +343,7 @@ class BatteryPack(Component):
         self._k = 0
         yv = np.zeros(_m.N_OUT)
         t_amb, h_conv = self.u["t_ambient_c"], self.u["h_conv_w_m2k"]
-        h_eff = h_conv * p.h_conv_factor
+        h_eff = _py(_m.effective_h)(self._c, t0, h_conv)     # factor and a convection change already due
         if self._fd_w is None:
             self._touts(self._c, st, t_amb, h_eff, yv)
         else:
@@ -376,9 +381,9 @@ class BatteryPack(Component):
             x = self._x_fd
             t_mean = float(np.dot(self._fd_w, x))
             q = self._elec(self._d, self._ix, self._c, st, float(p_pack), float(h), t_mean, self.yv)
-            h_eff = _m.effective_h.py_func(self._c, t + 0.5 * h, h_conv)
+            h_eff = _py(_m.effective_h)(self._c, t + 0.5 * h, h_conv)
             self._x_fd = self.thermal.step(x, q, t_amb, h_eff, h)
-            h_out = _m.effective_h.py_func(self._c, t + h, h_conv)
+            h_out = _py(_m.effective_h)(self._c, t + h, h_conv)
             self.yv[_m.Y_TCORE], self.yv[_m.Y_TSURF] = self.thermal.outputs(self._x_fd, q, t_amb, h_out)
             self.yv[_m.Y_TMEAN] = float(np.dot(self._fd_w, self._x_fd))
         soc_new = float(st[_m.S_SOC])
