@@ -339,7 +339,10 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
     names = list(model.effects) if effects is None else list(effects)
     for e in names:
         if e not in model.effects:
-            raise DataError(f"unknown effect '{e}' for model '{model_name}'; available: {', '.join(model.effects)}")
+            held = model.known.get("effects_in_nominal") or {}
+            why = (f"'{e}' is already part of the nominal model (its parameters are set in --params)" if e in held
+                   else f"unknown effect '{e}' for model '{model_name}'")
+            raise DataError(f"{why}; available: {', '.join(model.effects)}")
 
     # baseline: fit, reweight by training RMSE, refit
     base = fitter.fit(())
