@@ -73,7 +73,7 @@ import numpy as np
 from ..components.engine_generator import EngineGeneratorParams
 from ..core.errors import DataError
 from ..powertrain import engine as eng
-from .models import CalibrationModel, Effect, Param, resolve_known_files, sampling_grid
+from .models import CalibrationModel, Effect, Param, resolve_known_files, sampling_grid, split_known
 
 _FIELDS = {f.name: f for f in dataclasses.fields(EngineGeneratorParams)}
 _DEFAULT_PARAMS_FILE = eng.EG_DIR / "default.toml"
@@ -274,12 +274,7 @@ def _user_values(known: Mapping[str, Any] | None, where: str) -> dict:
     against it) and ``"__tables__"`` (``{table: {param: value}}`` of a file with component tables; the
     ``[engine_generator]`` table is merged over ``[params]``, other components' tables are ignored).
     """
-    known = dict(known or {})
-    base_dir = known.pop("__base_dir__", None)
-    tables = known.pop("__tables__", None) or {}
-    known.pop("__component_file__", None)
-    if not isinstance(tables, Mapping):
-        raise DataError(f"{where}: '__tables__' must map table names to tables")
+    known, base_dir, tables = split_known(known, where)
     if tables and "engine_generator" not in tables and not known:
         raise DataError(f"{where}: no [engine_generator] or [params] table "
                         f"(tables: {', '.join(sorted(map(str, tables)))})")

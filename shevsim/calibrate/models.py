@@ -214,3 +214,16 @@ def resolve_known_files(vals: dict, fields, base_dir, where: str, what: str = "f
             if not fp.is_file():
                 raise DataError(f"{where}: {k} = {v!r}: {what} not found ({fp})")
     return vals
+
+
+def split_known(known, where: str):
+    """``(known, base_dir, tables)`` from a ``--params`` dict of :func:`shevsim.calibrate.cli.load_params_toml`:
+    the flat values, the file's folder (``"__base_dir__"``) and its component tables (``"__tables__"``)."""
+    from typing import Mapping as _Mapping
+    known = dict(known or {})
+    base_dir = known.pop("__base_dir__", None)
+    tables = known.pop("__tables__", None) or {}
+    known.pop("__component_file__", None)
+    if not isinstance(tables, _Mapping):
+        raise DataError(f"{where}: '__tables__' must map table names to tables")
+    return known, base_dir, tables

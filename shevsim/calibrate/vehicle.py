@@ -58,7 +58,7 @@ from ..core.errors import DataError, ShevsimError
 from ..core.lookup import _njit
 from ..powertrain.motor import bus_balance, motor_step
 from ..powertrain.vehicle import grade_total_rad, speed_follow_step
-from .models import CalibrationModel, Effect, Param, resolve_known_files, sampling_grid
+from .models import CalibrationModel, Effect, Param, resolve_known_files, sampling_grid, split_known
 
 ROOT = Path(__file__).resolve().parents[2]
 PARAM_FILES = {"vehicle": ROOT / "components" / "vehicle" / "matv.toml",
@@ -113,12 +113,7 @@ def _user_values(known: Mapping[str, Any] | None, where: str) -> dict:
     (the record prescribes the motion).  A parameter in another component's table fails, as do unknown
     names (with a suggestion, by the base class).
     """
-    known = dict(known or {})
-    base_dir = known.pop("__base_dir__", None)
-    tables = known.pop("__tables__", None) or {}
-    known.pop("__component_file__", None)
-    if not isinstance(tables, Mapping):
-        raise DataError(f"{where}: '__tables__' must map table names to tables")
+    known, base_dir, tables = split_known(known, where)
     ours = [n for n in PARAM_FILES if n in tables]
     if tables and not ours and not known:
         raise DataError(f"{where}: no [vehicle], [motor], [bus] or [params] table "

@@ -23,6 +23,17 @@ EFFECTS_ON = dict(arrhenius_ea_r_k=3500.0, hyst_max_v=0.02, hyst_rate=50.0, curr
                   h_change_width_s=10.0, rs_scale=1.2, c2_scale=0.8)
 
 
+def _with_and_without_jit(code: str) -> dict:
+    """Run ``code`` (prints a JSON array) compiled ("0") and with NUMBA_DISABLE_JIT=1 ("1")."""
+    res = {}
+    for jit in ("0", "1"):
+        env = dict(os.environ, NUMBA_DISABLE_JIT=jit)
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+        assert r.returncode == 0, r.stderr
+        res[jit] = np.array(json.loads(r.stdout))
+    return res
+
+
 def _drive(b, mode, n, seed=1):
     rng = np.random.default_rng(seed)
     port = "power_w" if mode == "power" else "current_cmd_a"
@@ -62,12 +73,7 @@ for k in range(1500):
     out.append([b.y[n] for n in ("current_a", "voltage_v", "soc_pct", "t_core_c", "t_surface_c", "heat_w")])
 print(json.dumps(out))
 """
-    res = {}
-    for jit in ("0", "1"):
-        env = dict(os.environ, NUMBA_DISABLE_JIT=jit)
-        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
-        assert r.returncode == 0, r.stderr
-        res[jit] = np.array(json.loads(r.stdout))
+    res = _with_and_without_jit(code)
     for k in range(res["0"].shape[1]):
         np.testing.assert_allclose(res["0"][:, k], res["1"][:, k], rtol=1e-12, atol=1e-12 * np.abs(res["0"][:, k]).max())
 
@@ -105,12 +111,7 @@ ov, ots, otc = np.empty(t.size), np.empty(t.size), np.empty(t.size)
 m.run_profile(d, ix, c, st, t, i, np.full(t.size, 25.0), 20.0, ov, ots, otc)
 print(json.dumps([ov.tolist(), ots.tolist(), otc.tolist()]))
 """
-    res = {}
-    for jit in ("0", "1"):
-        env = dict(os.environ, NUMBA_DISABLE_JIT=jit)
-        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
-        assert r.returncode == 0, r.stderr
-        res[jit] = np.array(json.loads(r.stdout))
+    res = _with_and_without_jit(code)
     np.testing.assert_allclose(res["0"], res["1"], rtol=1e-12, atol=0.0)
 
 
@@ -207,3 +208,35 @@ def test_low_soc_resistance_rise_and_convection_change():
             b.do_step(float(k), 1.0)
     assert f.y["t_surface_c"] == pytest.approx(a.y["t_surface_c"], rel=1e-12)
     assert f.y["t_core_c"] == pytest.approx(a.y["t_core_c"], rel=1e-12)
+
+
+def test_neutral_effect_parameters_are_bit_identical_to_the_plain_model():
+    neutral = dict(arrhenius_ea_r_k=0.0, hyst_max_v=0.0, current_offset_a=0.0, lowsoc_r_gain=0.0,
+                   dudt_soc_frac=(), dudt_v_k=(), h_change_factor=1.0, rs_scale=1.0, r2_scale=1.0, h_conv_factor=1.0)
+    a = _drive(BatteryPack("b", BatteryPackParams()), "power", 800)
+    b = _drive(BatteryPack("b", replace(BatteryPackParams(), **neutral)), "power", 800)
+    assert np.array_equal(a, b)
+    # and every effect switched on changes the trajectory (the switch is wired)
+    for k, v in EFFECTS_ON.items():
+        if k in ("h_change_time_s", "h_change_width_s", "dudt_soc_frac", "lowsoc_r_scale_frac", "hyst_rate",
+                 "current_offset_a"):    # the offset acts in current mode (test_capacity_and_current_offset...)
+            continue
+        on = dict(EFFECTS_ON) if k in ("dudt_v_k", "h_change_factor", "hyst_max_v", "lowsoc_r_gain") else {k: v}
+        if k == "dudt_v_k":
+            on = {"dudt_soc_frac": EFFECTS_ON["dudt_soc_frac"], "dudt_v_k": v}
+        elif k == "h_change_factor":
+            on = {"h_change_factor": v, "h_change_time_s": 20.0, "h_change_width_s": 0.0}
+        elif k == "hyst_max_v":
+            on = {"hyst_max_v": v, "hyst_rate": EFFECTS_ON["hyst_rate"]}
+        elif k == "lowsoc_r_gain":
+            on = {"lowsoc_r_gain": v, "lowsoc_r_scale_frac": 0.5}
+        c = _drive(BatteryPack("b", replace(BatteryPackParams(), **on)), "power", 800)
+        assert not np.array_equal(a, c), k
+
+
+def test_bad_effect_parameters_are_refused_with_the_field_name():
+    from shevsim.core.errors import ScenarioError
+    for bad in (dict(hyst_max_v=float("nan")), dict(dudt_soc_frac=(0.0, 1.0), dudt_v_k=(1e-4,)),
+                dict(rs_scale=0.0), dict(arrhenius_ea_r_k=-1.0), dict(dudt_soc_frac=(0.5, 0.2), dudt_v_k=(0.0, 0.0))):
+        with pytest.raises(ScenarioError, match="battery parameters"):
+            BatteryPackParams(**bad)
