@@ -35,6 +35,7 @@ from pathlib import Path
 
 from shevsim.core.errors import DataError
 from shevsim.core.lookup import _t1_integral, _t1_slope, _t1_value, ecm_lookup
+from shevsim.core.paths import data_path
 
 __all__ = [
     "FARADAY_C_MOL",
@@ -48,7 +49,7 @@ __all__ = [
 ]
 
 FARADAY_C_MOL = 96485.3365  # seed 5.16
-DATA_DIR = Path(__file__).resolve().parents[2] / "components" / "battery"
+DATA_DIR = data_path("components", "battery")
 _ECM_COLS = ("soc_frac", "t_c", "rs_ohm", "r1_ohm", "c1_f", "r2_ohm", "c2_f")
 
 

@@ -59,8 +59,9 @@ from ..core.lookup import _njit
 from ..powertrain.motor import bus_balance, motor_step
 from ..powertrain.vehicle import grade_total_rad, speed_follow_step
 from .models import CalibrationModel, Effect, Param, resolve_known_files, sampling_grid, split_known
+from shevsim.core.paths import DATA_ROOT
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = DATA_ROOT
 PARAM_FILES = {"vehicle": ROOT / "components" / "vehicle" / "matv.toml",
                "motor": ROOT / "components" / "motor" / "default.toml",
                "bus": ROOT / "components" / "bus" / "default.toml"}

@@ -7,13 +7,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 from shevsim.core.component import Component
 from shevsim.core.variables import out
 from shevsim.cycles import load_cycle
+from shevsim.core.paths import data_path
 
-_DEFAULT_CYCLE = str(Path(__file__).resolve().parents[2] / "cycles" / "hd_udds.csv")
+_DEFAULT_CYCLE = str(data_path("cycles", "hd_udds.csv"))
 
 
 @dataclass(frozen=True, slots=True)

@@ -45,15 +45,15 @@ Outputs (all direct feedthrough of the inputs)
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
 from shevsim.powertrain.maps import load_curve_csv, load_grid_csv
 from shevsim.powertrain.motor import HEAT_RATE_PER_S, MotorMaps, motor_step
+from shevsim.core.paths import data_path
 
-_DIR = Path(__file__).resolve().parents[2] / "components" / "motor"
+_DIR = data_path("components", "motor")
 
 
 @dataclass(frozen=True)

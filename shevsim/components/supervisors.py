@@ -31,7 +31,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError, SimulationError
@@ -40,8 +39,9 @@ from shevsim.supervisor.fuel_curve import SqrtFuelCurve
 from shevsim.supervisor.mpc import MPCSettings, MPCSupervisor as _MPC
 from shevsim.supervisor.rate_map import PowerRateMap
 from shevsim.supervisor.rule_based import RuleBasedSupervisor, RuleSettings
+from shevsim.core.paths import data_path
 
-DEFAULT_FUEL_CURVE = Path(__file__).resolve().parents[2] / "components" / "engine_generator" / "fuel_vs_power.csv"
+DEFAULT_FUEL_CURVE = data_path("components", "engine_generator", "fuel_vs_power.csv")
 
 _IN = ("demand_power_w", "soc_pct", "gen_power_w", "power_max_w", "power_min_w", "ocv_v", "rs_ohm")
 _INPUTS = (

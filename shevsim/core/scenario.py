@@ -51,8 +51,9 @@ from .errors import ScenarioError, ShevsimError
 from .master import Connection, Fault, Master, MasterSettings
 from .overlay import overlay_tables, overlay_values, resolve_files
 from .params import load_params
+from shevsim.core.paths import DATA_ROOT, bundled_scenario
 
-PROJECT_ROOT = Path(__file__).resolve().parents[2]
+PROJECT_ROOT = DATA_ROOT   # the folder holding components/, cycles/, scenarios/ (checkout or wheel)
 
 _TOP = {"scenario", "components", "connections", "faults", "record", "metrics"}
 _SCEN = {"name", "description", "step_s", "stop_s", "t0_s", "method", "seed", "order"}
@@ -152,10 +153,14 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
     """Read and validate a scenario file; ``sets`` are ``component.param=value`` overrides, ``overlays``
     are ``COMPONENT=FILE`` or ``FILE`` parameter overlays (:mod:`shevsim.core.overlay`)."""
     spath = Path(path) if path is not None else None
+    if text is None and spath is not None and not spath.is_file() and bundled_scenario(str(path)) is not None:
+        spath = bundled_scenario(str(path))      # a bundled scenario by name (hd_udds_rule)
     where = str(spath) if spath else "<scenario>"
     if text is None:
         if spath is None or not spath.is_file():
-            raise ScenarioError(f"{where}: scenario file not found")
+            from .paths import bundled_scenarios
+            raise ScenarioError(f"{where}: scenario file not found (bundled scenarios by name: "
+                                f"{', '.join(bundled_scenarios())})")
         text = spath.read_text()
     try:
         doc = tomllib.loads(text)

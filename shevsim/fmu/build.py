@@ -24,13 +24,14 @@ import tempfile
 from pathlib import Path
 
 from .errors import FMUError
+from shevsim.core.paths import DATA_ROOT
 
 __all__ = ["build_c_fmu", "build_python_fmu", "fmu_sources_dir", "repo_root"]
 
 
 def repo_root() -> Path:
     """The directory holding the ``shevsim`` package (the repository root in a checkout)."""
-    return Path(__file__).resolve().parents[2]
+    return DATA_ROOT
 
 
 def fmu_sources_dir() -> Path:

@@ -60,8 +60,9 @@ from pathlib import Path
 import numpy as np
 
 from shevsim.powertrain.maps import RPM, Curve, Grid2D, grid_to_long, read_columns, write_long_csv
+from shevsim.core.paths import DATA_ROOT
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = DATA_ROOT
 SRC = ROOT / "components" / "maps_source"
 EG = ROOT / "components" / "engine_generator"
 MOT = ROOT / "components" / "motor"

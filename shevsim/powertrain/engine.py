@@ -82,11 +82,11 @@ load shedding, where ``dKE = W_e - W_g`` defines the new speed).
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 from .maps import load_curve_csv, load_grid_csv
+from shevsim.core.paths import DATA_ROOT
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = DATA_ROOT
 EG_DIR = ROOT / "components" / "engine_generator"
 
 

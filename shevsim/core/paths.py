@@ -1,0 +1,37 @@
+"""paths.py - where shevsim's bundled data live: in a checkout and in an installed wheel alike.
+
+The data folders ``components/``, ``cycles/``, ``scenarios/`` and ``fmus/`` sit beside the ``shevsim``
+package in the repository (the product owner's layout); the wheel carries them inside the package as
+``shevsim/_data/<folder>`` (``[tool.hatch.build.targets.wheel.force-include]`` in ``pyproject.toml``).
+:data:`DATA_ROOT` is the folder that holds them: ``shevsim/_data`` when installed, the repository root in
+a checkout or an editable install.
+"""
+from __future__ import annotations
+
+from importlib.resources import files
+from pathlib import Path
+
+_PKG = Path(str(files("shevsim")))
+_BUNDLED = _PKG / "_data"
+
+#: the folder holding components/, cycles/, scenarios/, fmus/
+DATA_ROOT: Path = _BUNDLED if (_BUNDLED / "scenarios").is_dir() else _PKG.parent
+
+
+def data_path(*parts: str) -> Path:
+    """A path inside the bundled data (``data_path("components", "battery")``)."""
+    return DATA_ROOT.joinpath(*parts)
+
+
+def bundled_scenario(name: str) -> Path | None:
+    """The bundled scenario called ``name`` (``hd_udds_rule`` or ``hd_udds_rule.toml``), or None."""
+    stem = name[:-5] if name.endswith(".toml") else name
+    if not stem or "/" in stem or "\\" in stem or stem.startswith("."):
+        return None
+    p = DATA_ROOT / "scenarios" / f"{stem}.toml"
+    return p if p.is_file() else None
+
+
+def bundled_scenarios() -> list[str]:
+    """Names of the bundled scenarios."""
+    return sorted(p.stem for p in (DATA_ROOT / "scenarios").glob("*.toml"))
