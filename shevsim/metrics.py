@@ -270,7 +270,8 @@ def fuel_economy_dsoc_corrected(df, density_kg_per_l: float = DIESEL_DENSITY_KG_
     if m_corr > 0:
         fe = dist_km / (m_corr / 1000.0 / density_kg_per_l)
         out["fuel_economy_kmpl"] = fe
-        out["fuel_consumption_l_per_100km"] = 100.0 / fe
+        # no distance (an idle cycle): fuel was burnt for nothing, consumption per distance is undefined
+        out["fuel_consumption_l_per_100km"] = 100.0 / fe if fe > 0 else None
     return out
 
 
@@ -483,6 +484,9 @@ def compute_metrics(df, params: Mapping | None = None) -> dict:
     else:
         notes.append("no vehicle speed/distance: distance-based metrics skipped")
         m["distance_km"] = None
+    if m["distance_km"] is not None and not m["distance_km"] > 0:
+        notes.append(f"the vehicle did not move (distance {m['distance_km']:g} km): per-distance metrics "
+                     f"(L/100 km, g/km) are null")
 
     cells_p = opts.get("cells_parallel")
     if cells_p is None:
@@ -558,3 +562,38 @@ def compute_metrics(df, params: Mapping | None = None) -> dict:
         notes.append(f"energy balance incomplete: missing {eb['missing']}")
     m["notes"] = notes
     return _clean(m)
+
+
+# --------------------------------------------------------------- a result's metrics, never raising
+#: cumulative counters reported as ``component.port``: final value
+COUNTER_SUFFIXES = (".fallback_count", ".clamp_count", ".shed_count", ".shed_time_s")
+
+
+def result_metrics(res, options: Mapping | None = None) -> dict:
+    """Metrics of a :class:`~shevsim.core.results.Result`; never raises.
+
+    The final value of every robustness counter (``*.fallback_count``, ``*.clamp_count``,
+    ``*.shed_count``, ``*.shed_time_s``), plus :func:`compute_metrics` when the vehicle's speed was
+    recorded. A metric that cannot be computed (an idle cycle, no distance, a run stopped after one
+    sample) is None and ``notes`` says why. ``options`` default to the scenario's ``[metrics]``
+    table saved in ``res.meta["metrics_options"]``.
+    """
+    opts = dict(res.meta.get("metrics_options") or {}) if options is None else dict(options)
+    out: dict[str, Any] = {}
+    notes: list[str] = []
+    for name, values in res.signals.items():
+        if name.endswith(COUNTER_SUFFIXES) and len(values):
+            out[name] = float(values[-1])
+    term = getattr(res, "termination", "completed")
+    if str(term) != "completed":
+        notes.append(f"the run did not complete ({term}): metrics cover what was simulated")
+    if "vehicle.speed_mps" in res.signals:
+        try:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                m = compute_metrics(res.to_pandas(), {"scenario": opts, "parameters": res.parameters})
+            notes = notes + list(m.pop("notes", []))
+            out.update(m)
+        except (ArithmeticError, ValueError, IndexError, KeyError, DataError) as exc:
+            notes.append(f"SHEV metrics could not be computed: {type(exc).__name__}: {exc}")
+    out["notes"] = notes
+    return _clean(out)

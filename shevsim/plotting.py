@@ -78,3 +78,56 @@ def scenario_plots(result, folder: Path) -> list[Path]:
     path = folder / "overview.png"
     fig.savefig(path, dpi=110)
     return [path]
+
+
+def plot_signals(results, signals, ax=None, labels=None):
+    """Plot ``signals`` of one or more results against time, one axis per unit.
+
+    Parameters
+    ----------
+    results : sequence of Result
+        Runs to overlay (same signal names).
+    signals : sequence of str
+        ``component.port`` names.
+    ax : Axes or sequence of Axes, optional
+        One per unit (in order of first appearance); a new figure (pyplot, the caller's
+        backend) when omitted.
+    labels : sequence of str, optional
+        One per result (default: the scenario name, numbered when repeated).
+
+    Returns
+    -------
+    list of Axes
+    """
+    results = list(results)
+    signals = list(signals)
+    for r in results:
+        for s in signals:
+            r[s]                                   # KeyError naming close matches
+    units: list[str] = []
+    for s in signals:
+        u = results[0].units.get(s, "") if results else ""
+        if u not in units:
+            units.append(u)
+    if ax is None:
+        import matplotlib.pyplot as plt          # the caller's backend
+        _, axes = plt.subplots(len(units), 1, sharex=True, squeeze=False, figsize=(8, 2.4 * len(units)))
+        axes = list(axes[:, 0])
+    else:
+        axes = list(ax) if isinstance(ax, (list, tuple, np.ndarray)) else [ax]
+        if len(axes) < len(units):
+            raise ValueError(f"plot: {len(units)} units ({units}) need {len(units)} axes, got {len(axes)}")
+    if labels is None:
+        names = [str(r.meta.get("scenario", f"run {i + 1}")) for i, r in enumerate(results)]
+        labels = [f"{n} #{i + 1}" if names.count(n) > 1 else n for i, n in enumerate(names)]
+    for a, u in zip(axes, units):
+        for r, lab in zip(results, labels):
+            for s in signals:
+                if r.units.get(s, "") == u:
+                    name = s if len(results) == 1 else f"{s} ({lab})"
+                    a.plot(r.time_s, r[s], lw=0.9, label=name)
+        a.set_ylabel(f"[{u}]" if u else "[-]")
+        a.grid(True, alpha=0.3)
+        a.legend(fontsize=7)
+    axes[len(units) - 1].set_xlabel("time [s]")
+    return axes[:len(units)]

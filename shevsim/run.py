@@ -1,12 +1,29 @@
-"""run.py - run a scenario end to end: load -> build -> simulate -> metrics -> save."""
+"""run.py - run a scenario end to end: load -> check -> simulate -> judge -> metrics -> save.
+
+:func:`run` is what ``shevsim.simulate`` and ``shevsim run`` call. A run never loses what it
+simulated: a run stopped by a non-finite value, a plant limit, a component or FMU failure, or Ctrl-C
+returns (and saves) the trajectory up to the stop with :attr:`Result.termination` saying why, where
+and when; a metric that cannot be computed is None with a note; the output folder is checked before
+the simulation starts.
+
+Engines: ``engine="python"`` steps the components with :class:`~shevsim.core.master.Master`;
+``"fast"`` uses the compiled fast path (:mod:`shevsim.fast`, when installed and when the scenario is
+eligible, else an error); ``"auto"`` uses the fast path when it can and the master otherwise.
+``res.meta["engine"]`` records which one ran.
+"""
 from __future__ import annotations
 
 import logging
+import math
+import os
 import time
 from pathlib import Path
+from typing import Any, Mapping
 
-from .core.errors import ShevsimError, SimulationError
-from .core.results import Result, git_commit, save_result
+import numpy as np
+
+from .core.errors import ScenarioError, ShevsimError, SimulationError
+from .core.results import Result, Termination, check_out_dir, git_commit, save_result
 from .core.scenario import PROJECT_ROOT, Scenario, build_master, load_scenario, stop_time
 
 log = logging.getLogger(__name__)
@@ -14,21 +31,186 @@ log = logging.getLogger(__name__)
 DEFAULT_SCENARIO = PROJECT_ROOT / "scenarios" / "hd_udds_mpc.toml"
 #: cumulative counters reported in metrics.json as ``component.port``: final value
 COUNTER_SUFFIXES = (".fallback_count", ".clamp_count", ".shed_count", ".shed_time_s")
+ENGINES = ("auto", "python", "fast")
+
+#: a run is refused before it starts when its record would need more than this fraction of the
+#: memory available now, or when it has more than MAX_STEPS communication steps (override:
+#: ``allow_large=True`` / ``--allow-large``)
+MEMORY_FRACTION = 0.5
+MAX_STEPS = 50_000_000
+#: conservative per-step wall time used for the duration estimate in the refusal message (s/step)
+STEP_WALL_S = 2e-5
+
+#: speed-trace check defaults (overridable in the scenario's [metrics] table or with
+#: ``--set metrics.trace_...``): the run is 'degraded' when it covers less than
+#: ``1 - trace_distance_tolerance`` of the cycle's distance, or when the speed error stays above
+#: ``trace_speed_tolerance_kmh`` for longer than ``trace_speed_window_s``; ``trace_allow_miss = true``
+#: turns both into notes
+TRACE_DEFAULTS = {"trace_distance_tolerance": 0.05, "trace_speed_tolerance_kmh": 10.0,
+                  "trace_speed_window_s": 30.0, "trace_allow_miss": False}
 
 
-def simulate(scenario: Scenario, progress: bool = False) -> Result:
-    """Simulate a loaded scenario and return its result (all signals, or the recorded ones)."""
+# --------------------------------------------------------------------------- checks before running
+def available_memory_bytes() -> int | None:
+    """Memory available to a new allocation now (``MemAvailable``; None when unknown)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def run_size(n_steps: int, n_signals: int, record_every: int = 1) -> dict:
+    """Estimate of a run's record (bytes) and wall time (s) from its size."""
+    rows = n_steps // max(1, record_every) + 2
+    # the record buffer, its copy into the result, and a DataFrame when it is saved
+    nbytes = int(rows * (n_signals + 1) * 8 * 3)
+    return {"steps": int(n_steps), "rows": int(rows), "signals": int(n_signals), "record_bytes": nbytes,
+            "wall_s_estimate": n_steps * STEP_WALL_S}
+
+
+def check_run_size(n_steps: int, n_signals: int, record_every: int = 1, *, allow_large: bool = False,
+                   memory_bytes: int | None = None, where: str = "<scenario>") -> dict:
+    """Refuse (ScenarioError) a run far beyond what this machine holds, before it starts."""
+    est = run_size(n_steps, n_signals, record_every)
+    if allow_large:
+        return est
+    avail = available_memory_bytes() if memory_bytes is None else memory_bytes
+    too_big = avail is not None and est["record_bytes"] > MEMORY_FRACTION * avail
+    too_long = n_steps > MAX_STEPS
+    if too_big or too_long:
+        why = []
+        if too_big:
+            why.append(f"its record needs ~{est['record_bytes'] / 1e9:.3g} GB ({est['rows']} points x "
+                       f"{n_signals} signals) but {avail / 1e9:.3g} GB are available")
+        if too_long:
+            why.append(f"{n_steps} communication steps (> {MAX_STEPS}; at least "
+                       f"~{est['wall_s_estimate'] / 3600:.3g} h)")
+        raise ScenarioError(f"{where}: run refused before starting: {'; '.join(why)}. Shorten stop_s, record "
+                            f"less ([record] signals, --record-every N), or override with --allow-large "
+                            f"(allow_large=True)")
+    return est
+
+
+def check_faults_in_run(scenario: Scenario, t_stop: float) -> None:
+    """A fault that would act only at or after the end of the run is an error (it never acts)."""
+    h, t0 = scenario.settings.step_s, scenario.t0_s
+    for i, f in enumerate(scenario.faults):
+        k = max(0, math.ceil((f.at_s - t0) / h - 1e-9 * max(1.0, abs(f.at_s) / h)))
+        if t0 + k * h >= t_stop - 1e-9 * max(1.0, abs(t_stop)):
+            raise ScenarioError(f"{scenario.path or '<scenario>'}: [[faults]] #{i + 1} at_s = {f.at_s} s "
+                                f"({f.component}.{f.port}) is at or after the end of the run ({t_stop:g} s): "
+                                f"it would never act")
+
+
+def _fast_runner(scenario: Scenario, engine: str):
+    """(runner, why): the fast path's runner for ``scenario`` or None with the reason."""
+    if engine not in ENGINES:
+        raise ScenarioError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+    if engine == "python":
+        return None, "engine 'python' requested"
+    try:
+        from .fast import runner_for
+    except ImportError as exc:
+        if engine == "fast":
+            raise ScenarioError(f"engine 'fast': the fast path is not available ({exc})") from None
+        return None, f"no fast path ({exc})"
+    runner, why = runner_for(scenario)
+    if runner is None and engine == "fast":
+        raise ScenarioError(f"engine 'fast': scenario '{scenario.name}' is not eligible for the fast path: {why}")
+    return runner, why
+
+
+def _stop_info(exc: BaseException) -> Termination:
+    if isinstance(exc, KeyboardInterrupt):
+        return Termination("stopped", "interrupted (Ctrl-C)", None, None, getattr(exc, "time_s", None))
+    return Termination("stopped", str(exc), getattr(exc, "component", None), getattr(exc, "port", None),
+                       getattr(exc, "time_s", None))
+
+
+# ------------------------------------------------------------------------------------ simulation
+def simulate(scenario: Scenario, progress: bool = False, *, engine: str = "auto", partial: bool = False,
+             record_every: int = 1, allow_large: bool = False) -> Result:
+    """Simulate a loaded scenario and return its result (all signals, or the recorded ones).
+
+    Parameters
+    ----------
+    scenario : Scenario
+    progress : bool
+        Progress bar on long runs.
+    engine : {'auto', 'python', 'fast'}
+        See the module docstring; ``res.meta["engine"]`` says which ran.
+    partial : bool
+        False (default): a run stopped by a :class:`SimulationError` (or Ctrl-C) raises it, with the
+        trajectory up to the stop attached as ``exc.result``. True: return that trajectory with
+        ``termination`` set (status 'stopped', reason, component, port, time).
+    record_every : int
+        Keep every k-th communication point (and the last).
+    allow_large : bool
+        Run even when the run-size check would refuse it.
+    """
+    if isinstance(record_every, bool) or not isinstance(record_every, int) or record_every < 1:
+        raise ScenarioError(f"record_every must be an integer >= 1, got {record_every!r}")
+    where = str(scenario.path or "<scenario>")
     master = build_master(scenario)
     master.settings.progress = progress
-    t_stop = stop_time(scenario, master)
-    wall = time.perf_counter()
+    master.record_every = record_every
     try:
-        res = master.run(t_stop, t0=scenario.t0_s)
-    finally:
+        t_stop = stop_time(scenario, master)
+        check_faults_in_run(scenario, t_stop)
+        x = (t_stop - scenario.t0_s) / scenario.settings.step_s
+        check_run_size(int(math.ceil(x)), len(master._signal_names), record_every,
+                       allow_large=allow_large, where=where)
+        runner, why = _fast_runner(scenario, engine)
+    except BaseException:
         master.terminate()
-    wall = time.perf_counter() - wall
+        raise
+    wall = time.perf_counter()
+    used = "python"
+    if runner is not None:
+        master.terminate()
+        used = "fast"
+        try:
+            res = runner(t_stop)
+        except (SimulationError, KeyboardInterrupt) as exc:
+            res = getattr(exc, "result", None)
+            if res is None:
+                res = Result(np.zeros(0), {}, {}, {}, _stop_info(exc))
+            res.termination = _stop_info(exc)
+            if not partial:
+                exc.result = res
+                raise
+        if record_every > 1 and len(res.time_s) > 2:
+            keep = np.unique(np.r_[np.arange(0, len(res.time_s), record_every), len(res.time_s) - 1])
+            res.time_s = res.time_s[keep]
+            res.signals = {k: v[keep] for k, v in res.signals.items()}
+    else:
+        try:
+            try:
+                res = master.run(t_stop, t0=scenario.t0_s)
+            except (SimulationError, KeyboardInterrupt) as exc:
+                res = master.result(_stop_info(exc))
+                if isinstance(exc, KeyboardInterrupt):
+                    res.termination = Termination("stopped", "interrupted (Ctrl-C)", None, None, master.time_s)
+                if not partial:
+                    _finish(res, scenario, master, time.perf_counter() - wall, used, why)
+                    exc.result = res
+                    raise
+        finally:
+            master.terminate()
+    _finish(res, scenario, master, time.perf_counter() - wall, used, why)
+    return res
+
+
+def _finish(res: Result, scenario: Scenario, master, wall: float, engine: str, why: str) -> None:
     if scenario.record is not None:
-        missing = [s for s in scenario.record if s not in res.signals]
+        missing = [s for s in scenario.record if s not in res.signals and len(res.signals)]
         if missing:
             raise ShevsimError(f"{scenario.path or '<scenario>'}: [record] unknown signal(s) {missing}")
         keep = set(scenario.record)
@@ -36,52 +218,133 @@ def simulate(scenario: Scenario, progress: bool = False) -> Result:
         res.units = {k: v for k, v in res.units.items() if k in keep}
     res.meta.update({"scenario": scenario.name, "seed": scenario.seed, "wall_s": wall,
                      "step_s": scenario.settings.step_s, "method": scenario.settings.method,
-                     "order": master.order, "resolved_scenario": scenario.resolved()})
-    return res
+                     "order": master.order, "engine": engine,
+                     "metrics_options": dict(scenario.metrics),
+                     "resolved_scenario": scenario.resolved()})
+    if engine != "fast":
+        res.meta["fast_path"] = why
 
 
-def compute_run_metrics(res: Result, scenario: Scenario) -> dict:
-    """Scenario metrics (SHEV metrics when the SHEV signals are present)."""
-    try:
-        from .metrics import compute_metrics
-    except ImportError:  # pragma: no cover
-        return {}
-    out = {}
-    # robustness counters every run reports (QP fallbacks, power demands clamped by the battery,
-    # generator load shedding): final value of every recorded counter; fallbacks and clamping logged
+# --------------------------------------------------------------------------------- judging a run
+def trace_check(res: Result, options: Mapping[str, Any] | None = None) -> Termination | None:
+    """A 'degraded' termination when a completed run missed its speed trace beyond tolerance
+    (distance shortfall or a sustained speed error), else None. Needs ``vehicle.speed_mps`` and
+    ``cycle.speed_ref_mps``; see :data:`TRACE_DEFAULTS` for the options."""
+    opts = {**TRACE_DEFAULTS, **{k: v for k, v in dict(options or {}).items() if k in TRACE_DEFAULTS}}
+    if opts["trace_allow_miss"] is True or "vehicle.speed_mps" not in res.signals \
+            or "cycle.speed_ref_mps" not in res.signals or len(res.time_s) < 2:
+        return None
+    t = np.asarray(res.time_s, float)
+    v = np.asarray(res["vehicle.speed_mps"], float)
+    ref = np.asarray(res["cycle.speed_ref_mps"], float)
+    dt = np.diff(t)
+    d_ref = float(np.sum(0.5 * (ref[1:] + ref[:-1]) * dt))
+    d_veh = float(np.sum(0.5 * (v[1:] + v[:-1]) * dt))
+    tol = float(opts["trace_distance_tolerance"])
+    if d_ref > 0 and d_veh < (1.0 - tol) * d_ref:
+        return Termination("degraded", f"trace miss: the vehicle covered {d_veh / 1000:.4g} km of the cycle's "
+                           f"{d_ref / 1000:.4g} km (shortfall {100 * (1 - d_veh / d_ref):.3g} % > "
+                           f"{100 * tol:.3g} % tolerance; [metrics] trace_distance_tolerance / trace_allow_miss)",
+                           "vehicle", "speed_mps", None)
+    err = np.abs(v - ref) * 3.6 > float(opts["trace_speed_tolerance_kmh"])
+    window = float(opts["trace_speed_window_s"])
+    if np.any(err):
+        # longest run of consecutive samples with the error above tolerance
+        edges = np.diff(np.r_[0, err.astype(np.int8), 0])
+        starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]
+        lengths = t[np.minimum(ends, len(t) - 1)] - t[starts]
+        i = int(np.argmax(lengths))
+        if lengths[i] > window:
+            return Termination("degraded", f"trace miss: speed error above {opts['trace_speed_tolerance_kmh']:g} "
+                               f"km/h for {lengths[i]:.4g} s from t={t[starts[i]]:.6g} s (> {window:g} s; "
+                               f"[metrics] trace_speed_tolerance_kmh / trace_speed_window_s / trace_allow_miss)",
+                               "vehicle", "speed_mps", float(t[starts[i]]))
+    return None
+
+
+def compute_run_metrics(res: Result, scenario: Scenario | None = None) -> dict:
+    """Scenario metrics (SHEV metrics when the SHEV signals are present). Never raises: a metric
+    that cannot be computed is None and ``notes`` says why."""
+    from .metrics import result_metrics
+    opts = dict(scenario.metrics) if scenario is not None else None
+    out = result_metrics(res, opts)
     for name, values in res.signals.items():
-        if name.endswith(COUNTER_SUFFIXES) and len(values):
-            out[name] = float(values[-1])
-            if values[-1] > 0 and name.endswith((".fallback_count", ".clamp_count")):   # anomalies, not operation
-                log.warning("%s: %s = %g at the end of the run", scenario.name, name, values[-1])
-    if "vehicle.speed_mps" not in res.signals:
-        return out
-    out.update(compute_metrics(res.to_pandas(), {"scenario": scenario.metrics, "parameters": res.parameters}))
+        if name.endswith((".fallback_count", ".clamp_count")) and len(values) and values[-1] > 0:
+            log.warning("%s: %s = %g at the end of the run", res.meta.get("scenario", ""), name, values[-1])
     return out
 
 
-def run_scenario(path: str | Path | None = None, out: str | Path | None = None, sets=(), progress: bool = False,
-                 plots: bool = True, save: bool = True, overlays=()) -> tuple[Result, dict, Path | None]:
-    """Run a scenario file; save under ``out`` (default ``results/<name>/``); ``overlays`` are
-    ``COMPONENT=FILE`` parameter overlays (``--params``)."""
-    scenario = load_scenario(path or DEFAULT_SCENARIO, sets, overlays=overlays)
-    res = simulate(scenario, progress=progress)
-    metrics = compute_run_metrics(res, scenario)
-    metrics["wall_s"] = res.meta["wall_s"]
+# ----------------------------------------------------------------------------- the one pipeline
+def _as_scenario(scenario, sets=(), overlays=()) -> Scenario:
+    if isinstance(scenario, Scenario):
+        if sets or overlays:
+            raise ScenarioError("sets/overlays apply when loading a scenario; use overrides= for a Scenario object")
+        return scenario.copy()
+    if scenario is None:
+        scenario = DEFAULT_SCENARIO
+    if not isinstance(scenario, (str, Path)):
+        raise ScenarioError(f"scenario must be a bundled name, a path or a Scenario, got {type(scenario).__name__}")
+    return load_scenario(scenario, list(sets), overlays=list(overlays))
+
+
+def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, Any] | None = None, *,
+        stop_s: float | None = None, out: str | Path | None = None, engine: str = "auto",
+        sets=(), overlays=(), record: list[str] | None = None, record_every: int = 1,
+        plots: bool = False, progress: bool = False, allow_large: bool = False, save: bool | None = None,
+        scenario_text: str | None = None) -> Result:
+    """Load, check, simulate, judge, compute metrics and (when ``out``) save one run.
+
+    Stopped runs are returned (and saved) with their termination; they do not raise.
+    ``res.meta["out"]`` is the folder written (when saved).
+    """
+    sc = _as_scenario(scenario, sets, overlays)
+    for k, v in dict(overrides or {}).items():
+        sc.set(k, v, f"overrides['{k}']")
+    if stop_s is not None:
+        sc.set("scenario.stop_s", stop_s, "stop_s=")
+    if record is not None:
+        sc.set("record.signals", list(record), "record=")
     out_dir = None
+    if save is None:
+        save = out is not None
     if save:
-        out_dir = Path(out) if out else Path("results") / scenario.name
+        out_dir = check_out_dir(Path(out) if out else Path("results") / sc.name)   # before running
+    res = simulate(sc, progress=progress, engine=engine, partial=True, record_every=record_every,
+                   allow_large=allow_large)
+    if res.termination.ok:
+        degraded = trace_check(res, sc.metrics)
+        if degraded is not None:
+            res.termination = degraded
+    res.metrics = compute_run_metrics(res, sc)
+    res.metrics["wall_s"] = res.meta["wall_s"]
+    if scenario_text is None:
+        scenario_text = sc.text or sc.to_toml()
+        if sc.overlays:
+            scenario_text = "".join(f"# run with --params {o}\n" for o in sc.overlays) + scenario_text
+        if sc.sets:   # the scenario as run: the command-line overrides on top of the file
+            scenario_text = "".join(f"# run with --set {s}\n" for s in sc.sets) + scenario_text
+        if overrides:
+            scenario_text = "".join(f"# run with overrides[{k!r}] = {v!r}\n"
+                                    for k, v in dict(overrides).items()) + scenario_text
+    res.meta["scenario_text"] = scenario_text
+    res.meta["sets"] = list(sc.sets)
+    res.meta["overlays"] = list(sc.overlays)
+    if save:
+        res.meta["git_commit"] = git_commit()
         plot_fn = None
         if plots:
             from .plotting import scenario_plots
             plot_fn = scenario_plots
-        res.meta["git_commit"] = git_commit()
-        res.meta["sets"] = list(scenario.sets)
-        res.meta["overlays"] = list(scenario.overlays)
-        text = scenario.text
-        if scenario.overlays:
-            text = "".join(f"# run with --params {o}\n" for o in scenario.overlays) + text
-        if scenario.sets:   # the scenario as run: the command-line overrides on top of the file
-            text = "".join(f"# run with --set {s}\n" for s in scenario.sets) + text
-        save_result(res, out_dir, scenario_text=text, metrics=metrics, plots=plot_fn)
-    return res, metrics, out_dir
+        save_result(res, out_dir, scenario_text=scenario_text, metrics=res.metrics, plots=plot_fn)
+        res.meta["out"] = str(out_dir)
+    return res
+
+
+def run_scenario(path: str | Path | None = None, out: str | Path | None = None, sets=(), progress: bool = False,
+                 plots: bool = True, save: bool = True, overlays=(), **kw) -> tuple[Result, dict, Path | None]:
+    """Run a scenario file; save under ``out`` (default ``results/<name>/``); ``overlays`` are
+    ``COMPONENT=FILE`` parameter overlays (``--params``). Returns ``(result, metrics, folder)``;
+    keyword arguments go to :func:`run` (``engine``, ``record_every``, ``allow_large``...)."""
+    res = run(path, out=out, sets=sets, overlays=overlays, progress=progress, plots=plots, save=save, **kw)
+    out_dir = Path(res.meta["out"]) if "out" in res.meta else None
+    return res, res.metrics, out_dir

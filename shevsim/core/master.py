@@ -160,6 +160,8 @@ class Master:
         self._forced: dict[tuple[str, str], float] = {}
         self._faults_done = 0
         self._initialized = False
+        #: keep every k-th communication point in the record (the last one always); 1 keeps all
+        self.record_every = 1
 
     # ------------------------------------------------------------------ checks
     def _port(self, comp: str, port: str, want: str, ctx: str):
@@ -302,9 +304,11 @@ class Master:
             self._apply_forced(comp)
             try:
                 comp.initialize(self.t0)
+            except SimulationError as exc:
+                raise _where(exc, comp.name, None, self.t0)
             except Exception as exc:
-                raise SimulationError(f"component '{comp.name}' failed to initialise at t={self.t0:.6g} s: "
-                                      f"{type(exc).__name__}: {exc}") from exc
+                raise _where(SimulationError(f"component '{comp.name}' failed to initialise at t={self.t0:.6g} s: "
+                                             f"{type(exc).__name__}: {exc}"), comp.name, None, self.t0) from exc
         self._buf = array("d")
         self._times = []
         self._record()
@@ -359,8 +363,9 @@ class Master:
                 ok = False
             if not ok:
                 comp, port = name.split(".", 1)
-                raise SimulationError(f"component '{comp}' output '{port}' is {val!r} at t={self.time_s:.6g} s "
-                                      f"(step {self.step_index})")
+                raise _where(SimulationError(f"component '{comp}' output '{port}' is {val!r} at "
+                                             f"t={self.time_s:.6g} s (step {self.step_index})"),
+                             comp, port, self.time_s)
 
     def step(self) -> None:
         """Advance the whole system by one communication step."""
@@ -386,23 +391,39 @@ class Master:
                         for du, dk, sy, sk in links:
                             du[dk] = sy[sk]
                         comp.do_step(t, m * h)
-            except SimulationError:
-                raise
+            except SimulationError as exc:
+                raise _where(exc, comp.name, None, t)
             except Exception as exc:      # same message as _do_step
-                raise SimulationError(f"component '{comp.name}' failed in do_step at t={t:.6g} s "
-                                      f"(step {self.step_index}): {type(exc).__name__}: {exc}") from exc
+                raise _where(SimulationError(f"component '{comp.name}' failed in do_step at t={t:.6g} s "
+                                             f"(step {self.step_index}): {type(exc).__name__}: {exc}"),
+                             comp.name, None, t) from exc
         self.step_index = k + 1
         self.time_s = self.t0 + self.step_index * h
-        self._record()
+        if self.record_every == 1 or self.step_index % self.record_every == 0:
+            self._record()
+        else:                             # decimated: not kept, still checked for non-finite outputs
+            self._check_only()
+
+    def _check_only(self) -> None:
+        """Check a step that decimated recording does not keep (non-finite outputs stop the run)."""
+        s = 0.0
+        try:
+            for y, get in self._rec:
+                s += sum(get(y))
+        except (TypeError, OverflowError):
+            s = math.nan
+        if not math.isfinite(s):
+            self._check_row([y[k] for y, k in self._signal_src])
 
     def _do_step(self, comp, t: float, h: float) -> None:
         try:
             comp.do_step(t, h)
-        except SimulationError:
-            raise
+        except SimulationError as exc:
+            raise _where(exc, comp.name, None, t)
         except Exception as exc:
-            raise SimulationError(f"component '{comp.name}' failed in do_step at t={t:.6g} s "
-                                  f"(step {self.step_index}): {type(exc).__name__}: {exc}") from exc
+            raise _where(SimulationError(f"component '{comp.name}' failed in do_step at t={t:.6g} s "
+                                         f"(step {self.step_index}): {type(exc).__name__}: {exc}"),
+                         comp.name, None, t) from exc
 
     def run(self, stop_s: float, t0: float = 0.0) -> Result:
         """Initialise (if needed) and step until ``stop_s``; return the result."""
@@ -438,7 +459,9 @@ class Master:
         finally:
             if bar is not None:
                 bar.close()
-        self.wall_s = _time.perf_counter() - wall
+            self.wall_s = _time.perf_counter() - wall
+        if self.record_every > 1 and (not self._times or self._times[-1] != self.time_s):
+            self._record()                # a decimated record still ends at the stop time
         return self.result(termination)
 
     def result(self, termination: str = "completed") -> Result:
@@ -523,6 +546,17 @@ class Master:
         if unconnected:
             lines.append("unconnected inputs (held at start value): " + ", ".join(unconnected))
         return "\n".join(lines)
+
+
+def _where(exc: SimulationError, component: str | None, port: str | None, time_s: float | None):
+    """Attach where a run stopped (``component``, ``port``, ``time_s``) to ``exc`` unless it already says."""
+    if getattr(exc, "component", None) is None:
+        exc.component = component
+    if getattr(exc, "port", None) is None:
+        exc.port = port
+    if getattr(exc, "time_s", None) is None:
+        exc.time_s = None if time_s is None else float(time_s)
+    return exc
 
 
 def _port_hint(name: str, vs: dict) -> str:

@@ -21,6 +21,66 @@ from .atomic import write_json_atomic  # the one atomic JSON writer (re-exported
 from .errors import ShevsimError
 
 
+class Termination(str):
+    """Why a run ended: a string (``"completed"``, ``"stopped: <reason>"``, ``"degraded: <reason>"``)
+    that also carries the details as attributes.
+
+    Attributes
+    ----------
+    status : {'completed', 'stopped', 'degraded'}
+        ``stopped``: the run ended before its stop time (non-finite value, plant limit, component or
+        FMU failure, interruption) and the result holds what was simulated up to then;
+        ``degraded``: the run reached its stop time but did not do what the scenario asked (trace miss).
+    reason : str
+        The error message or the failed check ('' when completed).
+    component, port : str or None
+        Where it happened, when known.
+    time_s : float or None
+        Simulation time of the stop, when known.
+    """
+
+    STATUSES = ("completed", "stopped", "degraded")
+
+    def __new__(cls, status: str = "completed", reason: str = "", component: str | None = None,
+                port: str | None = None, time_s: float | None = None):
+        if status not in cls.STATUSES:
+            raise ValueError(f"termination status must be one of {cls.STATUSES}, got {status!r}")
+        obj = super().__new__(cls, status if not reason else f"{status}: {reason}")
+        obj.status, obj.reason, obj.component, obj.port = status, str(reason), component, port
+        obj.time_s = None if time_s is None else float(time_s)
+        return obj
+
+    def __reduce__(self):
+        return (Termination, (self.status, self.reason, self.component, self.port, self.time_s))
+
+    @property
+    def ok(self) -> bool:
+        """True when the run completed."""
+        return self.status == "completed"
+
+    def to_dict(self) -> dict:
+        """Plain-dict form (saved in ``run.json`` as ``termination_detail``)."""
+        return {"status": self.status, "reason": self.reason, "component": self.component,
+                "port": self.port, "time_s": self.time_s}
+
+    @classmethod
+    def coerce(cls, value: Any, detail: dict | None = None) -> "Termination":
+        """A :class:`Termination` from itself, a detail dict or an old-style string
+        (``"completed"``, ``"error: ..."``)."""
+        if isinstance(value, Termination):
+            return value
+        if isinstance(detail, dict) and detail.get("status") in cls.STATUSES:
+            return cls(detail["status"], detail.get("reason") or "", detail.get("component"),
+                       detail.get("port"), detail.get("time_s"))
+        text = str(value)
+        if text == "completed":
+            return cls()
+        for st in ("stopped", "degraded"):
+            if text.startswith(st + ": "):
+                return cls(st, text[len(st) + 2:])
+        return cls("stopped", text[7:] if text.startswith("error: ") else text)
+
+
 @dataclass
 class Result:
     """Time plus named signals of one run.
@@ -32,20 +92,26 @@ class Result:
     signals : dict of str -> ndarray
         ``'component.port'`` -> values at each communication point.
     units : dict of str -> str
+        ``'component.port'`` -> unit string (``'m/s'``, ``'W'``, ``'%'``).
     parameters : dict
         Component name -> parameter values used.
-    termination : str
-        Why the run ended (``'completed'`` or the error).
+    termination : Termination
+        Why the run ended: compares equal to ``'completed'`` when it did; otherwise
+        ``.status`` ('stopped' / 'degraded'), ``.reason``, ``.component``, ``.port``, ``.time_s``.
     meta : dict
-        Scenario name, seed, version, git commit, wall time...
+        Scenario name, seed, version, git commit, wall time, engine...
     """
 
     time_s: np.ndarray
     signals: dict[str, np.ndarray]
     units: dict[str, str]
     parameters: dict[str, Any]
-    termination: str = "completed"
+    termination: Termination | str = "completed"
     meta: dict[str, Any] = field(default_factory=dict)
+    _metrics: dict | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self):
+        self.termination = Termination.coerce(self.termination)
 
     def __getitem__(self, name: str) -> np.ndarray:
         try:
@@ -58,26 +124,68 @@ class Result:
     def __contains__(self, name: str) -> bool:
         return name in self.signals
 
+    def __len__(self) -> int:
+        return len(self.time_s)
+
     def to_pandas(self, signals: list[str] | None = None):
-        """DataFrame with ``time_s`` and one column per signal (``component.port``)."""
+        """DataFrame with ``time_s`` and one column per signal (``component.port``).
+
+        The unit of every column is in ``df.attrs["units"]`` (``{"time_s": "s", ...}``).
+        """
         import pandas as pd
-        names = list(self.signals) if signals is None else signals
+        names = list(self.signals) if signals is None else list(signals)
         data = {"time_s": self.time_s}
         for n in names:
             data[n] = self[n]
-        return pd.DataFrame(data)
+        df = pd.DataFrame(data)
+        df.attrs["units"] = {"time_s": "s", **{n: self.units.get(n, "") for n in names}}
+        return df
 
-    def plot(self, signals: list[str], ax=None):
-        """Plot signals against time; returns the matplotlib axes."""
-        import matplotlib.pyplot as plt      # the caller's backend (headless: Agg by default)
-        if ax is None:
-            _, ax = plt.subplots(figsize=(8, 3))
-        for n in signals:
-            ax.plot(self.time_s, self[n], label=f"{n} [{self.units.get(n, '')}]")
-        ax.set_xlabel("time [s]")
-        ax.legend(fontsize=7)
-        ax.grid(True, alpha=0.3)
-        return ax
+    @property
+    def metrics(self) -> dict:
+        """Scenario metrics (:func:`shevsim.metrics.compute_metrics`; a metric that cannot be
+        computed is None and explained in ``metrics["notes"]``). Computed on first access."""
+        if self._metrics is None:
+            from ..metrics import result_metrics
+            self._metrics = result_metrics(self)
+        return self._metrics
+
+    @metrics.setter
+    def metrics(self, value: dict) -> None:
+        self._metrics = dict(value)
+
+    def plot(self, signals: list[str] | str | None = None, ax=None):
+        """Plot signals against time, one axis per unit.
+
+        Parameters
+        ----------
+        signals : list of str, optional
+            ``component.port`` names (default: the first six signals).
+        ax : matplotlib Axes or sequence of Axes, optional
+            Where to draw (one per unit); new figure when omitted.
+
+        Returns
+        -------
+        list of matplotlib Axes
+            One per unit, in order of first appearance.
+        """
+        from ..plotting import plot_signals
+        if isinstance(signals, str):
+            signals = [signals]
+        return plot_signals([self], list(signals) if signals is not None else list(self.signals)[:6], ax=ax)
+
+    def save(self, out_dir: str | Path, *, plots: bool = False, fmt: str = "parquet") -> Path:
+        """Save the run (timeseries with units, ``run.json``, ``metrics.json``) to ``out_dir``.
+
+        Only the files shevsim writes are replaced in an earlier result folder; a folder holding
+        other files and no ``run.json`` is refused.
+        """
+        plot_fn = None
+        if plots:
+            from ..plotting import scenario_plots
+            plot_fn = scenario_plots
+        return save_result(self, out_dir, scenario_text=self.meta.get("scenario_text"), metrics=self.metrics,
+                           plots=plot_fn, fmt=fmt)
 
 
 def git_commit(path: Path | None = None) -> str:
@@ -95,59 +203,186 @@ def git_commit(path: Path | None = None) -> str:
 
 
 
-def save_result(result: Result, out_dir: str | Path, *, scenario_text: str | None = None,
-                metrics: dict | None = None, plots=None, fmt: str = "parquet") -> Path:
-    """Write a run to ``out_dir`` atomically.
+#: files a run writes into its folder (older results have no manifest in run.json: these are taken as ours)
+_OWN_FILES = ("timeseries.parquet", "timeseries.csv", "run.json", "metrics.json", "scenario.toml", "overview.png")
 
-    Everything is written into a temporary sibling folder which then replaces
-    ``out_dir`` in one rename, so a crash never leaves a half-written result.
-    ``plots`` is an optional callable ``plots(result, folder)`` that writes figures.
+
+def check_out_dir(out_dir: str | Path) -> Path:
+    """Check, before anything runs, that ``out_dir`` can take a result; return it.
+
+    Refused with :class:`ShevsimError`: an existing file (or anything that is not a folder), a folder
+    that holds files but no ``run.json`` (not a shevsim result: nothing a user wrote is touched), a
+    place that cannot be created or written.
     """
     out_dir = Path(out_dir)
-    # the folder is replaced as a whole: never a file, nor a folder that holds something else
     if out_dir.exists() or out_dir.is_symlink():
         if not out_dir.is_dir():
-            raise ShevsimError(f"output folder '{out_dir}' exists and is not a folder: not replaced")
-        if any(out_dir.iterdir()) and not (out_dir / "run.json").is_file():
+            raise ShevsimError(f"output folder '{out_dir}' exists and is not a folder: not replaced; "
+                               f"choose another --out")
+        if not (out_dir / "run.json").is_file() and any(
+                not p.name.startswith(f".{out_dir.name}.") for p in out_dir.iterdir()):
             raise ShevsimError(f"output folder '{out_dir}' is not empty and not a shevsim result "
                                f"(no run.json): not replaced; choose another --out")
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.tmp-"))
+    parent = out_dir.absolute().parent
+    probe = parent
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ShevsimError(f"output folder '{out_dir}': '{probe}' is a file, so the folder cannot be created")
+    try:                                 # a real write test (permission bits lie for root and on some mounts)
+        parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=parent, prefix=f".{out_dir.name}.probe-")
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as exc:
+        raise ShevsimError(f"output folder '{out_dir}' is not writable: {exc.strerror or exc}") from None
+    return out_dir
+
+
+def _pid_alive(pid: int) -> bool:
     try:
-        df = result.to_pandas()
-        if fmt == "parquet":
-            try:
-                df.to_parquet(tmp / "timeseries.parquet", index=False)
-            except ImportError:
-                fmt = "csv"
-        if fmt == "csv":
-            df.to_csv(tmp / "timeseries.csv", index=False, float_format="%.9g")
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    return True
+
+
+def clean_stale_temp(out_dir: str | Path) -> list[Path]:
+    """Remove the temporary folders that killed runs left beside ``out_dir``
+    (``.NAME.tmp-p<pid>-*`` of a process that no longer runs; older unnamed ones after an hour)."""
+    import re
+    import time as _t
+    out_dir = Path(out_dir)
+    parent = out_dir.parent
+    removed = []
+    if not parent.is_dir():
+        return removed
+    pat = re.compile(rf"^\.{re.escape(out_dir.name)}\.(?:tmp-p(\d+)-[^/]+|old-(\d+)|tmp-[a-z0-9_]{{8}})$")
+    for p in parent.iterdir():
+        m = pat.match(p.name)
+        if not m or not p.is_dir() or p.is_symlink():
+            continue
+        pid = m.group(1) or m.group(2)
+        stale = (not _pid_alive(int(pid))) if pid else (_t.time() - p.stat().st_mtime > 3600)
+        if stale:
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+    return removed
+
+
+def write_timeseries(result: Result, folder: Path, fmt: str = "parquet") -> str:
+    """Write ``timeseries.parquet`` (units as field metadata ``unit`` and schema metadata
+    ``shevsim.units``) or ``timeseries.csv``; return the file name."""
+    df = result.to_pandas()
+    units = {"time_s": "s", **{k: result.units.get(k, "") for k in result.signals}}
+    if fmt == "parquet":
+        try:
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+        except ImportError:
+            fmt = "csv"
+        else:
+            table = pa.Table.from_pandas(df, preserve_index=False)
+            fields = [f.with_metadata({"unit": units.get(f.name, "")}) for f in table.schema]
+            schema = pa.schema(fields, metadata={"shevsim.units": json.dumps(units),
+                                                 "shevsim.termination": str(result.termination)})
+            pq.write_table(table.cast(schema), folder / "timeseries.parquet")
+            return "timeseries.parquet"
+    df.to_csv(folder / "timeseries.csv", index=False, float_format="%.9g")
+    return "timeseries.csv"
+
+
+def save_result(result: Result, out_dir: str | Path, *, scenario_text: str | None = None,
+                metrics: dict | None = None, plots=None, fmt: str = "parquet") -> Path:
+    """Write a run to ``out_dir``.
+
+    Everything is written into a temporary sibling folder first (the trajectory before anything
+    else), then moved into place: a new folder in one rename; an earlier result folder file by file,
+    replacing only the files shevsim wrote there (listed in its ``run.json``) - files a user added
+    are kept. ``plots`` is an optional callable ``plots(result, folder)`` that writes figures; when it
+    fails, the run is saved without them and the error is raised afterwards (with a note).
+    """
+    out_dir = check_out_dir(out_dir)
+    clean_stale_temp(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.tmp-p{os.getpid()}-"))
+    plot_error = None
+    try:
+        ts = write_timeseries(result, tmp, fmt)          # the trajectory first
         from .. import __version__
         meta = dict(result.meta)
-        meta.update({"termination": result.termination, "version": __version__,
+        meta.pop("scenario_text", None)
+        term = Termination.coerce(result.termination)
+        meta.update({"termination": str(term), "termination_detail": term.to_dict(), "version": __version__,
                      "git_commit": meta.get("git_commit") or git_commit(),
                      "units": {"time_s": "s", **result.units}, "parameters": result.parameters,
-                     "timeseries": f"timeseries.{fmt}"})
+                     "timeseries": ts})
+        files = [ts, "run.json", "metrics.json"]
+        meta["files"] = files
         write_json_atomic(tmp / "run.json", meta)
         write_json_atomic(tmp / "metrics.json", metrics or {})
         if scenario_text is not None:
             (tmp / "scenario.toml").write_text(scenario_text)
+            files.append("scenario.toml")
         if plots is not None:
-            plots(result, tmp)
+            before = set(os.listdir(tmp))
+            try:
+                plots(result, tmp)
+            except Exception as exc:    # noqa: BLE001 - the run is saved without figures, then the error raised
+                plot_error = exc
+                for name in set(os.listdir(tmp)) - before:      # half-written figures are dropped
+                    q = tmp / name
+                    shutil.rmtree(q) if q.is_dir() else q.unlink()
+                meta["plot_error"] = f"{type(exc).__name__}: {exc}"
+        files[:] = sorted(set(os.listdir(tmp)))
+        meta["files"] = files
+        write_json_atomic(tmp / "run.json", meta)
         umask = os.umask(0)                  # mkdtemp made the folder 0700: give it the usual permissions
         os.umask(umask)
         os.chmod(tmp, 0o777 & ~umask)
-        old = None
-        if out_dir.exists():
-            old = out_dir.with_name(f".{out_dir.name}.old-{os.getpid()}")
-            os.replace(out_dir, old)
-        os.replace(tmp, out_dir)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        _publish(tmp, out_dir, files)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    if plot_error is not None:
+        plot_error.add_note(f"the run was saved in {out_dir} without figures")
+        raise plot_error
     return out_dir
+
+
+def _publish(tmp: Path, out_dir: Path, files: list[str]) -> None:
+    """Move the files of ``tmp`` into ``out_dir``; remove only files an earlier run wrote there."""
+    if not out_dir.exists():
+        os.replace(tmp, out_dir)
+        return
+    old_run = out_dir / "run.json"
+    old_files = list(_OWN_FILES)
+    if old_run.is_file():
+        try:
+            listed = json.loads(old_run.read_text()).get("files")
+            if isinstance(listed, list):
+                old_files = [f for f in listed if isinstance(f, str)]
+        except (OSError, ValueError):
+            pass
+    for name in [f for f in files if f != "run.json"] + ["run.json"]:   # run.json last: it lists the others
+        dst = out_dir / name
+        if (tmp / name).is_dir():
+            if dst.is_dir() and name in old_files:
+                shutil.rmtree(dst)
+            elif dst.exists():
+                continue
+        os.replace(tmp / name, dst)
+    for name in set(old_files) - set(files):
+        if "/" in name or "\\" in name or name.startswith("."):
+            continue
+        q = out_dir / name
+        if q.is_file() and not q.is_symlink():
+            q.unlink()
+        elif q.is_dir() and not q.is_symlink():
+            shutil.rmtree(q, ignore_errors=True)
+    shutil.rmtree(tmp, ignore_errors=True)
 
 
 def load_result(out_dir: str | Path) -> Result:
@@ -160,5 +395,11 @@ def load_result(out_dir: str | Path) -> Result:
     t = df.pop("time_s").to_numpy()
     units = meta.pop("units")
     units.pop("time_s", None)
-    return Result(t, {c: df[c].to_numpy() for c in df.columns}, units, meta.pop("parameters"),
-                  meta.pop("termination"), meta)
+    detail = meta.pop("termination_detail", None)
+    term = Termination.coerce(meta.pop("termination"), detail)
+    meta.pop("files", None)
+    res = Result(t, {c: df[c].to_numpy() for c in df.columns}, units, meta.pop("parameters"), term, meta)
+    mpath = out_dir / "metrics.json"
+    if mpath.is_file():
+        res.metrics = json.loads(mpath.read_text())
+    return res

@@ -112,6 +112,9 @@ class ComponentSpec:
     fmu: Path | None = None
     mapping: dict[str, str] = field(default_factory=dict)
     replaces: str | None = None
+    #: where an override came from when it was not the scenario file (``--set 'x.y=1'``,
+    #: ``overrides['x.y']``): errors name that instead of the parameter file
+    origins: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -134,6 +137,91 @@ class Scenario:
     order: list[str] | None = None
     sets: list[str] = field(default_factory=list)     # command-line ``component.param=value`` overrides
     overlays: list[str] = field(default_factory=list)  # command-line ``--params COMPONENT=FILE`` overlays
+
+    # ----------------------------------------------------------- inspect / change in Python
+    def component(self, name: str) -> ComponentSpec:
+        """The spec of component ``name`` (its ``overrides`` dict can be changed before running)."""
+        for c in self.components:
+            if c.name == name:
+                return c
+        names = [c.name for c in self.components]
+        raise ScenarioError(f"scenario '{self.name}': unknown component '{name}'{_hint(name, names)}")
+
+    @property
+    def component_names(self) -> list[str]:
+        """Names of the components, in declaration order."""
+        return [c.name for c in self.components]
+
+    def set(self, key: str, value: Any, origin: str | None = None) -> "Scenario":
+        """Override one value (typed): ``"component.param"``, ``"scenario.step_s"`` (any [scenario]
+        field: name, description, step_s, stop_s, t0_s, method, seed, order), ``"record.signals"``
+        or ``"metrics.<option>"``. ``origin`` names the override in error messages. Returns self."""
+        apply_override(self, key, value, origin or f"override '{key}'")
+        return self
+
+    def update(self, overrides: dict[str, Any] | None = None, **kw) -> "Scenario":
+        """Apply several overrides (``{"vehicle.mass_kg": 18000.0, "scenario.stop_s": 60.0}``)."""
+        for k, v in {**(overrides or {}), **kw}.items():
+            self.set(k, v, f"overrides['{k}']")
+        return self
+
+    def add_component(self, name: str, type: str, params: str | Path | None = None, *,
+                      set: dict[str, Any] | None = None, start: dict[str, float] | None = None,
+                      step_multiple: int = 1) -> "Scenario":
+        """Add a component by registry ``type`` (``params``: a parameter file, a bundled one by its
+        path relative to the data root such as ``"components/vehicle/matv.toml"``). Returns self."""
+        _check_component_name(name, f"scenario '{self.name}'")
+        if name in self.component_names:
+            raise ScenarioError(f"scenario '{self.name}': component '{name}' already exists")
+        if isinstance(step_multiple, bool) or not isinstance(step_multiple, int) or step_multiple < 1:
+            raise ScenarioError(f"component '{name}': step_multiple must be an integer >= 1, got {step_multiple!r}")
+        pf = None
+        if params is not None:
+            pf = resolve_path(str(params), self.path)
+            if not pf.is_file():
+                raise ScenarioError(f"component '{name}': parameter file '{params}' not found")
+        self.components.append(ComponentSpec(name, str(type), pf, {}, dict(start or {}), step_multiple))
+        for k, v in (set or {}).items():
+            self.set(f"{name}.{k}", v, f"add_component('{name}', set={{'{k}': ...}})")
+        self.text = ""
+        return self
+
+    def connect(self, dst: str, src: str) -> "Scenario":
+        """Connect input ``dst`` ("component.port") to output ``src`` ("component.port"). Returns self."""
+        try:
+            c = Connection.parse(dst, src)
+        except ShevsimError as exc:
+            raise ScenarioError(f"scenario '{self.name}': {exc}") from None
+        for end in (c.src, c.dst):
+            if end not in self.component_names:
+                raise ScenarioError(f"scenario '{self.name}': connection '{dst}' = '{src}': unknown component "
+                                    f"'{end}'{_hint(end, self.component_names)}")
+        self.connections.append(c)
+        self.text = ""
+        return self
+
+    def add_fault(self, at_s: float, port: str, value: float) -> "Scenario":
+        """From ``at_s`` on, force input ``port`` ("component.port") to ``value``. Returns self."""
+        if "." not in port:
+            raise ScenarioError(f"fault: port must be 'component.port', got {port!r}")
+        comp, pname = port.split(".", 1)
+        self.component(comp)
+        if isinstance(at_s, bool) or not isinstance(at_s, (int, float)) or not math.isfinite(at_s):
+            raise ScenarioError(f"fault '{port}': at_s must be a finite number, got {at_s!r}")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ScenarioError(f"fault '{port}': value must be a number, got {value!r}")
+        self.faults.append(Fault(float(at_s), comp, pname, float(value)))
+        self.text = ""
+        return self
+
+    def copy(self) -> "Scenario":
+        """An independent copy (change it without touching this one)."""
+        import copy
+        return copy.deepcopy(self)
+
+    def to_toml(self) -> str:
+        """The scenario as TOML text (what ``scenario.toml`` in a result folder holds)."""
+        return scenario_to_toml(self)
 
     def resolved(self) -> dict:
         """A plain-dict view of what will run (saved with results)."""
@@ -194,6 +282,7 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
     specs: list[ComponentSpec] = []
     for cname, cd in comps_doc.items():
         w = f"{where}: [components.{cname}]"
+        _check_component_name(cname, w)
         _check_keys(cd, _COMP, w)
         if "type" not in cd:
             raise ScenarioError(f"{w}: missing field 'type'")
@@ -251,15 +340,6 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
                 next(c for c in specs if c.name == cname).overrides.update(vals)
         except ScenarioError as exc:
             raise ScenarioError(f"--params '{item}': {exc}") from None
-    for s in sets:
-        if "=" not in s or "." not in s.split("=", 1)[0]:
-            raise ScenarioError(f"--set '{s}': expected component.param=value")
-        key, val = s.split("=", 1)
-        cname, pname = key.strip().split(".", 1)
-        if cname not in names:
-            raise ScenarioError(f"--set '{s}': unknown component '{cname}'{_hint(cname, names)}")
-        # a relative *_file path given on the command line is relative to the working directory
-        next(c for c in specs if c.name == cname).overrides[pname] = _file_value(pname, parse_value(val.strip()), None)
     conns = []
     cd = doc.get("connections", {})
     if not isinstance(cd, dict):
@@ -318,9 +398,200 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
             rep = sorted({n for n in order if order.count(n) > 1})
             raise ScenarioError(f"{where}: [scenario] field 'order' must list every component exactly once "
                                 + (f"(repeated: {rep})" if rep else f"(missing: {sorted(names - set(order))})"))
-    return Scenario(spath, text, name, str(sc.get("description", "")), settings,
+    scen = Scenario(spath, text, name, str(sc.get("description", "")), settings,
                     stop_s, t0_s, seed, specs, conns, faults, signals, dict(doc.get("metrics", {})), order,
                     list(sets), [str(o) for o in overlays])
+    for s in sets:
+        if "=" not in s or "." not in s.split("=", 1)[0]:
+            raise ScenarioError(f"--set '{s}': expected component.param=value (or scenario.FIELD=value)")
+        key, val = s.split("=", 1)
+        # a relative *_file path given on the command line is relative to the working directory
+        apply_override(scen, key.strip(), parse_value(val.strip()), f"--set '{s}'", base=None)
+    return scen
+
+
+#: names of the tables ``--set``/overrides address besides components (so no component may take them)
+RESERVED = {"scenario": _SCEN, "record": _RECORD, "metrics": None}
+
+
+def _check_component_name(name: str, where: str) -> None:
+    if not isinstance(name, str) or not name or "." in name or name.strip() != name:
+        raise ScenarioError(f"{where}: component name {name!r} must be non-empty without '.' or surrounding "
+                            f"spaces (ports are addressed as component.port)")
+    if name in RESERVED:
+        raise ScenarioError(f"{where}: component name '{name}' is reserved (overrides address "
+                            f"'{name}.FIELD'); choose another name")
+
+
+def apply_override(scen: "Scenario", key: str, value: Any, origin: str, base: Path | None | str = "scenario") -> None:
+    """Apply one typed override to a loaded scenario; errors name ``origin``.
+
+    ``component.param`` goes into the component's overrides (checked when the component is built;
+    a relative ``*_file`` path is resolved against the working directory when ``base`` is None, else
+    against the scenario's folder); ``scenario.FIELD``, ``record.signals`` and ``metrics.OPTION``
+    change the scenario itself (checked here).
+    """
+    if not isinstance(key, str) or "." not in key:
+        raise ScenarioError(f"{origin}: expected 'component.param' (or 'scenario.FIELD'), got {key!r}")
+    head, name = key.split(".", 1)
+    if head == "scenario":
+        _set_scenario_field(scen, name, value, origin)
+        return
+    if head == "record":
+        if name != "signals":
+            raise ScenarioError(f"{origin}: [record] has only 'signals'")
+        if value == "all" or value is None:
+            scen.record = None
+        elif isinstance(value, (list, tuple)) and all(isinstance(x, str) for x in value):
+            scen.record = list(value)
+        else:
+            raise ScenarioError(f"{origin}: record.signals must be \"all\" or a list of 'component.port'")
+        return
+    if head == "metrics":
+        scen.metrics[name] = value
+        return
+    names = [c.name for c in scen.components]
+    if head not in names:
+        raise ScenarioError(f"{origin}: unknown component '{head}'{_hint(head, names + list(RESERVED))}")
+    if not name:
+        raise ScenarioError(f"{origin}: missing parameter name after '{head}.'")
+    spec = next(c for c in scen.components if c.name == head)
+    spec.overrides[name] = _file_value(name, value, scen.path if base == "scenario" else None)
+    spec.origins[name] = origin
+
+
+def _set_scenario_field(scen: "Scenario", name: str, value: Any, origin: str) -> None:
+    def number(v, integer=False, allow_none=False):
+        if v is None and allow_none:
+            return None
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or \
+                (integer and not float(v).is_integer()):
+            raise ScenarioError(f"{origin}: scenario.{name} must be a finite "
+                                f"{'integer' if integer else 'number'}, got {v!r}")
+        return int(v) if integer else float(v)
+    if name == "step_s":
+        st = MasterSettings(step_s=number(value), method=scen.settings.method)
+        try:
+            st.check()
+        except ScenarioError as exc:
+            raise ScenarioError(f"{origin}: {exc}") from None
+        scen.settings.step_s = st.step_s
+    elif name == "method":
+        st = MasterSettings(step_s=scen.settings.step_s, method=str(value))
+        try:
+            st.check()
+        except ScenarioError as exc:
+            raise ScenarioError(f"{origin}: {exc}") from None
+        scen.settings.method = st.method
+    elif name == "stop_s":
+        v = number(value, allow_none=True)
+        if v is not None and v <= scen.t0_s:
+            raise ScenarioError(f"{origin}: scenario.stop_s ({v} s) must be after t0_s ({scen.t0_s} s)")
+        scen.stop_s = v
+    elif name == "t0_s":
+        v = number(value)
+        if scen.stop_s is not None and scen.stop_s <= v:
+            raise ScenarioError(f"{origin}: scenario.t0_s ({v} s) must be before stop_s ({scen.stop_s} s)")
+        scen.t0_s = v
+    elif name == "seed":
+        scen.seed = number(value, integer=True)
+    elif name in ("name", "description"):
+        if not isinstance(value, str) or (name == "name" and not value):
+            raise ScenarioError(f"{origin}: scenario.{name} must be a {'non-empty ' if name == 'name' else ''}"
+                                f"string, got {value!r}")
+        setattr(scen, name, value)
+    elif name == "order":
+        names = [c.name for c in scen.components]
+        if value is not None and not (isinstance(value, (list, tuple)) and sorted(value) == sorted(names)):
+            raise ScenarioError(f"{origin}: scenario.order must list every component exactly once ({names})")
+        scen.order = None if value is None else list(value)
+    else:
+        raise ScenarioError(f"{origin}: unknown scenario field '{name}'{_hint(name, _SCEN)}")
+
+
+def _toml_value(v: Any) -> str:
+    import json
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, (str, Path)):
+        return json.dumps(str(v))
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + " }"
+    raise ScenarioError(f"cannot write {type(v).__name__} value {v!r} as TOML")
+
+
+def _toml_key(k: str) -> str:
+    import json
+    import re
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k)
+
+
+def scenario_to_toml(sc: "Scenario") -> str:
+    """TOML text of a scenario as it stands (paths absolute); loads back into an equal scenario."""
+    out = ["[scenario]", f"name = {_toml_value(sc.name)}"]
+    if sc.description:
+        out.append(f"description = {_toml_value(sc.description)}")
+    out += [f"step_s = {_toml_value(float(sc.settings.step_s))}", f"method = {_toml_value(sc.settings.method)}",
+            f"seed = {int(sc.seed)}", f"t0_s = {_toml_value(float(sc.t0_s))}"]
+    if sc.stop_s is not None:
+        out.append(f"stop_s = {_toml_value(float(sc.stop_s))}")
+    if sc.order:
+        out.append(f"order = {_toml_value(list(sc.order))}")
+    for c in sc.components:
+        out += ["", f"[components.{_toml_key(c.name)}]", f"type = {_toml_value(c.type)}"]
+        if c.params_file is not None:
+            out.append(f"params = {_toml_value(str(c.params_file))}")
+        if c.fmu is not None:
+            out.append(f"fmu = {_toml_value(str(c.fmu))}")
+        if c.mapping:
+            out.append(f"map = {_toml_value(c.mapping)}")
+        if c.replaces:
+            out.append(f"replaces = {_toml_value(c.replaces)}")
+        if c.step_multiple != 1:
+            out.append(f"step_multiple = {c.step_multiple}")
+        if c.overrides:
+            out.append(f"set = {_toml_value(c.overrides)}")
+        if c.start:
+            out.append(f"start = {_toml_value(c.start)}")
+    if sc.connections:
+        out += ["", "[connections]"]
+        out += [f"{_toml_value(f'{c.dst}.{c.dst_port}')} = {_toml_value(f'{c.src}.{c.src_port}')}"
+                for c in sc.connections]
+    for f in sc.faults:
+        out += ["", "[[faults]]", f"at_s = {_toml_value(float(f.at_s))}",
+                f"port = {_toml_value(f'{f.component}.{f.port}')}", f"value = {_toml_value(float(f.value))}"]
+    if sc.record is not None:
+        out += ["", "[record]", f"signals = {_toml_value(list(sc.record))}"]
+    if sc.metrics:
+        out += ["", "[metrics]"] + [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in sc.metrics.items()]
+    return "\n".join(out) + "\n"
+
+
+def new_scenario(name: str = "scenario", *, step_s: float = 0.1, stop_s: float | None = None, t0_s: float = 0.0,
+                 method: str = "gauss-seidel", seed: int = 0, description: str = "") -> Scenario:
+    """An empty scenario to build in code: add components, connections and faults, then simulate.
+
+    Examples
+    --------
+    >>> sc = new_scenario("two_body", step_s=0.01, stop_s=1.0)        # doctest: +SKIP
+    >>> sc.add_component("body1", "mass", "scenarios/verification/params/body1.toml")  # doctest: +SKIP
+    """
+    sc = Scenario(None, "", name, description, MasterSettings(), None, 0.0, 0, [], [], [], None, {})
+    for k, v in (("name", name), ("step_s", step_s), ("method", method), ("seed", seed), ("t0_s", t0_s),
+                 ("stop_s", stop_s)):
+        _set_scenario_field(sc, k, v, f"new_scenario({k}=...)")
+    sc.description = str(description)
+    return sc
 
 
 def _file_value(key: str, value: Any, scenario_path: Path | None) -> Any:
@@ -371,6 +642,7 @@ def instantiate(spec: ComponentSpec, scenario: Scenario):
             try:
                 params = load_params(cls.Params, spec.params_file, over)
             except ScenarioError as exc:
+                _blame_override(cls, spec, over, exc)
                 raise ScenarioError(f"{where}: {exc}") from None
         elif spec.overrides:
             raise ScenarioError(f"{where}: component type '{spec.type}' takes no parameters")
@@ -386,6 +658,24 @@ def instantiate(spec: ComponentSpec, scenario: Scenario):
             raise ScenarioError(f"{where}: field 'start.{port}' must be a number")
         comp.u[port] = float(val)
     return comp
+
+
+def _blame_override(cls, spec: ComponentSpec, over: dict, exc: ScenarioError) -> None:
+    """When an override given outside the scenario file (``--set``, the Python API) makes the
+    parameters invalid, raise an error that names that override instead of the parameter file."""
+    if not spec.origins:
+        return
+    base = {k: v for k, v in over.items() if k not in spec.origins}
+    for key, origin in spec.origins.items():
+        if key not in over:
+            continue
+        try:
+            load_params(cls.Params, spec.params_file, {**base, key: over[key]})
+        except ScenarioError as e2:
+            msg = str(e2)
+            if spec.params_file is not None:
+                msg = msg.replace(f"{spec.params_file}: ", "")
+            raise ScenarioError(f"{origin}: component '{spec.name}': {msg}") from None
 
 
 def build_master(scenario: Scenario) -> Master:
