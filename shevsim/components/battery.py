@@ -73,6 +73,7 @@ from shevsim.battery import model as _m
 from shevsim.battery.thermal import FDThermal, ThermalParams, TwoStateThermal, fd_matrices
 from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError, SimulationError
+from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
 
 _NOISE_BLOCK = 4096
@@ -162,7 +163,7 @@ class BatteryPackParams:
     c1_scale: float = 1.0
     r2_scale: float = 1.0
     c2_scale: float = 1.0
-    arrhenius_ea_r_k: float = 0.0
+    arrhenius_ea_r_k: float = dataclasses.field(default=0.0, metadata=rng(lo=0.0, what="Ea/R; 0 = off"))
     arrhenius_t_ref_c: float = 25.0
     hyst_max_v: float = 0.0
     hyst_rate: float = 30.0
@@ -170,7 +171,7 @@ class BatteryPackParams:
     lowsoc_r_gain: float = 0.0
     lowsoc_r_scale_frac: float = 0.1
     dudt_soc_frac: tuple[float, ...] = ()
-    dudt_v_k: tuple[float, ...] = ()
+    dudt_v_k: tuple[float, ...] = dataclasses.field(default=(), metadata=rng(what="dU/dT in V/K, either sign"))
     h_conv_factor: float = 1.0
     h_change_time_s: float = 0.0
     h_change_factor: float = 1.0

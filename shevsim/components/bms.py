@@ -35,7 +35,7 @@ Outputs (estimates after processing the measurement held over the step; declared
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from shevsim.battery.cell import CellTables
 from shevsim.battery.thermal import ThermalParams
@@ -44,6 +44,7 @@ from shevsim.bms.power_capability import PowerCapability, PowerCapabilityParams
 from shevsim.bms.thermal_estimators import ThermalDKF, ThermalJEKF, ThermalKF
 from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError, SimulationError
+from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
 
 _IN = ("cell_current_meas_a", "cell_voltage_meas_v", "t_surface_meas_c", "t_ambient_meas_c")
@@ -122,7 +123,7 @@ class BMSParams:
     v_min_v: float = 2.0
     v_max_v: float = 3.6
     t_core_max_c: float = 45.0
-    i_cell_max_a: float = math.inf
+    i_cell_max_a: float = field(default=math.inf, metadata=rng(gt=0.0, allow_inf=True))
     polarisation_heat: str = "exact"
     radius_m: float = 12.93e-3
     length_m: float = 65.15e-3

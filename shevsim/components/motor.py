@@ -44,10 +44,11 @@ Outputs (all direct feedthrough of the inputs)
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
+from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
 from shevsim.powertrain.maps import load_curve_csv, load_grid_csv
 from shevsim.powertrain.motor import HEAT_RATE_PER_S, MotorMaps, motor_step
@@ -93,7 +94,7 @@ class MotorParams:
     heat_rate_per_s: float = HEAT_RATE_PER_S
     regen_speed_min_mps: float = 0.5
     extrapolate_speed: bool = True
-    regen_power_max_w: float = float("inf")
+    regen_power_max_w: float = field(default=float("inf"), metadata=rng(lo=0.0, allow_inf=True))
     efficiency_scale_frac: float = 1.0
 
     def __post_init__(self):

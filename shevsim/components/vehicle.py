@@ -35,12 +35,13 @@ feedthrough of ``speed_ref_mps``; ``force_req_n`` also of ``accel_ref_mps2`` and
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
+from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
 from shevsim.powertrain.vehicle import G_MPS2, grade_total_rad, speed_follow_step, step_vehicle
 
@@ -80,10 +81,10 @@ class VehicleParams:
     drag_coefficient: float = 0.7
     rolling_coefficient: float = 0.012
     air_density_kg_m3: float = 1.2
-    gravity_mps2: float = G_MPS2
+    gravity_mps2: float = field(default=G_MPS2, metadata=rng(gt=0.0))
     speed_init_mps: float = 0.0
     grade_distance_m: tuple[float, ...] = ()
-    grade_frac: tuple[float, ...] = ()
+    grade_frac: tuple[float, ...] = field(default=(), metadata=rng(-1.0, 1.0, what="road grade rise/run"))
     input_mode: str = "force"
 
     def __post_init__(self):

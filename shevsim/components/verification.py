@@ -12,9 +12,10 @@ through a spring-damper ``(k, c)``. Split into two co-simulation components:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ..core.component import Component
+from ..core.params import rng
 from ..core.variables import inp, out
 
 
@@ -22,7 +23,7 @@ from ..core.variables import inp, out
 class MassSpringParams:
     mass_kg: float = 1.0
     stiffness_n_per_m: float = 10.0
-    x0_m: float = 1.0
+    x0_m: float = field(default=1.0, metadata=rng(what="a displacement, either sign"))
     v0_mps: float = 0.0
     substeps: int = 10
 
@@ -75,7 +76,7 @@ class SpringDamperParams:
     mass_kg: float = 1.0
     stiffness_n_per_m: float = 10.0
     damping_ns_per_m: float = 0.5
-    x0_m: float = 0.0
+    x0_m: float = field(default=0.0, metadata=rng(what="a displacement, either sign"))
     v0_mps: float = 0.0
     substeps: int = 10
 

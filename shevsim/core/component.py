@@ -30,6 +30,8 @@ Semantics the master relies on
 """
 from __future__ import annotations
 
+import dataclasses
+
 import copy
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
@@ -71,6 +73,9 @@ class Component:
         self.name = name
         if params is None and self.Params is not None:
             params = self.Params()
+        if params is not None and dataclasses.is_dataclass(params) and not isinstance(params, type):
+            from .params import validate_params   # every number checked, also when built through the Python API
+            validate_params(params, f"component '{name}' parameters")
         self.params = params
         self.u: dict[str, float] = {v.name: v.start for v in self.variables() if v.causality == "input"}
         self.y: dict[str, float] = {v.name: v.start for v in self.variables() if v.causality == "output"}

@@ -13,17 +13,218 @@ A parameter file looks like::
 Unknown keys fail with a best-match suggestion, wrong types fail with the
 expected type, and both name the file and the field. Fields whose name ends in
 ``_file`` are paths, resolved relative to the parameter file.
+
+Validation of every number (:func:`make_params` is the single entry of the parameter dataclasses, and
+:func:`validate_params` checks an object built directly through the Python API).  Each numeric field has
+one physical range, declared once:
+
+* explicitly, with ``dataclasses.field(metadata=rng(...))`` on the field (e.g. ``rng(gt=0, allow_inf=True)``
+  for a limit whose default ``inf`` means "no limit");
+* otherwise by the unit-suffix convention of the field name (:data:`NAME_RULES`): ``_pct`` in [0, 100],
+  ``_frac`` in [0, 1], ``_c`` above absolute zero (> -273.15), ``_k`` > 0, ``_kg``/``_ah``/``_f``/``_ohm``/
+  densities/heat capacities/conductivities > 0, durations ``_s`` and lengths ``_m`` >= 0, noise and
+  covariance tunings (``sigma_``, ``q_``, ``r_``, ``p0_``, ``s0_``) >= 0, scale factors > 0, efficiencies in
+  (0, 1], counts ``n_*`` >= 1;
+* every number must be finite: NaN is always refused, +-inf only where the field declares ``allow_inf``.
+
+The same name rules check the columns of map and table files (:func:`check_column`,
+:mod:`shevsim.powertrain.maps`): an ``efficiency_frac`` column of 1.5 is refused.  Messages name the file
+and field (or the ``--set`` option that gave the value) and the valid range.
 """
 from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
 import tomllib
 import typing
 from pathlib import Path
 from typing import Any, Mapping
 
 from .errors import ScenarioError
+
+
+ABSOLUTE_ZERO_C = -273.15
+
+
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """The valid range of a number: ``lo``/``hi`` bounds (open or closed), ``allow_inf`` for "no limit"."""
+    lo: float = -math.inf
+    hi: float = math.inf
+    lo_open: bool = False
+    hi_open: bool = False
+    allow_inf: bool = False
+    what: str = ""               # what the range means ("temperature above absolute zero")
+
+    def ok(self, v: float) -> bool:
+        if v != v:
+            return False
+        if math.isinf(v):
+            return self.allow_inf and ((v > 0 and self.hi == math.inf) or (v < 0 and self.lo == -math.inf))
+        if v < self.lo or (self.lo_open and v == self.lo):
+            return False
+        if v > self.hi or (self.hi_open and v == self.hi):
+            return False
+        return True
+
+    def describe(self) -> str:
+        if self.lo == -math.inf and self.hi == math.inf:
+            txt = "any finite number"
+        elif self.hi == math.inf:
+            txt = f"{'>' if self.lo_open else '>='} {self.lo:g}"
+        elif self.lo == -math.inf:
+            txt = f"{'<' if self.hi_open else '<='} {self.hi:g}"
+        else:
+            txt = f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'}"
+        if self.allow_inf:
+            txt += " (inf allowed: no limit)"
+        elif self.lo != -math.inf or self.hi != math.inf:
+            txt += ", finite"
+        return txt + (f" ({self.what})" if self.what else "")
+
+
+def rng(lo: float | None = None, hi: float | None = None, *, gt: float | None = None, lt: float | None = None,
+        allow_inf: bool = False, what: str = "") -> dict:
+    """Field metadata declaring a number's valid range: ``field(default=..., metadata=rng(gt=0))``.
+
+    ``lo``/``hi`` are closed bounds, ``gt``/``lt`` open ones; ``allow_inf`` lets +-inf through (a "no limit"
+    default).  A declared range replaces the unit-suffix rule of the field's name."""
+    r = Range(lo=-math.inf if lo is None and gt is None else (gt if gt is not None else lo),
+              hi=math.inf if hi is None and lt is None else (lt if lt is not None else hi),
+              lo_open=gt is not None, hi_open=lt is not None, allow_inf=allow_inf, what=what)
+    return {"range": r}
+
+
+ANY = Range()
+_POS = Range(lo=0.0, lo_open=True)
+_NONNEG = Range(lo=0.0)
+
+#: Name rules, first match wins: (kind, token, range). ``suffix`` matches the end of the name, ``prefix`` its
+#: start, ``exact`` the whole name.  Applied to parameter fields without a declared range and to map columns.
+NAME_RULES: tuple[tuple[str, str, Range], ...] = (
+    ("prefix", "sigma_", Range(lo=0.0, what="a standard deviation")),
+    ("suffix", "_sigma_c", Range(lo=0.0, what="a standard deviation")),
+    ("prefix", "q_", Range(lo=0.0, what="a process-noise variance")),
+    ("prefix", "r_", Range(lo=0.0, lo_open=True, what="a measurement-noise variance")),
+    ("prefix", "p0_", Range(lo=0.0, what="an initial covariance")),
+    ("prefix", "s0_", Range(lo=0.0, what="an initial covariance")),
+    ("prefix", "factor_", Range(lo=0.0, what="a covariance factor")),
+    ("prefix", "eta", Range(lo=0.0, what="a cost weight")),
+    ("suffix", "_weight", Range(lo=0.0, what="a cost weight")),
+    ("suffix", "_weight_1", Range(lo=0.0, what="a cost weight")),
+    ("suffix", "_weight_quad_1", Range(lo=0.0, what="a cost weight")),
+    ("suffix", "_coefficient", Range(lo=0.0, what="a coefficient")),
+    ("prefix", "kp_", Range(lo=0.0, what="a controller gain")),
+    ("prefix", "ki_", Range(lo=0.0, what="a controller gain")),
+    ("prefix", "rack_k", Range(lo=0.0, what="a controller gain")),
+    ("suffix", "_gain", Range(lo=0.0, what="a gain")),
+    ("suffix", "_rate", Range(lo=0.0, what="a rate")),
+    ("prefix", "thermal_", Range(lo=0.0, what="an estimator tuning")),
+    ("suffix", "_scale_frac", Range(lo=0.0, lo_open=True, what="a scale factor")),
+    ("suffix", "radius_m", Range(lo=0.0, lo_open=True, what="a radius")),
+    ("suffix", "length_m", Range(lo=0.0, lo_open=True, what="a length")),
+    ("suffix", "sample_time_s", Range(lo=0.0, lo_open=True, what="a sample time")),
+    ("suffix", "horizon_s", Range(lo=0.0, lo_open=True, what="a horizon")),
+    ("suffix", "_substep_s", Range(lo=0.0, lo_open=True, what="a step size")),
+    ("suffix", "_max_n", Range(lo=0.0, what="a force limit")),
+    ("suffix", "_max_wps", Range(lo=0.0, lo_open=True, what="a rate limit")),
+    ("suffix", "max_rate_wps", Range(lo=0.0, lo_open=True, what="a rate limit")),
+    ("suffix", "_max_radps2", Range(lo=0.0, lo_open=True, what="an acceleration limit")),
+    ("suffix", "_min_mps", Range(lo=0.0, what="a speed threshold")),
+    ("suffix", "speed_init_mps", Range(lo=0.0, what="an initial speed")),
+    ("suffix", "_max_v", Range(lo=0.0, what="a voltage limit")),
+    ("suffix", "_min_v", Range(lo=0.0, what="a voltage limit")),
+    ("prefix", "power_gen_", Range(lo=0.0, what="a generator power")),
+    ("suffix", "_mg_per_g", Range(lo=0.0, what="a mass ratio")),
+    ("exact", "gear_ratio", Range(lo=0.0, lo_open=True, what="a gear ratio")),
+    ("exact", "repeat", Range(lo=1.0, what="a count")),
+    ("exact", "substeps", Range(lo=1.0, what="a count")),
+    ("suffix", "_scale", Range(lo=0.0, lo_open=True, what="a scale factor")),
+    ("suffix", "_factor", Range(lo=0.0, lo_open=True, what="a scale factor")),
+    ("suffix", "_eff", Range(lo=0.0, hi=1.0, lo_open=True, what="an efficiency")),
+    ("suffix", "efficiency_frac", Range(lo=0.0, hi=1.0, lo_open=True, what="an efficiency")),
+    ("exact", "efficiency", Range(lo=0.0, hi=1.0, lo_open=True, what="an efficiency")),
+    ("suffix", "_pct", Range(lo=0.0, hi=100.0, what="a percentage")),
+    ("suffix", "_frac", Range(lo=0.0, hi=1.0, what="a fraction")),
+    ("suffix", "_c", Range(lo=ABSOLUTE_ZERO_C, lo_open=True, what="a temperature in degC, above absolute zero")),
+    ("suffix", "_k", Range(lo=0.0, lo_open=True, what="an absolute temperature in K")),
+    ("suffix", "_kg_m3", Range(lo=0.0, lo_open=True, what="a density")),
+    ("suffix", "_kg_per_l", Range(lo=0.0, lo_open=True, what="a density")),
+    ("suffix", "_j_kgk", Range(lo=0.0, lo_open=True, what="a heat capacity")),
+    ("suffix", "_w_mk", Range(lo=0.0, lo_open=True, what="a thermal conductivity")),
+    ("suffix", "_w_m2k", Range(lo=0.0, what="a heat-transfer coefficient")),
+    ("suffix", "_kg_m2", Range(lo=0.0, lo_open=True, what="an inertia")),
+    ("suffix", "_j_per_g", Range(lo=0.0, lo_open=True, what="a heating value")),
+    ("suffix", "_kg", Range(lo=0.0, lo_open=True, what="a mass")),
+    ("suffix", "_m2", Range(lo=0.0, lo_open=True, what="an area")),
+    ("suffix", "_ah", Range(lo=0.0, lo_open=True, what="a capacity")),
+    ("suffix", "_ohm", Range(lo=0.0, lo_open=True, what="a resistance")),
+    ("suffix", "_f", Range(lo=0.0, lo_open=True, what="a capacitance")),
+    ("suffix", "_gps", Range(lo=0.0, what="a mass rate")),
+    ("suffix", "_mgps", Range(lo=0.0, what="a mass rate")),
+    ("suffix", "_hz", Range(lo=0.0, lo_open=True, what="a frequency")),
+    ("suffix", "_s", Range(lo=0.0, what="a duration or time")),
+    ("suffix", "_m", Range(lo=0.0, what="a length")),
+    ("prefix", "n_", Range(lo=1.0, what="a count")),
+)
+
+
+def name_rule(name: str) -> Range:
+    """The range the unit-suffix convention gives a field or column ``name`` (:data:`NAME_RULES`)."""
+    for kind, tok, r in NAME_RULES:
+        if (kind == "suffix" and name.endswith(tok)) or (kind == "prefix" and name.startswith(tok)) \
+                or (kind == "exact" and name == tok):
+            return r
+    return ANY
+
+
+def field_range(f: dataclasses.Field) -> Range:
+    """The declared range of a dataclass field (``metadata['range']``), else its name rule."""
+    r = f.metadata.get("range") if f.metadata else None
+    return r if isinstance(r, Range) else name_rule(f.name)
+
+
+def _bad_number(v: Any, r: Range) -> str | None:
+    """Why number ``v`` is not valid for ``r`` (None when it is)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    v = float(v)
+    if v != v:
+        return "NaN is not a valid value"
+    if r.ok(v):
+        return None
+    if math.isinf(v):
+        return f"{v} is not allowed (a finite number is needed)"
+    return "out of range"
+
+
+def check_value(name: str, value: Any, where: str, r: Range | None = None) -> None:
+    """Raise :class:`ScenarioError` unless ``value`` (a number, or a list of numbers) fits ``r``
+    (default: the name rule of ``name``).  The message names ``where``, the field and the valid range."""
+    r = name_rule(name) if r is None else r
+    vals = value if isinstance(value, (list, tuple)) else (value,)
+    for i, v in enumerate(vals):
+        why = _bad_number(v, r)
+        if why is not None:
+            idx = f"[{i}]" if isinstance(value, (list, tuple)) else ""
+            raise ScenarioError(f"{where}: parameter '{name}{idx}' = {v!r}: {why}; valid range: {r.describe()}")
+
+
+def validate_params(obj: Any, where: str = "<parameters>", sources: Mapping[str, str] | None = None) -> Any:
+    """Check every number of parameter dataclass ``obj`` against its field's range (see module docstring).
+
+    ``sources`` maps a field name to where its value came from (``--set 'bms.t0_c=nan'``); other fields are
+    blamed on ``where``.  Returns ``obj``."""
+    sources = sources or {}
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        if isinstance(v, (list, tuple)) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+            pass
+        elif isinstance(v, bool) or not isinstance(v, (int, float)):
+            continue
+        check_value(f.name, v, sources.get(f.name, where), field_range(f))
+    return obj
 
 
 def _suggest(key: str, options) -> str:
@@ -62,15 +263,26 @@ def _coerce(value: Any, typ: Any, where: str) -> Any:
 
 
 def make_params(cls: type, values: Mapping[str, Any], where: str = "<parameters>",
-                base_dir: Path | None = None) -> Any:
-    """Build a parameter dataclass ``cls`` from ``values`` with checked keys and types."""
+                base_dir: Path | None = None, sources: Mapping[str, str] | None = None) -> Any:
+    """Build a parameter dataclass ``cls`` from ``values`` with checked keys, types and ranges.
+
+    ``sources`` maps a key to where its value came from (a ``--set`` option, a scenario's ``set`` table);
+    keys not in it are blamed on ``where`` (the parameter file)."""
+    if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
+        raise ScenarioError(f"{where}: {cls!r} is not a parameter dataclass")
+    if not isinstance(values, Mapping):
+        raise ScenarioError(f"{where}: parameters must be a table of name = value, got {type(values).__name__}")
+    sources = dict(sources or {})
     fields = {f.name: f for f in dataclasses.fields(cls)}
     hints = typing.get_type_hints(cls)
     kwargs = {}
     for key, value in values.items():
-        if key not in fields:
-            raise ScenarioError(f"{where}: unknown parameter '{key}' for {cls.__name__}{_suggest(key, fields)}")
-        val = _coerce(value, hints[key], f"{where}: parameter '{key}'")
+        src = sources.get(key, where)
+        if not isinstance(key, str) or key not in fields:
+            raise ScenarioError(f"{src}: unknown parameter '{key}' for {cls.__name__}{_suggest(str(key), fields)}")
+        val = _coerce(value, hints[key], f"{src}: parameter '{key}'")
+        if isinstance(val, (int, float, tuple)):
+            check_value(key, val, src, field_range(fields[key]))
         if key.endswith("_file") and isinstance(val, str) and base_dir is not None:
             p = Path(val)
             val = str(p if p.is_absolute() else (base_dir / p).resolve())
@@ -81,14 +293,18 @@ def make_params(cls: type, values: Mapping[str, Any], where: str = "<parameters>
         raise ScenarioError(f"{where}: missing parameter(s) {', '.join(missing)} for {cls.__name__}")
     try:
         obj = cls(**kwargs)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, ArithmeticError, IndexError, KeyError) as exc:
         raise ScenarioError(f"{where}: {exc}") from exc
-    # resolve default *_file fields relative to base_dir too
-    return obj
+    # every number, defaults included (a default that breaks its own declared range is a bug, said here)
+    return validate_params(obj, where, sources)
 
 
-def load_params(cls: type, path: str | Path | None, overrides: Mapping[str, Any] | None = None) -> Any:
-    """Load ``cls`` from a TOML parameter file (``[params]`` table) plus overrides."""
+def load_params(cls: type, path: str | Path | None, overrides: Mapping[str, Any] | None = None,
+                sources: Mapping[str, str] | None = None) -> Any:
+    """Load ``cls`` from a TOML parameter file (``[params]`` table) plus overrides.
+
+    ``sources`` names where each override came from (default: "override"), so an error in a value given
+    by ``--set`` blames that option, not the parameter file."""
     values: dict[str, Any] = {}
     base_dir = None
     where = "<overrides>"
@@ -97,8 +313,8 @@ def load_params(cls: type, path: str | Path | None, overrides: Mapping[str, Any]
         if not path.is_file():
             raise ScenarioError(f"{path}: parameter file not found")
         try:
-            doc = tomllib.loads(path.read_text())
-        except tomllib.TOMLDecodeError as exc:
+            doc = tomllib.loads(path.read_text(encoding="utf-8-sig"))
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise ScenarioError(f"{path}: malformed TOML: {exc}") from exc
         extra = set(doc) - {"meta", "params"}
         if extra:
@@ -111,9 +327,12 @@ def load_params(cls: type, path: str | Path | None, overrides: Mapping[str, Any]
         values.update(doc["params"])
         base_dir = path.parent
         where = str(path)
+    src: dict[str, str] = {}
     if overrides:
         values.update(overrides)
-    return make_params(cls, values, where, base_dir)
+        for k in overrides:
+            src[k] = (sources or {}).get(k, where)
+    return make_params(cls, values, where, base_dir, src)
 
 
 def params_to_dict(p: Any) -> dict[str, Any]:

@@ -21,12 +21,14 @@ row, e.g. ``speed_radps,torque_nm,fuel_gps``; see :func:`load_grid_csv`.
 """
 from __future__ import annotations
 
+import difflib
 import math
 from pathlib import Path
 
 import numpy as np
 
 from shevsim.core.errors import DataError
+from shevsim.core.params import name_rule
 from shevsim.core.lookup import EXTRAPOLATION_CODES, _curve_ex, _grid_ex, curve_eval_array, grid_eval_array
 
 _MODES = ("clamp", "linear", "error")
@@ -152,9 +154,20 @@ class Grid2D:
         return out.reshape(x.shape)
 
 
-def _read_table(path: Path) -> tuple[list[str], np.ndarray, list[str]]:
-    comments, rows, header = [], [], None
-    for lineno, line in enumerate(path.read_text().splitlines(), 1):
+def _split(line: str, sep: str) -> list[str]:
+    return [v.strip() for v in line.split(sep)]
+
+
+def _read_table(path: Path) -> tuple[list[str], np.ndarray, list[str], list[int]]:
+    """Header, data, comment lines and the file line of each data row.  Spreadsheet quirks are accepted:
+    a UTF-8 byte-order mark, CRLF line ends, ``;`` separators (with decimal commas), trailing empty columns."""
+    comments, rows, lines, header = [], [], [], None
+    sep = ","
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: cannot read the file as UTF-8 text: {exc}") from exc
+    for lineno, line in enumerate(text.splitlines(), 1):
         s = line.strip()
         if not s:
             continue
@@ -162,51 +175,99 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray, list[str]]:
             comments.append(s)
             continue
         if header is None:
-            header = [h.strip() for h in s.split(",")]
+            if ";" in s and "," not in s:
+                sep = ";"
+            elif "\t" in s and "," not in s:
+                sep = "\t"
+            header = _split(s, sep)
+            while header and header[-1] == "":       # trailing empty columns of a spreadsheet export
+                header.pop()
+            if not header or any(h == "" for h in header):
+                raise DataError(f"{path}:{lineno}: empty column name in the header {header!r}")
             continue
+        cells = _split(s, sep)
+        while len(cells) > len(header) and cells[-1] == "":
+            cells.pop()
         try:
-            vals = [float(v) for v in s.split(",")]
+            vals = [float(v.replace(",", ".") if sep == ";" else v) for v in cells]
         except ValueError as exc:
             raise DataError(f"{path}:{lineno}: not a number: {exc}") from exc
         if len(vals) != len(header):
             raise DataError(f"{path}:{lineno}: {len(vals)} values for {len(header)} columns")
         rows.append(vals)
+        lines.append(lineno)
     if header is None or not rows:
         raise DataError(f"{path}: no data rows")
-    return header, np.asarray(rows), comments
+    return header, np.asarray(rows), comments, lines
 
 
-def read_columns(path, columns: tuple[str, ...]) -> dict[str, np.ndarray]:
-    """Read named columns of a long-format CSV with ``#`` provenance comments."""
+def read_columns(path, columns: tuple[str, ...], checked: bool = False) -> dict[str, np.ndarray]:
+    """Read named columns of a long-format CSV with ``#`` provenance comments.
+
+    With ``checked=True`` every value must be finite (a NaN cell is reported with its file line and column)
+    and within the physical range the column's unit-suffixed name declares
+    (:func:`shevsim.core.params.name_rule`: ``efficiency_frac`` in (0, 1], ``fuel_gps`` >= 0, ...)."""
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: map file not found")
-    header, data, _ = _read_table(path)
+    header, data, _, lines = _read_table(path)
     out = {}
     for c in columns:
         if c not in header:
-            raise DataError(f"{path}: missing column '{c}' (has {', '.join(header)})")
+            best = difflib.get_close_matches(c, header, n=1)
+            hint = f"; did you mean '{best[0]}'?" if best else ""
+            raise DataError(f"{path}: missing column '{c}' (has {', '.join(header)}){hint}")
         out[c] = data[:, header.index(c)]
+        if checked:
+            check_column(path, c, out[c], lines)
     return out
 
 
+def check_column(path, name: str, values: np.ndarray, lines: list[int] | None = None) -> None:
+    """Raise :class:`DataError` at the first NaN/inf or out-of-range value of column ``name`` (file line
+    named when ``lines`` is given); the range is the unit-suffix rule of the name."""
+    values = np.asarray(values, float)
+    r = name_rule(name)
+    bad = np.flatnonzero(~np.isfinite(values))
+    why = "not a finite number (NaN/inf)"
+    if not bad.size:
+        bad = np.flatnonzero([not r.ok(float(v)) for v in values])
+        why = f"outside the physical range {r.describe()}"
+    if bad.size:
+        k = int(bad[0])
+        at = f"line {lines[k]}" if lines is not None else f"row {k}"
+        raise DataError(f"{path}: {at}, column '{name}': value {values[k]!r} is {why}"
+                        + (f" ({bad.size} such values)" if bad.size > 1 else ""))
+
+
 def load_curve_csv(path, xcol: str, ycol: str, extrapolation: str = "clamp") -> Curve:
-    """Curve from two columns of a CSV (rows sorted by ``xcol``)."""
-    d = read_columns(path, (xcol, ycol))
+    """Curve from two columns of a CSV (rows sorted by ``xcol``); values checked (:func:`read_columns`)."""
+    d = read_columns(path, (xcol, ycol), checked=True)
     order = np.argsort(d[xcol], kind="stable")
-    return Curve(d[xcol][order], d[ycol][order], extrapolation, name=f"{path}:{ycol}")
+    xs = d[xcol][order]
+    dup = np.flatnonzero(np.diff(xs) == 0)
+    if dup.size:
+        raise DataError(f"{path}: column '{xcol}': the value {xs[dup[0]]!r} appears twice (a curve needs "
+                        f"one row per {xcol})")
+    return Curve(xs, d[ycol][order], extrapolation, name=f"{path}:{ycol}")
 
 
 def load_grid_csv(path, xcol: str, ycol: str, zcol: str, extrapolation="clamp") -> Grid2D:
-    """Grid2D from a long-format CSV: one row per (x, y) node; the grid must be complete."""
-    d = read_columns(path, (xcol, ycol, zcol))
+    """Grid2D from a long-format CSV: one row per (x, y) node; the grid must be complete.  Values are
+    checked (:func:`read_columns`): a NaN cell is named by its line and column, not as a missing node."""
+    d = read_columns(path, (xcol, ycol, zcol), checked=True)
     xs, ys = np.unique(d[xcol]), np.unique(d[ycol])
     z = np.full((xs.size, ys.size), np.nan)
     ix = np.searchsorted(xs, d[xcol])
     iy = np.searchsorted(ys, d[ycol])
+    seen = np.zeros(z.shape, bool)
+    for a, b in zip(ix, iy):
+        if seen[a, b]:
+            raise DataError(f"{path}: two rows for {xcol}={xs[a]}, {ycol}={ys[b]} (one row per grid node)")
+        seen[a, b] = True
     z[ix, iy] = d[zcol]
-    if np.isnan(z).any():
-        k = np.argwhere(np.isnan(z))[0]
+    if not seen.all():
+        k = np.argwhere(~seen)[0]
         raise DataError(f"{path}: incomplete grid, no row for {xcol}={xs[k[0]]}, {ycol}={ys[k[1]]}")
     return Grid2D(xs, ys, z, extrapolation, name=f"{path}:{zcol}")
 

@@ -198,17 +198,23 @@ step_s = 0.1
 stop_s = 1.0
 [components.a]
 type = "gain"
-start = { in_1 = 0.0 }
-set = { gain = inf }
+start = { in_1 = nan }
 """
+    # (an infinite gain, the old trigger, is now refused before the run by the parameter ranges)
     sc, m = build(text, tmp_path)
     with pytest.raises(SimulationError, match=r"component 'a' output 'out_1' is nan at t=0 s"):
         m.run(stop_time(sc, m))
+    with pytest.raises(ScenarioError, match=r"parameter 'gain' = inf: inf is not allowed"):
+        build(text.replace("start = { in_1 = nan }", "start = { in_1 = 0.0 }\nset = { gain = inf }"), tmp_path)
 
 
 def test_component_exception_names_component_and_time(tmp_path):
+    # substeps = 0 (the old trigger) is now refused before the run: the component's code is made to fail instead
     bad = GOOD.replace('type = "mass_spring"', 'type = "mass_spring"\nset = { substeps = 0 }')
-    sc, m = build(bad, tmp_path)
+    with pytest.raises(ScenarioError, match=r"parameter 'substeps' = 0: out of range; valid range: >= 1"):
+        build(bad, tmp_path)
+    sc, m = build(GOOD, tmp_path)
+    m.components["body1"].do_step = lambda t, dt: 1.0 / 0.0
     with pytest.raises(SimulationError, match=r"component 'body1' failed in do_step at t=0 s \(step 0\): ZeroDivisionError"):
         m.run(stop_time(sc, m))
 
