@@ -65,6 +65,22 @@ multiplicative factors for ageing and cell-to-cell spread::
 - Limitation: with the seed's Sigma_v = 1 scaling, the theta gain is tiny; on a plant with R1 aged
   by 20 % kappa_1 stays near 1 over 2000 s (kappa_s does converge; tests/unit/test_bms.py).
 
+Slow second branch (``v2_model``; departure from the seed)
+-----------------------------------------------------------
+The plant (:mod:`shevsim.battery.model`) is OCV-R-RC-RC; its second branch is slow (tau_2 = R2 C2 ~
+220-400 s), larger than the first and direction dependent.  On LFP's flat OCV a few millivolts of it left
+out of the filter's model become 2-3 % of SOC in closed loop (issue 14).  With ``v2_model =
+"nominal_maps"`` (the BMS component's default) the filter propagates V2 open loop from the cell type's
+nominal R2, C2(SOC, T, sign i) maps (the ``CellTables`` it already loads), read at the predicted SOC, the
+previous mean-temperature estimate and the measured current's sign, with the current held over the step::
+
+    V2_k = a2 V2_{k-1} + R2,nom (1 - a2) i_k,     a2 = exp(-dt / (R2,nom C2,nom))
+    V_t,k = V_oc(SOC_k) - V1_k - V2_k - R_s i_k
+
+V2 is a known input to the measurement (not a filter state; its error is not tracked by P_x), and the
+heat (5.16) gains V2^2 / R2,nom.  ``"none"`` (the ``DEKFParams`` default) is the seed's one-branch filter,
+bit for bit.  The power capability still predicts with the one-branch model.
+
 The filter is written once, as the numba-compatible pure function :func:`dekf_step` (floats and the
 packed tables in, a tuple out; 3x3 and 2x2 symmetric covariances unrolled), with the heat (5.16) in
 :func:`cell_heat`.  ``DEKF(compiled=True)`` (default) runs it compiled; ``compiled=False`` runs
@@ -120,6 +136,10 @@ class DEKFParams:
         (1-sigma 10 %: cell-to-cell spread plus ageing not yet seen) and 1e-4 (the re-tuned free R_s
         random walk, 1e-8 Ohm^2, relative to the nominal ~0.01 Ohm: the same relative walk).  See the
         module docstring.
+    v2_model : str
+        ``"none"`` (seed: one RC branch) or ``"nominal_maps"`` (the slow second branch V2 is propagated
+        from the nominal R2, C2(SOC, T, sign i) maps and subtracted from the predicted voltage; see the
+        module docstring, "Slow second branch").
     """
 
     capacity_ah: float = 2.3
@@ -148,11 +168,14 @@ class DEKFParams:
     rc_model: str = "free"
     factor_p0: float = 1e-2
     factor_q: float = 1e-4
+    v2_model: str = "none"
 
     def __post_init__(self) -> None:
         for name in ("rs_model", "rc_model"):
             if getattr(self, name) not in ("free", "table_scaled"):
                 raise ValueError(f"DEKFParams: {name} must be 'free' or 'table_scaled', got {getattr(self, name)!r}")
+        if self.v2_model not in ("none", "nominal_maps"):
+            raise ValueError(f"DEKFParams: v2_model must be 'none' or 'nominal_maps', got {self.v2_model!r}")
         if not (self.factor_p0 >= 0.0 and self.factor_q >= 0.0):
             raise ValueError(f"DEKFParams: factor_p0 and factor_q must be >= 0, got {self.factor_p0!r}, "
                              f"{self.factor_q!r}")
@@ -174,16 +197,18 @@ def cell_heat(i_a, rs, v1, r1, t_c, ds):
 
 @_njit(cache=True)
 def dekf_step(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12, p22, s00, s01, s11,
-              i_a, v_meas_v, dt_s, t_mean_c):
+              i_a, v_meas_v, dt_s, t_mean_c, v2_prev):
     """One DEKF step (5.21-5.24, module docstring) and the heat (5.16) at the new estimates.
 
     ``d, ix`` = ``CellTables.packed()``; ``k = [capacity_ah, q_soc, q_v1, q_x2, r_v, q_th1, q_th2, r1_min,
-    r1_max, c1_min, c1_max, rs_min, F, rs_scaled, rc_scaled]``; the covariances are the unrolled symmetric
-    ``P_x`` (p00 .. p22) and ``P_theta`` (s00 .. s11).  Returns ``(ok, soc, v1, x2, rs, th1, th2, r1, c1,
-    p00, p01, p02, p11, p12, p22, s00, s01, s11, e, var, heat)`` (``x2``, ``th1``, ``th2`` the filter's
-    states/parameters: R_s, R1, C1 or their factors; ``rs``, ``r1``, ``c1`` the effective values; ``e``
-    the innovation [V] and ``var`` its variance); ``ok = 0`` when the innovation variance is unusable
-    (the rest is then not an update).
+    r1_max, c1_min, c1_max, rs_min, F, rs_scaled, rc_scaled, v2_nominal]``; the covariances are the unrolled
+    symmetric ``P_x`` (p00 .. p22) and ``P_theta`` (s00 .. s11); ``v2_prev`` [V] the slow branch's voltage
+    (propagated, not estimated, when ``k[15] > 0.5``; otherwise ignored and returned as 0).  Returns
+    ``(ok, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, var, heat, v2, r2)``
+    (``x2``, ``th1``, ``th2`` the filter's states/parameters: R_s, R1, C1 or their factors; ``rs``, ``r1``,
+    ``c1`` the effective values; ``e`` the innovation [V] and ``var`` its variance; ``v2`` the slow branch's
+    voltage after the step and ``r2`` [Ohm] the nominal R2 it used, ``inf`` without it); ``ok = 0`` when the innovation variance is unusable (the rest is then not an
+    update).
     """
     # 1. parameter time update (5.21); theta = [R1, C1] (free) or their factors (table_scaled)
     s00 += k[5]
@@ -193,13 +218,20 @@ def dekf_step(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12, p2
     rsn = 1.0
     r1n = 1.0
     c1n = 1.0
-    if k[13] > 0.5 or k[14] > 0.5:
-        rsn_t, r1n_t, c1n_t = _ecm_nom(d, ix, soc, t_mean_c, i_a)
+    v2 = 0.0
+    r2n = math.inf
+    if k[13] > 0.5 or k[14] > 0.5 or k[15] > 0.5:
+        rsn_t, r1n_t, c1n_t, r2n_t, c2n_t = ecm_lookup(d, ix, soc, t_mean_c, i_a)
         if k[13] > 0.5:
             rsn = rsn_t
         if k[14] > 0.5:
             r1n = r1n_t
             c1n = c1n_t
+        if k[15] > 0.5:
+            # slow second branch propagated from the nominal maps (module docstring), current held over dt
+            r2n = r2n_t
+            a2 = math.exp(-dt_s / (r2n_t * c2n_t))
+            v2 = a2 * v2_prev + r2n_t * (1.0 - a2) * i_a
     r1 = th1 * r1n
     c1 = th2 * c1n
     # 2. state time update (5.22) with i_{k-1} = i_k (ZOH); A = diag(1, a, 1): A P A^T + Sigma_w
@@ -217,7 +249,7 @@ def dekf_step(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12, p2
     no = ix[1]
     c0 = _t1_slope(d, oo, no, soc)
     c2 = -i_a * rsn
-    e = v_meas_v - (_t1_value(d, oo, no, soc) - v1 - x2 * rsn * i_a)
+    e = v_meas_v - (_t1_value(d, oo, no, soc) - v1 - v2 - x2 * rsn * i_a)
     # P C^T with C = [c0, -1, c2]
     h0 = p00 * c0 - p01 + p02 * c2
     h1 = p01 * c0 - p11 + p12 * c2
@@ -225,7 +257,7 @@ def dekf_step(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12, p2
     sden = c0 * h0 - h1 + c2 * h2 + k[4]
     if not (sden > 0.0 and math.isfinite(sden) and math.isfinite(e)):
         return (0, soc, v1, x2, x2 * rsn, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, sden,
-                0.0)
+                0.0, v2, r2n)
     k0 = h0 / sden
     k1 = h1 / sden
     k2 = h2 / sden
@@ -269,7 +301,9 @@ def dekf_step(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12, p2
     th2 = c1 / c1n
     rs = x2 * rsn
     heat = cell_heat(i_a, rs, v1, r1, t_mean_c, _t1_value(d, ix[2], ix[3], soc))
-    return (1, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, sden, heat)
+    if k[15] > 0.5:
+        heat += v2 * v2 / r2n
+    return (1, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, sden, heat, v2, r2n)
 
 
 class DEKF:
@@ -291,6 +325,9 @@ class DEKF:
         for ``table_scaled``).
     x2 : float
         The third filter state: R_s [Ohm] (``free``) or the factor kappa [-] (``table_scaled``).
+    v2, r2 : float
+        Slow second-branch voltage [V] propagated from the nominal maps and the nominal R2 [Ohm] of the
+        last step (``v2_model = "nominal_maps"``; 0 and ``inf`` otherwise).
     """
 
     def __init__(self, params: DEKFParams | None = None, tables: CellTables | None = None, compiled: bool = True):
@@ -318,7 +355,8 @@ class DEKF:
         self._tabs = self.tables.packed()
         self._k = np.array([p.capacity_ah, p.q_soc, p.q_v1, self._q_x2, p.r_v, self._q_th1, self._q_th2,
                             p.r1_min_ohm, p.r1_max_ohm, p.c1_min_f, p.c1_max_f, p.rs_min_ohm, FARADAY_C_MOL,
-                            1.0 if self.scaled else 0.0, 1.0 if self.rc_scaled else 0.0])
+                            1.0 if self.scaled else 0.0, 1.0 if self.rc_scaled else 0.0,
+                            1.0 if p.v2_model == "nominal_maps" else 0.0])
         self.reset()
 
     def reset(self, soc0_frac: float | None = None) -> None:
@@ -326,6 +364,8 @@ class DEKF:
         p = self.params
         self.soc = p.soc0_frac if soc0_frac is None else float(soc0_frac)
         self.v1 = p.v1_0_v
+        self.v2 = 0.0
+        self.r2 = math.inf
         self.x2 = self._x2_0
         self.rs = p.rs0_ohm
         self.r1 = p.r1_0_ohm
@@ -340,12 +380,13 @@ class DEKF:
     # -- model ------------------------------------------------------------------------------
     def predict_voltage(self, i_a: float) -> float:
         """Terminal voltage g(x, i) of the current estimate [V]."""
-        return self.tables.ocv(self.soc) - self.v1 - self.rs * i_a
+        return self.tables.ocv(self.soc) - self.v1 - self.v2 - self.rs * i_a
 
     def heat(self, i_a: float, t_mean_c: float) -> float:
-        """Heat generation estimate [W] (5.16 with the OCV-R-RC model): i^2 R_s + V1^2/R1 - i T dS/F."""
+        """Heat generation estimate [W] (5.16 with the OCV-R-RC model): i^2 R_s + V1^2/R1 - i T dS/F
+        plus V2^2/R2,nom of the last step with ``v2_model = "nominal_maps"``."""
         return cell_heat(float(i_a), self.rs, self.v1, self.r1, float(t_mean_c),
-                         self.tables.entropy_change(self.soc))
+                         self.tables.entropy_change(self.soc)) + self.v2 * self.v2 / self.r2
 
     @property
     def rs_factor(self) -> float:
@@ -362,13 +403,13 @@ class DEKF:
         d, ix = self._tabs
         r = self._step(d, ix, self._k, self.soc, self.v1, self.x2, self.th1, self.th2, px[0], px[1], px[2], px[3],
                        px[4], px[5], pth[0], pth[1], pth[2], float(i_a), float(v_meas_v), float(dt_s),
-                       float(t_mean_c))
+                       float(t_mean_c), self.v2)
         if not r[0]:
             raise SimulationError(f"DEKF: non-finite or non-positive innovation variance "
                                   f"(innovation {r[18]!r} V, variance {r[19]!r}; inputs i={i_a!r} A, "
                                   f"v={v_meas_v!r} V)")
         (_, self.soc, self.v1, self.x2, self.rs, self.th1, self.th2, self.r1, self.c1, p00, p01, p02, p11, p12, p22,
-         s00, s01, s11, self.innovation, _, q) = r
+         s00, s01, s11, self.innovation, _, q, self.v2, self.r2) = r
         self.px = [p00, p01, p02, p11, p12, p22]
         self.pth = [s00, s01, s11]
         return q

@@ -18,6 +18,7 @@ REGISTRY: dict[str, str] = {
     "vehicle": "shevsim.components.vehicle:Vehicle",
     "motor": "shevsim.components.motor:Motor",
     "bus": "shevsim.components.bus:PowerBus",
+    "power_limits": "shevsim.components.bus:PowerLimits",
     "engine_generator": "shevsim.components.engine_generator:EngineGenerator",
     "battery": "shevsim.components.battery:BatteryPack",
     "bms": "shevsim.components.bms:BMS",

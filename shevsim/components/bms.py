@@ -5,7 +5,9 @@ Each step (sample time = the component's step h, seed 0.1 s), in the seed's orde
 1. electrical DEKF (:class:`shevsim.bms.electrical.DEKF`, 5.18-5.25) on the measured cell
    current and voltage -> SOC, V1, R_s, R1, C1 (``rs_model``/``rc_model = "table_scaled"``, default:
    R_s, R1, C1 are factors on the nominal (SOC, T, direction) maps at the previous step's T_mean
-   estimate; ``"free"``: the seed's R_s state and R1, C1 parameters);
+   estimate; ``"free"``: the seed's R_s state and R1, C1 parameters; ``v2_model = "nominal_maps"``,
+   default: the plant's slow second RC branch V2 propagated from the nominal R2, C2 maps and
+   subtracted from the predicted voltage, ``"none"``: the seed's one-branch filter);
 2. heat-generation estimate (5.16) with the DEKF's estimates and the *previous* step's estimated
    mean temperature (Sec. 5.3.2);
 3. thermal DKF (:class:`shevsim.bms.thermal_estimators.ThermalDKF`, 3.10-3.15; KF or JEKF
@@ -89,6 +91,11 @@ class BMSParams:
         the seed's R_s random walk / free R1, C1 parameters.  See :mod:`shevsim.bms.electrical`.
     factor_p0, factor_q : float
         Initial and per-step random-walk variance of those factors (1e-2, 1e-4).
+    v2_model : str
+        ``"nominal_maps"`` (default): the DEKF propagates the plant-type's slow second RC branch V2 from
+        the nominal R2, C2 maps and subtracts it from the predicted voltage (unbiased SOC against the
+        OCV-R-RC-RC plant, issue 14); ``"none"``: the seed's one-branch filter.  See
+        :mod:`shevsim.bms.electrical`.
     """
 
     n_series: int = 130
@@ -136,8 +143,11 @@ class BMSParams:
     rc_model: str = "table_scaled"
     factor_p0: float = 1e-2
     factor_q: float = 1e-4
+    v2_model: str = "nominal_maps"
 
     def __post_init__(self) -> None:
+        if self.v2_model not in ("none", "nominal_maps"):
+            raise ScenarioError(f"bms parameters: v2_model must be 'nominal_maps' or 'none', got {self.v2_model!r}")
         for name in ("rs_model", "rc_model"):
             if getattr(self, name) not in ("free", "table_scaled"):
                 raise ScenarioError(f"bms parameters: {name} must be 'table_scaled' or 'free', "
@@ -236,7 +246,8 @@ class BMS(Component):
             capacity_ah=p.capacity_ah, soc0_frac=p.soc0_pct / 100.0, rs0_ohm=p.rs0_ohm, r1_0_ohm=p.r1_0_ohm,
             c1_0_f=p.c1_0_f, q_soc=p.q_soc, q_v1=p.q_v1, q_rs=p.q_rs, r_v=p.r_v, q_r1=p.q_r1, q_c1=p.q_c1,
             p0_soc=p.p0_soc, p0_v1=p.p0_v1, p0_rs=p.p0_rs, s0_r1=p.s0_r1, s0_c1=p.s0_c1,
-            rs_model=p.rs_model, rc_model=p.rc_model, factor_p0=p.factor_p0, factor_q=p.factor_q), self.tables)
+            rs_model=p.rs_model, rc_model=p.rc_model, factor_p0=p.factor_p0, factor_q=p.factor_q,
+            v2_model=p.v2_model), self.tables)
         self.t_mean = p.t0_c
         self.gamma = 0.0
         self.t_core = p.t0_c

@@ -28,6 +28,23 @@ Outputs (direct feedthrough of the inputs they use)
     ``enforce_battery_limits = false``.
     ``battery_power_w`` [W] + discharge; ``demand_power_w`` [W] = motor + aux;
     cumulative ``aux_energy_j``, ``motor_energy_j``, ``gen_energy_j``, ``battery_energy_j`` [J].
+
+Limits held within the step (:class:`PowerLimits`, TYPE ``power_limits``)
+-----------------------------------------------------------------------
+The bus computes its limit outputs in its own step, *after* the motor and the generator have run (it
+books their power), so a motor or generator connected to them is clamped against the previous step's
+BMS limits and the previous step's other machine: over the cooling-fault run the battery then leaves the
+same-step BMS limits for ~50 s (up to 170 kW in a step, issue 14).  ``power_limits`` is the same limit
+algebra (:meth:`PowerBus._limits`) as a component of its own, so a scenario can evaluate it where the
+limits act, in the step they are computed for (``scenarios/*seed*.toml``)::
+
+    order = [..., "bms", "motor_limits", "motor", "gen_limits", "engine_generator", "bus", "battery", ...]
+
+``motor_limits`` (after the BMS) clamps the motor against this step's BMS limits and the generator's
+last power; ``gen_limits`` (after the motor) sheds the generator against this step's motor power and
+charge limit.  The charge side then holds exactly (battery = motor + aux - gen >= P_min whenever the
+generator can shed); the discharge side is exact unless the generator's power falls within the step
+after the motor was clamped (the motor used its last power).
 """
 from __future__ import annotations
 
@@ -136,4 +153,46 @@ class PowerBus(Component):
         y["motor_energy_j"] = e[1]
         y["gen_energy_j"] = e[2]
         y["battery_energy_j"] = e[3]
+        self._limits()
+
+
+class PowerLimits(Component):
+    """The bus's limit algebra as a component of its own (TYPE ``power_limits``), evaluated in the step
+    the limits act in (module docstring, "Limits held within the step").
+
+    Inputs ``motor_power_w``, ``gen_power_w``, ``aux_power_w`` [W] (signs as the bus),
+    ``battery_power_max_w`` (>= 0), ``battery_power_min_w`` (<= 0) [W].  Outputs (direct feedthrough)
+    ``motor_power_max_w``, ``motor_power_min_w``, ``gen_power_max_w`` [W], the same laws as
+    :class:`PowerBus`.  Parameters: :class:`BusParams` (``enforce_battery_limits``, ``aux_power_w``).
+    """
+
+    TYPE = "power_limits"
+    Params = BusParams
+    VARIABLES = (
+        inp("motor_power_w", "W", 0.0, "motor electrical power, + drawn from the bus"),
+        inp("gen_power_w", "W", 0.0, "generator electrical power, + delivered to the bus"),
+        inp("aux_power_w", "W", 0.0, "auxiliary load, + drawn from the bus"),
+        inp("battery_power_max_w", "W", 1e12, "battery discharge power capability (>= 0)"),
+        inp("battery_power_min_w", "W", -1e12, "battery charge power capability (<= 0)"),
+        out("motor_power_max_w", "W", 1e12, "most power the motors may draw", _LIM),
+        out("motor_power_min_w", "W", -1e12, "most power the motors may return (<= 0)", _LIM),
+        out("gen_power_max_w", "W", 1e12, "most generator power the bus can absorb (>= 0)", _GLIM),
+    )
+    _static = ("name", "params", "_aux_w")
+
+    def __init__(self, name: str = "power_limits", params: BusParams | None = None):
+        super().__init__(name, params)
+        self._aux_w = float(self.params.aux_power_w)
+
+    _aux = PowerBus._aux
+    _limits = PowerBus._limits
+
+    def initialize(self, t0: float) -> None:
+        self._limits()
+
+    def do_step(self, t: float, h: float) -> None:
+        u = self.u
+        for k in _LIM + ("motor_power_w",):
+            if u[k] != u[k]:
+                raise SimulationError(f"{self.name}: NaN input '{k}' at t={t:g} s")
         self._limits()

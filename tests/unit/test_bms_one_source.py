@@ -90,10 +90,13 @@ def test_thermal_filter_steps_compiled_equal_py_func(make):
     assert abs(fast.h - make(True).h) > 0.01 or isinstance(fast, ThermalKF)   # the h estimate moved
 
 
-@pytest.mark.parametrize("rs_model,rc_model", [("free", "free"), ("table_scaled", "free"),
-                                               ("table_scaled", "table_scaled")])
-def test_dekf_step_compiled_equals_py_func(rs_model, rc_model):
-    prm = DEKFParams(q_soc=1e-5, q_v1=2e-3, q_rs=1e-8, q_c1=1e4, rs_model=rs_model, rc_model=rc_model)
+@pytest.mark.parametrize("rs_model,rc_model,v2_model", [("free", "free", "none"), ("table_scaled", "free", "none"),
+                                                        ("table_scaled", "table_scaled", "none"),
+                                                        ("table_scaled", "table_scaled", "nominal_maps"),
+                                                        ("free", "free", "nominal_maps")])
+def test_dekf_step_compiled_equals_py_func(rs_model, rc_model, v2_model):
+    prm = DEKFParams(q_soc=1e-5, q_v1=2e-3, q_rs=1e-8, q_c1=1e4, rs_model=rs_model, rc_model=rc_model,
+                     v2_model=v2_model)
     fast, ref = DEKF(prm), DEKF(prm, compiled=False)
     assert ref._step is el.dekf_step.py_func
     rng = np.random.default_rng(3)
@@ -102,8 +105,13 @@ def test_dekf_step_compiled_equals_py_func(rs_model, rc_model):
         v = 3.3 - 0.012 * i + rng.normal(0.0, 0.01) - 0.1 * math.sin(k / 3000.0)
         tm = 25.0 + 5.0 * math.sin(k / 1000.0)
         _close(fast.step_heat(i, v, 0.1, tm), ref.step_heat(i, v, 0.1, tm))
-        _close([fast.soc, fast.v1, fast.x2, fast.rs, fast.r1, fast.c1, fast.innovation, *fast.px, *fast.pth],
-               [ref.soc, ref.v1, ref.x2, ref.rs, ref.r1, ref.c1, ref.innovation, *ref.px, *ref.pth])
+        _close([fast.soc, fast.v1, fast.v2, fast.x2, fast.rs, fast.r1, fast.c1, fast.innovation, *fast.px,
+                *fast.pth], [ref.soc, ref.v1, ref.v2, ref.x2, ref.rs, ref.r1, ref.c1, ref.innovation, *ref.px,
+                             *ref.pth])
+    if v2_model == "nominal_maps":
+        assert abs(fast.v2) > 1e-4 and fast.r2 > 0.0      # the slow branch was propagated
+    else:
+        assert fast.v2 == 0.0
     for f in (fast, ref):      # the same error from both forms
         with pytest.raises(Exception, match="innovation"):
             f.step(1.0, math.nan, 0.1)
