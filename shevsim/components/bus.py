@@ -114,7 +114,9 @@ class PowerBus(Component):
             pa = self._aux()
             base = u["gen_power_w"] - pa
             y["motor_power_max_w"] = max(base + u["battery_power_max_w"], 0.0)
-            y["motor_power_min_w"] = min(base + u["battery_power_min_w"], 0.0)
+            # the generator can be shed to any power >= 0 within the step but not made to motor: the regen
+            # limit counts on max(gen, 0) (a motoring generator may stop within the step)
+            y["motor_power_min_w"] = min(max(u["gen_power_w"], 0.0) - pa + u["battery_power_min_w"], 0.0)
             y["gen_power_max_w"] = max(u["motor_power_w"] + pa - u["battery_power_min_w"], 0.0)
         else:
             y["motor_power_max_w"] = 1e12

@@ -61,3 +61,6 @@ def test_seed_order_holds_the_limits_better_than_the_one_step_late_order():
     assert v_late > 10.0                     # the one-step-late order leaves the limits (issue 14: ~50 s)
     assert v_now < 0.25 * v_late, (v_now, v_late)
     assert now["battery.t_core_c"].max() <= 45.0
+    # the charge side holds exactly: the generator is shed against this step's motor power and charge limit,
+    # and the regen limit counts only on the generator power that shedding can hold (>= 0)
+    assert np.all(now["bus.battery_power_w"] >= now["bms.power_min_w"] - 1.0)
