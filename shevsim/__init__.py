@@ -1,2 +1,18 @@
-"""shevsim - co-simulation of series-hybrid electric vehicles (FMI-style components, fixed-step master)."""
+"""shevsim - co-simulation of series-hybrid electric vehicles (FMI-style components, fixed-step master).
+
+The Python API (see :mod:`shevsim.api`)::
+
+    import shevsim
+    res = shevsim.simulate("hd_udds_rule", overrides={"vehicle.mass_kg": 18000.0, "cycle.repeat": 1})
+    res.to_pandas(); res.metrics; res.termination; res.plot(["vehicle.speed_mps"]); res.save("out")
+"""
 __version__ = "0.1.0"
+
+from .api import (Result, Scenario, calibrate, compare, load_result, load_scenario, metrics_table,  # noqa: E402
+                  new_scenario, scenarios, simulate, study)
+from .core.errors import ScenarioError, ShevsimError, SimulationError  # noqa: E402
+from .core.results import Termination  # noqa: E402
+
+__all__ = ["__version__", "simulate", "load_scenario", "new_scenario", "scenarios", "compare", "metrics_table",
+           "load_result", "study", "calibrate", "Scenario", "Result", "Termination", "ShevsimError",
+           "ScenarioError", "SimulationError"]

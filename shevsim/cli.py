@@ -2,132 +2,282 @@
 
 Sub-commands::
 
-    shevsim run [SCENARIO] [--out DIR] [--set comp.param=value ...] [--params [COMP=]FILE ...] [--no-plots] [--quiet]
+    shevsim run [SCENARIO] [--out DIR] [--set comp.param=value ...] [--params [COMP=]FILE ...] [--engine E]
+                [--record SIG ...] [--record-every N] [--allow-large] [--no-plots] [-q]
+    shevsim scenarios
     shevsim info SCENARIO|FMU
     shevsim cycles [FOLDER]
     shevsim study {thermal,bms,tradeoff,powerrate-map} ...
     shevsim calibrate MODEL DATA.csv --out DIR [...]
     shevsim fmu export TYPE --params FILE -o OUT.fmu
+
+Exit codes (:data:`EXIT_CODES`): 0 ok; 1 the run stopped early or is degraded (results saved);
+2 bad input (scenario, parameters, options, output folder); 3 internal error; 130 interrupted (Ctrl-C;
+what was simulated is saved).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
-from .core.errors import ShevsimError
+from .core.errors import ShevsimError, SimulationError
+
+EXIT_OK, EXIT_STOPPED, EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+EXIT_CODES = {EXIT_OK: "ok", EXIT_STOPPED: "the run stopped early or is degraded (its results are saved)",
+              EXIT_BAD_INPUT: "bad input: scenario, parameters, options or output folder (nothing was run)",
+              EXIT_INTERNAL: "internal error (a bug: please report it with the message)",
+              EXIT_INTERRUPTED: "interrupted with Ctrl-C (what was simulated is saved)"}
+
+RUN_EPILOG = """\
+SCENARIO is a bundled scenario's name (see `shevsim scenarios`, e.g. hd_udds_rule) or the path of a
+scenario TOML file; default: the bundled hd_udds_mpc. A scenario file may name bundled parameter files and
+cycles by their path in the data folder (params = "components/vehicle/matv.toml").
+
+--set KEY=VALUE changes one value, typed as TOML (numbers, true/false, "strings", [lists]):
+  component.param   e.g. --set vehicle.mass_kg=18000 --set cycle.repeat=1
+  scenario.FIELD    step_s, stop_s, t0_s, method, seed, name   e.g. --set scenario.stop_s=120
+  metrics.OPTION    e.g. --set metrics.trace_allow_miss=true (a run that misses its speed trace is
+                    'degraded' unless allowed; see trace_* options in docs/getting_started.md)
+
+Results go to --out (default results/<scenario name>/): timeseries.parquet (units in the Parquet
+schema metadata), run.json (termination, parameters, version), metrics.json, scenario.toml (as run),
+overview.png. Re-running into a result folder replaces only the files shevsim wrote there.
+
+exit codes: 0 ok; 1 stopped early or degraded (results saved); 2 bad input; 3 internal error;
+130 interrupted (results saved)."""
+
+
+def _say(a, *args, **kw):
+    if not getattr(a, "quiet", False):
+        print(*args, **kw)
 
 
 def _cmd_run(a) -> int:
-    from .run import DEFAULT_SCENARIO, run_scenario
-    res, metrics, out = run_scenario(a.scenario or DEFAULT_SCENARIO, a.out, a.set or (), progress=not a.quiet,
-                                     plots=not a.no_plots, overlays=a.params or ())
+    from .run import DEFAULT_SCENARIO, run
+    interrupted = False
+    try:
+        res = run(a.scenario or DEFAULT_SCENARIO, out=a.out, sets=a.set or (), overlays=a.params or (),
+                  engine=a.engine, record=a.record, record_every=a.record_every, plots=not a.no_plots,
+                  progress=not a.quiet, allow_large=a.allow_large, save=True)
+    except KeyboardInterrupt:          # outside the simulation (loading, saving): nothing to keep
+        raise
+    term = res.termination
+    interrupted = term.status == "stopped" and term.reason.startswith("interrupted")
+    _say(a, f"scenario {res.meta['scenario']}: {term}, {len(res.time_s)} points, engine {res.meta['engine']}, "
+            f"wall {res.meta['wall_s']:.2f} s")
     if not a.quiet:
-        print(f"scenario {res.meta['scenario']}: {res.termination}, {len(res.time_s)} points, "
-              f"wall {res.meta['wall_s']:.2f} s")
-        for k, v in metrics.items():
-            if isinstance(v, (int, float)):
+        for k, v in res.metrics.items():
+            if isinstance(v, (int, float)) and not isinstance(v, bool):
                 print(f"  {k:40s} {v:.6g}")
-        print(f"results in {out}")
-    return 0
+        for n in res.metrics.get("notes", []):
+            print(f"  note: {n}")
+    _say(a, f"results in {res.meta.get('out')}")
+    if not term.ok:
+        where = ", ".join(x for x in (f"component {term.component}" if term.component else "",
+                                      f"port {term.port}" if term.port else "",
+                                      f"t={term.time_s:g} s" if term.time_s is not None else "") if x)
+        print(f"shevsim: run {term.status}{' (' + where + ')' if where else ''}: {term.reason}; "
+              f"results saved in {res.meta.get('out')}", file=sys.stderr)
+        return EXIT_INTERRUPTED if interrupted else EXIT_STOPPED
+    return EXIT_OK
+
+
+def _cmd_scenarios(a) -> int:
+    import tomllib
+
+    from .core.paths import bundled_scenario, bundled_scenarios
+    for n in bundled_scenarios():
+        desc = ""
+        try:
+            desc = tomllib.loads(bundled_scenario(n).read_text()).get("scenario", {}).get("description", "")
+        except (OSError, ValueError):
+            pass
+        print(n if a.quiet or not desc else f"{n:32s} {desc}")
+    return EXIT_OK
 
 
 def _cmd_info(a) -> int:
     p = Path(a.target)
     if p.suffix.lower() == ".fmu":
         from .fmu.info import fmu_info
-        print(fmu_info(p))
-        return 0
+        text = fmu_info(p)
+        print(text.splitlines()[0] if a.quiet and text else text)
+        return EXIT_OK
     from .core.scenario import build_master, load_scenario, stop_time
     sc = load_scenario(p)
     m = build_master(sc)
-    print(f"scenario {sc.name}: step {sc.settings.step_s} s, method {sc.settings.method}, "
-          f"start {sc.t0_s} s, stop {stop_time(sc, m)} s, seed {sc.seed}")
-    if sc.description:
-        print(f"  {sc.description}")
-    print(m.describe())
-    if sc.faults:
-        print("faults:")
-        for f in sc.faults:
-            # a fault acts from the first communication point at or after its time (as the master applies it)
-            h, t0 = sc.settings.step_s, sc.t0_s
-            k = max(0, math.ceil((f.at_s - t0) / h - 1e-9 * max(1.0, abs(f.at_s) / h)))
-            acts = "" if abs(t0 + k * h - f.at_s) <= 1e-9 * max(1.0, abs(f.at_s)) else \
-                f" (acts from the communication point {t0 + k * h:.6g} s)"
-            print(f"  at {f.at_s} s: {f.component}.{f.port} = {f.value}{acts}")
-    m.terminate()
-    return 0
+    try:
+        print(f"scenario {sc.name}: step {sc.settings.step_s} s, method {sc.settings.method}, "
+              f"start {sc.t0_s} s, stop {stop_time(sc, m)} s, seed {sc.seed}")
+        if a.quiet:
+            return EXIT_OK
+        if sc.description:
+            print(f"  {sc.description}")
+        print(m.describe())
+        if sc.faults:
+            print("faults:")
+            for f in sc.faults:
+                # a fault acts from the first communication point at or after its time (as the master applies it)
+                h, t0 = sc.settings.step_s, sc.t0_s
+                k = max(0, math.ceil((f.at_s - t0) / h - 1e-9 * max(1.0, abs(f.at_s) / h)))
+                acts = "" if abs(t0 + k * h - f.at_s) <= 1e-9 * max(1.0, abs(f.at_s)) else \
+                    f" (acts from the communication point {t0 + k * h:.6g} s)"
+                print(f"  at {f.at_s} s: {f.component}.{f.port} = {f.value}{acts}")
+    finally:
+        m.terminate()
+    return EXIT_OK
 
 
 def _cmd_cycles(a) -> int:
     from .cycles import cycles_command
     from .core.scenario import PROJECT_ROOT
-    print(cycles_command(Path(a.folder) if a.folder else PROJECT_ROOT / "cycles"))
-    return 0
+    text = cycles_command(Path(a.folder) if a.folder else PROJECT_ROOT / "cycles")
+    print(text)
+    return EXIT_OK
+
+
+def _quiet_stdout(quiet: bool):
+    return contextlib.redirect_stdout(io.StringIO()) if quiet else contextlib.nullcontext()
 
 
 def _cmd_study(a, rest) -> int:
     from .studies.cli import main_study
-    return main_study([a.which] + [r for r in rest if r != a.which])
+    args = [r for r in rest if r != a.which]
+    quiet = a.quiet or "-q" in args
+    args = [r for r in args if r != "-q"]
+    if quiet and a.which in ("tradeoff", "powerrate-map") and "--quiet" not in args:
+        args.append("--quiet")
+    with _quiet_stdout(quiet):
+        return main_study([a.which] + args)
 
 
-def _cmd_calibrate(rest) -> int:
+def _cmd_calibrate(rest, quiet: bool) -> int:
     from .calibrate.cli import main_calibrate
-    return main_calibrate(rest)
+    if quiet and "-q" not in rest and "--quiet" not in rest:
+        rest = rest + ["--quiet"]
+    with _quiet_stdout(quiet or "-q" in rest or "--quiet" in rest):
+        return main_calibrate(rest)
 
 
 def _cmd_fmu(a) -> int:
     from .fmu.export import export_component
     out = export_component(a.type, a.params, a.output, fmi_version=a.fmi_version)
-    print(f"wrote {out}")
-    return 0
+    _say(a, f"wrote {out}")
+    return EXIT_OK
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``shevsim`` argument parser (sub-commands run, scenarios, info, cycles, study, calibrate, fmu)."""
+    from . import __version__
+    codes = "; ".join(f"{k} {v}" for k, v in EXIT_CODES.items())
+    ap = argparse.ArgumentParser(prog="shevsim", description="Series-hybrid electric vehicle co-simulation",
+                                 epilog=f"exit codes: {codes}")
+    ap.add_argument("--version", action="version", version=f"shevsim {__version__}")
+    ap.add_argument("-q", "--quiet", action="store_true", help="print only results and errors (every command)")
+    q = argparse.ArgumentParser(add_help=False)
+    q.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                   help="no progress bar or summary; errors only")
+    sub = ap.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+    r = sub.add_parser("run", parents=[q], help="run a scenario and save its results",
+                       description="Run a scenario and save its results.", epilog=RUN_EPILOG,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    r.add_argument("scenario", nargs="?", metavar="SCENARIO",
+                   help="bundled scenario name (shevsim scenarios) or scenario TOML path (default hd_udds_mpc)")
+    r.add_argument("-o", "--out", metavar="DIR", help="output folder (default results/<scenario name>); checked "
+                                                      "before the run: not a file, not a folder of other files")
+    r.add_argument("-s", "--set", action="append", metavar="KEY=VALUE",
+                   help="override component.param, scenario.FIELD or metrics.OPTION (repeatable; see below)")
+    r.add_argument("-p", "--params", action="append", metavar="[COMPONENT=]FILE",
+                   help="parameter overlay (e.g. a calibration's DIR/params.toml) merged over the component's "
+                        "parameters; without COMPONENT= every table applies to the component of that name")
+    r.add_argument("--engine", choices=("auto", "python", "fast"), default="auto",
+                   help="python: the co-simulation master; fast: the compiled fast path (error if the scenario "
+                        "is not eligible); auto (default): fast when possible")
+    r.add_argument("--record", nargs="+", metavar="COMP.PORT", help="record only these signals")
+    r.add_argument("--record-every", type=_positive_int, default=1, metavar="N",
+                   help="keep every N-th communication point (and the last); default 1")
+    r.add_argument("--allow-large", action="store_true",
+                   help="run even when the record/duration estimate exceeds what this machine holds")
+    r.add_argument("--no-plots", action="store_true", help="do not write overview.png")
+    sub.add_parser("scenarios", parents=[q], help="list the bundled scenarios (names for `shevsim run NAME`)")
+    i = sub.add_parser("info", parents=[q], help="describe a scenario (components, ports, units) or an FMU")
+    i.add_argument("target", metavar="SCENARIO|FMU", help="bundled scenario name, scenario TOML or .fmu file")
+    c = sub.add_parser("cycles", parents=[q], help="list drive cycles with statistics")
+    c.add_argument("folder", nargs="?", help="folder of cycle CSVs (default: the bundled cycles)")
+    s = sub.add_parser("study", help="studies: thermal, bms, tradeoff, powerrate-map (shevsim study NAME --help)",
+                       add_help=False)
+    s.add_argument("which", nargs="?", default="--help")
+    sub.add_parser("calibrate", help="closed-loop calibration against measured data (shevsim calibrate --help)",
+                   add_help=False)
+    f = sub.add_parser("fmu", parents=[q], help="FMU tools")
+    fsub = f.add_subparsers(dest="fmu_cmd", required=True)
+    fe = fsub.add_parser("export", parents=[q], help="export a native component as a co-simulation FMU")
+    fe.add_argument("type", help="registered component type name (e.g. vehicle)")
+    fe.add_argument("--params", help="parameter file")
+    fe.add_argument("-o", "--output", required=True, help="the .fmu file to write")
+    fe.add_argument("--fmi-version", default="2", choices=["2", "3"], help="FMI version (default 2)")
+    return ap
 
 
 def main(argv=None) -> int:
+    """Entry point of ``shevsim``; returns the exit code (see :data:`EXIT_CODES`)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    ap = argparse.ArgumentParser(prog="shevsim", description="Series-hybrid vehicle co-simulation")
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("run", help="run a scenario (default: scenarios/hd_udds_mpc.toml)")
-    r.add_argument("scenario", nargs="?")
-    r.add_argument("--out", help="output folder (default results/<scenario name>)")
-    r.add_argument("--set", action="append", metavar="COMP.PARAM=VALUE", help="parameter override")
-    r.add_argument("--params", action="append", metavar="[COMPONENT=]FILE",
-                   help="parameter overlay (e.g. a calibration's DIR/params.toml) merged over the component's "
-                        "parameters; without COMPONENT= every table applies to the component of that name")
-    r.add_argument("--no-plots", action="store_true")
-    r.add_argument("--quiet", action="store_true")
-    i = sub.add_parser("info", help="describe a scenario or an FMU")
-    i.add_argument("target")
-    c = sub.add_parser("cycles", help="list drive cycles with statistics")
-    c.add_argument("folder", nargs="?")
-    s = sub.add_parser("study", help="studies: thermal, bms, tradeoff, powerrate-map", add_help=False)
-    s.add_argument("which", nargs="?", default="--help")
-    sub.add_parser("calibrate", help="closed-loop calibration against measured data", add_help=False)
-    f = sub.add_parser("fmu", help="FMU tools")
-    fsub = f.add_subparsers(dest="fmu_cmd", required=True)
-    fe = fsub.add_parser("export", help="export a native component as a co-simulation FMU")
-    fe.add_argument("type", help="registered component type name (e.g. vehicle)")
-    fe.add_argument("--params", help="parameter file")
-    fe.add_argument("-o", "--output", required=True)
-    fe.add_argument("--fmi-version", default="2", choices=["2", "3"])
+    ap = build_parser()
+    quiet = False
+    while argv and argv[0] in ("-q", "--quiet"):
+        quiet = True
+        argv = argv[1:]
     try:
         if argv and argv[0] == "calibrate":
-            return _cmd_calibrate(argv[1:])
+            return _cmd_calibrate(argv[1:], quiet)
         if argv and argv[0] == "study":
             a, rest = ap.parse_known_args(argv)
+            a.quiet = quiet or getattr(a, "quiet", False)
             return _cmd_study(a, rest)
-        a = ap.parse_args(argv)
-        return {"run": _cmd_run, "info": _cmd_info, "cycles": _cmd_cycles, "fmu": _cmd_fmu}[a.cmd](a)
+        try:
+            a = ap.parse_args(argv)
+        except SystemExit as exc:          # argparse: --help/--version (0) or a usage error (2)
+            return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
+        a.quiet = quiet or getattr(a, "quiet", False)
+        return {"run": _cmd_run, "scenarios": _cmd_scenarios, "info": _cmd_info, "cycles": _cmd_cycles,
+                "fmu": _cmd_fmu}[a.cmd](a)
+    except SimulationError as exc:      # a simulation that failed outside `run` (info, fmu export)
+        print(f"shevsim: stopped: {exc}", file=sys.stderr)
+        return EXIT_STOPPED
     except ShevsimError as exc:
         print(f"shevsim: error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("shevsim: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except BrokenPipeError:             # output piped into `head` & co.: stop quietly
-        import os
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())   # the interpreter's final flush must not fail again
-        return 1
+        return EXIT_STOPPED
+    except Exception as exc:  # noqa: BLE001 - an internal error: one clear message and its own exit code
+        import traceback
+        if os.environ.get("SHEVSIM_TRACEBACK"):
+            traceback.print_exc()
+        notes = "".join(f"\n  {n}" for n in getattr(exc, "__notes__", []))
+        print(f"shevsim: internal error: {type(exc).__name__}: {exc}{notes}\n  (set SHEVSIM_TRACEBACK=1 for the "
+              f"traceback; please report it)", file=sys.stderr)
+        return EXIT_INTERNAL
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -127,6 +127,20 @@ def _fast_runner(scenario: Scenario, engine: str):
     return runner, why
 
 
+def _guess_port(exc: BaseException, master) -> None:
+    """A component's own error names the port it is about as ``port=value`` (``soc_pct=100.6``):
+    take the first such port of that component when the error does not say it otherwise."""
+    import re
+    comp = getattr(exc, "component", None)
+    if comp is None or getattr(exc, "port", None) is not None or comp not in getattr(master, "_vars", {}):
+        return
+    text = str(exc)
+    hits = [(m.start(), name) for name in master._vars[comp]
+            for m in [re.search(rf"(?<![\w.]){re.escape(name)}\s*=", text)] if m]
+    if hits:
+        exc.port = min(hits)[1]
+
+
 def _stop_info(exc: BaseException) -> Termination:
     if isinstance(exc, KeyboardInterrupt):
         return Termination("stopped", "interrupted (Ctrl-C)", None, None, getattr(exc, "time_s", None))
@@ -195,6 +209,7 @@ def simulate(scenario: Scenario, progress: bool = False, *, engine: str = "auto"
             try:
                 res = master.run(t_stop, t0=scenario.t0_s)
             except (SimulationError, KeyboardInterrupt) as exc:
+                _guess_port(exc, master)
                 res = master.result(_stop_info(exc))
                 if isinstance(exc, KeyboardInterrupt):
                     res.termination = Termination("stopped", "interrupted (Ctrl-C)", None, None, master.time_s)
