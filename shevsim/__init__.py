@@ -8,11 +8,11 @@ The Python API (see :mod:`shevsim.api`)::
 """
 __version__ = "0.1.0"
 
-from .api import (Result, Scenario, calibrate, compare, load_result, load_scenario, metrics_table,  # noqa: E402
-                  new_scenario, scenarios, simulate, study)
+from .api import (Result, Scenario, compare, load_result, load_scenario, metrics_table,  # noqa: E402
+                  new_scenario, run_calibration, run_study, scenarios, simulate)
 from .core.errors import ScenarioError, ShevsimError, SimulationError  # noqa: E402
 from .core.results import Termination  # noqa: E402
 
 __all__ = ["__version__", "simulate", "load_scenario", "new_scenario", "scenarios", "compare", "metrics_table",
-           "load_result", "study", "calibrate", "Scenario", "Result", "Termination", "ShevsimError",
+           "load_result", "run_study", "run_calibration", "Scenario", "Result", "Termination", "ShevsimError",
            "ScenarioError", "SimulationError"]

@@ -17,7 +17,7 @@ Inspect and change a scenario before running, or build one in code::
     res = shevsim.simulate(sc, stop_s=120.0)
 
 Studies and calibration take the command line's options as keyword arguments
-(:func:`study`, :func:`calibrate`).
+(:func:`run_study`, :func:`run_calibration`).
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ from .core.scenario import Scenario, new_scenario
 from .core.scenario import load_scenario as _load_scenario
 
 __all__ = ["simulate", "load_scenario", "new_scenario", "compare", "metrics_table", "load_result",
-           "scenarios", "study", "calibrate", "Scenario", "Result"]
+           "scenarios", "run_study", "run_calibration", "Scenario", "Result"]
 
 
 def simulate(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = None, *,
@@ -196,7 +196,7 @@ def _call_cli(fn, argv: list[str], what: str) -> int:
         return 0
 
 
-def study(which: str, scenario: str | Path | None = None, *, out: str | Path | None = None, **options) -> dict:
+def run_study(which: str, scenario: str | Path | None = None, *, out: str | Path | None = None, **options) -> dict:
     """Run a study (``tradeoff``, ``powerrate-map``, ``thermal``, ``bms``) with the CLI's options.
 
     Keyword arguments are the options of ``shevsim study WHICH --help`` with ``_`` for ``-``
@@ -221,7 +221,7 @@ def study(which: str, scenario: str | Path | None = None, *, out: str | Path | N
     return {"exit_code": code, "out": Path(out) if out is not None else None}
 
 
-def calibrate(model: str, data: str | Path, *, out: str | Path, **options) -> dict:
+def run_calibration(model: str, data: str | Path, *, out: str | Path, **options) -> dict:
     """Calibrate a model (``shevsim calibrate --help``: battery cell, vehicle, engine) on a measured
     CSV with the CLI's options (``_`` for ``-``: ``map={"current_a": "I"}``, ``effects=[...]``,
     ``params="FILE"``). Writes ``out`` (params.toml, report.json, report.md, figures).

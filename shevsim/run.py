@@ -127,6 +127,16 @@ def _fast_runner(scenario: Scenario, engine: str):
     return runner, why
 
 
+def _drop_non_finite_tail(res: Result) -> None:
+    """The master records a row before checking it: a run stopped by a non-finite output keeps the
+    trajectory up to the last finite row (the value that stopped it is in the termination reason)."""
+    if len(res.time_s) and res.signals:
+        last = np.array([v[-1] for v in res.signals.values()], dtype=float)
+        if not np.all(np.isfinite(last)):
+            res.time_s = res.time_s[:-1]
+            res.signals = {k: v[:-1] for k, v in res.signals.items()}
+
+
 def _guess_port(exc: BaseException, master) -> None:
     """A component's own error names the port it is about as ``port=value`` (``soc_pct=100.6``):
     take the first such port of that component when the error does not say it otherwise."""
@@ -211,6 +221,7 @@ def simulate(scenario: Scenario, progress: bool = False, *, engine: str = "auto"
             except (SimulationError, KeyboardInterrupt) as exc:
                 _guess_port(exc, master)
                 res = master.result(_stop_info(exc))
+                _drop_non_finite_tail(res)
                 if isinstance(exc, KeyboardInterrupt):
                     res.termination = Termination("stopped", "interrupted (Ctrl-C)", None, None, master.time_s)
                 if not partial:

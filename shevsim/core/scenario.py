@@ -675,6 +675,7 @@ def _blame_override(cls, spec: ComponentSpec, over: dict, exc: ScenarioError) ->
             msg = str(e2)
             if spec.params_file is not None:
                 msg = msg.replace(f"{spec.params_file}: ", "")
+            msg = msg.replace("<overrides>: ", "").replace("<parameters>: ", "")
             raise ScenarioError(f"{origin}: component '{spec.name}': {msg}") from None
 
 

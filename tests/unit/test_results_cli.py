@@ -24,7 +24,8 @@ def test_run_saves_everything(tmp_path):
     np.testing.assert_array_equal(back["body1.position_m"], res["body1.position_m"])
 
 
-def test_crash_during_save_keeps_previous_result(tmp_path):
+def test_crash_while_plotting_leaves_no_half_figure_nor_temp_folder(tmp_path):
+    # (the run itself is saved, then the error raised: tests/unit/test_termination.py)
     res, _, out = run_scenario(TWO_BODY, tmp_path / "tb", plots=False)
     before = (out / "timeseries.parquet").read_bytes()
 
