@@ -35,3 +35,33 @@ def bundled_scenario(name: str) -> Path | None:
 def bundled_scenarios() -> list[str]:
     """Names of the bundled scenarios."""
     return sorted(p.stem for p in (DATA_ROOT / "scenarios").glob("*.toml"))
+
+
+def _plain_name(name: str) -> bool:
+    return bool(name) and not name.startswith(".") and "\\" not in name and ":" not in name \
+        and not Path(name).is_absolute() and ".." not in Path(name).parts
+
+
+def bundled_params(name: str, *folders: str) -> Path | None:
+    """A bundled parameter set by name: ``"matv"`` in ``components/<folder>/matv.toml`` for the given
+    folders (the component's type, then its name), or ``"vehicle/matv"`` naming the folder; else None."""
+    if not _plain_name(name):
+        return None
+    stem = name[:-5] if name.endswith(".toml") else name
+    cands = [DATA_ROOT / "components" / f"{stem}.toml"] if "/" in stem else \
+        [DATA_ROOT / "components" / f / f"{stem}.toml" for f in folders if f]
+    return next((c for c in cands if c.is_file()), None)
+
+
+def bundled_cycle(name: str) -> Path | None:
+    """A bundled drive cycle by name (``"hd_udds"`` -> ``cycles/hd_udds.csv``), else None."""
+    if not _plain_name(name) or "/" in name:
+        return None
+    stem = name[:-4] if name.endswith(".csv") else name
+    p = DATA_ROOT / "cycles" / f"{stem}.csv"
+    return p if p.is_file() else None
+
+
+def bundled_cycles() -> list[str]:
+    """Names of the bundled drive cycles."""
+    return sorted(p.stem for p in (DATA_ROOT / "cycles").glob("*.csv"))

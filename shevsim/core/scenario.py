@@ -51,7 +51,7 @@ from .errors import ScenarioError, ShevsimError
 from .master import Connection, Fault, Master, MasterSettings
 from .overlay import overlay_tables, overlay_values, resolve_files
 from .params import load_params
-from shevsim.core.paths import DATA_ROOT, bundled_scenario
+from shevsim.core.paths import DATA_ROOT, bundled_cycle, bundled_params, bundled_scenario
 
 PROJECT_ROOT = DATA_ROOT   # the folder holding components/, cycles/, scenarios/ (checkout or wheel)
 
@@ -293,8 +293,11 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
             if not isinstance(cd["params"], str):
                 raise ScenarioError(f"{w}: field 'params' must be a file path string")
             pf = resolve_path(cd["params"], spath)
-            if not pf.is_file():
-                raise ScenarioError(f"{w}: field 'params': parameter file '{cd['params']}' not found")
+            if not pf.is_file():          # a bundled parameter set by name ("matv", "vehicle/matv")
+                pf = bundled_params(cd["params"], str(cd["type"]), cname)
+            if pf is None:
+                raise ScenarioError(f"{w}: field 'params': parameter file '{cd['params']}' not found (nor a "
+                                    f"bundled set of that name in components/{cd['type']}/)")
         fmu = None
         if cd["type"] == "fmu":
             if "fmu" not in cd:
@@ -598,7 +601,10 @@ def _file_value(key: str, value: Any, scenario_path: Path | None) -> Any:
     """A ``*_file`` override as an absolute path: relative to the scenario file (its ``set`` table) or
     to the working directory (``--set``); other values unchanged."""
     if key.endswith("_file") and isinstance(value, str) and value:
-        return str(resolve_path(value, scenario_path).absolute())
+        p = resolve_path(value, scenario_path)
+        if not p.exists() and key == "cycle_file" and bundled_cycle(value) is not None:
+            p = bundled_cycle(value)      # a bundled cycle by name ("uac_proxy")
+        return str(p.absolute())
     return value
 
 

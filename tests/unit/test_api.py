@@ -174,3 +174,48 @@ def test_study_wrapper_runs_the_synthetic_tradeoff(tmp_path):
     out = shevsim.run_study("tradeoff", synthetic=True, workers=0, out=tmp_path / "s", rates_kwps=[20, 40],
                         no_plots=True, quiet=True)
     assert out["exit_code"] == 0 and any((tmp_path / "s").iterdir())
+
+
+def test_user_scenario_names_bundled_parameter_sets_and_cycles(tmp_path):
+    p = tmp_path / "mine.toml"
+    p.write_text('[scenario]\nname = "mine"\nstop_s = 5.0\n'
+                 '[components.cycle]\ntype = "cycle"\nset = { cycle_file = "uac_proxy" }\n'
+                 '[components.vehicle]\ntype = "vehicle"\nparams = "matv"\n'
+                 '[components.driver]\ntype = "driver"\nparams = "driver/default"\n')
+    sc = shevsim.load_scenario(p)
+    from shevsim.core.paths import data_path
+    assert sc.component("vehicle").params_file == data_path("components", "vehicle", "matv.toml")
+    assert sc.component("driver").params_file == data_path("components", "driver", "default.toml")
+    assert Path(sc.component("cycle").overrides["cycle_file"]) == data_path("cycles", "uac_proxy.csv").absolute()
+    p.write_text(p.read_text().replace('params = "matv"', 'params = "matvv"'))
+    with pytest.raises(ScenarioError, match=r"mine.toml: \[components.vehicle\]: field 'params'.*'matvv' not found"):
+        shevsim.load_scenario(p)
+
+
+def test_cli_version_scenarios_quiet_and_exit_codes(capsys):
+    from shevsim.cli import main
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"shevsim {shevsim.__version__}"
+    assert main(["scenarios", "-q"]) == 0
+    assert capsys.readouterr().out.split() == shevsim.scenarios()
+    assert main(["-q", "info", "hd_udds_rule"]) == 0
+    assert capsys.readouterr().out.count("\n") == 1
+    assert main(["run", "--no-such-flag"]) == 2
+    assert main(["run", "no_such_scenario", "-q"]) == 2
+    assert "bundled scenarios by name" in capsys.readouterr().err
+    assert main(["--help"]) == 0
+    assert "exit codes: 0 ok; 1 " in capsys.readouterr().out
+    assert main(["run", "--help"]) == 0
+    text = capsys.readouterr().out
+    assert "SCENARIO is a bundled scenario's name" in text and "scenario.FIELD" in text
+
+
+def test_internal_error_has_its_own_exit_code(monkeypatch, capsys):
+    import shevsim.run as run_mod
+    from shevsim.cli import main
+
+    def bug(*a, **k):
+        raise ZeroDivisionError("a bug")
+    monkeypatch.setattr(run_mod, "run", bug)
+    assert main(["run", str(TWO_BODY), "-q"]) == 3
+    assert "internal error: ZeroDivisionError: a bug" in capsys.readouterr().err
