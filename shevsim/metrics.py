@@ -275,6 +275,20 @@ def fuel_economy_dsoc_corrected(df, density_kg_per_l: float = DIESEL_DENSITY_KG_
     return out
 
 
+def soot_dsoc_corrected(soot_mg: float, fuel_g: float, fuel_equivalent_g: float | None,
+                        distance_km: float) -> float | None:
+    """Soot on the fuel economy's Delta-SOC-corrected basis [g/km] (issue 14).
+
+    The battery's net energy is booked as ``fuel_equivalent_g - fuel_g`` grams of fuel (the same
+    equivalent as :func:`fuel_economy_dsoc_corrected`); that fuel is charged with the run's mean soot per
+    gram of fuel: ``soot_corr = soot x fuel_equivalent / fuel``.  A run that ends with a lower SOC thus
+    no longer shows the soot it borrowed from the battery as a cut.  None when an input is missing or
+    no fuel was burnt."""
+    if fuel_equivalent_g is None or not fuel_g > 0 or not distance_km > 0:
+        return None
+    return soot_mg / 1000.0 * (fuel_equivalent_g / fuel_g) / distance_km
+
+
 # ------------------------------------------------------------------ battery use
 def severity_factor_wang2011(current_c_rate, temperature_c) -> np.ndarray:
     """Onori-style severity factor from the Wang et al. (2011) A123 ageing law (1 at 1 C, 25 degC)."""
@@ -539,6 +553,10 @@ def compute_metrics(df, params: Mapping | None = None) -> dict:
     if m["distance_km"] and "engine_generator.soot_mass_mg" in df.columns:
         m["soot_g_per_km"] = soot_g_per_km(df)
         m["soot_mass_g"] = _delta(df, "engine_generator.soot_mass_mg") / 1000.0
+        if m.get("fuel_mass_g"):
+            m["soot_per_fuel_g_per_kg"] = m["soot_mass_g"] / (m["fuel_mass_g"] / 1000.0)
+            m["soot_dsoc_corrected_g_per_km"] = soot_dsoc_corrected(
+                1000.0 * m["soot_mass_g"], m["fuel_mass_g"], m.get("fuel_equivalent_g"), m["distance_km"])
 
     if "battery.current_a" in df.columns:
         m.update(effective_ah_processed(df, cells_p, str(opts.get("ah_weighting", "constant")),

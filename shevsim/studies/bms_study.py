@@ -15,8 +15,9 @@ Three studies, each writing PNG figures and CSV/JSON tables atomically (temporar
     closed-loop run's (``replay_soc_max_diff_pct``).
 :func:`thermal_table`
     seed Table 3.3 analogue: :func:`shevsim.bms.thermal_estimators.table_3_3` (KF, DKF, JEKF on a
-    30-node plant, stages I-III), with the synthetic heat profile and with the per-cell heat of the
-    UAC proxy run (current x1 and x2).
+    30-node plant, stages I-III, 1 s sample time), with the synthetic heat profile and with the per-cell
+    heat of the UAC proxy run (current x1 and x2); :func:`table_3_3_rates`: core and surface RMSE at
+    1 s and 0.1 s, stage III adaptive filters started at a wrong h (2 h* and h*/2).
 :func:`power_capability_study`
     seed Fig. 5.15 analogue: ``scenarios/uac_proxy_mpc_cooling_fault.toml`` (h 20 -> 3 W/m2K at
     300 s) with the BMS power limits enforced (motors derated through ``bus.motor_power_max_w`` /
@@ -380,6 +381,64 @@ def _table_into(out: Path, name: str, **kw) -> dict:
     return res
 
 
+#: seed Table 3.3 (core, surface RMSE [degC]) for the side-by-side columns of :func:`table_3_3_rates`
+SEED_TABLE_3_3 = {"I": {"KF": (0.18, 0.07), "DKF": (0.18, 0.07), "JEKF": (0.18, 0.07)},
+                  "II": {"KF": (0.24, 0.08), "DKF": (0.25, 0.08), "JEKF": (0.25, 0.08)},
+                  "III": {"KF": (1.58, 0.15), "DKF": (0.45, 0.11), "JEKF": (0.40, 0.11)}}
+
+
+def table_3_3_rates(out_dir=None, seed: int = 0, duration_s: float = 3600.0, dt_values=(1.0, 0.1),
+                    wrong_h0_factors=(2.0, 0.5)) -> dict:
+    """Seed Table 3.3 with core *and* surface RMSE at each sample time in ``dt_values`` (issue 14).
+
+    Each stage of :func:`shevsim.bms.thermal_estimators.run_stage` (synthetic ``i^2 0.015 ohm`` heat, 30-node
+    plant, sigma 0.05 degC) runs at every sample time ``dt_s`` (the filters' step and the measurement
+    rate; the filter tuning is per step, Table 3.2).  Stage III: true h = h*, the KF is given 2 h*, and
+    DKF/JEKF start at a *wrong* h, ``f h*`` for each ``f`` in ``wrong_h0_factors`` (rows ``III`` for
+    f = 2, the stage's default, and ``III_h0_x{f}`` otherwise); no row starts them at the truth.
+
+    Returns ``{"dt_s": {dt: {row: {"KF"|"DKF"|"JEKF": {"core_c", "surface_c", "h_final_w_m2k"}, "h0_adaptive_w_m2k"}}},
+    "seed_table": SEED_TABLE_3_3}``; with ``out_dir`` writes ``table_3_3_rates.csv`` (one line per sample
+    time and row, the seed's values beside) and ``table_3_3_rates.json``.
+    """
+    from ..bms.thermal_estimators import H_STAR_W_M2K, run_stage
+    if any(not (float(f) > 0.0) or float(f) == 1.0 for f in wrong_h0_factors):
+        raise ValueError(f"table_3_3_rates: wrong_h0_factors must be > 0 and != 1 (1 = the true h), "
+                         f"got {list(wrong_h0_factors)}")
+    res: dict = {"dt_s": {}, "seed_table": SEED_TABLE_3_3, "seed": seed, "duration_s": duration_s}
+    lines = []
+    for dt in dt_values:
+        dt = float(dt)
+        rows = {}
+        plan = [("I", "I", None), ("II", "II", None)]
+        for f in wrong_h0_factors:
+            f = float(f)
+            plan.append(("III" if f == 2.0 else f"III_h0_x{f:g}", "III", f * H_STAR_W_M2K))
+        for label, st, h0 in plan:
+            r = run_stage(st, seed=seed, duration_s=duration_s, dt_s=dt, h0_adaptive_w_m2k=h0)
+            rows[label] = {k: {"core_c": v["rmse_core_c"], "surface_c": v["rmse_surface_c"],
+                               "h_final_w_m2k": v["h_final_w_m2k"]} for k, v in r["filters"].items()}
+            rows[label]["h0_adaptive_w_m2k"] = r["h0_adaptive_w_m2k"]
+            rows[label]["h_kf_w_m2k"] = r["h_kf_w_m2k"]
+            sd = SEED_TABLE_3_3.get(st)
+            lines.append({"dt_s": dt, "row": label, "h0_adaptive_w_m2k": r["h0_adaptive_w_m2k"],
+                          "h_kf_w_m2k": r["h_kf_w_m2k"],
+                          **{f"{k}_{m}_c": rows[label][k][f"{m}_c"] for k in ("KF", "DKF", "JEKF")
+                             for m in ("core", "surface")},
+                          **{f"seed_{k}_{m}_c": sd[k][j] for k in ("KF", "DKF", "JEKF")
+                             for j, m in enumerate(("core", "surface"))}})
+        res["dt_s"][dt] = rows
+    if out_dir is not None:
+        import pandas as pd
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        _write_csv(out / "table_3_3_rates.csv", pd.DataFrame(lines),
+                   f"seed Table 3.3 analogue at sample times {list(dt_values)} s; seed={seed}, {duration_s:.0f} s per stage; "
+                   "stage III: true h = h*, KF given 2 h*, DKF/JEKF from the wrong h0_adaptive; seed_* = the thesis's values")
+        write_json_atomic(out / "table_3_3_rates.json", {**res, "dt_s": {str(k): v for k, v in res["dt_s"].items()}})
+    return res
+
+
 def thermal_table(out_dir, seed: int = 0, duration_s: float = 3600.0, uac_proxy: bool = True,
                   current_scales=(1.0, 2.0), scenario_path=BASE_SCENARIO) -> dict:
     """Seed Table 3.3 analogue via :func:`shevsim.bms.thermal_estimators.table_3_3`.
@@ -393,15 +452,23 @@ def thermal_table(out_dir, seed: int = 0, duration_s: float = 3600.0, uac_proxy:
     :func:`~shevsim.bms.thermal_estimators.uac_proxy_profile`) and repeats the same experiment with
     its per-cell heat (true ``battery.heat_w``, 1-s means, repeated end to end over the three stages)
     for each current scale s in ``current_scales`` (heat x s^2): ``table_3_3_uac_proxy.*`` for s = 1,
-    ``table_3_3_uac_proxy_x{s}.*`` otherwise, each with the extra row ``III_h0_star`` (DKF/JEKF
-    started at the seed's theta(0) = h* in stage III). Their metrics are under ``"uac_proxy"``.
+    ``table_3_3_uac_proxy_x{s}.*`` otherwise. Their metrics are under ``"uac_proxy"``.  (The former
+    row ``III_h0_star`` started DKF/JEKF at the true h of stage III and so repeated stage I; it is
+    gone: stage III starts them at 2 h*, and :func:`table_3_3_rates` adds h*/2.)
+
+    These tables run at the 1 s sample time; :func:`table_3_3_rates` (``table_3_3_rates.csv``, under
+    ``"rates"``) repeats the synthetic one at 1 s and 0.1 s (the BMS rate of Ch. IV-V) with core and
+    surface RMSE beside the thesis's.
     """
     from ..bms.thermal_estimators import uac_proxy_profile
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     res = _table_into(out, "table_3_3", seed=seed, duration_s=duration_s)
-    met = {"seed": seed, "duration_s": duration_s, **_thermal_metrics(res),
+    met = {"seed": seed, "duration_s": duration_s, "dt_s": 1.0, **_thermal_metrics(res),
            "figure": str(out / "table_3_3.png"), "table_csv": str(out / "table_3_3.csv")}
+    rates = table_3_3_rates(out, seed=seed, duration_s=duration_s)
+    met["rates"] = {str(k): v for k, v in rates["dt_s"].items()}
+    met["rates_csv"] = str(out / "table_3_3_rates.csv")
     if uac_proxy:
         prof = uac_proxy_profile(scenario_path)
         met["uac_proxy"] = {}
@@ -412,7 +479,7 @@ def thermal_table(out_dir, seed: int = 0, duration_s: float = 3600.0, uac_proxy:
             note = (f"heat: {Path(prof['scenario']).name} (seed {prof['seed']}) true battery.heat_w per cell, "
                     f"1-s means, {prof['period_s']:.0f} s repeated; current x{sc:g} (heat x{sc * sc:g}), "
                     f"mean {heat.mean():.2f} W")
-            r = _table_into(out, name, seed=seed, duration_s=duration_s, heat_w=heat, seed_h0_row=True, note=note)
+            r = _table_into(out, name, seed=seed, duration_s=duration_s, heat_w=heat, note=note)
             cur = prof["current_a"] * sc
             met["uac_proxy"][name] = {"current_scale": sc, "heat_mean_w": float(heat.mean()),
                                       "heat_max_w": float(heat.max()),
@@ -643,15 +710,14 @@ def main(argv=None) -> int:
               f"heat RMSE {100 * d['heat_rmse_rel_mean']:.2f} % of mean (OCV-R-RC floor "
               f"{100 * d['heat_floor_rel_mean']:.2f} %)")
     if "thermal" in s:
-        r = s["thermal"]["rmse_core_c"]
-        for st in ("I", "II", "III"):
-            print(f"Table 3.3 stage {st}: core RMSE KF {r[st]['KF']:.3f}, DKF {r[st]['DKF']:.3f}, "
-                  f"JEKF {r[st]['JEKF']:.3f} degC")
+        for dt, rows in s["thermal"].get("rates", {}).items():
+            for st, v in rows.items():
+                print(f"Table 3.3 (dt {dt} s) {st}: core/surface RMSE KF {v['KF']['core_c']:.3f}/{v['KF']['surface_c']:.3f}, "
+                      f"DKF {v['DKF']['core_c']:.3f}/{v['DKF']['surface_c']:.3f}, JEKF {v['JEKF']['core_c']:.3f}/"
+                      f"{v['JEKF']['surface_c']:.3f} degC (DKF/JEKF from h = {v['h0_adaptive_w_m2k']:.1f})")
         for name, u in s["thermal"].get("uac_proxy", {}).items():
-            print(f"{name} (mean heat {u['heat_mean_w']:.2f} W/cell): stage III KF/DKF "
-                  f"{u['stage_III_kf_over_dkf']:.2f}, KF/JEKF {u['stage_III_kf_over_jekf']:.2f} "
-                  f"(DKF/JEKF from h*: {u['stage_III_h0_star_kf_over_dkf']:.2f} / "
-                  f"{u['stage_III_h0_star_kf_over_jekf']:.2f})")
+            print(f"{name} (mean heat {u['heat_mean_w']:.2f} W/cell, dt 1 s): stage III KF/DKF "
+                  f"{u['stage_III_kf_over_dkf']:.2f}, KF/JEKF {u['stage_III_kf_over_jekf']:.2f}")
     if "power" in s:
         p = s["power"]
         for k, r in p["runs"].items():

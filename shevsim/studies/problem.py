@@ -120,8 +120,8 @@ def synthetic_metrics(edges_w, rates_wps, r_ref_wps: float = 30e3) -> dict:
     """
     check_map(edges_w, rates_wps)
     f0, s0 = 3.278, 0.0316          # seed A.2 baseline values, for familiar magnitudes
-    if rates_wps is None:
-        return {FE_KEY: f0, "soot_g_per_km": s0, "termination": "completed"}
+    if rates_wps is None:     # no battery in the surrogate: the Delta-SOC-corrected soot equals the raw one
+        return {FE_KEY: f0, "soot_g_per_km": s0, "soot_dsoc_corrected_g_per_km": s0, "termination": "completed"}
     pmax = float(edges_w[-1])
     soot_cut = fe_cut = 0.0
     for lo, hi, r in zip(edges_w, edges_w[1:], rates_wps):
@@ -130,7 +130,7 @@ def synthetic_metrics(edges_w, rates_wps, r_ref_wps: float = 30e3) -> dict:
         soot_cut += 0.03 * c * c * (1.0 - (1.0 - x) ** 2)
         fe_cut += 0.004 * (1.2 - c) ** 2 * x * x
     return {FE_KEY: f0 * (1.0 - fe_cut), "soot_g_per_km": s0 * (1.0 - soot_cut),
-            "termination": "completed"}
+            "soot_dsoc_corrected_g_per_km": s0 * (1.0 - soot_cut), "termination": "completed"}
 
 
 @dataclass(frozen=True)

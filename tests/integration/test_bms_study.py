@@ -115,8 +115,30 @@ def test_cli_study_bms_thermal_quick(tmp_path):
     assert u["table_3_3_uac_proxy_x2"]["heat_mean_w"] == pytest.approx(4 * u["table_3_3_uac_proxy"]["heat_mean_w"])
     for v in u.values():
         rr = v["rmse_core_c"]
-        assert rr["III"]["KF"] > rr["III"]["DKF"] and rr["III_h0_star"]["KF"] > 2 * rr["III_h0_star"]["DKF"]
+        assert rr["III"]["KF"] > rr["III"]["DKF"]
+        assert "III_h0_star" not in rr          # the row that started at the true h (= stage I) is gone
+    # Table 3.3 at both sample times, core and surface (issue 14)
+    assert (out / "table_3_3_rates.csv").is_file()
+    assert set(s["thermal"]["rates"]) == {"1.0", "0.1"}
     assert not list(out.glob(".*tmp*")), "temporary files left behind"
+
+
+def test_table_3_3_at_0p1s_adaptive_filters_beat_the_mistuned_kf_from_a_wrong_h():
+    """Issue 14: stage III at the 0.1 s BMS rate, DKF/JEKF started at a wrong h (2 h* and h*/2, never the
+    true h*): both beat the KF that is given 2 h*, in core and surface RMSE."""
+    from shevsim.bms.thermal_estimators import H_STAR_W_M2K
+    from shevsim.studies.bms_study import table_3_3_rates
+    r = table_3_3_rates(None, seed=0, duration_s=1200.0, dt_values=(0.1,), wrong_h0_factors=(2.0, 0.5))
+    rows = r["dt_s"][0.1]
+    for label in ("III", "III_h0_x0.5"):
+        row = rows[label]
+        assert abs(row["h0_adaptive_w_m2k"] / H_STAR_W_M2K - 1.0) >= 0.5      # started at a wrong h
+        assert row["h_kf_w_m2k"] == pytest.approx(2.0 * H_STAR_W_M2K)
+        for f in ("DKF", "JEKF"):
+            assert row[f]["core_c"] < 0.5 * row["KF"]["core_c"], (label, f, row)
+            assert row[f]["surface_c"] < row["KF"]["surface_c"], (label, f, row)
+    with pytest.raises(ValueError, match="wrong_h0_factors"):
+        table_3_3_rates(None, duration_s=10.0, dt_values=(1.0,), wrong_h0_factors=(1.0,))
 
 
 def test_cli_study_bms_rejects_unknown_part(tmp_path):
