@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.driver import feedforward_n, pi_force
+from shevsim.powertrain.driver import driver_step
 from shevsim.powertrain.vehicle import G_MPS2
 
 
@@ -86,17 +86,9 @@ class Driver(Component):
         vr, ar, v = u["speed_ref_mps"], u["accel_ref_mps2"], u["speed_mps"]
         if vr != vr or ar != ar or v != v:
             raise SimulationError(f"{self.name}: NaN input at t={t:g} s")
-        e = vr - v
-        if vr <= 0.0 and ar <= 0.0:
-            self.integ = 0.0
-            ff = 0.0
-            f = min(p.kp_n_per_mps * e, 0.0)
-            f = max(f, -p.force_brake_max_n)
-        else:
-            ff = feedforward_n(vr, ar, p.mass_kg, self._c, p.rolling_coefficient, G_MPS2)
-            f, integrate = pi_force(e, self.integ, ff, p.kp_n_per_mps, -p.force_brake_max_n, p.force_prop_max_n)
-            if integrate:
-                self.integ += p.ki_n_per_m * e * h
+        f, e, ff, self.integ = driver_step(float(vr), float(ar), float(v), self.integ, float(h), p.kp_n_per_mps,
+                                           p.ki_n_per_m, p.mass_kg, self._c, p.rolling_coefficient, G_MPS2,
+                                           p.force_brake_max_n, p.force_prop_max_n)
         y = self.y
         y["force_req_n"] = f
         y["speed_error_mps"] = e

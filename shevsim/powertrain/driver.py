@@ -15,9 +15,12 @@ start of the step (direct feedthrough); the integral is then advanced by ``k_I e
 """
 from __future__ import annotations
 
+from shevsim.core.lookup import _njit
+
 from .vehicle import G_MPS2
 
 
+@_njit(cache=True)
 def feedforward_n(v_ref: float, a_ref: float, mass_kg: float, c_aero: float, f_roll: float,
                   g: float = G_MPS2) -> float:
     """Feed-forward force [N] for reference speed and acceleration."""
@@ -27,6 +30,7 @@ def feedforward_n(v_ref: float, a_ref: float, mass_kg: float, c_aero: float, f_r
     return f
 
 
+@_njit(cache=True)
 def pi_force(e: float, integ: float, ff: float, kp: float, f_min: float, f_max: float) -> tuple[float, bool]:
     """Saturated PI output and whether the integral may integrate ``e`` (anti-windup)."""
     f = ff + kp * e + integ
@@ -35,3 +39,25 @@ def pi_force(e: float, integ: float, ff: float, kp: float, f_min: float, f_max: 
     if f < f_min:
         return f_min, e > 0.0
     return f, True
+
+
+@_njit(cache=True)
+def driver_step(v_ref: float, a_ref: float, v: float, integ: float, h: float, kp: float, ki: float, mass_kg: float,
+                c_aero: float, f_roll: float, g: float, force_brake_max_n: float, force_prop_max_n: float):
+    """One driver step with the inputs held over ``h``: ``(force_req_n, speed_error_mps, feedforward_n,
+    integral at t + h)``.  The component's step and the compiled whole-vehicle loop both call it."""
+    e = v_ref - v
+    if v_ref <= 0.0 and a_ref <= 0.0:
+        integ = 0.0
+        ff = 0.0
+        f = kp * e
+        if 0.0 < f:                      # min(kp e, 0.0), then max(., -F_brake,max), as Python's min/max
+            f = 0.0
+        if -force_brake_max_n > f:
+            f = -force_brake_max_n
+    else:
+        ff = feedforward_n(v_ref, a_ref, mass_kg, c_aero, f_roll, g)
+        f, integrate = pi_force(e, integ, ff, kp, -force_brake_max_n, force_prop_max_n)
+        if integrate:
+            integ += ki * e * h
+    return f, e, ff, integ

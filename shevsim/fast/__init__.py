@@ -1,0 +1,473 @@
+"""shevsim.fast - the compiled whole-vehicle path (issue 15).
+
+:func:`runner_for` turns a scenario whose components are all native types this path knows into a
+``runner(t_stop_s) -> Result`` that steps the whole system in one numba-compiled loop
+(:func:`shevsim.fast.loop.run_loop`): the scenario's own execution order, step multiples and
+connections (as index arrays), the components' own compiled physics (:mod:`shevsim.fast.kernels`),
+the MPC's QP solved by DAQP's C library called from compiled code (:mod:`shevsim.fast.daqp_nb`), and
+the outputs recorded into a preallocated array.  The result equals :meth:`Master.run
+<shevsim.core.master.Master.run>` of the same scenario bit for bit (``tests/unit/test_fast_path.py``);
+the Python master stays the reference and the path for FMUs, faults and debugging.
+
+How a run goes: the scenario is built and initialised by the Python master once (component
+construction, initial state, initial outputs: the reference code itself); the components' states are
+then copied into arrays (a template), and each call of the runner copies the template and runs the
+compiled loop from ``t0``.  So one runner serves many runs (a study's evaluations) at the cost of
+the loop alone.
+
+A scenario the path cannot take is declined with the reason: FMUs or component types without a
+kernel, two components of one type, faults, the Jacobi method, a vehicle in speed mode, the 30-node
+battery thermal model, an MPC solver other than DAQP (or a DAQP build whose C structs are not the
+checked ones), uncompiled components, or ports that differ from the kernels' (a component changed
+since).
+
+Example::
+
+    from shevsim.core.scenario import load_scenario
+    from shevsim.fast import runner_for
+    run, why = runner_for(load_scenario("hd_udds_mpc"))
+    res = run(1060.0) if run is not None else None
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["runner_for", "FastRunner", "SUPPORTED_TYPES"]
+
+SUPPORTED_TYPES = ("cycle", "driver", "vehicle", "motor", "bus", "engine_generator", "battery", "bms",
+                   "rule_supervisor", "mpc_supervisor")
+
+# the ports each kernel reads/writes, in the components' declaration order (checked at build time)
+_PORTS = {
+    "cycle": ((), ("speed_ref_mps", "accel_ref_mps2", "time_in_cycle_s")),
+    "driver": (("speed_ref_mps", "accel_ref_mps2", "speed_mps"), ("force_req_n", "speed_error_mps", "feedforward_n")),
+    "vehicle": (("traction_force_n", "brake_force_n", "grade_rad"),
+                ("speed_mps", "accel_mps2", "distance_m", "traction_energy_j", "aero_energy_j", "rolling_energy_j",
+                 "brake_energy_j", "grade_energy_j", "kinetic_energy_j")),
+    "motor": (("force_req_n", "speed_mps", "elec_power_max_w", "elec_power_min_w"),
+              ("traction_force_n", "brake_force_n", "elec_power_w", "torque_nm", "speed_radps", "torque_max_nm",
+               "heat_index_frac", "loss_energy_j", "elec_energy_j", "mech_energy_j")),
+    "bus": (("motor_power_w", "gen_power_w", "aux_power_w", "battery_power_max_w", "battery_power_min_w"),
+            ("motor_power_max_w", "motor_power_min_w", "gen_power_max_w", "battery_power_w", "demand_power_w",
+             "aux_energy_j", "motor_energy_j", "gen_energy_j", "battery_energy_j")),
+    "engine_generator": (("power_cmd_w", "power_rate_max_wps", "elec_power_max_w"),
+                         ("elec_power_w", "engine_power_w", "engine_speed_radps", "engine_torque_nm", "rack_frac",
+                          "fuel_rate_gps", "soot_rate_mgps", "power_limited_w", "elec_power_rated_w", "shed_count",
+                          "shed_time_s", "fuel_mass_g", "fuel_energy_j", "soot_mass_mg", "soot_transient_mg",
+                          "engine_loss_energy_j", "gen_loss_energy_j", "elec_energy_j", "shaft_kinetic_energy_j",
+                          "soot_rate_meas_mgps")),
+    "battery": (("power_w", "h_conv_w_m2k", "t_ambient_c", "current_cmd_a"),
+                ("current_a", "voltage_v", "soc_pct", "ocv_v", "t_core_c", "t_surface_c", "t_mean_c", "heat_w",
+                 "cell_current_meas_a", "cell_voltage_meas_v", "t_surface_meas_c", "t_ambient_meas_c",
+                 "loss_energy_j", "chem_energy_j", "ah_throughput_ah", "clamp_count")),
+    "bms": (("cell_current_meas_a", "cell_voltage_meas_v", "t_surface_meas_c", "t_ambient_meas_c"),
+            ("soc_pct", "v1_v", "rs_ohm", "r1_ohm", "c1_f", "t_avg_c", "gamma_c", "t_core_c", "h_w_m2k", "heat_w",
+             "ocv_v", "power_max_w", "power_min_w", "i_max_a", "i_min_a", "cell_rs_ohm")),
+    "rule_supervisor": (("demand_power_w", "soc_pct", "gen_power_w", "power_max_w", "power_min_w", "ocv_v", "rs_ohm"),
+                        ("power_cmd_w", "power_rate_max_wps", "battery_power_plan_w", "engine_on_1")),
+    "mpc_supervisor": (("demand_power_w", "soc_pct", "gen_power_w", "power_max_w", "power_min_w", "ocv_v", "rs_ohm"),
+                       ("power_cmd_w", "power_rate_max_wps", "battery_power_plan_w", "fallback_count",
+                        "battery_slack_w", "soc_slack_pct")),
+}
+
+
+class Declined(Exception):
+    """The scenario cannot take the fast path (the message says why)."""
+
+
+def _f(*vals) -> np.ndarray:
+    return np.array([float(v) for v in vals], dtype=np.float64)
+
+
+# ------------------------------------------------------------------------------- packing per type
+# each returns (data tuple, indices of the entries a run mutates (copied per run))
+def _pack_cycle(c):
+    return (np.array(c._v, dtype=np.float64), np.array(c._slope, dtype=np.float64),
+            _f(c._dt, c._n, c._dur, c._repeat, c.t0)), ()
+
+
+def _pack_driver(c):
+    from shevsim.powertrain.vehicle import G_MPS2
+    p = c.params
+    return (_f(p.kp_n_per_mps, p.ki_n_per_m, p.mass_kg, c._c, p.rolling_coefficient, G_MPS2, p.force_brake_max_n,
+               p.force_prop_max_n), _f(c.integ)), (1,)
+
+
+def _pack_vehicle(c):
+    if c._speed:
+        raise Declined(f"component '{c.name}': vehicle input_mode 'speed' has no fast-path kernel")
+    return (_f(c._m, c._c, c._fr, c._g, 1.0 if c._knots else 0.0), np.ascontiguousarray(c._kd, dtype=np.float64),
+            np.ascontiguousarray(c._kg, dtype=np.float64), _f(c.v, c.dist, *c.e)), (3,)
+
+
+def _pack_motor(c):
+    return (c._md, c._mi, _f(c._k_w, c._k_tau, 1.0 if c.extrapolate else 0.0, c._v_regen, c._p_regen, c._eff_scale,
+                             c._heat_rate),
+            _f(c.gamma, c.e_loss, c.e_elec, c.e_mech, c.v_prev, c.h_prev)), (3,)
+
+
+def _pack_bus(c):
+    return (_f(c._aux_w, 1.0 if c.params.enforce_battery_limits else 0.0), _f(*c.e)), (1,)
+
+
+def _pack_engine(c):
+    from shevsim.powertrain.engine import step
+    s = c._step
+    if s.fn is not step:
+        raise Declined(f"component '{c.name}': engine-generator built with compiled=False")
+    return (s.md, s.mi, s.c, _f(s.p_max, c.maps.p_max_w), _f(*c.st.values())), (4,)
+
+
+def _pack_battery(c):
+    from shevsim.battery import model as bm
+    if c._fd_w is not None:
+        raise Declined(f"component '{c.name}': battery thermal_model 'fd30' has no fast-path kernel")
+    if c._step is not bm.cell_step:
+        raise Declined(f"component '{c.name}': battery built with compiled=False")
+    p = c.params
+    data = (c._d, c._ix, c._c, c.st.copy(), c._th.copy(), c.yv.copy(), np.zeros(0),
+            _f(c._np, c._ns, c._npack, p.current_offset_a, p.sigma_current_a, p.sigma_voltage_v,
+               p.sigma_temperature_c, 1.0 if p.input_mode == "current" else 0.0), np.zeros(1, dtype=np.int64))
+    return data, (3, 4, 5, 8)
+
+
+def _pack_bms(c, h):
+    from shevsim.bms.electrical import dekf_step
+    from shevsim.bms.power_capability import power_limits
+    from shevsim.bms.thermal_estimators import ThermalDKF, ThermalJEKF, ThermalKF, dkf_step, jekf_step, kf_step
+    if h != c.dt:                       # what do_step does first when its step differs from the built one
+        c._build(h)
+    d = c.dekf
+    th = c.thermal
+    kinds = {ThermalKF: (0, kf_step), ThermalDKF: (1, dkf_step), ThermalJEKF: (2, jekf_step)}
+    if type(th) not in kinds:
+        raise Declined(f"component '{c.name}': thermal estimator {type(th).__name__} has no fast-path kernel")
+    code, fn = kinds[type(th)]
+    if d._step is not dekf_step or th._step is not fn or c.pc._limits is not power_limits:
+        raise Declined(f"component '{c.name}': BMS estimators built with compiled=False")
+    a_n, a_1 = c.pc._discN._args, c.pc._disc1._args
+    if a_n[5] or a_1[5] or a_n[:4] != a_1[:4]:
+        raise Declined(f"component '{c.name}': power capability discretisation is not the ZOH of one cell")
+    dd, dix = d._tabs
+    xe = _f(d.soc, d.v1, d.x2, d.th1, d.th2, *d.px, *d.pth, d.rs, d.r1, d.c1, d.v2, d.r2)
+    coef = np.full(18, np.nan)
+    pd_, pix = c.pc._tabs
+    xb = _f(c.t_mean, c.gamma, c.t_core, c.h_est, c.q_est, c.pc.last_i_max_a, c.pc.last_i_min_a)
+    data = (dd, dix, d._k, xe, th._st.copy(), th._c, pd_, pix, c.pc._k, _f(*a_n[:5], a_1[4]), coef,
+            c.tables._d, c.tables._ix, xb, _f(c._ns, c._np, code))
+    return data, (3, 4, 10, 13)
+
+
+def _rule_vec(rule, ts):
+    s = rule.settings
+    return _f(s.soc_min_pct, s.soc_max_pct, s.soc_ref_pct, s.soc_on_pct, s.soc_off_pct, s.charge_power_w,
+              s.engine_on_min_power_w, s.engine_on_demand_w, s.power_gen_min_w, s.power_gen_max_w,
+              s.power_rate_min_wps, rule.dt_s, ts)
+
+
+def _rate_arrays(rate_map):
+    return np.array(rate_map._inner, dtype=np.float64), np.array(rate_map.rates_wps, dtype=np.float64)
+
+
+def _pack_rule(c):
+    inner, rates = _rate_arrays(c.rule.rate_map)
+    return (_rule_vec(c.rule, c.params.sample_time_s), inner, rates, _f(1.0 if c.engine_on else 0.0, c.prev_cmd)), (3,)
+
+
+def _pack_mpc(c):
+    from shevsim.supervisor.mpc import _build
+    from . import daqp_nb
+    m = c.mpc
+    if m.solver_name != "daqp":
+        raise Declined(f"component '{c.name}': MPC solver '{m.solver_name}' (the fast path calls DAQP only)")
+    ok, why = daqp_nb.available()
+    if not ok:
+        raise Declined(f"component '{c.name}': {why}")
+    pr = m.prob
+    if pr._build is not _build:
+        raise Declined(f"component '{c.name}': MPC built with compiled=False")
+    if m.rule is None or m.rule.rate_map is not m.rate_map and \
+            (m.rule.rate_map._inner, m.rule.rate_map.rates_wps) != (m.rate_map._inner, m.rate_map.rates_wps):
+        raise Declined(f"component '{c.name}': MPC fallback rule with its own rate map")
+    s = m.settings
+    inner, rates = _rate_arrays(m.rate_map)
+    nc = s.n_c
+    mp = _f(c.params.sample_time_s, nc, m._pg_min_kw, m._pg_max_kw, 1.0 if s.fallback == "shift" else 0.0,
+            s.power_gen_min_w, s.power_gen_max_w, s.power_rate_min_wps, s.dt_s)
+    plan = np.zeros(nc)
+    valid = m._plan_kw is not None
+    if valid:
+        plan[:] = m._plan_kw
+    x = _f(c.prev_cmd, m.fallback_count, 1.0 if valid else 0.0, m._plan_age, m.last.battery_slack_w,
+           m.last.soc_slack_pct)
+    ws, qp, res, sense, z, lam, flags = daqp_nb.new_state(pr.n, pr.n + pr.m)
+    data = (mp, _rule_vec(m.rule, c.params.sample_time_s), inner, rates, x, plan, pr.c, pr.fp, pr.fs, pr.fsl,
+            pr.MtM, pr.LtL, pr.Mt1, pr.Mtr, pr.Lt1, pr.soc_idx, np.zeros_like(pr.H), np.zeros_like(pr.f), pr.A,
+            np.zeros_like(pr.bu), np.zeros_like(pr.bl), np.zeros_like(pr.aux), ws, qp, res, sense, z, lam, flags)
+    return data, (4, 5, 28)
+
+
+_PACK = {"cycle": _pack_cycle, "driver": _pack_driver, "vehicle": _pack_vehicle, "motor": _pack_motor,
+         "bus": _pack_bus, "engine_generator": _pack_engine, "battery": _pack_battery,
+         "rule_supervisor": _pack_rule, "mpc_supervisor": _pack_mpc}
+
+_DUMMY: dict = {}
+
+
+def _dummies() -> dict:
+    """Data of a default component of every type (the loop's argument for a type the scenario lacks:
+    never stepped, but it keeps one compiled signature for every scenario)."""
+    if not _DUMMY:
+        from shevsim.components import get_component_class
+        for typ in SUPPORTED_TYPES:
+            comp = get_component_class(typ, "fast path")(typ)
+            comp.initialize(0.0)
+            _DUMMY[typ] = (_pack_bms(comp, 0.1) if typ == "bms" else _PACK[typ](comp))[0]
+    return _DUMMY
+
+
+class FastRunner:
+    """``runner(t_stop_s) -> Result``: one scenario on the compiled loop (see the module docstring).
+
+    Attributes
+    ----------
+    scenario : Scenario
+    master : Master
+        The initialised Python master the template was taken from (not stepped).
+    last_wall_s : float
+        Wall time of the last run's compiled loop [s].
+    """
+
+    def __init__(self, scenario, master):
+        from .kernels import (T_BATTERY, T_BMS, T_BUS, T_CYCLE, T_DRIVER, T_ENGINE, T_MOTOR, T_MPC, T_RULE,
+                              T_VEHICLE)
+        codes = {"cycle": T_CYCLE, "driver": T_DRIVER, "vehicle": T_VEHICLE, "motor": T_MOTOR, "bus": T_BUS,
+                 "engine_generator": T_ENGINE, "battery": T_BATTERY, "bms": T_BMS, "rule_supervisor": T_RULE,
+                 "mpc_supervisor": T_MPC}
+        self.scenario = scenario
+        self.master = m = master
+        self.h = float(m.settings.step_s)
+        self.t0 = float(scenario.t0_s)
+        m.initialize(self.t0)
+        order = list(m.order)
+        comps = [m.components[n] for n in order]
+        types = {n: m.components[n].TYPE for n in order}
+        # port layout: outputs in the master's recording order, then inputs
+        out_idx, in_idx = {}, {}
+        obase, ibase = [], []
+        k = 0
+        for n, c in zip(order, comps):
+            obase.append(k)
+            for port in _PORTS[types[n]][1]:
+                out_idx[(n, port)] = k
+                k += 1
+        self.nsig = k
+        names = [f"{n}.{p}" for n in order for p in _PORTS[types[n]][1]]
+        if names != list(m._signal_names):
+            raise Declined("the recorded signals differ from the fast path's layout")
+        for n, c in zip(order, comps):
+            ibase.append(k)
+            for port in _PORTS[types[n]][0]:
+                in_idx[(n, port)] = k
+                k += 1
+        sig = np.zeros(k)
+        for (n, port), i in out_idx.items():
+            sig[i] = float(m.components[n].y[port])
+        for (n, port), i in in_idx.items():
+            sig[i] = float(m.components[n].u[port])
+        self._sig0 = sig
+        lptr, ldst, lsrc = [0], [], []
+        for n in order:
+            for cn in m.connections:
+                if cn.dst == n:
+                    ldst.append(in_idx[(cn.dst, cn.dst_port)])
+                    lsrc.append(out_idx[(cn.src, cn.src_port)])
+            lptr.append(len(ldst))
+        i64 = lambda v: np.array(v, dtype=np.int64)  # noqa: E731
+        self._typ = i64([codes[types[n]] for n in order])
+        self._mult = i64([m.step_multiples[n] for n in order])
+        self._ibase, self._obase = i64(ibase), i64(obase)
+        self._lptr, self._ldst, self._lsrc = i64(lptr), i64(ldst), i64(lsrc)
+        self._names = names
+        self._units = dict(zip(m._signal_names, m._signal_units))
+        self._row0 = sig[:self.nsig].copy()
+        # per-type data (template) and which entries a run mutates
+        dummies = _dummies()
+        self._data, self._mut = {}, {}
+        for n, c in zip(order, comps):
+            typ = types[n]
+            if typ == "bms":
+                data, mut = _pack_bms(c, m.step_multiples[n] * self.h)
+            else:
+                data, mut = _PACK[typ](c)
+            self._data[typ], self._mut[typ] = data, mut
+        for typ in SUPPORTED_TYPES:
+            if typ not in self._data:
+                self._data[typ], self._mut[typ] = dummies[typ], ()
+        self._comp_names = order
+        self._battery = next((c for c in comps if c.TYPE == "battery"), None)
+        self._battery_mult = next((m.step_multiples[n] for n in order if types[n] == "battery"), 1)
+        if self._battery is not None:
+            import copy
+            b = self._battery
+            self._noise = np.array(b._buf[b._k:], dtype=np.float64)
+            self._rng = copy.deepcopy(b.rng)
+        from shevsim.core.params import params_to_dict
+        self._params = {}
+        for n, c in m.components.items():
+            try:
+                self._params[n] = params_to_dict(getattr(c, "params", None))
+            except TypeError:
+                self._params[n] = {}
+        self.last_wall_s = 0.0
+
+    # ------------------------------------------------------------------------------------------
+    def _noise_for(self, n_draws: int) -> np.ndarray:
+        from shevsim.components.battery import _NOISE_BLOCK
+        while self._noise.size < n_draws:       # the battery's blocks of standard normals, in order
+            self._noise = np.concatenate([self._noise, np.array(self._rng.standard_normal(_NOISE_BLOCK).tolist())])
+        return self._noise
+
+    def n_steps(self, t_stop_s: float) -> int:
+        """Communication steps to ``t_stop_s`` (the rule of :meth:`Master.run`)."""
+        x = (t_stop_s - self.t0) / self.h
+        n_total = round(x) if abs(x - round(x)) <= 1e-9 * max(1.0, abs(x)) else math.ceil(x)
+        return max(int(n_total), 0)
+
+    def _fresh(self, typ):
+        data = self._data[typ]
+        mut = self._mut[typ]
+        if not mut:
+            return data
+        return tuple(a.copy() if i in mut else a for i, a in enumerate(data))
+
+    def __call__(self, t_stop_s: float):
+        import time
+        from shevsim.core.errors import ScenarioError, SimulationError
+        from shevsim.core.results import Result
+        from . import daqp_nb
+        from .kernels import ERR_NONFINITE_OUTPUT, ERRORS
+        from .loop import run_loop
+        if not (isinstance(t_stop_s, (int, float)) and math.isfinite(t_stop_s)):
+            raise ScenarioError(f"fast path: stop time must be a finite number, got {t_stop_s!r}")
+        n = self.n_steps(float(t_stop_s))
+        nsig = self.nsig
+        rec = np.empty((n + 1, nsig))
+        rec[0] = self._row0
+        sig = self._sig0.copy()
+        data = {typ: self._fresh(typ) for typ in SUPPORTED_TYPES}
+        if self._battery is not None:
+            b = data["battery"]
+            n_bat = -(-n // self._battery_mult)
+            data["battery"] = b[:6] + (self._noise_for(4 * n_bat),) + b[7:]
+        mpc = data["mpc_supervisor"]
+        out = np.zeros(3, dtype=np.int64)
+        wall = time.perf_counter()
+        k0 = 0
+        try:
+            while True:
+                run_loop(n - k0, k0, self.h, self.t0, self._typ, self._mult, self._ibase, self._obase, self._lptr,
+                         self._ldst, self._lsrc, sig, rec[k0:], nsig, out, data["cycle"], data["driver"],
+                         data["vehicle"], data["motor"], data["bus"], data["engine_generator"], data["battery"],
+                         data["bms"], data["rule_supervisor"], mpc)
+                if out[0] == ERR_NONFINITE_OUTPUT:
+                    row = int(out[1])
+                    bad = [j for j in range(nsig) if not math.isfinite(rec[row, j])]
+                    if bad:
+                        comp, port = self._names[bad[0]].split(".", 1)
+                        err = SimulationError(f"component '{comp}' output '{port}' is {float(rec[row, bad[0]])!r} "
+                                              f"at t={self._time(row):.6g} s (step {row})")
+                        raise self._stopped(err, rec, row, comp, port, self._time(row))
+                    k0 = row                # a row whose sum overflowed, every value finite: go on
+                    if k0 >= n:
+                        break
+                    continue
+                if out[0] != 0:
+                    k = int(out[1])
+                    comp = self._comp_names[int(out[2])]
+                    err = SimulationError(f"component '{comp}' failed in do_step at t={self._time(k):.6g} s "
+                                          f"(step {k}): {ERRORS.get(int(out[0]), 'error')}")
+                    raise self._stopped(err, rec, k + 1, comp, None, self._time(k))
+                break
+        finally:
+            daqp_nb.drop_model(mpc[22], mpc[28])      # free DAQP's workspace (as daqp.Model.__dealloc__)
+            self.last_wall_s = time.perf_counter() - wall
+        return self._result(rec, n + 1, "completed")
+
+    def _stopped(self, err, rec, nrows, comp, port, t):
+        """Attach where/when and the trajectory up to the stop (as the master's errors carry them)."""
+        from shevsim.core.results import Termination
+        err.component, err.port, err.time_s = comp, port, t
+        err.result = self._result(rec, nrows, Termination("stopped", str(err), comp, port, t))
+        return err
+
+    def _time(self, k: int) -> float:
+        return self.t0 + k * self.h
+
+    def _result(self, rec, nrows, termination):
+        from shevsim.core.results import Result
+        times = np.empty(nrows)
+        if nrows:
+            times[0] = self.t0
+            times[1:] = self.t0 + np.arange(1, nrows, dtype=np.int64) * self.h
+        signals = {name: rec[:nrows, j] for j, name in enumerate(self._names)}
+        return Result(times, signals, dict(self._units), {k: dict(v) for k, v in self._params.items()}, termination)
+
+
+def runner_for(scenario) -> tuple[Callable | None, str]:
+    """``(runner, why)``: a :class:`FastRunner` for ``scenario`` and ``""``, or ``None`` and the reason the
+    scenario cannot take the fast path.
+
+    ``runner(t_stop_s)`` returns a :class:`~shevsim.core.results.Result` equal to ``Master.run(t_stop_s,
+    t0=scenario.t0_s)`` of the same scenario.
+    """
+    from shevsim.core.errors import ShevsimError
+    why = _static_reason(scenario)
+    if why:
+        return None, why
+    from shevsim.core.scenario import build_master
+    try:
+        master = build_master(scenario)
+    except ShevsimError as exc:
+        return None, f"the scenario does not build: {exc}"
+    why = _component_reason(master)
+    if why:
+        return None, why
+    try:
+        return FastRunner(scenario, master), ""
+    except Declined as exc:
+        return None, str(exc)
+
+
+def _static_reason(scenario) -> str:
+    if scenario.settings.method != "gauss-seidel":
+        return f"method '{scenario.settings.method}' (the fast path steps Gauss-Seidel only)"
+    if scenario.faults:
+        return "the scenario has faults (the Python master applies them)"
+    seen = {}
+    for spec in scenario.components:
+        if spec.type == "fmu":
+            return f"component '{spec.name}' is an FMU"
+        if spec.type not in SUPPORTED_TYPES:
+            return f"component '{spec.name}' has type '{spec.type}', which has no fast-path kernel"
+        if spec.type in seen:
+            return (f"components '{seen[spec.type]}' and '{spec.name}' are both of type '{spec.type}' "
+                    "(the fast path takes one component per type)")
+        seen[spec.type] = spec.name
+    return ""
+
+
+def _component_reason(master) -> str:
+    from shevsim.components import get_component_class
+    for n, c in master.components.items():
+        typ = getattr(c, "TYPE", None)
+        if typ not in _PORTS or type(c) is not get_component_class(typ, "fast path"):
+            return f"component '{n}' ({type(c).__name__}) is not the native '{typ}' class"
+        ins = tuple(v.name for v in c.variables() if v.causality == "input")
+        outs = tuple(v.name for v in c.variables() if v.causality == "output")
+        if (ins, outs) != _PORTS[typ]:
+            return f"component '{n}': its ports differ from the fast-path kernel's for type '{typ}'"
+    return ""

@@ -1,0 +1,594 @@
+"""kernels.py - one compiled step per native component type, for the compiled whole-vehicle loop.
+
+Each ``*_step(data, sig, ib, ob, t, h)`` advances one component from ``t`` to ``t + h``: it reads its
+inputs from ``sig[ib + j]`` (``j`` = the input's position among the component's declared inputs),
+calls the component's own compiled physics (the very functions the component's ``do_step`` calls:
+:func:`shevsim.powertrain.motor.motor_step`, :func:`shevsim.powertrain.engine.step`,
+:func:`shevsim.battery.model.cell_step`, :func:`shevsim.bms.electrical.dekf_step`, the thermal filter
+steps, :func:`shevsim.bms.power_capability.power_limits`, :func:`shevsim.supervisor.mpc._build`, DAQP's C
+library, ...) and writes its outputs to ``sig[ob + j]`` in declaration order.  What is left here is the
+components' bookkeeping around those calls (unit scaling, cumulative energies, output publishing),
+written to give the same floating-point operations in the same order as the components' Python
+methods, so the loop reproduces :class:`shevsim.core.master.Master` bit for bit (the agreement test,
+``tests/unit/test_fast_path.py``, fails on any drift).
+
+Return value: 0, or an error code (:data:`ERRORS`) that the runner turns into the component's
+:class:`~shevsim.core.errors.SimulationError`.
+
+Python's ``min``/``max`` keep the first argument unless the second is strictly smaller/larger; numba's
+may pick the other one of two equal values (signed zeros), so the bookkeeping uses :func:`pmin` /
+:func:`pmax`, which mirror Python.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from shevsim.battery.model import (S_AH, S_CLAMPS, S_ECHEM, S_ELOSS, S_SOC, Y_I, Y_Q, Y_TCORE, Y_TMEAN, Y_TSURF,
+                                   Y_V, Y_VOC, cell_step)
+from shevsim.battery.thermal import two_state_ad_bd, two_state_out
+from shevsim.bms.electrical import dekf_step
+from shevsim.bms.power_capability import power_limits
+from shevsim.bms.thermal_estimators import dkf_step, jekf_step, kf_step
+from shevsim.core.lookup import _t1_value
+from shevsim.powertrain.engine import step as engine_step
+from shevsim.powertrain.motor import bus_aux_w, bus_balance, motor_step
+from shevsim.powertrain.vehicle import grade_total_rad, step_vehicle
+from shevsim.powertrain.driver import driver_step
+from shevsim.supervisor.mpc import _build as mpc_build
+
+from . import daqp_nb
+
+# component type codes of the loop
+T_CYCLE, T_DRIVER, T_VEHICLE, T_MOTOR, T_BUS, T_ENGINE, T_BATTERY, T_BMS, T_RULE, T_MPC = range(10)
+
+ERR_NAN_INPUT, ERR_SOC_RANGE, ERR_ENGINE_NONFINITE, ERR_DEKF, ERR_THERMAL_INPUT, ERR_SAMPLE_TIME, \
+    ERR_BATTERY_INPUT, ERR_NONFINITE_OUTPUT = range(1, 9)
+ERRORS = {ERR_NAN_INPUT: "NaN input", ERR_SOC_RANGE: "SOC left [0, 100] %",
+          ERR_ENGINE_NONFINITE: "engine-generator step gave a non-finite result (a NaN lookup, or a lookup "
+                                "outside a map with extrapolation 'error')",
+          ERR_DEKF: "DEKF: non-finite or non-positive innovation variance",
+          ERR_THERMAL_INPUT: "thermal estimator: non-finite input",
+          ERR_SAMPLE_TIME: "supervisor called with a step that is not its sample_time_s",
+          ERR_BATTERY_INPUT: "bad input (non-finite, or h_conv_w_m2k < 0)",
+          ERR_NONFINITE_OUTPUT: "non-finite output"}
+
+
+@njit(cache=True)
+def pmin(a, b):
+    """Python's ``min(a, b)``."""
+    return b if b < a else a
+
+
+@njit(cache=True)
+def pmax(a, b):
+    """Python's ``max(a, b)``."""
+    return b if b > a else a
+
+
+@njit(cache=True)
+def bisect_right(a, x):
+    """Python's ``bisect.bisect_right`` (the power-rate map's partition)."""
+    lo = 0
+    hi = a.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if x < a[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@njit(cache=True)
+def round3(x):
+    """Python's ``round(x, 3)`` (correctly rounded: the decimal ``x`` rounded half-even to 3 places, then
+    the nearest double), used by the power capability's thermal-coefficient cache key."""
+    if not math.isfinite(x):
+        return x
+    p = x * 1000.0
+    if abs(p) >= 4503599627370496.0:       # 2**52: already an integer number of thousandths
+        return x
+    # exact error of the product x * 1000 (Dekker's two-product; 1000 splits exactly)
+    c = 134217729.0 * x
+    xh = c - (c - x)
+    xl = x - xh
+    e = (xh * 1000.0 - p) + xl * 1000.0
+    fl = math.floor(p)
+    d = (p - fl) - 0.5
+    s = d + e
+    if s > 0.0:
+        q = fl + 1.0
+    elif s < 0.0:
+        q = fl
+    else:
+        q = fl if (fl % 2.0) == 0.0 else fl + 1.0
+    r = q / 1000.0
+    if r == 0.0:
+        r = math.copysign(0.0, x)
+    return r
+
+
+# ------------------------------------------------------------------------------------------------ cycle
+@njit(cache=True)
+def cycle_step(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.cycle.CycleSource.do_step` (``_evaluate(t + h)``)."""
+    v, slope, p = data
+    dt = p[0]
+    n = int(p[1])
+    dur = p[2]
+    repeat = int(p[3])
+    t0 = p[4]
+    tt = t + h
+    rel = tt - t0
+    k = math.floor(rel / dur + 1e-9)
+    if rel < 0.0:
+        k = 0
+        rel = 0.0
+    if k >= repeat:
+        sig[ob] = v[n - 1]
+        sig[ob + 1] = 0.0
+        sig[ob + 2] = dur
+        return 0
+    tc = rel - k * dur
+    if tc < 0.0:
+        tc = 0.0
+    x = tc / dt
+    i = int(math.floor(x + 1e-9))
+    if i >= n - 1:
+        i = n - 2
+    frac = x - i
+    if frac < 0.0:
+        frac = 0.0
+    sig[ob] = v[i] + (v[i + 1] - v[i]) * frac
+    sig[ob + 1] = slope[i]
+    sig[ob + 2] = tc
+    return 0
+
+
+# ----------------------------------------------------------------------------------------------- driver
+@njit(cache=True)
+def driver_kernel(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.driver.Driver.do_step` (the law is :func:`~shevsim.powertrain.driver.driver_step`)."""
+    p, x = data
+    vr = sig[ib]
+    ar = sig[ib + 1]
+    v = sig[ib + 2]
+    if vr != vr or ar != ar or v != v:
+        return ERR_NAN_INPUT
+    f, e, ff, integ = driver_step(vr, ar, v, x[0], h, p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7])
+    x[0] = integ
+    sig[ob] = f
+    sig[ob + 1] = e
+    sig[ob + 2] = ff
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------- vehicle
+@njit(cache=True)
+def vehicle_kernel(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.vehicle.Vehicle.do_step` (force mode)."""
+    p, kd, kg, x = data
+    f_t = sig[ib]
+    f_b = sig[ib + 1]
+    th = sig[ib + 2]
+    if f_t != f_t or f_b != f_b or th != th:
+        return ERR_NAN_INPUT
+    v0 = x[0]
+    if p[4] > 0.5:
+        th = grade_total_rad(th, x[1], kd, kg)
+    v1, dist, wp, wb, wr, wa, wg = step_vehicle(v0, f_t, f_b, th, h, p[0], p[1], p[2], p[3])
+    x[0] = v1
+    x[2] += wp
+    x[3] += wb
+    x[4] += wr
+    x[5] += wa
+    x[6] += wg
+    x[1] += dist
+    sig[ob] = v1
+    sig[ob + 1] = (v1 - v0) / h
+    sig[ob + 2] = x[1]
+    sig[ob + 3] = x[2]          # traction
+    sig[ob + 4] = x[5]          # aero
+    sig[ob + 5] = x[4]          # rolling
+    sig[ob + 6] = x[3]          # brake
+    sig[ob + 7] = x[6]          # grade
+    sig[ob + 8] = 0.5 * p[0] * v1 * v1
+    return 0
+
+
+# ------------------------------------------------------------------------------------------------ motor
+@njit(cache=True)
+def motor_kernel(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.motor.Motor.do_step`."""
+    md, mi, p, x = data
+    f_req = sig[ib]
+    v = sig[ib + 1]
+    if f_req != f_req or v != v:
+        return ERR_NAN_INPUT
+    tau, brake, p_el, p_m, w, t_lim, gamma, v = motor_step(
+        md, mi, f_req, v, sig[ib + 2], sig[ib + 3], h, x[4], x[5], x[0], p[0], p[1], p[2] > 0.5, p[3], p[4],
+        p[5], p[6])
+    x[4] = v
+    x[5] = h
+    x[2] += p_el * h
+    x[3] += p_m * h
+    x[1] += (p_el - p_m) * h
+    x[0] = gamma
+    sig[ob] = tau / p[1]
+    sig[ob + 1] = brake
+    sig[ob + 2] = p_el
+    sig[ob + 3] = tau
+    sig[ob + 4] = w
+    sig[ob + 5] = t_lim
+    sig[ob + 6] = gamma
+    sig[ob + 7] = x[1]
+    sig[ob + 8] = x[2]
+    sig[ob + 9] = x[3]
+    return 0
+
+
+# -------------------------------------------------------------------------------------------------- bus
+@njit(cache=True)
+def bus_kernel(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.bus.PowerBus.do_step` (balance, energies, then the limits)."""
+    p, e = data
+    pm = sig[ib]
+    pg = sig[ib + 1]
+    u_aux = sig[ib + 2]
+    pa, d, b = bus_balance(pm, pg, u_aux, p[0])
+    if pm != pm or pg != pg or pa != pa:
+        return ERR_NAN_INPUT
+    e[0] += pa * h
+    e[1] += pm * h
+    e[2] += pg * h
+    e[3] += b * h
+    sig[ob + 4] = d
+    sig[ob + 3] = b
+    sig[ob + 5] = e[0]
+    sig[ob + 6] = e[1]
+    sig[ob + 7] = e[2]
+    sig[ob + 8] = e[3]
+    if p[1] > 0.5:
+        pa2 = bus_aux_w(u_aux, p[0])
+        base = pg - pa2
+        sig[ob] = pmax(base + sig[ib + 3], 0.0)
+        sig[ob + 1] = pmin(pmax(pg, 0.0) - pa2 + sig[ib + 4], 0.0)
+        sig[ob + 2] = pmax(pm + pa2 - sig[ib + 4], 0.0)
+    else:
+        sig[ob] = 1e12
+        sig[ob + 1] = -1e12
+        sig[ob + 2] = 1e12
+    return 0
+
+
+# --------------------------------------------------------------------------------------------- engine
+@njit(cache=True)
+def engine_kernel(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.engine_generator.EngineGenerator.do_step`."""
+    md, mi, c, p, s = data
+    pc = sig[ib]
+    rate = sig[ib + 1]
+    lim = sig[ib + 2]
+    if pc != pc or rate != rate or lim != lim:
+        return ERR_NAN_INPUT
+    r = engine_step(md, mi, c, p[0], s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8], s[9], s[10], s[11],
+                    s[12], s[13], s[14], s[15], s[16], s[17], s[18], s[19], s[20], pc, rate, h, lim)
+    if not math.isfinite(r[21] + r[22] + r[24] + r[1] + r[5]):
+        return ERR_ENGINE_NONFINITE
+    (s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8], s[9], s[10], s[11], s[12], s[13], s[14], s[15], s[16],
+     s[17], s[18], s[19], s[20]) = (r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11],
+                                    r[12], r[13], r[14], r[15], r[16], r[17], r[18], r[19], r[20])
+    # _write(e_el / h, fuel / h, soot / h, soot_meas); state order of engine.STATE
+    sig[ob] = r[21] / h
+    sig[ob + 1] = s[5] * s[1]
+    sig[ob + 2] = s[1]
+    sig[ob + 3] = s[5]
+    sig[ob + 4] = s[3]
+    sig[ob + 5] = r[22] / h
+    sig[ob + 6] = r[23] / h
+    sig[ob + 7] = s[0]
+    sig[ob + 8] = p[1]
+    sig[ob + 9] = s[18]
+    sig[ob + 10] = s[19]
+    sig[ob + 11] = s[7]
+    sig[ob + 12] = s[8]
+    sig[ob + 13] = s[14]
+    sig[ob + 14] = s[15]
+    sig[ob + 15] = s[9]
+    sig[ob + 16] = s[12]
+    sig[ob + 17] = s[13]
+    sig[ob + 18] = s[11]
+    sig[ob + 19] = r[24]
+    return 0
+
+
+# -------------------------------------------------------------------------------------------- battery
+@njit(cache=True)
+def battery_kernel(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.battery.BatteryPack.do_step` (two-state thermal model)."""
+    d, ix, c, st, th, yv, noise, p, kn = data
+    p_pack = sig[ib + 3] if p[7] > 0.5 else sig[ib]
+    h_conv = sig[ib + 1]
+    t_amb = sig[ib + 2]
+    if not (math.isfinite(p_pack) and math.isfinite(h_conv) and math.isfinite(t_amb)) or h_conv < 0.0:
+        return ERR_BATTERY_INPUT
+    cell_step(d, ix, c, st, p_pack, t, h, t_amb, h_conv, th, yv)
+    soc_new = st[S_SOC]
+    if not (0.0 <= soc_new <= 1.0):
+        return ERR_SOC_RANGE
+    # _publish(t_amb)
+    i = yv[Y_I]
+    v = yv[Y_V]
+    ts = yv[Y_TSURF]
+    k = kn[0]
+    n0 = noise[k]
+    n1 = noise[k + 1]
+    n2 = noise[k + 2]
+    n3 = noise[k + 3]
+    kn[0] = k + 4
+    sig[ob] = i * p[0]
+    sig[ob + 1] = v * p[1]
+    sig[ob + 2] = 100.0 * st[S_SOC]
+    sig[ob + 3] = yv[Y_VOC] * p[1]
+    sig[ob + 4] = yv[Y_TCORE]
+    sig[ob + 5] = ts
+    sig[ob + 6] = yv[Y_TMEAN]
+    sig[ob + 7] = yv[Y_Q]
+    sig[ob + 8] = i + p[3] + p[4] * n0
+    sig[ob + 9] = v + p[5] * n1
+    sig[ob + 10] = ts + p[6] * n2
+    sig[ob + 11] = t_amb + p[6] * n3
+    sig[ob + 12] = st[S_ELOSS] * p[2]
+    sig[ob + 13] = st[S_ECHEM] * p[2]
+    sig[ob + 14] = st[S_AH] * p[0]
+    sig[ob + 15] = st[S_CLAMPS]
+    return 0
+
+
+# ------------------------------------------------------------------------------------------------ BMS
+@njit(cache=True)
+def _pc_coeffs(tp, h_w_m2k, out):
+    """:meth:`shevsim.bms.power_capability.PowerCapability._thermal_coeffs` (without the memo, a pure
+    function of the rounded h): ``tp = [R, k, alpha, bq, dt_N, dt_1]``."""
+    hh = round3(h_w_m2k)
+    if hh == out[17]:
+        return
+    a = two_state_ad_bd(hh, tp[0], tp[1], tp[2], tp[3], tp[4], False)
+    o = two_state_out(hh, tp[0], tp[1])
+    b = two_state_ad_bd(hh, tp[0], tp[1], tp[2], tp[3], tp[5], False)
+    out[0] = a[0]
+    out[1] = a[1]
+    out[2] = a[2]
+    out[3] = a[3]
+    out[4] = a[4]
+    out[5] = a[5]
+    out[6] = a[6]
+    out[7] = a[7]
+    out[8] = o[3]
+    out[9] = o[4]
+    out[10] = o[5]
+    out[11] = b[0]
+    out[12] = b[1]
+    out[13] = b[2]
+    out[14] = b[3]
+    out[15] = b[4]
+    out[16] = b[6]
+    out[17] = hh
+
+
+@njit(cache=True)
+def bms_kernel(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.bms.BMS.do_step`: DEKF -> heat -> thermal filter -> power capability."""
+    dd, dix, dk, xe, tst, tc, pd_, pix, pk, tp, coef, od, oix, xb, p = data
+    i = sig[ib]
+    v = sig[ib + 1]
+    ts = sig[ib + 2]
+    ta = sig[ib + 3]
+    if not (math.isfinite(i) and math.isfinite(v) and math.isfinite(ts) and math.isfinite(ta)):
+        return ERR_NAN_INPUT
+    # 1. electrical DEKF and 2. heat with the previous T_mean (DEKF.step_heat)
+    r = dekf_step(dd, dix, dk, xe[0], xe[1], xe[2], xe[3], xe[4], xe[5], xe[6], xe[7], xe[8], xe[9], xe[10],
+                  xe[11], xe[12], xe[13], i, v, h, xb[0], xe[17])
+    if not r[0]:
+        return ERR_DEKF
+    xe[0] = r[1]
+    xe[1] = r[2]
+    xe[2] = r[3]
+    xe[14] = r[4]
+    xe[3] = r[5]
+    xe[4] = r[6]
+    xe[15] = r[7]
+    xe[16] = r[8]
+    xe[5] = r[9]
+    xe[6] = r[10]
+    xe[7] = r[11]
+    xe[8] = r[12]
+    xe[9] = r[13]
+    xe[10] = r[14]
+    xe[11] = r[15]
+    xe[12] = r[16]
+    xe[13] = r[17]
+    xe[17] = r[21]
+    xe[18] = r[22]
+    q = r[20]
+    xb[4] = q
+    # 3. thermal filter (ThermalKF/DKF/JEKF.update)
+    if not (math.isfinite(ts) and math.isfinite(ta) and math.isfinite(q)):
+        return ERR_THERMAL_INPUT
+    code = int(p[2])
+    if code == 1:
+        est = dkf_step(tst, tc, ts, ta, q)
+    elif code == 2:
+        est = jekf_step(tst, tc, ts, ta, q)
+    else:
+        est = kf_step(tst, tc, ts, ta, q)
+    xb[0] = est[0]
+    xb[1] = est[1]
+    xb[2] = est[2]
+    xb[3] = est[4]
+    # 4. power capability (_publish)
+    soc = xe[0]
+    v1 = xe[1]
+    rs = xe[14]
+    r1 = xe[15]
+    c1 = xe[16]
+    _pc_coeffs(tp, xb[3], coef)
+    lim = power_limits(pd_, pix, pk, coef[:17], soc, v1, rs, r1, c1, xb[0], xb[1], ta, xb[5], xb[6])
+    xb[5] = lim[0]
+    xb[6] = lim[1]
+    ns = p[0]
+    np_ = p[1]
+    sig[ob] = 100.0 * soc
+    sig[ob + 1] = v1 * ns
+    sig[ob + 2] = rs * ns / np_
+    sig[ob + 3] = r1 * ns / np_
+    sig[ob + 4] = c1 * np_ / ns
+    sig[ob + 15] = rs
+    sig[ob + 5] = xb[0]
+    sig[ob + 6] = xb[1]
+    sig[ob + 7] = xb[2]
+    sig[ob + 8] = xb[3]
+    sig[ob + 9] = q
+    sig[ob + 10] = _t1_value(od, oix[0], oix[1], soc) * ns
+    sig[ob + 11] = lim[2]
+    sig[ob + 12] = lim[3]
+    sig[ob + 13] = lim[0]
+    sig[ob + 14] = lim[1]
+    return 0
+
+
+# -------------------------------------------------------------------------------------- supervisors
+@njit(cache=True)
+def _check_h(h, ts):
+    return abs(h - ts) > 1e-9 * pmax(1.0, ts)
+
+
+@njit(cache=True)
+def _rate(inner, rates, pw):
+    return rates[bisect_right(inner, pw)]
+
+
+@njit(cache=True)
+def rule_split(rp, inner, rates, engine_on, soc, demand, gen, pmax_w, pmin_w):
+    """:class:`shevsim.supervisor.rule_based.RuleBasedSupervisor` ``_thermostat`` + ``_power``; returns
+    ``(on, command_w)``.  ``rp = [soc_min, soc_max, soc_ref, soc_on, soc_off, charge_w, on_min_w,
+    on_demand_w, pg_min_w, pg_max_w, rate_min_wps, dt_s]``."""
+    must = demand >= rp[7] or demand > pmax_w
+    if engine_on:
+        on = not (soc >= rp[4] and not must)
+    else:
+        on = soc <= rp[3] or must
+    if on:
+        x = (rp[2] - soc) / (rp[2] - rp[0])
+        pw = demand + rp[5] * pmin(pmax(x, -1.0), 1.0)
+        pw = pmax(pw, rp[6])
+    else:
+        pw = rp[8]
+    if soc <= rp[0]:
+        pw = pmax(pw, demand)
+    if soc >= rp[1]:
+        pw = pmin(pw, pmax(demand, rp[8]))
+    if pmin_w <= pmax_w:
+        pw = pmin(pmax(pw, demand - pmax_w), demand - pmin_w)
+    pw = pmin(pmax(pw, rp[8]), rp[9])
+    rate = _rate(inner, rates, gen)
+    return on, pmin(pmax(pw, gen + rp[10] * rp[11]), gen + rate * rp[11])
+
+
+@njit(cache=True)
+def rule_kernel(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.supervisors.RuleSupervisor.do_step`."""
+    rp, inner, rates, x = data
+    if _check_h(h, rp[12]):
+        return ERR_SAMPLE_TIME
+    for j in range(5):
+        if not math.isfinite(sig[ib + j]):
+            return ERR_NAN_INPUT
+    demand = sig[ib]
+    prev = x[1]
+    on, cmd = rule_split(rp, inner, rates, x[0] > 0.5, sig[ib + 1], demand, prev, sig[ib + 3], sig[ib + 4])
+    x[0] = 1.0 if on else 0.0
+    sig[ob] = cmd
+    sig[ob + 1] = _rate(inner, rates, prev)
+    sig[ob + 2] = demand - cmd
+    sig[ob + 3] = 1.0 if on else 0.0
+    x[1] = cmd
+    return 0
+
+
+@njit(cache=True)
+def _mpc_fallback(mp, rp, inner, rates, plan, x, soc, demand, gen, pmax_w, pmin_w, rate):
+    """:meth:`shevsim.supervisor.mpc.MPCSupervisor._fallback` (engine power [W])."""
+    nc = int(mp[1])
+    vo = gen if math.isfinite(gen) else 0.0
+    cand = math.nan
+    have = False
+    if mp[4] > 0.5 and x[2] > 0.5 and x[3] + 1 < nc:
+        x[3] += 1
+        cand = plan[int(x[3])] * 1e3
+        have = True
+    else:
+        on, c = rule_split(rp, inner, rates, False, soc, demand, gen, pmax_w, pmin_w)
+        cand = c
+        have = True
+    if not have or not math.isfinite(cand):
+        cand = vo
+    if math.isfinite(demand) and math.isfinite(pmax_w) and math.isfinite(pmin_w) and pmin_w <= pmax_w:
+        cand = pmin(pmax(cand, demand - pmax_w), demand - pmin_w)
+    cand = pmin(pmax(cand, mp[5]), mp[6])
+    up = rate if (math.isfinite(rate) and rate > 0) else 0.0
+    cand = pmin(pmax(cand, vo + mp[7] * mp[8]), vo + up * mp[8])
+    return cand
+
+
+@njit(cache=True)
+def mpc_kernel(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.supervisors.MPCSupervisor.do_step` with ``MPCSupervisor.step`` (QP
+    build :func:`shevsim.supervisor.mpc._build`, DAQP through its C library, fallback)."""
+    (mp, rp, inner, rates, x, plan, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx, H, f, A, bu, bl, aux,
+     ws, qp, res, sense, z, lam, flags) = data
+    if _check_h(h, mp[0]):
+        return ERR_SAMPLE_TIME
+    demand = sig[ib]
+    soc = sig[ib + 1]
+    pmax_w = sig[ib + 3]
+    pmin_w = sig[ib + 4]
+    gen = x[0]                                    # the previous command u(k-1)
+    rate = _rate(inner, rates, gen)
+    vo = gen * 1e-3
+    nc = int(mp[1])
+    st = mpc_build(soc, demand * 1e-3, vo, sig[ib + 5], sig[ib + 6], pmax_w * 1e-3, pmin_w * 1e-3, rate * 1e-3,
+                   c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx, H, f, bu, bl, aux)
+    ok = False
+    if st == 0:
+        flag = daqp_nb.solve(ws, qp, res, sense, z, lam, flags, H, f, A, bu, bl)
+        ok = flag >= 1
+    if ok:
+        v_cmd = pmin(pmax(vo + z[0], mp[2]), mp[3])
+        acc = 0.0
+        for j in range(nc):                       # the plan: cumsum(z[:nc]) + vo
+            acc += z[j]
+            plan[j] = acc
+        for j in range(nc):
+            plan[j] += vo
+        x[2] = 1.0
+        x[3] = 0.0
+        x[4] = z[nc] * 1e3
+        x[5] = z[nc + 1] * aux[0]
+    else:
+        v_cmd = _mpc_fallback(mp, rp, inner, rates, plan, x, soc, demand, gen, pmax_w, pmin_w, rate) * 1e-3
+        x[1] += 1.0
+        x[4] = 0.0
+        x[5] = 0.0
+    cmd = v_cmd * 1e3
+    sig[ob] = cmd
+    sig[ob + 1] = _rate(inner, rates, gen)
+    sig[ob + 2] = demand - cmd
+    sig[ob + 3] = x[1]
+    sig[ob + 4] = x[4]
+    sig[ob + 5] = x[5]
+    x[0] = cmd
+    return 0

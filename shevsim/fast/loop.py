@@ -1,0 +1,85 @@
+"""loop.py - the compiled fixed-step, multi-rate Gauss-Seidel loop over a scenario's schedule.
+
+The loop is the one of :meth:`shevsim.core.master.Master.step`, with the components' ports in one
+float array ``sig`` (outputs first, in the master's recording order, then inputs) and the
+connections as index pairs::
+
+    for k in range(n):                              # communication steps, t = t0 + k h
+        for j in execution order:
+            if k % multiple[j] == 0:
+                sig[dst] = sig[src] for the connections into component j
+                step component j over multiple[j] * h      (kernels.py, by type code)
+        record sig[:n_signals] as row k + 1; stop at the first non-finite value
+
+Component data are passed as one tuple per type (:mod:`shevsim.fast.kernels`); a scenario has at most one
+component of each type on this path.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from . import kernels as K
+
+
+@njit(cache=True)
+def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, nsig, out,
+             cyc, drv, veh, mot, bus, eng, bat, bms, rule, mpc):
+    """Step ``n`` communication steps from step index ``k0``; rows ``1..n`` of ``rec`` are recorded.
+
+    ``out`` receives ``[status, step index, position in the order]``; status 0 = completed, otherwise
+    the kernel's error code (or :data:`~shevsim.fast.kernels.ERR_NONFINITE_OUTPUT`).
+    """
+    ncomp = typ.shape[0]
+    for s in range(n):
+        k = k0 + s
+        t = t0 + k * h
+        for j in range(ncomp):
+            m = mult[j]
+            if m == 1 or k % m == 0:
+                for q in range(lptr[j], lptr[j + 1]):
+                    sig[ldst[q]] = sig[lsrc[q]]
+                hk = m * h
+                ty = typ[j]
+                ib = ibase[j]
+                ob = obase[j]
+                if ty == K.T_CYCLE:
+                    st = K.cycle_step(cyc, sig, ib, ob, t, hk)
+                elif ty == K.T_DRIVER:
+                    st = K.driver_kernel(drv, sig, ib, ob, t, hk)
+                elif ty == K.T_VEHICLE:
+                    st = K.vehicle_kernel(veh, sig, ib, ob, t, hk)
+                elif ty == K.T_MOTOR:
+                    st = K.motor_kernel(mot, sig, ib, ob, t, hk)
+                elif ty == K.T_BUS:
+                    st = K.bus_kernel(bus, sig, ib, ob, t, hk)
+                elif ty == K.T_ENGINE:
+                    st = K.engine_kernel(eng, sig, ib, ob, t, hk)
+                elif ty == K.T_BATTERY:
+                    st = K.battery_kernel(bat, sig, ib, ob, t, hk)
+                elif ty == K.T_BMS:
+                    st = K.bms_kernel(bms, sig, ib, ob, t, hk)
+                elif ty == K.T_RULE:
+                    st = K.rule_kernel(rule, sig, ib, ob, t, hk)
+                else:
+                    st = K.mpc_kernel(mpc, sig, ib, ob, t, hk)
+                if st != 0:
+                    out[0] = st
+                    out[1] = k
+                    out[2] = j
+                    return
+        acc = 0.0
+        row = s + 1
+        for i in range(nsig):
+            x = sig[i]
+            rec[row, i] = x
+            acc += x
+        if not math.isfinite(acc):
+            out[0] = K.ERR_NONFINITE_OUTPUT
+            out[1] = k + 1
+            out[2] = -1
+            return
+    out[0] = 0
+    out[1] = k0 + n
+    out[2] = -1

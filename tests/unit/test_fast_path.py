@@ -1,0 +1,188 @@
+"""The compiled whole-vehicle path (``shevsim.fast``) against the Python master, the reference.
+
+* Agreement: on the co-simulation regression scenarios (``tests/unit/test_cosim_regression.py``:
+  HD-UDDS with the MPC and the BMS, 120 s, with the default, the one-branch and the seed DEKF) and on
+  the rule-based scenario, every recorded signal of the fast path equals the master's to 1e-9
+  (relative, with an absolute floor of 1e-9 times the signal's scale); at the time of writing they are
+  bit-identical, which the message reports.
+* The pieces that must reproduce Python exactly: DAQP called through its C library from compiled code
+  against ``daqp.Model`` (same iterates, warm start and exit flags), ``round3`` against Python's
+  ``round(x, 3)``, the rate-map bisection against ``bisect.bisect_right``.
+* Ineligible scenarios are declined with a reason; a failing run raises the component's error.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from shevsim.core.errors import SimulationError
+from shevsim.core.scenario import build_master, load_scenario
+from shevsim.fast import runner_for
+
+ROOT = Path(__file__).resolve().parents[2]
+SCEN = ROOT / "scenarios"
+
+
+def _compare(name: str, stop_s: float, sets=()):
+    sc = load_scenario(SCEN / f"{name}.toml", ["cycle.repeat=1", *sets])
+    run, why = runner_for(sc)
+    assert run is not None, why
+    fast = run(stop_s)
+    ref = build_master(load_scenario(SCEN / f"{name}.toml", ["cycle.repeat=1", *sets])).run(stop_s)
+    assert fast.termination == ref.termination == "completed"
+    assert np.array_equal(fast.time_s, ref.time_s)
+    assert list(fast.signals) == list(ref.signals)
+    assert fast.units == ref.units
+    n_exact = 0
+    for k, r in ref.signals.items():
+        f = fast[k]
+        assert f.shape == r.shape, k
+        scale = max(float(np.max(np.abs(r))), 1.0)
+        err = np.abs(f - r)
+        tol = 1e-9 * np.maximum(np.abs(r), scale)
+        i = int(np.argmax(err - tol))
+        assert np.all(err <= tol), (f"{k}: fast {f[i]!r} vs master {r[i]!r} at t={ref.time_s[i]} s "
+                                    f"(max |diff| {err.max():.3e})")
+        n_exact += bool(np.array_equal(f, r))
+    return fast, ref, n_exact
+
+
+def test_mpc_hd_udds_120s_agrees_with_the_master_on_every_signal():
+    fast, ref, n_exact = _compare("hd_udds_mpc", 120.0)
+    assert len(fast.time_s) == 1201
+    # the MPC really solved QPs (no silent fallback) and the supervisor acted
+    assert fast["supervisor.fallback_count"][-1] == ref["supervisor.fallback_count"][-1]
+    assert np.ptp(fast["supervisor.power_cmd_w"]) > 1e3
+    print(f"{n_exact} of {len(ref.signals)} signals bit-identical")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sets", [("bms.v2_model=none",),
+                                  ("bms.rs_model=free", "bms.rc_model=free", "bms.v2_model=none")])
+def test_mpc_hd_udds_120s_agrees_with_the_other_dekf_variants(sets):
+    _compare("hd_udds_mpc", 120.0, sets)
+
+
+def test_rule_hd_udds_agrees_with_the_master_on_every_signal():
+    fast, ref, _ = _compare("hd_udds_rule", 200.0)
+    assert np.ptp(fast["engine_generator.elec_power_w"]) > 1e3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name,stop", [("hd_udds_mpc", 1060.0), ("uac_proxy_mpc", 600.0), ("uac_proxy_rule", 600.0)])
+def test_longer_runs_agree(name, stop):
+    _compare(name, stop)
+
+
+def test_a_runner_serves_repeated_runs_identically():
+    sc = load_scenario(SCEN / "hd_udds_mpc.toml", ["cycle.repeat=1"])
+    run, why = runner_for(sc)
+    a = run(30.0)
+    b = run(30.0)
+    c = run(12.0)
+    for k in a.signals:
+        assert np.array_equal(a[k], b[k]), k
+        assert np.array_equal(a[k][:121], c[k]), k
+
+
+# --------------------------------------------------------------------------------- declined scenarios
+def _declined(path, sets=(), text=None):
+    sc = load_scenario(path, list(sets)) if text is None else load_scenario(None, list(sets), text=text)
+    run, why = runner_for(sc)
+    assert run is None
+    assert isinstance(why, str) and why
+    return why
+
+
+def test_ineligible_scenarios_are_declined_with_a_reason():
+    why = _declined(SCEN / "hd_udds_fmu_battery.toml")
+    assert "FMU" in why
+    why = _declined(SCEN / "uac_proxy_mpc_cooling_fault.toml")
+    assert "fault" in why
+    text = (SCEN / "hd_udds_rule.toml").read_text().replace('method = "gauss-seidel"', 'method = "jacobi"')
+    assert "jacobi" in _declined(None, text=text)
+    assert "osqp" in _declined(SCEN / "hd_udds_mpc.toml", ["supervisor.solver=osqp"])
+    assert "fd30" in _declined(SCEN / "hd_udds_mpc.toml", ["battery.thermal_model=fd30"])
+    text = (SCEN / "hd_udds_rule.toml").read_text().replace('type = "bus"', 'type = "power_limits"')
+    assert "power_limits" in _declined(None, text=text)
+    # two components of one type
+    text = (SCEN / "hd_udds_rule.toml").read_text().replace('"supervisor"]', '"supervisor", "cycle2"]')
+    text += '\n[components.cycle2]\ntype = "cycle"\n'
+    assert "one component per type" in _declined(None, text=text)
+
+
+def test_runtime_error_names_the_component_like_the_master():
+    sets = ["cycle.repeat=1", "battery.soc_init_pct=30.5", "battery.capacity_ah=0.05", "bms.soc0_pct=30.5"]
+    sc = load_scenario(SCEN / "hd_udds_rule.toml", sets)
+    run, why = runner_for(sc)
+    assert run is not None, why
+    with pytest.raises(SimulationError) as fast_err:
+        run(600.0)
+    with pytest.raises(SimulationError) as ref_err:
+        build_master(load_scenario(SCEN / "hd_udds_rule.toml", sets)).run(600.0)
+    assert "'battery'" in str(fast_err.value) and "battery" in str(ref_err.value)
+    part = fast_err.value.result
+    assert part.termination.status == "stopped" and part.termination.component == "battery"
+    assert 1 < len(part.time_s) < 6001
+
+
+# ------------------------------------------------------------------------------ exact building blocks
+def test_compiled_daqp_calls_reproduce_daqp_model_bit_for_bit():
+    daqp = pytest.importorskip("daqp")
+    from shevsim.fast import daqp_nb
+    ok, why = daqp_nb.available()
+    if not ok:
+        pytest.skip(why)
+    m = build_master(load_scenario(SCEN / "hd_udds_mpc.toml", ["cycle.repeat=1"]))
+    prob = m.components["supervisor"].mpc.prob
+    rng = np.random.default_rng(3)
+    st = daqp_nb.new_state(prob.n, prob.n + prob.m)
+    model = None
+    flags_seen = set()
+    for k in range(400):
+        # a drifting operating point (warm starts carry over) with occasional jumps and infeasible limits
+        soc = 50 + 15 * math.sin(k / 40) + rng.normal()
+        pd = 80 * math.sin(k / 9) + 20 * rng.normal()
+        vo = abs(60 + 50 * math.sin(k / 17))
+        pbmax, pbmin = (150.0, -100.0) if k % 97 else (-5.0, -4.0)
+        st_build = prob.build(soc, pd, vo, pbmax, pbmin, 430.0, 0.13, 30.0)
+        if st_build != 0:
+            continue
+        if model is None:
+            model = daqp.Model()
+            model.setup(prob.H, prob.f, prob.A, prob.bu, prob.bl)
+        else:
+            model.update(H=prob.H, f=prob.f, bupper=prob.bu, blower=prob.bl)
+        x, _, flag, _ = model.solve()
+        if flag < 1:
+            model = None
+        fl = daqp_nb.solve(*st, prob.H, prob.f, prob.A, prob.bu, prob.bl)
+        flags_seen.add(int(flag))
+        assert fl == flag, k
+        assert np.array_equal(x, st[4]), (k, np.max(np.abs(x - st[4])))
+    daqp_nb.drop_model(st[0], st[6])
+    assert 1 in flags_seen or 2 in flags_seen
+
+
+def test_round3_is_pythons_round():
+    from shevsim.fast.kernels import round3
+    rng = np.random.default_rng(0)
+    xs = list(rng.uniform(0, 1000, 20000)) + list(rng.uniform(-2, 2, 5000))
+    xs += [k / 1000 + 0.0005 for k in range(-3000, 3000)]            # decimal ties (as doubles)
+    xs += [k / 2000 for k in range(-4000, 4000)]                      # exact binary ties where they exist
+    xs += [0.0, -0.0, 1e-300, 123456789.0005, 4.5e15, math.inf, -math.inf]
+    for x in xs:
+        a, b = round3(float(x)), round(float(x), 3)
+        assert a == b and math.copysign(1, a) == math.copysign(1, b), (x, a, b)
+    assert math.isnan(round3(math.nan))
+
+
+def test_rate_map_bisection_is_bisect_right():
+    from shevsim.fast.kernels import bisect_right
+    a = np.array([-1.0, 0.0, 0.0, 2.5, 236e3])
+    for x in [-2.0, -1.0, -0.5, 0.0, 1.0, 2.5, 3.0, 236e3, 1e9, math.nan, -math.inf, math.inf]:
+        assert bisect_right(a, x) == bisect.bisect_right(list(a), x), x
