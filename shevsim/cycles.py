@@ -27,6 +27,7 @@ Statistics (all from the sampled trace, interval ``i`` between samples ``i`` and
 from __future__ import annotations
 
 import csv
+import difflib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,6 +46,19 @@ DT_REL_TOL = 1e-6
 NEG_SPEED_TOL_MPS = 1e-9
 
 REQUIRED_COLUMNS = ("time_s", "speed_mps")
+#: Declared units a header may carry instead of SI, converted on load: column -> (canonical, factor to SI).
+UNIT_COLUMNS = {
+    "time_s": ("time_s", 1.0), "time_ms": ("time_s", 1e-3), "time_min": ("time_s", 60.0),
+    "speed_mps": ("speed_mps", 1.0), "speed_kmh": ("speed_mps", 1.0 / 3.6), "speed_kph": ("speed_mps", 1.0 / 3.6),
+    "speed_mph": ("speed_mps", 0.44704),
+}
+#: Highest plausible road-vehicle cycle speed (m/s, 180 km/h): above it the column looks like km/h.
+MAX_PLAUSIBLE_SPEED_MPS = 50.0
+#: Largest plausible cycle sample step (s): drive cycles are sampled at 0.1-1 s; a step of 10 or more
+#: "seconds" is a time column in milliseconds (or a trace too coarse to follow).
+MAX_PLAUSIBLE_STEP_S = 10.0
+#: Largest plausible acceleration magnitude of a drive cycle (m/s^2, ~1 g).
+MAX_PLAUSIBLE_ACCEL_MPS2 = 10.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,16 +156,54 @@ def _fail(path, line: int | None, column: str | None, msg: str) -> DataError:
     return DataError(f"{where}: {msg}")
 
 
-def load_cycle(path: str | Path, name: str | None = None) -> Cycle:
+def _split_row(line: str, sep: str) -> list[str]:
+    return next(csv.reader([line], delimiter=sep))
+
+
+def check_plausible(path, t: np.ndarray, v: np.ndarray, lines=None) -> None:
+    """Unit sniffing on a cycle in SI: a speed above :data:`MAX_PLAUSIBLE_SPEED_MPS` looks like km/h, a
+    sample step of :data:`MAX_PLAUSIBLE_STEP_S` or more looks like milliseconds, an acceleration above
+    :data:`MAX_PLAUSIBLE_ACCEL_MPS2` is no road vehicle's.  The error says what was detected and how to
+    declare the unit (a header ``speed_kmh`` / ``speed_mph`` / ``time_ms`` converts)."""
+    def line(k):
+        return int(lines[k]) if lines is not None else None
+    k = int(np.argmax(v))
+    if v[k] > MAX_PLAUSIBLE_SPEED_MPS:
+        raise _fail(path, line(k), "speed_mps",
+                    f"speed {v[k]:g} m/s (= {v[k] * 3.6:.0f} km/h) is beyond any road vehicle (> "
+                    f"{MAX_PLAUSIBLE_SPEED_MPS:g} m/s); the column looks like km/h (or mph): name it 'speed_kmh' "
+                    f"(or 'speed_mph') in the header and it is converted, or convert it to m/s")
+    dt = np.diff(t)
+    if dt.size and float(np.median(dt)) >= MAX_PLAUSIBLE_STEP_S:
+        raise _fail(path, line(1), "time_s",
+                    f"sample step {float(np.median(dt)):g} s: a drive cycle is sampled every 0.1-1 s, so the "
+                    f"time column looks like milliseconds; name it 'time_ms' in the header and it is converted")
+    if dt.size:
+        a = np.abs(np.diff(v)) / dt
+        k = int(np.argmax(a))
+        if a[k] > MAX_PLAUSIBLE_ACCEL_MPS2:
+            raise _fail(path, line(k + 1), "speed_mps",
+                        f"acceleration {a[k]:.3g} m/s^2 between {t[k]:g} s and {t[k + 1]:g} s is beyond any road "
+                        f"vehicle (> {MAX_PLAUSIBLE_ACCEL_MPS2:g} m/s^2): are speed (m/s) and time (s) in the "
+                        f"declared units?")
+
+
+def load_cycle(path: str | Path, name: str | None = None, check_units: bool = True) -> Cycle:
     """Load and validate a ``time_s,speed_mps`` drive-cycle CSV.
 
     Parameters
     ----------
     path : str or Path
         CSV file. ``#`` lines and blank lines are comments; the first other line is
-        the header and must contain ``time_s`` and ``speed_mps``.
+        the header and must contain a time and a speed column: ``time_s`` (or ``time_ms``, ``time_min``)
+        and ``speed_mps`` (or ``speed_kmh``, ``speed_mph``), converted to SI on load.  Spreadsheet
+        exports are read as they come: UTF-8 byte-order mark, CRLF line ends, ``;`` separators with
+        decimal commas, trailing empty columns.
     name : str, optional
         Cycle name; defaults to the file stem.
+    check_units : bool
+        Unit sniffing (:func:`check_plausible`): refuse speeds that look like km/h and times that look
+        like milliseconds.  Turn off only for a trace that really is that fast or that coarse.
 
     Returns
     -------
@@ -161,33 +213,51 @@ def load_cycle(path: str | Path, name: str | None = None) -> Cycle:
     ------
     DataError
         Missing file or columns, unparsable/NaN/infinite values, negative speed,
-        duplicate or decreasing time, non-uniform step (gap), fewer than 2 rows.
+        duplicate or decreasing time, non-uniform step (gap), fewer than 2 rows, implausible units.
         The message names the file, the line (1-based, as in an editor) and the column.
     """
     path = Path(path)
     if not path.is_file():
         raise _fail(path, None, None, "cycle file not found")
     try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
+        raw = path.read_bytes()
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise _fail(path, None, None, f"not UTF-8 text (byte {exc.start}): save the cycle as a UTF-8 CSV") from exc
+    except OSError as exc:
         raise _fail(path, None, None, f"cannot read cycle file: {exc}") from exc
+    if "\x00" in text:
+        raise _fail(path, None, None, "contains NUL bytes: not a text CSV (UTF-16 or binary?)")
 
-    rows: list[tuple[int, list[str]]] = []
+    rows: list[tuple[int, str]] = []
     for lineno, line in enumerate(text.splitlines(), start=1):
         s = line.strip()
         if not s or s.startswith("#"):
             continue
-        rows.append((lineno, next(csv.reader([s]))))
+        rows.append((lineno, s))
     if not rows:
         raise _fail(path, None, None, "no header and no data (file empty or only comments)")
-    header_line, header = rows[0]
-    header = [h.strip() for h in header]
-    idx = {}
+    header_line, hs = rows[0]
+    sep = ";" if (";" in hs and "," not in hs) else ("\t" if ("\t" in hs and "," not in hs) else ",")
+    decimal_comma = sep == ";"
+    header = [h.strip() for h in _split_row(hs, sep)]
+    idx: dict[str, int] = {}
+    factor: dict[str, float] = {}
+    declared: dict[str, str] = {}
+    for j, h in enumerate(header):
+        if h in UNIT_COLUMNS:
+            canon, f = UNIT_COLUMNS[h]
+            if canon in idx:
+                raise _fail(path, header_line, h, f"two columns give '{canon}' ('{declared[canon]}' and '{h}')")
+            idx[canon], factor[canon], declared[canon] = j, f, h
     for col in REQUIRED_COLUMNS:
-        if col not in header:
+        if col not in idx:
+            alts = [c for c, (k, _) in UNIT_COLUMNS.items() if k == col]
+            best = difflib.get_close_matches(col, [h for h in header if h], n=1, cutoff=0.5)
+            hint = f"; did you mean '{best[0]}'?" if best else ""
             raise _fail(path, header_line, col,
-                        f"missing column (header is {header}; required: {', '.join(REQUIRED_COLUMNS)})")
-        idx[col] = header.index(col)
+                        f"missing column (header is {header}; required: {', '.join(REQUIRED_COLUMNS)}, a unit "
+                        f"may be declared instead: {', '.join(alts)}){hint}")
     data = rows[1:]
     if len(data) < 2:
         raise _fail(path, None, None, f"needs at least 2 data rows, found {len(data)}")
@@ -195,23 +265,25 @@ def load_cycle(path: str | Path, name: str | None = None) -> Cycle:
     t = np.empty(len(data))
     v = np.empty(len(data))
     lines = np.empty(len(data), dtype=int)
-    for k, (lineno, fields) in enumerate(data):
+    for k, (lineno, s) in enumerate(data):
         lines[k] = lineno
+        fields = _split_row(s, sep)
         for col, arr in (("time_s", t), ("speed_mps", v)):
             j = idx[col]
             if j >= len(fields) or fields[j].strip() == "":
-                raise _fail(path, lineno, col, "missing value")
-            raw = fields[j].strip()
+                raise _fail(path, lineno, declared[col], "missing value")
+            raw_v = fields[j].strip()
             try:
-                val = float(raw)
+                val = float(raw_v.replace(",", ".") if decimal_comma else raw_v)
             except ValueError:
-                raise _fail(path, lineno, col, f"not a number: {raw!r}") from None
+                hint = (" (a decimal comma? separate columns with ';' then)" if "," in raw_v else "")
+                raise _fail(path, lineno, declared[col], f"not a number: {raw_v!r}{hint}") from None
             if not math.isfinite(val):
-                raise _fail(path, lineno, col, f"non-finite value {raw!r}")
-            arr[k] = val
+                raise _fail(path, lineno, declared[col], f"non-finite value {raw_v!r}")
+            arr[k] = val * factor[col]
         if v[k] < 0.0:
             if v[k] < -NEG_SPEED_TOL_MPS:
-                raise _fail(path, lineno, "speed_mps", f"negative speed {v[k]!r} m/s")
+                raise _fail(path, lineno, declared["speed_mps"], f"negative speed {v[k]!r} m/s")
             v[k] = 0.0
 
     dt = np.diff(t)
@@ -219,26 +291,31 @@ def load_cycle(path: str | Path, name: str | None = None) -> Cycle:
     if bad.size:
         k = int(bad[0]) + 1
         kind = "duplicate time" if dt[k - 1] == 0 else "time decreases (non-monotonic)"
-        raise _fail(path, int(lines[k]), "time_s",
+        raise _fail(path, int(lines[k]), declared["time_s"],
                     f"{kind}: {t[k]!r} s after {t[k - 1]!r} s on line {int(lines[k - 1])}")
     step = float(dt[0])
     tol = DT_REL_TOL * step + 1e-9
     bad = np.nonzero(np.abs(dt - step) > tol)[0]
     if bad.size:
         k = int(bad[0]) + 1
-        raise _fail(path, int(lines[k]), "time_s",
+        raise _fail(path, int(lines[k]), declared["time_s"],
                     f"non-uniform time step (gap?): {dt[k - 1]:.6g} s from {t[k - 1]!r} s, "
                     f"the cycle's step is {step:.6g} s")
+    if check_units:
+        check_plausible(path, t, v, lines)
     offset = float(t[0])
     # rebuild a clean uniform grid (removes accumulated rounding of the file's times)
     tt = np.arange(len(t)) * step
     return Cycle(name=name or path.stem, time_s=tt, speed_mps=v, source=str(path), time_offset_s=offset)
 
 
-def cycle_from_arrays(name: str, time_s, speed_mps, source: str = "<arrays>") -> Cycle:
+def cycle_from_arrays(name: str, time_s, speed_mps, source: str = "<arrays>", check_units: bool = True) -> Cycle:
     """Build a :class:`Cycle` from arrays with the same checks as :func:`load_cycle`."""
-    t = np.asarray(time_s, dtype=float)
-    v = np.asarray(speed_mps, dtype=float)
+    try:
+        t = np.asarray(time_s, dtype=float)
+        v = np.asarray(speed_mps, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"{source}: time_s and speed_mps must be numbers: {exc}") from None
     if t.shape != v.shape or t.ndim != 1 or t.size < 2:
         raise DataError(f"{source}: time_s and speed_mps must be 1-D of equal length >= 2")
     for col, arr in (("time_s", t), ("speed_mps", v)):
@@ -252,6 +329,8 @@ def cycle_from_arrays(name: str, time_s, speed_mps, source: str = "<arrays>") ->
     if np.any(dt <= 0) or np.any(np.abs(dt - dt[0]) > DT_REL_TOL * dt[0] + 1e-9):
         k = int(np.nonzero((dt <= 0) | (np.abs(dt - dt[0]) > DT_REL_TOL * dt[0] + 1e-9))[0][0]) + 1
         raise DataError(f"{source}, row {k}, column 'time_s': time not strictly increasing with a uniform step")
+    if check_units:
+        check_plausible(source, t, np.maximum(v, 0.0))
     return Cycle(name=name, time_s=np.arange(t.size) * float(dt[0]), speed_mps=np.maximum(v, 0.0),
                  source=source, time_offset_s=float(t[0]))
 

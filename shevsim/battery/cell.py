@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from shevsim.core.errors import DataError
+from shevsim.core.params import name_rule
 from shevsim.core.lookup import _t1_integral, _t1_slope, _t1_value, ecm_lookup
 from shevsim.core.paths import data_path
 
@@ -58,21 +59,30 @@ def _read_csv(path: Path, cols: tuple[str, ...]) -> list[list[float]]:
     if not path.is_file():
         raise DataError(f"{path}: table file not found")
     rows: list[list[float]] = []
-    with open(path, newline="") as fh:
-        lines = [ln for ln in fh if ln.strip() and not ln.lstrip().startswith("#")]
-    reader = csv.reader(lines)
+    try:   # utf-8-sig: a byte-order mark of a spreadsheet export is not part of the first column's name
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            lines = [ln for ln in fh if ln.strip() and not ln.lstrip().startswith("#")]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: cannot read the table as UTF-8 text: {exc}") from exc
+    sep = ";" if lines and ";" in lines[0] and "," not in lines[0] else ","
+    reader = csv.reader(lines, delimiter=sep)
     header = [h.strip() for h in next(reader, [])]
     missing = [c for c in cols if c not in header]
     if missing:
         raise DataError(f"{path}: missing column(s) {', '.join(missing)} (header: {', '.join(header)})")
     idx = [header.index(c) for c in cols]
+    rules = [name_rule(c) for c in cols]
     for lineno, row in enumerate(reader, start=2):
         try:
-            vals = [float(row[i]) for i in idx]
+            vals = [float(row[i].replace(",", ".") if sep == ";" else row[i]) for i in idx]
         except (ValueError, IndexError) as exc:
             raise DataError(f"{path}: data row {lineno}: cannot parse {row!r} ({exc})") from exc
-        if not all(math.isfinite(v) for v in vals):
-            raise DataError(f"{path}: data row {lineno}: non-finite value in {row!r}")
+        for c, v, r in zip(cols, vals, rules):
+            if not math.isfinite(v):
+                raise DataError(f"{path}: data row {lineno}, column '{c}': non-finite value {v!r}")
+            if not r.ok(v):
+                raise DataError(f"{path}: data row {lineno}, column '{c}': value {v!r} outside the physical "
+                                f"range {r.describe()}")
         rows.append(vals)
     if len(rows) < 2:
         raise DataError(f"{path}: need at least two data rows")

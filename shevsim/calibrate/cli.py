@@ -26,7 +26,7 @@ import tomllib
 from pathlib import Path
 
 from ..core.errors import DataError, ShevsimError
-from .data import CURRENT_SIGNS, POWER_SIGNS, load_measured, parse_mapping
+from .data import CURRENT_SIGNS, POWER_SIGNS, load_measured, parse_mapping, parse_units
 from .models import MODELS
 
 
@@ -98,6 +98,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="sign convention of the power column in the file")
     ap.add_argument("--drop-duplicate-rows", action="store_true",
                     help="drop rows identical to the previous one (logger repeats) instead of failing")
+    ap.add_argument("--unit", action="append", default=[], metavar="CANONICAL=UNIT",
+                    help="unit of a column in the file, converted to SI (time_s=ms, current_a=mA, speed_mps=kmh, "
+                         "power_w=kW, t_surface_c=K, voltage_v=mV; CANONICAL=its SI unit skips the unit sniffing)")
     ap.add_argument("--effects", nargs="+", help="restrict the candidate effects to these names")
     ap.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     ap.add_argument("-q", "--quiet", action="store_true")
@@ -112,7 +115,8 @@ def main_calibrate(argv=None) -> int:
     try:
         known = load_params_toml(args.params) if args.params else {}
         data = load_measured(args.data, args.model, parse_mapping(args.map), current_sign=args.current_sign,
-                             power_sign=args.power_sign, drop_duplicate_rows=args.drop_duplicate_rows)
+                             power_sign=args.power_sign, drop_duplicate_rows=args.drop_duplicate_rows,
+                             units=parse_units(args.unit))
         for n in data.notes:
             log(f"note: {n}")
         rep = run_workflow(args.model, data, known, holdout=args.holdout, split=args.split, out_dir=args.out,

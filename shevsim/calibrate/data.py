@@ -41,6 +41,59 @@ OPTIONAL = {"cell": ("t_core_c",), "vehicle": (), "engine": ()}
 CURRENT_SIGNS = ("discharge-positive", "charge-positive")
 POWER_SIGNS = ("drawn-positive", "delivered-positive")
 
+#: Units a column may be declared in (a header suffix ``time_ms`` or ``--unit time_s=ms``), converted to the
+#: canonical SI column on load: unit -> (scale, offset), SI = value * scale + offset; per canonical suffix.
+UNITS = {
+    "_s": {"s": (1.0, 0.0), "ms": (1e-3, 0.0), "min": (60.0, 0.0), "h": (3600.0, 0.0)},
+    "_a": {"a": (1.0, 0.0), "ma": (1e-3, 0.0)},
+    "_v": {"v": (1.0, 0.0), "mv": (1e-3, 0.0)},
+    "_w": {"w": (1.0, 0.0), "kw": (1e3, 0.0)},
+    "_mps": {"mps": (1.0, 0.0), "kmh": (1.0 / 3.6, 0.0), "kph": (1.0 / 3.6, 0.0), "mph": (0.44704, 0.0)},
+    "_c": {"c": (1.0, 0.0), "k": (1.0, -273.15)},
+    "_mgps": {"mgps": (1.0, 0.0), "gps": (1e3, 0.0)},
+}
+#: Largest plausible sample step of a calibration record (s): 10 or more "seconds" looks like milliseconds.
+MAX_PLAUSIBLE_STEP_S = 10.0
+#: Smallest plausible cell resistance seen through dV/dI (ohm): below it, with large current numbers, the
+#: current column looks like milliamps.
+MIN_APPARENT_RESISTANCE_OHM = 1e-4
+
+
+def _unit_of(canon: str) -> tuple[str, str, dict] | None:
+    for suf, units in UNITS.items():
+        if canon.endswith(suf):
+            return canon[: -len(suf)], suf, units
+    return None
+
+
+def _declared_units(columns, canon_all, units: Mapping[str, str], path) -> dict:
+    """``{file column: (canonical, scale, offset, unit)}`` for columns declared in a non-SI unit: a header
+    ``time_ms`` for canonical ``time_s``, or ``units={"time_s": "ms"}`` (``--unit time_s=ms``)."""
+    out = {}
+    for canon, unit in (units or {}).items():
+        u = _unit_of(canon) if canon in canon_all else None
+        if u is None:
+            raise DataError(f"--unit {canon}={unit}: '{canon}' is not a canonical column with a unit "
+                            f"({', '.join(canon_all)})")
+        if str(unit).lower() not in u[2]:
+            raise DataError(f"--unit {canon}={unit}: unknown unit '{unit}' for {canon} (known: {', '.join(u[2])})")
+        sc, off = u[2][str(unit).lower()]
+        out[canon] = (canon, sc, off, str(unit).lower())
+    for col in columns:
+        for canon in canon_all:
+            u = _unit_of(canon)
+            if u is None or canon in out or col == canon:
+                continue
+            base, suf, table = u
+            if col.lower().startswith(base + "_"):
+                unit = col[len(base) + 1:].lower()
+                if unit in table and unit != suf[1:]:
+                    if canon in columns:
+                        raise DataError(f"{path}: both '{canon}' and '{col}' are in the file: keep one")
+                    sc, off = table[unit]
+                    out[col] = (canon, sc, off, unit)
+    return out
+
 
 @dataclass
 class MeasuredData:
@@ -62,6 +115,17 @@ def parse_mapping(items) -> dict:
     for it in items or ():
         if "=" not in it:
             raise DataError(f"--map '{it}': expected canonical=column")
+        k, v = it.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def parse_units(items) -> dict:
+    """Parse ``["canonical=unit", ...]`` (``--unit time_s=ms``) into a dict (errors name the bad item)."""
+    out = {}
+    for it in items or ():
+        if "=" not in it:
+            raise DataError(f"--unit '{it}': expected canonical=unit (e.g. time_s=ms)")
         k, v = it.split("=", 1)
         out[k.strip()] = v.strip()
     return out
@@ -96,10 +160,34 @@ def _runs(mask: np.ndarray):
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
 
 
+def _sniff_format(path: Path) -> dict:
+    """pandas options for a CSV as spreadsheets export it: ``;`` separators with decimal commas, tabs."""
+    import gzip
+    opener = gzip.open if str(path).endswith(".gz") else open
+    with opener(path, "rt", encoding="utf-8-sig", errors="replace") as fh:
+        for line in fh:
+            s = line.strip()
+            if s and not s.startswith("#"):
+                if ";" in s and "," not in s:
+                    return {"sep": ";", "decimal": ","}
+                if "\t" in s and "," not in s:
+                    return {"sep": "\t"}
+                return {}
+    return {}
+
+
 def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
                   current_sign: str = "discharge-positive", power_sign: str = "drawn-positive",
-                  drop_duplicate_rows: bool = False, check_sign: bool = True) -> MeasuredData:
+                  drop_duplicate_rows: bool = False, check_sign: bool = True,
+                  units: Mapping[str, str] | None = None, check_units: bool = True) -> MeasuredData:
     """Load and check a measured CSV for calibration model ``model`` (``cell`` or ``vehicle``).
+
+    Columns in other units are converted when the unit is declared: by the header (``time_ms``,
+    ``current_ma``, ``speed_kmh``, ``power_kw``, ``t_surface_k`` ...) or by ``units`` (``{"time_s": "ms"}``,
+    CLI ``--unit time_s=ms``).  Undeclared units that look wrong (time in ms, current in mA, speed in km/h,
+    power in kW, temperature in K, voltage in mV) are refused with what was detected and how to declare
+    it.  Spreadsheet quirks are read as they come: UTF-8 byte-order mark, CRLF, ``;`` with decimal commas,
+    tabs, trailing empty columns.
 
     Returns
     -------
@@ -116,17 +204,28 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
     if not path.is_file():
         raise DataError(f"{path}: file not found")
     try:
-        raw = pd.read_csv(path, comment="#", skipinitialspace=True)
+        raw = pd.read_csv(path, comment="#", skipinitialspace=True, encoding="utf-8-sig", index_col=False,
+                          **_sniff_format(path))
     except Exception as exc:  # pandas parser errors carry the line
-        raise DataError(f"{path}: cannot parse CSV: {exc}") from exc
+        raise DataError(f"{path}: cannot parse CSV: {type(exc).__name__}: {exc}") from exc
+    raw.columns = [str(c).strip() for c in raw.columns]
+    empty = [c for c in raw.columns if (c == "" or c.startswith("Unnamed:")) and raw[c].isna().all()]
+    if empty:   # trailing separators of a spreadsheet export
+        raw = raw.drop(columns=empty)
+    if len(set(raw.columns)) != len(raw.columns) or any(c.endswith(".1") and c[:-2] in raw.columns
+                                                        for c in raw.columns):
+        raise DataError(f"{path}: duplicate column names in the header ({', '.join(raw.columns)})")
     if raw.shape[0] < 3:
         raise DataError(f"{path}: only {raw.shape[0]} data rows")
     line_of = _file_lines(path)
     if line_of.size != raw.shape[0]:  # blank lines inside etc.: fall back to header offset
         line_of = np.arange(raw.shape[0]) + 2
-    raw.columns = [str(c).strip() for c in raw.columns]
     mapping = dict(mapping or {})
     canon_all = REQUIRED[model] + OPTIONAL[model]
+    declared = _declared_units(list(raw.columns), canon_all, dict(units or {}), path)
+    for col, (canon, _, _, _) in list(declared.items()):
+        if col != canon and col in raw.columns and canon not in mapping:
+            mapping[canon] = col
     for canon, col in mapping.items():
         if canon not in canon_all:
             raise DataError(f"--map {canon}={col}: '{canon}' is not a canonical column of model '{model}' "
@@ -174,6 +273,12 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
         if col not in canon_all and df[col].isna().any():
             notes.append(f"extra column '{col}' has NaN values and was dropped from the candidate signals")
             df = df.drop(columns=[col])
+    # declared units: converted to SI before any check
+    for col, (canon, sc, off, unit) in declared.items():
+        if canon in df.columns and (sc != 1.0 or off != 0.0):
+            df[canon] = df[canon] * sc + off
+            notes.append(f"column '{canon}' converted from {unit} (declared by "
+                         f"{'the header' if col != canon else '--unit'})")
     # time
     t = df["time_s"].to_numpy()
     dt = np.diff(t)
@@ -201,7 +306,8 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
         k = int(back[0])
         raise DataError(f"{path}: column 'time_s': time goes backwards at line {_row_of(k + 1, line_of)} "
                         f"({t[k]} -> {t[k + 1]} s); time must increase strictly")
-    _check_units(df, model, path, line_of)
+    if check_units:
+        _check_units(df, model, path, line_of, {d[0] for d in declared.values()})
     if model == "cell" and current_sign == "charge-positive":
         df["current_a"] = -df["current_a"]
         notes.append("current negated (file: charge positive -> canonical: discharge positive)")
@@ -222,9 +328,33 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
     return MeasuredData(df=df, path=str(path), model=model, notes=notes)
 
 
-def _check_units(df, model, path, line_of):
+def _check_units(df, model, path, line_of, declared=frozenset()):
     def bad(col, msg, k):
         raise DataError(f"{path}: column '{col}', line {_row_of(k, line_of)}: {msg}")
+
+    t = df["time_s"].to_numpy()
+    dt = np.diff(t)
+    if "time_s" not in declared and dt.size and float(np.median(dt)) >= MAX_PLAUSIBLE_STEP_S:
+        bad("time_s", f"median sample step {float(np.median(dt)):g} s looks like milliseconds (calibration "
+                      f"records are sampled every 0.01-1 s); name the column 'time_ms' or pass --unit time_s=ms "
+                      f"to convert (--unit time_s=s if the step really is that long)", 1)
+    if model == "vehicle" and "time_s" not in declared and dt.size:
+        s = df["speed_mps"].to_numpy()
+        acc = np.abs(np.diff(s)) / np.where(dt > 0, dt, np.inf)
+        if np.ptp(s) > 2.0 and acc.max() < 0.02:
+            bad("time_s", f"speed varies by {np.ptp(s):.3g} m/s but never faster than {acc.max():.2g} m/s^2: the "
+                          f"time column looks like milliseconds; name it 'time_ms' or pass --unit time_s=ms", 1)
+    if model == "cell" and "current_a" not in declared:
+        i = df["current_a"].to_numpy()
+        di, dv = np.diff(i), np.diff(df["voltage_v"].to_numpy())
+        big = np.abs(di) > 0.05 * max(np.abs(i).max(), 1e-12)
+        if big.sum() >= 5 and np.abs(i).max() > 50.0:
+            r_app = float(np.median(np.abs(dv[big] / di[big])))
+            if r_app < MIN_APPARENT_RESISTANCE_OHM:
+                bad("current_a", f"the voltage moves {r_app:.2g} V per unit of current, i.e. a cell resistance "
+                                 f"of {r_app * 1e3:.3g} mOhm if the column is in A - implausibly small, while the "
+                                 f"largest current is {np.abs(i).max():.4g}: the column looks like milliamps; name "
+                                 f"it 'current_ma' or pass --unit current_a=mA", int(np.argmax(np.abs(i))))
 
     if model == "cell":
         for col in ("t_surface_c", "t_ambient_c", "t_core_c"):
@@ -232,25 +362,28 @@ def _check_units(df, model, path, line_of):
                 continue
             x = df[col].to_numpy()
             if np.median(x) > 150.0:
-                bad(col, f"median {np.median(x):.1f} looks like kelvin, expected degC (subtract 273.15)",
+                bad(col, f"median {np.median(x):.1f} looks like kelvin, expected degC (name the column '{col[:-2]}_k' or pass --unit {col}=K to convert)",
                     int(np.argmax(x > 150)))
             k = np.flatnonzero((x < -60.0) | (x > 150.0))
             if k.size:
                 bad(col, f"temperature {x[k[0]]} degC outside the plausible range [-60, 150]", int(k[0]))
         v = df["voltage_v"].to_numpy()
         if np.median(v) > 100:
-            bad("voltage_v", f"median {np.median(v):.0f} looks like millivolts, expected V", 0)
+            bad("voltage_v", f"median {np.median(v):.0f} looks like millivolts, expected V (name the column 'voltage_mv' "
+                             f"or pass --unit voltage_v=mV to convert)", 0)
         k = np.flatnonzero((v < 1.0) | (v > 5.5))
         if k.size:
             bad("voltage_v", f"cell voltage {v[k[0]]} V outside the plausible range [1, 5.5] V", int(k[0]))
         i = df["current_a"].to_numpy()
         k = np.flatnonzero(np.abs(i) > 1000.0)
         if k.size:
-            bad("current_a", f"cell current {i[k[0]]} A implausible (> 1000 A; milliamps?)", int(k[0]))
+            bad("current_a", f"cell current {i[k[0]]} A implausible (> 1000 A): the column looks like milliamps; name "
+                             f"it 'current_ma' or pass --unit current_a=mA to convert", int(k[0]))
     elif model == "engine":
         p = df["power_w"].to_numpy()
         if np.abs(p).max() < 2000.0:
-            bad("power_w", f"largest engine power {np.abs(p).max():.3g} - looks like kW, expected W",
+            bad("power_w", f"largest engine power {np.abs(p).max():.3g} - looks like kW, expected W (name the column "
+                           f"'power_kw' or pass --unit power_w=kW to convert)",
                 int(np.argmax(np.abs(p))))
         sr = df["soot_rate_mgps"].to_numpy()
         k = np.flatnonzero(sr < -1.0)
@@ -262,7 +395,8 @@ def _check_units(df, model, path, line_of):
         if k.size:
             bad("speed_mps", f"negative speed {s[k[0]]} m/s", int(k[0]))
         if s.max() > 70.0:
-            bad("speed_mps", f"speed {s.max():.1f} m/s (> 70 m/s = 252 km/h) looks like km/h; divide by 3.6",
+            bad("speed_mps", f"speed {s.max():.1f} m/s (> 70 m/s = 252 km/h) looks like km/h; name the column 'speed_kmh' or "
+                "pass --unit speed_mps=kmh to convert",
                 int(np.argmax(s)))
         p = df["power_w"].to_numpy()
         moving = s > 5.0

@@ -292,6 +292,68 @@ class Fitter:
         return fr.pred[c] - self.meas[c]
 
 
+IDENT_SE_MAX = 0.1      # 1-sigma uncertainty above this fraction of the bound range: "not identifiable"
+IDENT_STEP = 1e-3       # finite-difference step in the normalised [0, 1] parameter space
+
+
+def identifiability(fitter: "Fitter", effects, values: dict) -> list[dict]:
+    """Local identifiability of every fitted parameter from this record (Fisher information).
+
+    The Jacobian ``J`` of the training residual with respect to each parameter, normalised to its bound
+    range ([0, 1], log where declared), is taken by central differences at the final values; each
+    channel's rows are divided by its residual scale ``sigma_c`` = max(training RMSE, noise floor of the
+    measurement), inflated by ``sqrt((1 + rho1) / (1 - rho1))`` for the residual's lag-1 autocorrelation
+    (correlated samples carry less information).  The covariance ``(J^T J)^-1`` gives each parameter's
+    1-sigma uncertainty as a fraction of its bound range (``se_frac``; the inverse is regularised so that
+    a direction with no information has a huge, not a zero, variance).  A parameter with
+    ``se_frac > IDENT_SE_MAX`` is **not identifiable** from this record: the data do not pin it (no
+    excitation, or it trades off against another parameter - ``partner`` names the most correlated one).
+    """
+    ps = fitter._params_for(tuple(effects))
+    if not ps:
+        return []
+    x0 = fitter._to_x(ps, values)
+    idx = fitter.fit_idx
+    base = fitter.simulate(fitter._to_values(ps, x0))
+    sig = {}
+    for c in fitter.channels:
+        r = base[c][idx] - fitter.meas[c][idx]
+        rmse = float(np.sqrt(np.mean(r * r))) if r.size else 0.0
+        nf = noise_floor(fitter.meas[c][idx])
+        rho = float(np.clip(_acf(r, 1)[0], 0.0, 0.999)) if r.size > 2 else 0.0
+        scale = max(rmse, nf if math.isfinite(nf) else 0.0, 1e-12 * max(float(np.std(fitter.meas[c])), 1e-300))
+        sig[c] = scale * math.sqrt((1.0 + rho) / (1.0 - rho))
+    cols = []
+    for j in range(len(ps)):
+        xp, xm = x0.copy(), x0.copy()
+        xp[j] = min(x0[j] + IDENT_STEP, 1.0)
+        xm[j] = max(x0[j] - IDENT_STEP, 0.0)
+        pp = fitter.simulate(fitter._to_values(ps, xp))
+        pm = fitter.simulate(fitter._to_values(ps, xm))
+        col = np.concatenate([(np.asarray(pp[c])[idx] - np.asarray(pm[c])[idx]) / (xp[j] - xm[j]) / sig[c]
+                              for c in fitter.channels])
+        cols.append(np.where(np.isfinite(col), col, 0.0))
+    J = np.column_stack(cols)
+    F = J.T @ J
+    k = F.shape[0]
+    eps = 1e-10 * max(float(np.trace(F)) / k, 1.0)
+    cov = np.linalg.inv(F + eps * np.eye(k))
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    corr = cov / np.outer(d, d)
+    out = []
+    for j, p in enumerate(ps):
+        partner = None
+        if k > 1:
+            cj = np.abs(corr[j]).copy()
+            cj[j] = 0.0
+            m = int(np.argmax(cj))
+            partner = {"parameter": ps[m].name, "correlation": round(float(corr[j, m]), 4)}
+        out.append({"parameter": p.name, "se_frac": float(se[j]), "sensitivity": float(np.linalg.norm(J[:, j])),
+                    "identifiable": bool(se[j] <= IDENT_SE_MAX), "partner": partner, "unit": p.unit})
+    return out
+
+
 def _score(fr: FitResult, ref: dict) -> float:
     return float(np.sqrt(np.mean([(fr.rmse[c]["holdout"] / max(ref[c], 1e-300)) ** 2 for c in ref])))
 
@@ -324,7 +386,13 @@ def run_workflow(model_name: str, data, known: dict | None = None, holdout: floa
     except ImportError:  # pragma: no cover - optional
         return _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plots, params_where, log)
     with threadpool_limits(limits=1):
-        return _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plots, params_where, log)
+        try:
+            return _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plots, params_where,
+                                 log)
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+            # a numerical failure on this record: keep the original message, name the model and the data
+            raise DataError(f"{getattr(data, 'path', '<data>')}: calibration of model '{model_name}' failed: "
+                            f"{type(exc).__name__}: {exc} (check the record's units and excitation)") from exc
 
 
 def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plots, params_where, log):
@@ -413,7 +481,7 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
                        "candidates": [_cand_json(e, fr, fitter.channels) for e, fr in results]})
         if rnd == 0:
             first_round = rounds[0]["candidates"]
-        ok = [((e,), fr) for e, fr in results if fr.passed]
+        ok = [((e,), fr) for e, fr in results if fr.passed and math.isfinite(fr.score)]
         if not ok and not selected and len(remaining) >= 2:
             # no single effect passes: two effects may each fix part of the residual while spoiling
             # another part; test pairs of the PAIR_TOP candidates with the best training BIC
@@ -429,7 +497,7 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
                         st.update({p.name: single[e].params[p.name] for p in model.effects[e].params})
                     pairs.append(((a, b), assess((a, b), st)))
             rounds[-1]["pairs"] = [_cand_json("+".join(k), fr, fitter.channels) for k, fr in pairs]
-            ok = [(k, fr) for k, fr in pairs if fr.passed]
+            ok = [(k, fr) for k, fr in pairs if fr.passed and math.isfinite(fr.score)]
         if not ok:
             break
         best_score = min(fr.score for _, fr in ok)
@@ -535,9 +603,18 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
         if pos <= 1e-4 or pos >= 1.0 - 1e-4:
             at_bounds.append({"parameter": prm.name, "value": v, "bound": "lower" if pos <= 1e-4 else "upper",
                               "bounds": [lo, hi], "unit": prm.unit})
+    ident = identifiability(fitter, tuple(selected), final.params)
+    not_ident = [d for d in ident if not d["identifiable"]]
+    by_name = {d["parameter"]: d for d in ident}
     for b in at_bounds:
+        b["identifiable"] = by_name.get(b["parameter"], {}).get("identifiable")
         say(f"parameter {b['parameter']} = {b['value']:.4g} {b['unit']} sits on its {b['bound']} bound: not "
             f"identifiable from this record (or the bound is wrong)")
+    for d in not_ident:
+        say(f"parameter {d['parameter']} is not identifiable from this record: its 1-sigma uncertainty is "
+            f"{d['se_frac']:.3g} of its bound range (> {IDENT_SE_MAX:g}); the record does not excite it"
+            + (f" or it trades off against {d['partner']['parameter']} (r = {d['partner']['correlation']:+.2f})"
+               if d["partner"] else ""))
     replay_dev = (max(abs(replay[c][part] / max(final.rmse[c][part], 1e-300) - 1.0)
                       for c in replay for part in ("train", "holdout")) if replay and "error" not in replay else None)
     elapsed = time.perf_counter() - t_start
@@ -566,6 +643,9 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
         "dropped_by_backward_elimination": dropped,
         "baseline_failure": baseline_failure,
         "parameters_at_bounds": at_bounds,
+        "identifiability": ident,
+        "not_identifiable": [d["parameter"] for d in not_ident],
+        "identifiability_rule": {"se_frac_max": IDENT_SE_MAX, "finite_difference_step": IDENT_STEP},
         "overlay": {"file": "params.toml" if out_dir is not None else None, "component": model.component_name,
                     "tables": overlay},
         "replay": replay,
@@ -690,6 +770,14 @@ def render_markdown(rep: dict) -> str:
         L += ["", "Parameters that ended on a bound (not identifiable from this record, or the bound is wrong): "
               + ", ".join(f"`{b['parameter']}` = {_g(b['value'])} {b['unit']} ({b['bound']})"
                           for b in rep["parameters_at_bounds"]) + "."]
+    if rep.get("not_identifiable"):
+        by = {d["parameter"]: d for d in rep.get("identifiability", [])}
+        L += ["", "**Not identifiable from this record** (1-sigma uncertainty > "
+              f"{rep['identifiability_rule']['se_frac_max']:g} of the bound range; the value reported is not "
+              "a measurement): " + ", ".join(
+                  f"`{n}` (uncertainty {by[n]['se_frac']:.3g} of its range"
+                  + (f", trades off against `{by[n]['partner']['parameter']}`" if by[n].get("partner") else "")
+                  + ")" for n in rep["not_identifiable"]) + "."]
     if rep.get("replay") and "error" in rep["replay"]:
         L += ["", f"Replay through the simulator: {rep['replay']['error']}"]
     elif rep.get("replay"):
