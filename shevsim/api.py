@@ -187,8 +187,12 @@ def _argv(positional: Sequence[Any], options: Mapping[str, Any]) -> list[str]:
 
 
 def _call_cli(fn, argv: list[str], what: str) -> int:
+    import contextlib
+    import io
+    quiet = "--quiet" in argv or "-q" in argv
     try:
-        return int(fn(argv))
+        with contextlib.redirect_stdout(io.StringIO()) if quiet else contextlib.nullcontext():
+            return int(fn(argv))
     except SystemExit as exc:          # argparse: a bad option
         code = exc.code if isinstance(exc.code, int) else 2
         if code:
