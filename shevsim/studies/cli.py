@@ -62,6 +62,7 @@ def _problem(a, name: str):
     from .evaluate import _freeze
     prob = ScenarioProblem(str(p.resolve()), a.supervisor, a.stop_s, tuple(sorted((k, _freeze(v)) for k, v in extra.items())))
     prob.item((0.0, 1.0), None).key()          # fail early on a malformed scenario
+    prob.check(_edges(a))                      # ... on an unknown --supervisor, a bad --set: before any run
     return prob, Path(a.out or f"results/study_{name}_{p.stem}")
 
 
@@ -100,8 +101,22 @@ def cmd_tradeoff(argv) -> int:
     problem, out = _problem(a, "tradeoff")
     cache, runner = _runner(a, out)
     with cache, runner:
-        run_tradeoff(problem, runner, [1e3 * r for r in a.rates_kwps], out, _edges(a),
-                     fe_loss_max_frac=a.fe_loss_pct / 100, plots=not a.no_plots, **_metric_keys(a))
+        summary = run_tradeoff(problem, runner, [1e3 * r for r in a.rates_kwps], out, _edges(a),
+                               fe_loss_max_frac=a.fe_loss_pct / 100, plots=not a.no_plots, **_metric_keys(a))
+    return _failed_rows_status("tradeoff", summary.get("rows", []))
+
+
+def _failed_rows_status(name: str, rows) -> int:
+    """Exit status of a study from its rows: 1 when every evaluation failed (said on stderr with the first
+    reason), 0 otherwise (failures, if any, counted on stderr)."""
+    failed = [r for r in rows if r.get("error")]
+    if rows and len(failed) == len(rows):
+        print(f"shevsim study {name}: error: all {len(rows)} evaluations failed; first: {failed[0]['error']}",
+              file=sys.stderr)
+        return 1
+    if failed:
+        print(f"shevsim study {name}: warning: {len(failed)} of {len(rows)} evaluations failed; first: "
+              f"{failed[0]['error']}", file=sys.stderr)
     return 0
 
 

@@ -85,6 +85,41 @@ class ScenarioProblem:
     def describe(self) -> str:
         return f"scenario {Path(self.scenario).name}" + (f" (stop_s={self.stop_s})" if self.stop_s else "")
 
+    def check(self, edges_w=DEFAULT_EDGES_W) -> None:
+        """Refuse, before any evaluation, a problem whose every run would fail: the scenario must load with
+        the extra overrides, and ``supervisor`` must name one of its components whose parameters hold the
+        power-rate map (``rate_map_power_edges_w``, ``rate_map_max_rate_wps``); a probe map (every partition
+        at the first positive level) must give valid parameters.  Raises
+        :class:`~shevsim.core.errors.ScenarioError` naming the scenario and the option."""
+        import dataclasses
+        from ..components import get_component_class
+        from ..core.errors import ScenarioError
+        from ..core.scenario import load_scenario
+        item = self.item(edges_w, None)
+        sc = load_scenario(self.scenario, item.sets(), text=getattr(item, "text", None) or None)
+        names = [c.name for c in sc.components]
+        spec = next((c for c in sc.components if c.name == self.supervisor), None)
+        if spec is None:
+            import difflib
+            best = difflib.get_close_matches(self.supervisor, names, n=1)
+            hint = f" (did you mean '{best[0]}'?)" if best else ""
+            raise ScenarioError(f"{self.scenario}: --supervisor '{self.supervisor}': no such component{hint}; "
+                                f"components: {', '.join(names)}")
+        need = ("rate_map_power_edges_w", "rate_map_max_rate_wps")
+        cls = None if spec.type == "fmu" else get_component_class(spec.type, f"{self.scenario}")
+        fields = {f.name for f in dataclasses.fields(cls.Params)} if cls is not None and cls.Params else set()
+        if not all(n in fields for n in need):
+            sups = [c.name for c in sc.components if c.type != "fmu" and get_component_class(c.type).Params is not None
+                    and all(n in {f.name for f in dataclasses.fields(get_component_class(c.type).Params)}
+                            for n in need)]
+            raise ScenarioError(f"{self.scenario}: --supervisor '{self.supervisor}' is a '{spec.type}' component "
+                                f"without a power-rate map ({', '.join(need)})"
+                                + (f"; the scenario's supervisor is {', '.join(sups)}" if sups else
+                                   "; the scenario has no supervisor with a power-rate map"))
+        probe = self.item(edges_w, [DEFAULT_LEVELS_WPS[0]] * (len(edges_w) - 1))
+        from ..core.scenario import build_master
+        build_master(load_scenario(self.scenario, probe.sets(), text=getattr(probe, "text", None) or None))
+
 
 @dataclass(frozen=True)
 class SyntheticEvaluation:
