@@ -226,6 +226,17 @@ def validate_params(obj: Any, where: str = "<parameters>", sources: Mapping[str,
     return obj
 
 
+def check_options(options: Mapping[str, Any], where: str) -> dict:
+    """Check every number (or list of numbers) of an options table (a scenario's ``[metrics]``) against
+    the name rule of its key (``fuel_density_kg_per_l`` > 0, ``soc_tolerance_pct`` in [0, 100], ...);
+    NaN and inf are refused.  Returns the options as a dict."""
+    if not isinstance(options, Mapping):
+        raise ScenarioError(f"{where}: expected a table of name = value, got {options!r}")
+    for k, v in options.items():
+        check_value(str(k), v, where)
+    return dict(options)
+
+
 def _suggest(key: str, options) -> str:
     best = difflib.get_close_matches(key, list(options), n=1)
     return f" (did you mean '{best[0]}'?)" if best else ""

@@ -50,7 +50,7 @@ from typing import Any
 from .errors import ScenarioError, ShevsimError
 from .master import Connection, Fault, Master, MasterSettings
 from .overlay import overlay_tables, overlay_values, resolve_files
-from .params import load_params
+from .params import check_options, load_params
 from shevsim.core.paths import DATA_ROOT, bundled_cycle, bundled_params, bundled_scenario
 
 PROJECT_ROOT = DATA_ROOT   # the folder holding components/, cycles/, scenarios/ (checkout or wheel)
@@ -402,7 +402,8 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
             raise ScenarioError(f"{where}: [scenario] field 'order' must list every component exactly once "
                                 + (f"(repeated: {rep})" if rep else f"(missing: {sorted(names - set(order))})"))
     scen = Scenario(spath, text, name, str(sc.get("description", "")), settings,
-                    stop_s, t0_s, seed, specs, conns, faults, signals, dict(doc.get("metrics", {})), order,
+                    stop_s, t0_s, seed, specs, conns, faults, signals,
+                    check_options(doc.get("metrics", {}), f"{where}: [metrics]"), order,
                     list(sets), [str(o) for o in overlays])
     for s in sets:
         if "=" not in s or "." not in s.split("=", 1)[0]:
@@ -451,7 +452,7 @@ def apply_override(scen: "Scenario", key: str, value: Any, origin: str, base: Pa
             raise ScenarioError(f"{origin}: record.signals must be \"all\" or a list of 'component.port'")
         return
     if head == "metrics":
-        scen.metrics[name] = value
+        scen.metrics.update(check_options({name: value}, origin))
         return
     names = [c.name for c in scen.components]
     if head not in names:
