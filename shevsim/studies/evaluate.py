@@ -226,6 +226,10 @@ class Evaluation:
     text : str
         The scenario file's text, read once by :meth:`make`: the key hashes it and the run parses
         it, so editing the file during a study cannot make a cached result disagree with its key.
+    engine : {'auto', 'python', 'fast'}
+        Simulation engine (:func:`shevsim.run.simulate`): ``'auto'`` (default) runs the compiled
+        whole-vehicle path (:mod:`shevsim.fast`) whenever the scenario is eligible - it gives the master's
+        result bit for bit, so the engine is not part of the key.
     """
 
     scenario: str
@@ -233,6 +237,7 @@ class Evaluation:
     stop_s: float | None = None
     final_signals: tuple = ()
     text: str = field(default="", repr=False, compare=False)   # scenario text captured by make()
+    engine: str = field(default="auto", compare=False)
 
     @classmethod
     def make(cls, scenario: str | Path, overrides: dict | None = None, stop_s: float | None = None,
@@ -274,7 +279,7 @@ class Evaluation:
             sc = load_scenario(self.scenario, self.sets(), text=self.text or None)
             if self.stop_s is not None:
                 sc.stop_s = self.stop_s
-            res = simulate(sc, progress=False)
+            res = simulate(sc, progress=False, engine=self.engine)
             out: dict[str, Any] = {"termination": str(res.termination)}
             for k, v in compute_run_metrics(res, sc).items():
                 if isinstance(v, bool):
@@ -286,6 +291,24 @@ class Evaluation:
             return out
         except Exception as exc:  # noqa: BLE001 - a failing point is a result (infeasible), not a crash
             return {"error": f"{type(exc).__name__}: {exc}"}
+
+
+def warm_up_fast_path() -> str:
+    """Load the compiled whole-vehicle loop in this process (from numba's on-disk cache, or compile it
+    once) so that a worker's first evaluation does not pay for it; returns "" or why it is unavailable."""
+    limit_threads()
+    try:
+        from ..core.paths import bundled_scenario
+        from ..core.scenario import load_scenario
+        from ..fast import runner_for
+        sc = load_scenario(bundled_scenario("hd_udds_rule"), ["cycle.repeat=1"])
+        run, why = runner_for(sc)
+        if run is None:
+            return why
+        run(2 * sc.settings.step_s)
+        return ""
+    except Exception as exc:  # noqa: BLE001 - a warm-up must never stop a study
+        return f"{type(exc).__name__}: {exc}"
 
 
 def run_item(item) -> tuple[dict, float, str]:

@@ -29,7 +29,7 @@ import time
 from dataclasses import dataclass, field
 
 from ..core.errors import ShevsimError
-from .evaluate import THREAD_ENV, code_version, limit_threads, run_item
+from .evaluate import THREAD_ENV, code_version, limit_threads, run_item, warm_up_fast_path
 
 log = logging.getLogger(__name__)
 
@@ -130,6 +130,11 @@ class StudyRunner:
             self._client = Client(self._cluster)
         nthreads = self._client.nthreads()
         self.stats.slots = max(1, sum(nthreads.values()))
+        # every worker loads the compiled whole-vehicle loop now (start-up), not in its first evaluation
+        try:
+            self._client.run(warm_up_fast_path)
+        except Exception:  # noqa: BLE001 - a warm-up failure only costs time later
+            pass
         return self
 
     def close(self) -> None:
