@@ -53,3 +53,63 @@ def test_built_wheel_holds_the_data(tmp_path):
         assert any(n.startswith(f"shevsim/_data/{f}/") for n in names), f
     assert "shevsim/_data/scenarios/hd_udds_mpc.toml" in names
     assert sum(n.endswith(".csv") for n in names) >= 20 and sum(n.endswith(".toml") for n in names) >= 15
+
+
+def test_license_and_py_typed_ship():
+    assert "MIT License" in (ROOT / "LICENSE").read_text()
+    assert (ROOT / "shevsim" / "py.typed").is_file()
+    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert cfg["project"]["license"] == {"text": "MIT"}
+    assert "docs" in cfg["project"]["optional-dependencies"]
+
+
+def test_docs_build_strict(tmp_path):
+    """The API reference builds from the docstrings with warnings as errors (as .ci/run does)."""
+    pytest.importorskip("mkdocstrings")
+    r = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--quiet", "--site-dir",
+                        str(tmp_path / "site")], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    html = (tmp_path / "site" / "api" / "shevsim" / "index.html").read_text()
+    assert "overrides" in html and "simulate" in html
+
+
+SCRIPT = """
+import shevsim
+res = shevsim.simulate("hd_udds_rule", overrides={"vehicle.mass_kg": 18000.0, "cycle.repeat": 1}, stop_s=120.0)
+df = res.to_pandas()
+print(shevsim.__file__)
+print(res.termination, len(df), df.attrs["units"]["vehicle.speed_mps"], res.metrics["distance_km"] > 0.1)
+"""
+
+
+@pytest.mark.slow
+def test_wheel_in_a_fresh_venv_runs_from_an_empty_folder(tmp_path):
+    """Build the wheel, install it in a new virtual environment (dependencies from the system site), and from
+    an empty folder run --version, a bundled scenario (one cycle) and the Python API."""
+    r = subprocess.run([sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "-q", "-w", str(tmp_path)],
+                       capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr
+    wheel = glob.glob(str(tmp_path / "*.whl"))[0]
+    names = zipfile.ZipFile(wheel).namelist()
+    assert "shevsim/py.typed" in names and any(n.endswith("licenses/LICENSE") or n.endswith("/LICENSE")
+                                               for n in names)
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True, timeout=300)
+    py, exe = venv / "bin" / "python", venv / "bin" / "shevsim"
+    r = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "--no-index", wheel],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    work = tmp_path / "empty"
+    work.mkdir()
+    env = {"PATH": f"{venv / 'bin'}:/usr/bin:/bin", "HOME": str(tmp_path), "MPLBACKEND": "Agg"}
+
+    def run(*args):
+        out = subprocess.run(list(args), cwd=work, capture_output=True, text=True, timeout=900, env=env)
+        assert out.returncode == 0, (args, out.stdout, out.stderr)
+        return out.stdout
+    assert run(str(exe), "--version").strip().startswith("shevsim ")
+    run(str(exe), "run", "hd_udds_rule", "-s", "cycle.repeat=1", "-q", "-o", "res")
+    assert (work / "res" / "timeseries.parquet").is_file() and (work / "res" / "overview.png").is_file()
+    lines = run(str(py), "-c", SCRIPT).splitlines()
+    assert lines[0].startswith(str(venv)), lines
+    assert lines[1] == "completed 1201 m/s True"
