@@ -236,7 +236,7 @@ def check_column(path, name: str, values: np.ndarray, lines: list[int] | None = 
     if bad.size:
         k = int(bad[0])
         at = f"line {lines[k]}" if lines is not None else f"row {k}"
-        raise DataError(f"{path}: {at}, column '{name}': value {values[k]!r} is {why}"
+        raise DataError(f"{path}: {at}, column '{name}': value {float(values[k])!r} is {why}"
                         + (f" ({bad.size} such values)" if bad.size > 1 else ""))
 
 
