@@ -186,3 +186,70 @@ def test_rate_map_bisection_is_bisect_right():
     a = np.array([-1.0, 0.0, 0.0, 2.5, 236e3])
     for x in [-2.0, -1.0, -0.5, 0.0, 1.0, 2.5, 3.0, 236e3, 1e9, math.nan, -math.inf, math.inf]:
         assert bisect_right(a, x) == bisect.bisect_right(list(a), x), x
+
+
+# ------------------------------------------------------- supervisor kernels vs the components, every branch
+def _kernel_vs_component(typ: str, params_sets=(), n=600, seed=0):
+    """Drive the component and its kernel with the same random inputs (including non-finite values,
+    infeasible battery limits and SOC outside the window) and compare every output after every call."""
+    from shevsim.components import get_component_class
+    from shevsim.core.params import load_params
+    from shevsim.fast import _PORTS, _pack_mpc, _pack_rule
+    from shevsim.fast.kernels import mpc_kernel, rule_kernel
+    cls = get_component_class(typ, "test")
+    over = dict(params_sets)
+    params = load_params(cls.Params, None, over) if over else None
+    comp = cls(typ, params)
+    comp.u["gen_power_w"] = 20e3
+    comp.initialize(0.0)
+    data, _ = (_pack_mpc if typ == "mpc_supervisor" else _pack_rule)(comp)
+    kern = mpc_kernel if typ == "mpc_supervisor" else rule_kernel
+    ins, outs = _PORTS[typ]
+    sig = np.zeros(len(ins) + len(outs))
+    ob, ib = 0, len(outs)
+    rng = np.random.default_rng(seed)
+    h = comp.params.sample_time_s
+    n_fb = 0
+    for k in range(n):
+        u = {"demand_power_w": rng.normal(40e3, 60e3), "soc_pct": float(np.clip(rng.normal(50, 15), 1, 99)),
+             "gen_power_w": 0.0, "power_max_w": abs(rng.normal(120e3, 40e3)), "power_min_w": -abs(rng.normal(80e3, 30e3)),
+             "ocv_v": rng.normal(430, 5), "rs_ohm": abs(rng.normal(0.13, 0.02))}
+        r = rng.random()
+        if r < 0.05:
+            u["soc_pct"] = math.nan
+        elif r < 0.10:
+            u["power_max_w"], u["power_min_w"] = -5e3, -1e3          # P_b,max < P_b,min: unusable limits
+        elif r < 0.13:
+            u["rs_ohm"] = 0.0
+        elif r < 0.2:
+            u["demand_power_w"] = 400e3                               # beyond engine + battery
+        for j, name in enumerate(ins):
+            comp.u[name] = u[name]
+            sig[ib + j] = u[name]
+        if typ == "rule_supervisor" and not math.isfinite(u["soc_pct"]):
+            with pytest.raises(SimulationError):
+                comp.do_step(k * h, h)
+            assert kern(data, sig, ib, ob, k * h, h) != 0
+            continue
+        comp.do_step(k * h, h)
+        assert kern(data, sig, ib, ob, k * h, h) == 0
+        for j, name in enumerate(outs):
+            a, b = sig[ob + j], comp.y[name]
+            assert a == b or (math.isnan(a) and math.isnan(b)), (k, name, a, b)
+        n_fb = comp.y.get("fallback_count", 0.0)
+    return n_fb
+
+
+def test_mpc_kernel_equals_the_component_including_fallbacks():
+    n_fb = _kernel_vs_component("mpc_supervisor")
+    assert n_fb > 10                       # the fallback branches were exercised
+
+
+@pytest.mark.parametrize("sets", [(("battery_limits_soft", False), ("fallback", "rule")),
+                                  (("battery_limits_soft", False), ("fallback", "shift"))])
+def test_mpc_kernel_equals_the_component_with_hard_limits(sets):
+    assert _kernel_vs_component("mpc_supervisor", sets, n=400, seed=1) > 10
+
+
+def test_rule_kernel_equals_the_component():
+    _kernel_vs_component("rule_supervisor", n=2000, seed=2)
