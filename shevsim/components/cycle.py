@@ -8,7 +8,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from shevsim.core.component import Component
+from shevsim.core.lookup import _njit
 from shevsim.core.variables import out
 from shevsim.cycles import load_cycle
 from shevsim.core.paths import data_path
@@ -35,6 +38,35 @@ class CycleParams:
     def __post_init__(self):
         if self.repeat < 1:
             raise ValueError(f"parameter 'repeat' must be >= 1, got {self.repeat}")
+
+
+@_njit(cache=True)
+def cycle_sample(v, slope, dt: float, dur: float, repeat: int, t0: float, t: float):
+    """``(speed_ref_mps, accel_ref_mps2, time_in_cycle_s)`` of the trace ``v`` (samples every ``dt``,
+    segment slopes ``slope``) played ``repeat`` times from ``t0``, at time ``t`` (see :class:`CycleSource`).
+
+    Compiled once; the component and the compiled whole-vehicle loop (:mod:`shevsim.fast`) both call it.
+    """
+    n = v.shape[0]
+    rel = t - t0
+    # repetition index, robust to floating-point round-off at the boundaries
+    k = math.floor(rel / dur + 1e-9)
+    if rel < 0.0:
+        k = 0
+        rel = 0.0
+    if k >= repeat:
+        return v[n - 1], 0.0, dur
+    tc = rel - k * dur
+    if tc < 0.0:
+        tc = 0.0
+    x = tc / dt
+    i = int(math.floor(x + 1e-9))
+    if i >= n - 1:
+        i = n - 2
+    frac = x - i
+    if frac < 0.0:
+        frac = 0.0
+    return v[i] + (v[i + 1] - v[i]) * frac, slope[i], tc
 
 
 class CycleSource(Component):
@@ -67,7 +99,7 @@ class CycleSource(Component):
         out("accel_ref_mps2", "m/s2", 0.0, "reference acceleration: slope of the segment driven next (+ speeding up)"),
         out("time_in_cycle_s", "s", 0.0, "time since the start of the current repetition"),
     )
-    _static = ("name", "params", "cycle", "_v", "_slope", "_dt", "_n", "_dur", "_repeat")
+    _static = ("name", "params", "cycle", "_v", "_slope", "_dt", "_n", "_dur", "_repeat", "_va", "_sa")
 
     def __init__(self, name: str, params: CycleParams | None = None):
         super().__init__(name, params)
@@ -76,6 +108,8 @@ class CycleSource(Component):
         self._dt = self.cycle.dt_s
         self._slope = [(self._v[i + 1] - self._v[i]) / self._dt for i in range(len(self._v) - 1)] + [0.0]
         self._n = len(self._v)
+        self._va = np.array(self._v, dtype=np.float64)     # the trace and slopes for cycle_sample
+        self._sa = np.array(self._slope, dtype=np.float64)
         self._dur = self.cycle.duration_s
         self._repeat = int(self.params.repeat)
         self.t0 = 0.0
@@ -86,31 +120,8 @@ class CycleSource(Component):
 
     def _evaluate(self, t: float) -> None:
         y = self.y
-        rel = t - self.t0
-        dur = self._dur
-        # repetition index, robust to floating-point round-off at the boundaries
-        k = math.floor(rel / dur + 1e-9)
-        if rel < 0.0:
-            k, rel = 0, 0.0
-        if k >= self._repeat:
-            y["speed_ref_mps"] = self._v[-1]
-            y["accel_ref_mps2"] = 0.0
-            y["time_in_cycle_s"] = dur
-            return
-        tc = rel - k * dur
-        if tc < 0.0:
-            tc = 0.0
-        x = tc / self._dt
-        i = int(math.floor(x + 1e-9))
-        if i >= self._n - 1:
-            i = self._n - 2
-        frac = x - i
-        if frac < 0.0:
-            frac = 0.0
-        v = self._v
-        y["speed_ref_mps"] = v[i] + (v[i + 1] - v[i]) * frac
-        y["accel_ref_mps2"] = self._slope[i]
-        y["time_in_cycle_s"] = tc
+        y["speed_ref_mps"], y["accel_ref_mps2"], y["time_in_cycle_s"] = cycle_sample(
+            self._va, self._sa, self._dt, self._dur, self._repeat, self.t0, float(t))
 
     def initialize(self, t0: float) -> None:
         self.t0 = float(t0)

@@ -51,7 +51,7 @@ from shevsim.core.errors import SimulationError
 from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
 from shevsim.powertrain.maps import load_curve_csv, load_grid_csv
-from shevsim.powertrain.motor import HEAT_RATE_PER_S, MotorMaps, motor_step
+from shevsim.powertrain.motor import HEAT_RATE_PER_S, MotorMaps, motor_component_step
 from shevsim.core.paths import data_path
 
 _DIR = data_path("components", "motor")
@@ -171,17 +171,14 @@ class Motor(Component):
         v = u["speed_mps"]
         if f_req != f_req or v != v:
             raise SimulationError(f"{self.name}: NaN input at t={t:g} s (force_req_n={f_req}, speed_mps={v})")
-        tau, brake, p_el, p_m, w, t_lim, gamma, v = motor_step(
+        (f_trac, brake, p_el, tau, w, t_lim, self.gamma, self.e_loss, self.e_elec, self.e_mech,
+         self.v_prev) = motor_component_step(
             self._md, self._mi, f_req, v, u["elec_power_max_w"], u["elec_power_min_w"], h, self.v_prev, self.h_prev,
-            self.gamma, self._k_w, self._k_tau, self.extrapolate, self._v_regen, self._p_regen, self._eff_scale,
-            self._heat_rate)
-        self.v_prev, self.h_prev = v, h
-        self.e_elec += p_el * h
-        self.e_mech += p_m * h
-        self.e_loss += (p_el - p_m) * h
-        self.gamma = gamma
+            self.gamma, self.e_loss, self.e_elec, self.e_mech, self._k_w, self._k_tau, self.extrapolate,
+            self._v_regen, self._p_regen, self._eff_scale, self._heat_rate)
+        self.h_prev = h
         y = self.y
-        y["traction_force_n"] = tau / self._k_tau
+        y["traction_force_n"] = f_trac
         y["brake_force_n"] = brake
         y["elec_power_w"] = p_el
         y["torque_nm"] = tau

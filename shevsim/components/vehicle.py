@@ -43,7 +43,7 @@ from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
 from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.vehicle import G_MPS2, grade_total_rad, speed_follow_step, step_vehicle
+from shevsim.powertrain.vehicle import G_MPS2, grade_total_rad, speed_follow_step, vehicle_force_step
 
 INPUT_MODES = ("force", "speed")
 
@@ -191,27 +191,33 @@ class Vehicle(Component):
 
     def do_step(self, t: float, h: float) -> None:
         v0 = self.v
-        if self._speed:
-            v1, dist, wp, wb, wr, wa, wg = self._step_speed(t, h)
-        else:
+        y = self.y
+        e = self.e
+        if not self._speed:
             u = self.u
             f_t, f_b, th = u["traction_force_n"], u["brake_force_n"], u["grade_rad"]
             if f_t != f_t or f_b != f_b or th != th:
                 raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
                                       f"(traction_force_n={f_t}, brake_force_n={f_b}, grade_rad={th})")
-            if self._knots:
-                th = grade_total_rad(th, self.dist, self._kd, self._kg)
-            v1, dist, wp, wb, wr, wa, wg = step_vehicle(v0, f_t, f_b, th, h, self._m, self._c, self._fr, self._g)
+            (v1, y["accel_mps2"], self.dist, e[0], e[1], e[2], e[3], e[4], y["kinetic_energy_j"]) = vehicle_force_step(
+                v0, self.dist, e[0], e[1], e[2], e[3], e[4], f_t, f_b, th, h, self._m, self._c, self._fr, self._g,
+                self._knots, self._kd, self._kg)
+            self.v = v1
+            y["speed_mps"] = v1
+            y["distance_m"] = self.dist
+            y["traction_energy_j"] = e[0]
+            y["brake_energy_j"] = e[1]
+            y["rolling_energy_j"] = e[2]
+            y["aero_energy_j"] = e[3]
+            y["grade_energy_j"] = e[4]
+            return
+        v1, dist, wp, wb, wr, wa, wg = self._step_speed(t, h)
         self.v = v1
-        e = self.e
         e[0] += wp
         e[1] += wb
         e[2] += wr
         e[3] += wa
         e[4] += wg
-        if not self._speed:
-            self.dist += dist
-        y = self.y
         y["speed_mps"] = v1
         y["accel_mps2"] = (v1 - v0) / h
         y["distance_m"] = self.dist

@@ -41,6 +41,13 @@ SUPPORTED_TYPES = ("cycle", "driver", "vehicle", "motor", "bus", "engine_generat
                    "rule_supervisor", "mpc_supervisor")
 
 # the ports each kernel reads/writes, in the components' declaration order (checked at build time)
+def _engine_floor() -> tuple:
+    import inspect
+    from shevsim.powertrain.engine import step
+    return ("elec_power_min_w",) if "elec_min_w" in inspect.signature(step.py_func).parameters else ()
+
+
+_ENGINE_FLOOR = _engine_floor()
 _PORTS = {
     "cycle": ((), ("speed_ref_mps", "accel_ref_mps2", "time_in_cycle_s")),
     "driver": (("speed_ref_mps", "accel_ref_mps2", "speed_mps"), ("force_req_n", "speed_error_mps", "feedforward_n")),
@@ -53,7 +60,7 @@ _PORTS = {
     "bus": (("motor_power_w", "gen_power_w", "aux_power_w", "battery_power_max_w", "battery_power_min_w"),
             ("motor_power_max_w", "motor_power_min_w", "gen_power_max_w", "battery_power_w", "demand_power_w",
              "aux_energy_j", "motor_energy_j", "gen_energy_j", "battery_energy_j")),
-    "engine_generator": (("power_cmd_w", "power_rate_max_wps", "elec_power_max_w"),
+    "engine_generator": (("power_cmd_w", "power_rate_max_wps", "elec_power_max_w") + _ENGINE_FLOOR,
                          ("elec_power_w", "engine_power_w", "engine_speed_radps", "engine_torque_nm", "rack_frac",
                           "fuel_rate_gps", "soot_rate_mgps", "power_limited_w", "elec_power_rated_w", "shed_count",
                           "shed_time_s", "fuel_mass_g", "fuel_energy_j", "soot_mass_mg", "soot_transient_mg",
@@ -85,8 +92,7 @@ def _f(*vals) -> np.ndarray:
 # ------------------------------------------------------------------------------- packing per type
 # each returns (data tuple, indices of the entries a run mutates (copied per run))
 def _pack_cycle(c):
-    return (np.array(c._v, dtype=np.float64), np.array(c._slope, dtype=np.float64),
-            _f(c._dt, c._n, c._dur, c._repeat, c.t0)), ()
+    return (c._va, c._sa, _f(c._dt, c._n, c._dur, c._repeat, c.t0)), ()
 
 
 def _pack_driver(c):

@@ -21,6 +21,7 @@ may pick the other one of two equal values (signed zeros), so the bookkeeping us
 """
 from __future__ import annotations
 
+import inspect
 import math
 
 import numpy as np
@@ -34,8 +35,9 @@ from shevsim.bms.power_capability import power_limits
 from shevsim.bms.thermal_estimators import dkf_step, jekf_step, kf_step
 from shevsim.core.lookup import _t1_value
 from shevsim.powertrain.engine import step as engine_step
-from shevsim.powertrain.motor import bus_aux_w, bus_balance, motor_step
-from shevsim.powertrain.vehicle import grade_total_rad, step_vehicle
+from shevsim.powertrain.motor import bus_aux_w, bus_balance, motor_component_step
+from shevsim.powertrain.vehicle import vehicle_force_step
+from shevsim.components.cycle import cycle_sample
 from shevsim.powertrain.driver import driver_step
 from shevsim.supervisor.mpc import _build as mpc_build
 
@@ -114,37 +116,10 @@ def round3(x):
 # ------------------------------------------------------------------------------------------------ cycle
 @njit(cache=True)
 def cycle_step(data, sig, ib, ob, t, h):
-    """:meth:`shevsim.components.cycle.CycleSource.do_step` (``_evaluate(t + h)``)."""
+    """:meth:`shevsim.components.cycle.CycleSource.do_step` (:func:`~shevsim.components.cycle.cycle_sample`
+    at ``t + h``)."""
     v, slope, p = data
-    dt = p[0]
-    n = int(p[1])
-    dur = p[2]
-    repeat = int(p[3])
-    t0 = p[4]
-    tt = t + h
-    rel = tt - t0
-    k = math.floor(rel / dur + 1e-9)
-    if rel < 0.0:
-        k = 0
-        rel = 0.0
-    if k >= repeat:
-        sig[ob] = v[n - 1]
-        sig[ob + 1] = 0.0
-        sig[ob + 2] = dur
-        return 0
-    tc = rel - k * dur
-    if tc < 0.0:
-        tc = 0.0
-    x = tc / dt
-    i = int(math.floor(x + 1e-9))
-    if i >= n - 1:
-        i = n - 2
-    frac = x - i
-    if frac < 0.0:
-        frac = 0.0
-    sig[ob] = v[i] + (v[i + 1] - v[i]) * frac
-    sig[ob + 1] = slope[i]
-    sig[ob + 2] = tc
+    sig[ob], sig[ob + 1], sig[ob + 2] = cycle_sample(v, slope, p[0], p[2], int(p[3]), p[4], t + h)
     return 0
 
 
@@ -169,64 +144,63 @@ def driver_kernel(data, sig, ib, ob, t, h):
 # ---------------------------------------------------------------------------------------------- vehicle
 @njit(cache=True)
 def vehicle_kernel(data, sig, ib, ob, t, h):
-    """:meth:`shevsim.components.vehicle.Vehicle.do_step` (force mode)."""
+    """:meth:`shevsim.components.vehicle.Vehicle.do_step` (force mode,
+    :func:`~shevsim.powertrain.vehicle.vehicle_force_step`)."""
     p, kd, kg, x = data
     f_t = sig[ib]
     f_b = sig[ib + 1]
     th = sig[ib + 2]
     if f_t != f_t or f_b != f_b or th != th:
         return ERR_NAN_INPUT
-    v0 = x[0]
-    if p[4] > 0.5:
-        th = grade_total_rad(th, x[1], kd, kg)
-    v1, dist, wp, wb, wr, wa, wg = step_vehicle(v0, f_t, f_b, th, h, p[0], p[1], p[2], p[3])
+    v1, acc, dist, e0, e1, e2, e3, e4, ke = vehicle_force_step(x[0], x[1], x[2], x[3], x[4], x[5], x[6], f_t, f_b,
+                                                               th, h, p[0], p[1], p[2], p[3], p[4] > 0.5, kd, kg)
     x[0] = v1
-    x[2] += wp
-    x[3] += wb
-    x[4] += wr
-    x[5] += wa
-    x[6] += wg
-    x[1] += dist
+    x[1] = dist
+    x[2] = e0
+    x[3] = e1
+    x[4] = e2
+    x[5] = e3
+    x[6] = e4
     sig[ob] = v1
-    sig[ob + 1] = (v1 - v0) / h
-    sig[ob + 2] = x[1]
-    sig[ob + 3] = x[2]          # traction
-    sig[ob + 4] = x[5]          # aero
-    sig[ob + 5] = x[4]          # rolling
-    sig[ob + 6] = x[3]          # brake
-    sig[ob + 7] = x[6]          # grade
-    sig[ob + 8] = 0.5 * p[0] * v1 * v1
+    sig[ob + 1] = acc
+    sig[ob + 2] = dist
+    sig[ob + 3] = e0            # traction
+    sig[ob + 4] = e3            # aero
+    sig[ob + 5] = e2            # rolling
+    sig[ob + 6] = e1            # brake
+    sig[ob + 7] = e4            # grade
+    sig[ob + 8] = ke
     return 0
 
 
 # ------------------------------------------------------------------------------------------------ motor
 @njit(cache=True)
 def motor_kernel(data, sig, ib, ob, t, h):
-    """:meth:`shevsim.components.motor.Motor.do_step`."""
+    """:meth:`shevsim.components.motor.Motor.do_step` (:func:`~shevsim.powertrain.motor.motor_component_step`)."""
     md, mi, p, x = data
     f_req = sig[ib]
     v = sig[ib + 1]
     if f_req != f_req or v != v:
         return ERR_NAN_INPUT
-    tau, brake, p_el, p_m, w, t_lim, gamma, v = motor_step(
-        md, mi, f_req, v, sig[ib + 2], sig[ib + 3], h, x[4], x[5], x[0], p[0], p[1], p[2] > 0.5, p[3], p[4],
-        p[5], p[6])
-    x[4] = v
-    x[5] = h
-    x[2] += p_el * h
-    x[3] += p_m * h
-    x[1] += (p_el - p_m) * h
+    (f_trac, brake, p_el, tau, w, t_lim, gamma, e_loss, e_elec, e_mech, v_used) = motor_component_step(
+        md, mi, f_req, v, sig[ib + 2], sig[ib + 3], h, x[4], x[5], x[0], x[1], x[2], x[3], p[0], p[1], p[2] > 0.5,
+        p[3], p[4], p[5], p[6])
     x[0] = gamma
-    sig[ob] = tau / p[1]
+    x[1] = e_loss
+    x[2] = e_elec
+    x[3] = e_mech
+    x[4] = v_used
+    x[5] = h
+    sig[ob] = f_trac
     sig[ob + 1] = brake
     sig[ob + 2] = p_el
     sig[ob + 3] = tau
     sig[ob + 4] = w
     sig[ob + 5] = t_lim
     sig[ob + 6] = gamma
-    sig[ob + 7] = x[1]
-    sig[ob + 8] = x[2]
-    sig[ob + 9] = x[3]
+    sig[ob + 7] = e_loss
+    sig[ob + 8] = e_elec
+    sig[ob + 9] = e_mech
     return 0
 
 
@@ -266,8 +240,49 @@ def bus_kernel(data, sig, ib, ob, t, h):
 
 # --------------------------------------------------------------------------------------------- engine
 @njit(cache=True)
-def engine_kernel(data, sig, ib, ob, t, h):
-    """:meth:`shevsim.components.engine_generator.EngineGenerator.do_step`."""
+def _engine_kernel_floor(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.engine_generator.EngineGenerator.do_step` with the generator floor input."""
+    md, mi, c, p, s = data
+    pc = sig[ib]
+    rate = sig[ib + 1]
+    lim = sig[ib + 2]
+    floor = sig[ib + 3]
+    if pc != pc or rate != rate or lim != lim or floor != floor:
+        return ERR_NAN_INPUT
+    r = engine_step(md, mi, c, p[0], s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8], s[9], s[10], s[11],
+                    s[12], s[13], s[14], s[15], s[16], s[17], s[18], s[19], s[20], pc, rate, h, lim, floor)
+    if not math.isfinite(r[21] + r[22] + r[24] + r[1] + r[5]):
+        return ERR_ENGINE_NONFINITE
+    (s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8], s[9], s[10], s[11], s[12], s[13], s[14], s[15], s[16],
+     s[17], s[18], s[19], s[20]) = (r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11],
+                                    r[12], r[13], r[14], r[15], r[16], r[17], r[18], r[19], r[20])
+    # _write(e_el / h, fuel / h, soot / h, soot_meas); state order of engine.STATE
+    sig[ob] = r[21] / h
+    sig[ob + 1] = s[5] * s[1]
+    sig[ob + 2] = s[1]
+    sig[ob + 3] = s[5]
+    sig[ob + 4] = s[3]
+    sig[ob + 5] = r[22] / h
+    sig[ob + 6] = r[23] / h
+    sig[ob + 7] = s[0]
+    sig[ob + 8] = p[1]
+    sig[ob + 9] = s[18]
+    sig[ob + 10] = s[19]
+    sig[ob + 11] = s[7]
+    sig[ob + 12] = s[8]
+    sig[ob + 13] = s[14]
+    sig[ob + 14] = s[15]
+    sig[ob + 15] = s[9]
+    sig[ob + 16] = s[12]
+    sig[ob + 17] = s[13]
+    sig[ob + 18] = s[11]
+    sig[ob + 19] = r[24]
+    return 0
+
+
+@njit(cache=True)
+def _engine_kernel_plain(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.engine_generator.EngineGenerator.do_step` (engine step without a floor input)."""
     md, mi, c, p, s = data
     pc = sig[ib]
     rate = sig[ib + 1]
@@ -303,6 +318,11 @@ def engine_kernel(data, sig, ib, ob, t, h):
     sig[ob + 18] = s[11]
     sig[ob + 19] = r[24]
     return 0
+
+
+# the engine-generator's step gained a generator-floor input (issue 14); the kernel follows the installed one
+ENGINE_HAS_FLOOR = "elec_min_w" in inspect.signature(getattr(engine_step, "py_func", engine_step)).parameters
+engine_kernel = _engine_kernel_floor if ENGINE_HAS_FLOOR else _engine_kernel_plain
 
 
 # -------------------------------------------------------------------------------------------- battery

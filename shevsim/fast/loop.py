@@ -16,11 +16,21 @@ component of each type on this path.
 """
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 from numba import njit
 
 from . import kernels as K
+
+#: the modules whose compiled functions the loop calls (inlined into its machine code). numba's on-disk
+#: cache checks only the defining file of a function, so a change in one of these would leave a stale
+#: compiled loop: :func:`_drop_stale_cache` removes the loop's cache entries when their sources change.
+_DEPENDS = ("fast/loop.py", "fast/kernels.py", "fast/daqp_nb.py", "battery/model.py", "battery/thermal.py",
+            "bms/electrical.py", "bms/thermal_estimators.py", "bms/power_capability.py", "core/lookup.py",
+            "powertrain/engine.py", "powertrain/motor.py", "powertrain/vehicle.py", "powertrain/driver.py",
+            "supervisor/mpc.py", "components/cycle.py")
 
 
 @njit(cache=True)
@@ -83,3 +93,34 @@ def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, 
     out[0] = 0
     out[1] = k0 + n
     out[2] = -1
+
+
+def _sources_digest() -> str:
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for rel in _DEPENDS:
+        try:
+            h.update(rel.encode() + b"\0" + (root / rel).read_bytes())
+        except OSError:
+            h.update(rel.encode() + b"\0missing")
+    return h.hexdigest()
+
+
+def _drop_stale_cache() -> None:
+    """Remove the cached compiled loop and kernels when the sources they inline have changed (best effort:
+    a cache folder that cannot be written is left alone)."""
+    try:
+        cache_dir = Path(run_loop._cache._cache_path)
+        stamp = cache_dir / "shevsim_fast_sources.sha256"
+        digest = _sources_digest()
+        if stamp.exists() and stamp.read_text().strip() == digest:
+            return
+        for f in list(cache_dir.glob("loop.*.nb[ic]")) + list(cache_dir.glob("kernels.*.nb[ic]")):
+            f.unlink(missing_ok=True)
+        cache_dir.mkdir(parents=True, exist_ok=True)
+        stamp.write_text(digest + "\n")
+    except Exception:  # noqa: BLE001 - never stop a run over the cache
+        pass
+
+
+_drop_stale_cache()

@@ -157,6 +157,27 @@ def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: floa
     return tau, brake, p_el, p_m, w, t_lim, gamma1, v
 
 
+@_njit(cache=True)
+def motor_component_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: float, v_prev: float,
+                         h_prev: float, gamma: float, e_loss: float, e_elec: float, e_mech: float, k_w: float,
+                         k_tau: float, extrapolate: bool, regen_speed_min: float, regen_power_max: float,
+                         eff_scale: float, heat_rate: float):
+    """:func:`motor_step` plus the motor component's bookkeeping (energies integrated over the held step).
+
+    Returns ``(traction_force_n, brake_force_n, elec_power_w, torque_nm, speed_radps, torque_max_nm,
+    heat_index_frac, loss_energy_j, elec_energy_j, mech_energy_j, v_used)``; ``v_used`` is the next
+    step's ``v_prev``.  The component (:class:`shevsim.components.motor.Motor`) and the compiled
+    whole-vehicle loop (:mod:`shevsim.fast`) both call it.
+    """
+    tau, brake, p_el, p_m, w, t_lim, gamma1, v_used = motor_step(
+        md, mi, f_req, v, p_hi, p_lo, h, v_prev, h_prev, gamma, k_w, k_tau, extrapolate, regen_speed_min,
+        regen_power_max, eff_scale, heat_rate)
+    e_elec += p_el * h
+    e_mech += p_m * h
+    e_loss += (p_el - p_m) * h
+    return tau / k_tau, brake, p_el, tau, w, t_lim, gamma1, e_loss, e_elec, e_mech, v_used
+
+
 @_njit(cache=True, error_model="numpy")
 def bus_aux_w(aux_in_w: float, aux_param_w: float) -> float:
     """Auxiliary load on the bus [W]: the ``aux_power_w`` input plus the constant ``aux_power_w`` parameter

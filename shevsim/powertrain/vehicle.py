@@ -170,6 +170,24 @@ def step_vehicle(v0: float, f_prop: float, f_brk: float, grade_rad: float, h: fl
     return v1, dist, f_prop * dist, f_brk * dist, f_rr * dist, f_a * dist, f_g * dist
 
 
+@_njit(cache=True)
+def vehicle_force_step(v0: float, dist: float, e_trac: float, e_brake: float, e_roll: float, e_aero: float,
+                       e_grade: float, f_prop: float, f_brk: float, grade_in: float, h: float, mass_kg: float,
+                       c_aero: float, f_roll_coeff: float, g: float, knots: bool, knot_d, knot_frac):
+    """The vehicle component's force-mode step: the parameter grade added (:func:`grade_total_rad`, when
+    ``knots``), :func:`step_vehicle`, the works accumulated.
+
+    Returns ``(speed_mps, accel_mps2, distance_m, traction_energy_j, brake_energy_j, rolling_energy_j,
+    aero_energy_j, grade_energy_j, kinetic_energy_j)`` at t + h.  The component
+    (:class:`shevsim.components.vehicle.Vehicle`) and the compiled whole-vehicle loop (:mod:`shevsim.fast`)
+    both call it.
+    """
+    th = grade_total_rad(grade_in, dist, knot_d, knot_frac) if knots else grade_in
+    v1, dd, wp, wb, wr, wa, wg = step_vehicle(v0, f_prop, f_brk, th, h, mass_kg, c_aero, f_roll_coeff, g)
+    return (v1, (v1 - v0) / h, dist + dd, e_trac + wp, e_brake + wb, e_roll + wr, e_aero + wa, e_grade + wg,
+            0.5 * mass_kg * v1 * v1)
+
+
 def coast_down_aero_only(v0: float, t: float, mass_kg: float, c_aero: float) -> float:
     """Analytical speed of ``M dv/dt = -c v^2``: ``v = v0 / (1 + c v0 t / M)``."""
     return v0 / (1.0 + c_aero * v0 * t / mass_kg)
