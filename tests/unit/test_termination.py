@@ -49,19 +49,24 @@ def test_idle_cycle_metrics_are_null_with_a_note(tmp_path):
 
 def test_plant_limit_stop_keeps_the_trajectory_and_exits_1(tmp_path, capsys):
     # a tiny pack charged hard by the generator leaves SOC [0, 100] %: the run stops at the plant limit
-    out = tmp_path / "o"
-    code = main(["run", "hd_udds_rule", "-o", str(out), "-q", "--no-plots", "-s", "cycle.repeat=1",
-                 "-s", "battery.soc_init_pct=3", "-s", "battery.capacity_ah=0.05"])
-    assert code == 1
-    err = capsys.readouterr().err
-    assert "stopped" in err and "component battery" in err and str(out) in err
-    res = load_result(out)
-    term = res.termination
-    assert term.status == "stopped" and term.component == "battery" and term.port == "soc_pct"
-    assert "SOC left" in term.reason
-    assert 0 < term.time_s < 1060 and res.time_s[-1] == pytest.approx(term.time_s)
-    assert len(res) > 100 and np.all(np.isfinite(res["battery.soc_pct"]))
-    assert json.loads((out / "metrics.json").read_text())["notes"][0].startswith("the run did not complete")
+    stops = {}
+    for engine in ("python", "auto"):   # auto: the compiled fast path when eligible; same stop expected
+        out = tmp_path / engine
+        code = main(["run", "hd_udds_rule", "-o", str(out), "-q", "--no-plots", "-s", "cycle.repeat=1", "--engine",
+                     engine, "-s", "battery.soc_init_pct=3", "-s", "battery.capacity_ah=0.05"])
+        assert code == 1
+        err = capsys.readouterr().err
+        assert "stopped" in err and "component battery" in err and str(out) in err
+        res = load_result(out)
+        term = res.termination
+        assert term.status == "stopped" and term.component == "battery" and "SOC left" in term.reason
+        if engine == "python":              # the component's message names the port (soc_pct=...)
+            assert term.port == "soc_pct"
+        assert 0 < term.time_s < 1060 and res.time_s[-1] == pytest.approx(term.time_s)
+        assert len(res) > 100 and np.all(np.isfinite(res["battery.soc_pct"]))
+        assert json.loads((out / "metrics.json").read_text())["notes"][0].startswith("the run did not complete")
+        stops[engine] = (len(res), term.time_s, res["battery.soc_pct"][-1])
+    assert stops["python"] == pytest.approx(stops["auto"], rel=1e-9)
 
 
 def _unstable_lag():
