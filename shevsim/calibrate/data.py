@@ -203,9 +203,16 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
         raise DataError(f"power sign '{power_sign}': expected one of {POWER_SIGNS}")
     if not path.is_file():
         raise DataError(f"{path}: file not found")
+    import warnings
     try:
-        raw = pd.read_csv(path, comment="#", skipinitialspace=True, encoding="utf-8-sig", index_col=False,
-                          **_sniff_format(path))
+        with warnings.catch_warnings():
+            # a row longer than the header would lose its extra values silently: an error instead
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            raw = pd.read_csv(path, comment="#", skipinitialspace=True, encoding="utf-8-sig", index_col=False,
+                              **_sniff_format(path))
+    except pd.errors.ParserWarning as exc:
+        raise DataError(f"{path}: a data row has more values than the header has columns ({exc}); nothing is "
+                        f"dropped silently: fix the header or the row") from exc
     except Exception as exc:  # pandas parser errors carry the line
         raise DataError(f"{path}: cannot parse CSV: {type(exc).__name__}: {exc}") from exc
     raw.columns = [str(c).strip() for c in raw.columns]
