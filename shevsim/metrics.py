@@ -611,7 +611,7 @@ def result_metrics(res, options: Mapping | None = None) -> dict:
                 m = compute_metrics(res.to_pandas(), {"scenario": opts, "parameters": res.parameters})
             notes = notes + list(m.pop("notes", []))
             out.update(m)
-        except (ArithmeticError, ValueError, IndexError, KeyError, DataError) as exc:
+        except Exception as exc:  # noqa: BLE001 - a metric never costs the run: null and the reason
             notes.append(f"SHEV metrics could not be computed: {type(exc).__name__}: {exc}")
     out["notes"] = notes
     return _clean(out)

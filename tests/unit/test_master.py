@@ -222,3 +222,28 @@ def test_initialize_failure_names_component_time_and_exception_type():
     m = Master([Gain("a"), Broken("b")], [], MasterSettings(step_s=0.1))
     with pytest.raises(SimulationError, match=r"component 'b' failed to initialise at t=2.5 s: KeyError: 'ocv_v'"):
         m.run(3.0, t0=2.5)
+
+
+# ------------------------------------------------------------------ recording less (issue 12)
+def test_record_every_keeps_every_kth_point_and_the_last():
+    sc = load_scenario(TWO_BODY, [])
+    full = build_master(sc).run(1.0)
+    m = build_master(sc)
+    m.record_every = 3
+    dec = m.run(1.0)
+    k = [int(round(t / 0.01)) for t in dec.time_s]
+    assert k[:4] == [0, 3, 6, 9] and k[-2:] == [99, 100]
+    for s in full.signals:
+        np.testing.assert_array_equal(dec[s], full[s][k])
+
+
+def test_record_every_still_stops_on_a_non_finite_step_it_does_not_keep():
+    from shevsim.components.verification import Trivial, TrivialParams
+    from shevsim.core.errors import SimulationError
+    comp = Trivial("lag", TrivialParams(gain=1e4))     # x_{k+1} = -999 x_k + 1000 u: overflows at step 103
+    comp.u["in0_1"] = 1.0
+    m = Master([comp], [], MasterSettings(step_s=0.1))
+    m.record_every = 1000
+    with pytest.raises(SimulationError, match=r"component 'lag' output 'out0_1' is inf at t=10.3 s") as ei:
+        m.run(100.0)
+    assert ei.value.component == "lag" and ei.value.port == "out0_1" and ei.value.time_s == pytest.approx(10.3)

@@ -302,3 +302,34 @@ def test_energy_balance_mid_run_with_grade_stored_energies_and_engine_shaft():
         bad = df.copy()
         bad[col] = -bad[col]
         assert M.energy_balance(bad)["residual_j"] == pytest.approx(2.0 * size, rel=1e-9), col
+
+
+# ----------------------------------------------------------- a result's metrics never raise (issue 12)
+def _result(t, **sig):
+    from shevsim.core.results import Result
+    sig = {k.replace("__", "."): np.asarray(v, float) for k, v in sig.items()}
+    return Result(np.asarray(t, float), sig, {k: "" for k in sig}, {})
+
+
+def test_idle_run_per_distance_metrics_are_null_with_a_note():
+    t = np.arange(0.0, 101.0)
+    z = np.zeros_like(t)
+    res = _result(t, vehicle__speed_mps=z, cycle__speed_ref_mps=z, battery__soc_pct=50 - 0.01 * t,
+                  battery__chem_energy_j=1e3 * t, engine_generator__fuel_mass_g=0.5 * t,
+                  engine_generator__soot_mass_mg=t, engine_generator__elec_energy_j=4e3 * t)
+    m = M.result_metrics(res)
+    json.dumps(m, allow_nan=False)              # JSON-clean: no NaN/inf
+    assert m["distance_km"] == 0.0 and m["fuel_mass_g"] == pytest.approx(50.0)
+    assert m["fuel_economy_raw_kmpl"] == 0.0    # fuel burnt for no distance
+    assert m.get("fuel_consumption_dsoc_corrected_l_per_100km") is None
+    assert m.get("soot_g_per_km") is None
+    assert any("did not move" in n for n in m["notes"])
+
+
+def test_a_run_stopped_after_one_sample_gives_notes_not_an_exception():
+    res = _result([0.0], vehicle__speed_mps=[0.0], bus__clamp_count=[0.0])
+    res.termination = "error: stopped at once"
+    m = M.result_metrics(res)
+    assert m["bus.clamp_count"] == 0.0
+    assert any("did not complete" in n for n in m["notes"])
+    assert any("could not be computed" in n and "2 samples" in n for n in m["notes"])
