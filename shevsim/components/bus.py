@@ -41,10 +41,13 @@ limits act, in the step they are computed for (``scenarios/*seed*.toml``)::
     order = [..., "bms", "motor_limits", "motor", "gen_limits", "engine_generator", "bus", "battery", ...]
 
 ``motor_limits`` (after the BMS) clamps the motor against this step's BMS limits and the generator's
-last power; ``gen_limits`` (after the motor) sheds the generator against this step's motor power and
-charge limit.  The charge side then holds exactly (battery = motor + aux - gen >= P_min whenever the
-generator can shed); the discharge side is exact unless the generator's power falls within the step
-after the motor was clamped (the motor used its last power).
+last power (the regen side counts only on max(gen, 0): shedding can hold the generator at any power
+>= 0, not make it motor); ``gen_limits`` (after the motor) sheds the generator against this step's motor
+power and charge limit (``gen_power_max_w``) and gives it a floor (``gen_power_min_w`` = motor + aux -
+P_max, the engine-generator's ``elec_power_min_w``: the generator holds that power out of its shaft's
+kinetic energy when its own dynamics dip, :mod:`shevsim.powertrain.engine` item 10d).  The charge side
+then holds exactly (battery = motor + aux - gen >= P_min whenever the generator can shed); the discharge
+side whenever the floor can be held above the engine's idle speed.
 """
 from __future__ import annotations
 
@@ -165,7 +168,10 @@ class PowerLimits(Component):
     Inputs ``motor_power_w``, ``gen_power_w``, ``aux_power_w`` [W] (signs as the bus),
     ``battery_power_max_w`` (>= 0), ``battery_power_min_w`` (<= 0) [W].  Outputs (direct feedthrough)
     ``motor_power_max_w``, ``motor_power_min_w``, ``gen_power_max_w`` [W], the same laws as
-    :class:`PowerBus`.  Parameters: :class:`BusParams` (``enforce_battery_limits``, ``aux_power_w``).
+    :class:`PowerBus`, and ``gen_power_min_w`` = motor + aux - battery_power_max [W] (what the generator
+    must deliver for the battery to stay within its discharge capability; <= 0: nothing; -1e12 with
+    ``enforce_battery_limits = false``), the engine-generator's floor.  Parameters: :class:`BusParams`
+    (``enforce_battery_limits``, ``aux_power_w``).
     """
 
     TYPE = "power_limits"
@@ -179,6 +185,8 @@ class PowerLimits(Component):
         out("motor_power_max_w", "W", 1e12, "most power the motors may draw", _LIM),
         out("motor_power_min_w", "W", -1e12, "most power the motors may return (<= 0)", _LIM),
         out("gen_power_max_w", "W", 1e12, "most generator power the bus can absorb (>= 0)", _GLIM),
+        out("gen_power_min_w", "W", -1e12, "least generator power the bus needs (<= 0: none)",
+            ("motor_power_w", "aux_power_w", "battery_power_max_w")),
     )
     _static = ("name", "params", "_aux_w")
 
@@ -187,7 +195,12 @@ class PowerLimits(Component):
         self._aux_w = float(self.params.aux_power_w)
 
     _aux = PowerBus._aux
-    _limits = PowerBus._limits
+
+    def _limits(self) -> None:
+        PowerBus._limits(self)
+        u = self.u
+        self.y["gen_power_min_w"] = (u["motor_power_w"] + self._aux() - u["battery_power_max_w"]
+                                     if self.params.enforce_battery_limits else -1e12)
 
     def initialize(self, t0: float) -> None:
         self._limits()

@@ -19,6 +19,10 @@ Inputs
     limit) and the generator torque is cut so that the electrical power of every internal sub-step
     is ``<= max(elec_power_max_w, 0)``; the surplus engine work accelerates the shaft (booked as
     kinetic energy) until the governor has cut the fuel (falls with ``fuel_fall_s``).
+    ``elec_power_min_w`` [W] least electrical power the bus needs (``power_limits.gen_power_min_w``: motors +
+    auxiliaries - battery discharge capability); start 0 (none). Not direct feedthrough: above 0 the
+    generator torque is raised within the step so that every sub-step delivers at least it, out of the
+    shaft's kinetic energy, down to the idle speed (item 10d of the physics docstring).
 Outputs (at t + h, no direct feedthrough: every output comes from the state or the step just run)
     ``elec_power_w`` [W] + to the bus, *mean over the last step* (so that sum(P h) equals the
     electrical energy delivered); ``engine_power_w`` [W] crankshaft power (end of step);
@@ -129,6 +133,7 @@ class EngineGenerator(Component):
         inp("power_cmd_w", "W", 0.0, "electrical power command, + to the bus"),
         inp("power_rate_max_wps", "W/s", 1e12, "max rate of increase of the power command"),
         inp("elec_power_max_w", "W", 1e12, "most electrical power the bus can absorb (load shedding below it)"),
+        inp("elec_power_min_w", "W", 0.0, "least electrical power the bus needs (generator floor above 0)"),
         out("elec_power_w", "W", 0.0, "electrical power delivered to the bus (mean over the last step)"),
         out("engine_power_w", "W", 0.0, "engine crankshaft power"),
         out("engine_speed_radps", "rad/s", 0.0, "engine speed"),
@@ -192,8 +197,9 @@ class EngineGenerator(Component):
 
     def do_step(self, t: float, h: float) -> None:
         pc, rate, lim = self.u["power_cmd_w"], self.u["power_rate_max_wps"], self.u["elec_power_max_w"]
-        if pc != pc or rate != rate or lim != lim:
+        floor = self.u["elec_power_min_w"]
+        if pc != pc or rate != rate or lim != lim or floor != floor:
             raise SimulationError(f"{self.name}: NaN input at t={t:g} s (power_cmd_w={pc}, power_rate_max_wps={rate}, "
-                                  f"elec_power_max_w={lim})")
-        e_el, fuel, soot, soot_meas = self._step(self.st, pc, rate, h, lim)
+                                  f"elec_power_max_w={lim}, elec_power_min_w={floor})")
+        e_el, fuel, soot, soot_meas = self._step(self.st, pc, rate, h, lim, floor)
         self._write(e_el / h, fuel / h, soot / h, soot_meas)

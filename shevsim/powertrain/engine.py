@@ -55,6 +55,18 @@ Chain, advanced in sub-steps of at most ``max_substep_s`` with the inputs held:
        instead (added to the torque demand of the PI rack): the over-speed from (b) is removed by
        cutting fuel, and the shaft's kinetic energy then returns to the bus (within ``L``).
 
+    d. *generator floor* (input ``elec_min_w`` = what the bus needs from the generator so that the
+       battery stays within its discharge capability, motors + auxiliaries - ``P_b,max``; ``<= 0``: none;
+       issue 14): if the electrical energy of the sub-step would fall below ``F dt`` (``F = min(elec_min_w,
+       P_max)``) and (b) did not act, the generator torque is raised so that ``E_el = F dt``: shaft work
+       ``W_g = F dt / eta_g(w, tau_gf)`` (efficiency at ``tau_gf = F dt / (eta_free w_avg dt)``), the deficit
+       comes out of the shaft's kinetic energy, ``w1 = sqrt(w0^2 + 2 (W_e - W_g) / J)``, but never below
+       the optimal line's idle speed ``w*(0)`` nor above the unraised ``w1`` (then ``E_el`` is what that
+       speed allows); the engine torque is re-read at that speed, and the speed loop then asks the engine
+       for the dip back (fuel).  This holds the battery within its discharge limit in the step the motors
+       were clamped against it, through the generator's own dynamics (the speed-up dips of the optimal
+       line).
+
     (b) makes the electrical output of every sub-step ``<= L`` (hence its step mean too), exactly;
     the bookkeeping below stays exact because the surplus is booked as ``dKE``. Counted as
     ``shed_n`` (number of episodes: sub-steps with (a) or (b) following one without) and ``shed_s``
@@ -195,7 +207,7 @@ from shevsim.core.lookup import EXTRAPOLATION_CODES, HAVE_NUMBA, _curve_ex, _gri
 @_njit(cache=True)
 def step(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g, fuel_j, eng_loss_j,
          shaft_j, ke_j, gen_loss_j, elec_j, soot_mg, soot_tr_mg, gen_sat, shed, shed_n, shed_s, soot_lag,
-         p_cmd_w, rate_up_wps, h, elec_max_w):
+         p_cmd_w, rate_up_wps, h, elec_max_w, elec_min_w=0.0):
     """Advance the engine-generator by ``h`` with the inputs held (items 1-11 of the module docstring).
 
     Parameters
@@ -210,6 +222,8 @@ def step(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g,
         The state, in the order of :data:`STATE`.
     p_cmd_w, rate_up_wps, h, elec_max_w : float
         Power command [W], its max rate of increase [W/s], step [s], bus limit [W].
+    elec_min_w : float
+        Generator floor [W] (item 10d; default 0 = none).
 
     Returns
     -------
@@ -239,6 +253,8 @@ def step(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g,
     a_a = math.exp(-dt / tau_a) if tau_a > 0.0 else 0.0
     p_shed = max(elec_max_w, 0.0)
     e_shed = p_shed * dt
+    e_floor = min(elec_min_w, p_max) * dt          # 10d: <= 0 = no floor
+    w_idle = _curve_ex(md, mi[0], mi[1], mi[2], 0.0)
     e_el = 0.0
     fuel = 0.0
     soot = 0.0
@@ -316,6 +332,20 @@ def step(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g,
             w1 = math.sqrt(w0 * w0 + 2.0 * dke / J)
             tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
             gen_sat = 1.0
+        elif e_floor > 0.0 and el < e_floor and w1 > w_idle:
+            # 10d. generator torque raised to the floor; the deficit comes out of the shaft's kinetic energy
+            eta_f = _grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg,
+                             e_floor / (max(eta, 1e-3) * w_avg * dt))
+            w1sq = w0 * w0 + 2.0 * (w_e - e_floor / eta_f) / J
+            if w1sq < w_idle * w_idle:
+                w1sq = w_idle * w_idle
+            w1f = math.sqrt(w1sq)
+            if w1f < w1:
+                dke = 0.5 * J * (w1f * w1f - w0 * w0)
+                w_g = w_e - dke
+                el = w_g * eta_f
+                w1 = w1f
+                tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
         if cut > 0.0 or gen_sat > 0.0:
             if shed == 0.0:
                 shed_n += 1.0
@@ -408,7 +438,7 @@ class EngineGenStep:
 
     ``compiled=True`` calls the numba-compiled :func:`step` (when numba is installed), ``False`` its
     Python form :data:`step_py`; both are the one source.  ``__call__(st, p_cmd_w, rate_up_wps, h,
-    elec_max_w=1e12)`` advances ``st`` in place and returns (elec J, fuel g, soot mg, analyser reading
+    elec_max_w=1e12, elec_min_w=0)`` advances ``st`` in place and returns (elec J, fuel g, soot mg, analyser reading
     mg/s) of the step.  A non-finite result (a map with extrapolation ``"error"`` queried outside its
     range, or a NaN met inside) raises :class:`~shevsim.core.errors.DataError`; the state is then left
     unchanged.
@@ -423,11 +453,11 @@ class EngineGenStep:
         self.fn = step if self.compiled else step_py
 
     def __call__(self, st: EngineGenState, p_cmd_w: float, rate_up_wps: float, h: float,
-                 elec_max_w: float = 1e12):
+                 elec_max_w: float = 1e12, elec_min_w: float = 0.0):
         r = self.fn(self.md, self.mi, self.c, self.p_max, st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e,
                     st.fuel_cmd, st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j, st.gen_loss_j,
                     st.elec_j, st.soot_mg, st.soot_tr_mg, st.gen_sat, st.shed, st.shed_n, st.shed_s, st.soot_lag,
-                    float(p_cmd_w), float(rate_up_wps), float(h), float(elec_max_w))
+                    float(p_cmd_w), float(rate_up_wps), float(h), float(elec_max_w), float(elec_min_w))
         if not math.isfinite(r[21] + r[22] + r[24] + r[1] + r[5]):     # one test for all (NaN/inf propagate)
             modes = [m.name for m in (self.maps.ool_speed, self.maps.ool_shaft, self.maps.tmax, self.maps.fmax)
                      if m.mode == "error"]

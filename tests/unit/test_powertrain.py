@@ -44,7 +44,7 @@ SIGNAL_TABLE = {   # docs/DEVELOPING.md, SHEV signal table
                "brake_energy_j", "grade_energy_j", "kinetic_energy_j")),
     PowerBus: (("motor_power_w", "gen_power_w", "aux_power_w", "battery_power_max_w", "battery_power_min_w"),
                ("battery_power_w", "demand_power_w", "aux_energy_j", "motor_power_max_w", "motor_power_min_w")),
-    EngineGenerator: (("power_cmd_w", "power_rate_max_wps", "elec_power_max_w"),
+    EngineGenerator: (("power_cmd_w", "power_rate_max_wps", "elec_power_max_w", "elec_power_min_w"),
                       ("elec_power_w", "engine_power_w", "engine_speed_radps", "engine_torque_nm", "rack_frac",
                        "fuel_rate_gps", "soot_rate_mgps", "fuel_mass_g", "fuel_energy_j", "soot_mass_mg",
                        "engine_loss_energy_j", "gen_loss_energy_j")),
