@@ -198,6 +198,8 @@ def _pack_mpc(c):
     if m.rule is None or m.rule.rate_map is not m.rate_map and \
             (m.rule.rate_map._inner, m.rule.rate_map.rates_wps) != (m.rate_map._inner, m.rate_map.rates_wps):
         raise Declined(f"component '{c.name}': MPC fallback rule with its own rate map")
+    if m.rule.engine_on:
+        raise Declined(f"component '{c.name}': MPC fallback rule with its thermostat on")
     s = m.settings
     inner, rates = _rate_arrays(m.rate_map)
     nc = s.n_c

@@ -40,6 +40,7 @@ from shevsim.powertrain.vehicle import vehicle_force_step
 from shevsim.components.cycle import cycle_sample
 from shevsim.powertrain.driver import driver_step
 from shevsim.supervisor.mpc import _build as mpc_build
+from shevsim.supervisor.rule_based import rule_command
 
 from . import daqp_nb
 
@@ -492,33 +493,6 @@ def _rate(inner, rates, pw):
 
 
 @njit(cache=True)
-def rule_split(rp, inner, rates, engine_on, soc, demand, gen, pmax_w, pmin_w):
-    """:class:`shevsim.supervisor.rule_based.RuleBasedSupervisor` ``_thermostat`` + ``_power``; returns
-    ``(on, command_w)``.  ``rp = [soc_min, soc_max, soc_ref, soc_on, soc_off, charge_w, on_min_w,
-    on_demand_w, pg_min_w, pg_max_w, rate_min_wps, dt_s]``."""
-    must = demand >= rp[7] or demand > pmax_w
-    if engine_on:
-        on = not (soc >= rp[4] and not must)
-    else:
-        on = soc <= rp[3] or must
-    if on:
-        x = (rp[2] - soc) / (rp[2] - rp[0])
-        pw = demand + rp[5] * pmin(pmax(x, -1.0), 1.0)
-        pw = pmax(pw, rp[6])
-    else:
-        pw = rp[8]
-    if soc <= rp[0]:
-        pw = pmax(pw, demand)
-    if soc >= rp[1]:
-        pw = pmin(pw, pmax(demand, rp[8]))
-    if pmin_w <= pmax_w:
-        pw = pmin(pmax(pw, demand - pmax_w), demand - pmin_w)
-    pw = pmin(pmax(pw, rp[8]), rp[9])
-    rate = _rate(inner, rates, gen)
-    return on, pmin(pmax(pw, gen + rp[10] * rp[11]), gen + rate * rp[11])
-
-
-@njit(cache=True)
 def rule_kernel(data, sig, ib, ob, t, h):
     """:meth:`shevsim.components.supervisors.RuleSupervisor.do_step`."""
     rp, inner, rates, x = data
@@ -529,7 +503,7 @@ def rule_kernel(data, sig, ib, ob, t, h):
             return ERR_NAN_INPUT
     demand = sig[ib]
     prev = x[1]
-    on, cmd = rule_split(rp, inner, rates, x[0] > 0.5, sig[ib + 1], demand, prev, sig[ib + 3], sig[ib + 4])
+    on, cmd = rule_command(rp, inner, rates, x[0] > 0.5, sig[ib + 1], demand, prev, sig[ib + 3], sig[ib + 4])
     x[0] = 1.0 if on else 0.0
     sig[ob] = cmd
     sig[ob + 1] = _rate(inner, rates, prev)
@@ -551,7 +525,7 @@ def _mpc_fallback(mp, rp, inner, rates, plan, x, soc, demand, gen, pmax_w, pmin_
         cand = plan[int(x[3])] * 1e3
         have = True
     else:
-        on, c = rule_split(rp, inner, rates, False, soc, demand, gen, pmax_w, pmin_w)
+        on, c = rule_command(rp, inner, rates, False, soc, demand, gen, pmax_w, pmin_w)
         cand = c
         have = True
     if not have or not math.isfinite(cand):

@@ -30,7 +30,7 @@ from . import kernels as K
 _DEPENDS = ("fast/loop.py", "fast/kernels.py", "fast/daqp_nb.py", "battery/model.py", "battery/thermal.py",
             "bms/electrical.py", "bms/thermal_estimators.py", "bms/power_capability.py", "core/lookup.py",
             "powertrain/engine.py", "powertrain/motor.py", "powertrain/vehicle.py", "powertrain/driver.py",
-            "supervisor/mpc.py", "components/cycle.py")
+            "supervisor/mpc.py", "supervisor/rule_based.py", "components/cycle.py")
 
 
 @njit(cache=True)

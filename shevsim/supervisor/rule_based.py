@@ -25,9 +25,67 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from shevsim.core.errors import ScenarioError
 
+from shevsim.core.lookup import _njit
+
 from .rate_map import PowerRateMap
+
+
+@_njit(cache=True)
+def _bisect_right(a, x):
+    """``bisect.bisect_right`` (the power-rate map's partition of :class:`PowerRateMap`)."""
+    lo = 0
+    hi = a.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if x < a[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@_njit(cache=True)
+def _min(a, b):
+    return b if b < a else a          # Python's min(a, b)
+
+
+@_njit(cache=True)
+def _max(a, b):
+    return b if b > a else a          # Python's max(a, b)
+
+
+@_njit(cache=True)
+def rule_command(rp, inner, rates, engine_on, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w):
+    """The rules 1-5 of the module docstring, compiled once: ``(engine_on, command_w)``.
+
+    ``rp = [soc_min, soc_max, soc_ref, soc_on, soc_off, charge_w, on_min_w, on_demand_w, pg_min_w, pg_max_w,
+    rate_min_wps, dt_s]``; ``inner, rates`` the power-rate map (inner edges, rate per partition).
+    :class:`RuleBasedSupervisor` and the compiled whole-vehicle loop (:mod:`shevsim.fast`) both call it.
+    """
+    must = demand_w >= rp[7] or demand_w > power_max_w          # 1. thermostat
+    if engine_on:
+        on = not (soc_pct >= rp[4] and not must)
+    else:
+        on = soc_pct <= rp[3] or must
+    if on:                                                       # 2. power follower
+        x = (rp[2] - soc_pct) / (rp[2] - rp[0])
+        p = demand_w + rp[5] * _min(_max(x, -1.0), 1.0)
+        p = _max(p, rp[6])
+    else:
+        p = rp[8]
+    if soc_pct <= rp[0]:                                         # 3. SOC window
+        p = _max(p, demand_w)
+    if soc_pct >= rp[1]:
+        p = _min(p, _max(demand_w, rp[8]))
+    if power_min_w <= power_max_w:                               # 4. battery limits
+        p = _min(_max(p, demand_w - power_max_w), demand_w - power_min_w)
+    p = _min(_max(p, rp[8]), rp[9])                              # 5. engine and rate limits
+    rate = rates[_bisect_right(inner, gen_power_w)]
+    return on, _min(_max(p, gen_power_w + rp[10] * rp[11]), gen_power_w + rate * rp[11])
 
 
 @dataclass(frozen=True)
@@ -112,39 +170,28 @@ class RuleBasedSupervisor:
         self.dt_s = dt_s
         self.engine_on = False
 
-    def _thermostat(self, soc_pct, demand_w, power_max_w) -> bool:
-        s = self.settings
-        must = demand_w >= s.engine_on_demand_w or demand_w > power_max_w
-        if self.engine_on:
-            return not (soc_pct >= s.soc_off_pct and not must)
-        return soc_pct <= s.soc_on_pct or must
-
-    def _power(self, on, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w) -> float:
-        s = self.settings
-        if on:
-            x = (s.soc_ref_pct - soc_pct) / (s.soc_ref_pct - s.soc_min_pct)
-            p = demand_w + s.charge_power_w * min(max(x, -1.0), 1.0)
-            p = max(p, s.engine_on_min_power_w)
-        else:
-            p = s.power_gen_min_w
-        if soc_pct <= s.soc_min_pct:
-            p = max(p, demand_w)
-        if soc_pct >= s.soc_max_pct:
-            p = min(p, max(demand_w, s.power_gen_min_w))
-        if power_min_w <= power_max_w:
-            p = min(max(p, demand_w - power_max_w), demand_w - power_min_w)
-        p = min(max(p, s.power_gen_min_w), s.power_gen_max_w)
-        rate = self.rate_map(gen_power_w)
-        return min(max(p, gen_power_w + s.power_rate_min_wps * self.dt_s), gen_power_w + rate * self.dt_s)
+    def _law(self, engine_on, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w):
+        """``(on, command_w)`` of :func:`rule_command` (packed settings and rate map cached)."""
+        rm = self.rate_map
+        pf = getattr(self, "_packed_for", None)
+        if pf is None or pf[0] is not self.settings or pf[1] is not rm or pf[2] != self.dt_s:
+            s = self.settings
+            self._rp = np.array([s.soc_min_pct, s.soc_max_pct, s.soc_ref_pct, s.soc_on_pct, s.soc_off_pct,
+                                 s.charge_power_w, s.engine_on_min_power_w, s.engine_on_demand_w, s.power_gen_min_w,
+                                 s.power_gen_max_w, s.power_rate_min_wps, self.dt_s], dtype=np.float64)
+            self._inner = np.array(rm._inner, dtype=np.float64)
+            self._rates = np.array(rm.rates_wps, dtype=np.float64)
+            self._packed_for = (self.settings, rm, self.dt_s)
+        return rule_command(self._rp, self._inner, self._rates, bool(engine_on), float(soc_pct), float(demand_w),
+                            float(gen_power_w), float(power_max_w), float(power_min_w))
 
     def step(self, soc_pct: float, demand_w: float, gen_power_w: float, power_max_w: float,
              power_min_w: float) -> float:
         """Advance the thermostat and return the engine-generator power command [W]."""
-        self.engine_on = self._thermostat(soc_pct, demand_w, power_max_w)
-        return self._power(self.engine_on, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w)
+        self.engine_on, p = self._law(self.engine_on, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w)
+        return p
 
     def split(self, soc_pct: float, demand_w: float, gen_power_w: float, power_max_w: float,
               power_min_w: float) -> float:
         """The command of :meth:`step` without changing the thermostat state."""
-        on = self._thermostat(soc_pct, demand_w, power_max_w)
-        return self._power(on, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w)
+        return self._law(self.engine_on, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w)[1]
