@@ -401,7 +401,8 @@ class FastRunner:
                     raise self._stopped(err, rec, k + 1, comp, None, self._time(k))
                 break
         finally:
-            daqp_nb.drop_model(mpc[22], mpc[28])      # free DAQP's workspace (as daqp.Model.__dealloc__)
+            if mpc[28][0] != 0:
+                daqp_nb.drop_model(mpc[22], mpc[28])  # free DAQP's workspace (as daqp.Model.__dealloc__)
             self.last_wall_s = time.perf_counter() - wall
         return self._result(rec, n + 1, "completed")
 

@@ -539,7 +539,7 @@ def _mpc_fallback(mp, rp, inner, rates, plan, x, soc, demand, gen, pmax_w, pmin_
 
 
 @njit(cache=True)
-def mpc_kernel(data, sig, ib, ob, t, h):
+def _mpc_kernel_daqp(data, sig, ib, ob, t, h):
     """:meth:`shevsim.components.supervisors.MPCSupervisor.do_step` with ``MPCSupervisor.step`` (QP
     build :func:`shevsim.supervisor.mpc._build`, DAQP through its C library, fallback)."""
     (mp, rp, inner, rates, x, plan, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx, H, f, A, bu, bl, aux,
@@ -586,3 +586,13 @@ def mpc_kernel(data, sig, ib, ob, t, h):
     sig[ob + 5] = x[5]
     x[0] = cmd
     return 0
+
+
+@njit(cache=True)
+def _mpc_kernel_unavailable(data, sig, ib, ob, t, h):
+    """Stand-in when DAQP's C library cannot be bound (MPC scenarios are then declined)."""
+    return ERR_SAMPLE_TIME
+
+
+# the loop must not reference the DAQP binding when it is unavailable (its symbols would not link)
+mpc_kernel = _mpc_kernel_daqp if daqp_nb.available()[0] else _mpc_kernel_unavailable
