@@ -657,6 +657,9 @@ def instantiate(spec: ComponentSpec, scenario: Scenario):
             comp = cls(spec.name, params)
         except ShevsimError as exc:
             raise ScenarioError(f"{where}: {exc}") from exc
+        except Exception as exc:          # the component's own code failed: keep its message, name it
+            raise ScenarioError(f"{where}: component '{spec.name}' (type '{spec.type}') could not be built: "
+                                f"{type(exc).__name__}: {exc}") from exc
     inputs = {v.name for v in comp.variables() if v.causality == "input"}
     for port, val in spec.start.items():
         if port not in inputs:

@@ -74,9 +74,24 @@ def test_unknown_port(tmp_path):
 def test_unit_mismatch(tmp_path):
     bad = GOOD.replace('"coupling.position_m" = "body1.position_m"', '"coupling.position_m" = "body1.velocity_mps"')
     bad = bad.replace('"coupling.velocity_mps" = "body1.velocity_mps"', '"coupling.velocity_mps" = "body1.position_m"')
-    with pytest.raises(ConnectionError_, match=r"unit mismatch, output body1.velocity_mps is in 'm/s' but input "
+    # the message names both ends and both units (wording of the unit checker may vary)
+    with pytest.raises(ConnectionError_, match=r"(?s)body1.velocity_mps.*coupling.position_m.*unit mismatch.*'m/s'.*'m'"
+                                               r"|unit mismatch, output body1.velocity_mps is in 'm/s' but input "
                                                r"coupling.position_m expects 'm'"):
         build(bad, tmp_path)
+
+
+def test_component_constructor_exception_names_component(tmp_path, monkeypatch):
+    """An exception in a component's own construction code keeps its message and names the component."""
+    from shevsim.components.verification import Gain
+
+    def boom(self, *a, **k):
+        raise ValueError("table row 3 is bad")
+    monkeypatch.setattr(Gain, "__init__", boom)
+    text = '[scenario]\nstep_s = 0.1\nstop_s = 1.0\n[components.a]\ntype = "gain"\nstart = { in_1 = 1.0 }\n'
+    with pytest.raises(ScenarioError, match=r"\[components.a\]: component 'a' \(type 'gain'\) could not be built: "
+                                            r"ValueError: table row 3 is bad"):
+        build(text, tmp_path)
 
 
 def test_input_connected_twice(tmp_path):

@@ -1,0 +1,533 @@
+"""bad_inputs.py - run a table of bad inputs and faults through the CLI / API and classify each outcome.
+
+    python benchmarks/bad_inputs.py --tree /work/main --label after  --json /tmp/after.json
+    python benchmarks/bad_inputs.py --tree /tmp/before --label before --json /tmp/before.json
+    python benchmarks/bad_inputs.py --merge /tmp/before.json /tmp/after.json --markdown docs/bad_inputs.md
+
+Every case runs in its own temporary folder, as a subprocess ``python -m shevsim.cli ...`` (or a short
+``python -c`` for Python-API cases) with ``PYTHONPATH=<tree>``, so the same script measures any checkout
+(the session-start commit in a separate worktree for the "before" column).  The data the cases need
+(cycles, records, maps, scenario copies) are written by the script; scenario copies resolve their
+component parameter files through the checkout's own search path.
+
+Outcome classes (per case, from exit status, output and a post-check):
+
+* ``clear error``: refused, non-zero exit, no traceback;
+* ``handled``: accepted and the result is right (a quirk converted, a fault reported, partial results kept);
+* ``silent``: accepted and the result is wrong or the problem is not said (exit 0 where an error or a
+  report was expected);
+* ``traceback``: a Python traceback or "internal error" reached the user;
+* ``hang``: did not finish within the case's timeout (killed);
+* ``data loss``: a file the user owned was removed or changed.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+PY = sys.executable
+
+
+@dataclass
+class Case:
+    cid: str
+    group: str
+    what: str
+    expect: str                         # "error" (should be refused) or "accept" (should work / be reported)
+    setup: Callable                      # (ctx) -> argv list (after "python -m shevsim.cli") or ("-c", code)
+    timeout: float = 60.0
+    check: Callable | None = None        # (ctx, proc) -> (ok: bool, note: str) for accepted runs
+    lost: Callable | None = None         # (ctx) -> True when a user's file was lost
+    sigint_after: float | None = None    # send Ctrl-C after this many seconds
+
+
+@dataclass
+class Ctx:
+    tree: Path
+    tmp: Path
+    extra: dict = field(default_factory=dict)
+
+    def scen(self, name: str) -> Path:
+        return self.tree / "scenarios" / f"{name}.toml"
+
+    def copy_scenario(self, name: str, edit=lambda s: s, new="s.toml") -> Path:
+        txt = self.scen(name).read_text()
+        p = self.tmp / new
+        p.write_text(edit(txt))
+        return p
+
+    def write(self, name: str, text: str | bytes) -> Path:
+        p = self.tmp / name
+        if isinstance(text, bytes):
+            p.write_bytes(text)
+        else:
+            p.write_text(text)
+        return p
+
+
+# ------------------------------------------------------------------------------------------ helpers
+
+def _cycle_rows(speed_scale=1.0, dt=1.0, n=120, vmax=20.0):
+    rows = []
+    for k in range(n):
+        v = vmax * math.sin(math.pi * k / (n - 1))
+        rows.append((k * dt, v * speed_scale))
+    return rows
+
+
+def cycle_csv(rows, header="time_s,speed_mps", sep=",", nl="\n", dec=".", trailing=""):
+    out = [header.replace(",", sep) + trailing]
+    for t, v in rows:
+        out.append(sep.join((f"{t:g}", f"{v:.4f}".replace(".", dec))) + trailing)
+    return nl.join(out) + nl
+
+
+def cell_record(n=600, dt=1.0, i_amp=2.0, current_scale=1.0, time_scale=1.0, rest=False):
+    """A plausible cell record: current pulses, voltage from OCV - R i, temperatures near 25 degC."""
+    import numpy as np
+    rng = np.random.default_rng(0)
+    t = np.arange(n) * dt
+    i = np.zeros(n) if rest else i_amp * np.sign(np.sin(t / 25.0)) * (rng.random(n) > 0.15)
+    v = 3.30 - 0.0003 * np.cumsum(i) * dt / 3.6 - 0.03 * i + rng.normal(0, 1e-3, n)
+    ts = 25.0 + 0.002 * np.cumsum(i * i) * dt / 10 + rng.normal(0, 0.03, n)
+    lines = ["time_s,current_a,voltage_v,t_surface_c,t_ambient_c"]
+    for k in range(n):
+        lines.append(f"{t[k] * time_scale:g},{i[k] * current_scale:.5g},{v[k]:.5f},{ts[k]:.3f},25.0")
+    return "\n".join(lines) + "\n"
+
+
+def motor_map(ctx, transform) -> Path:
+    src = (ctx.tree / "components" / "motor" / "motor_eff_map.csv").read_text().splitlines()
+    head = [ln for ln in src if ln.startswith("#")]
+    rows = [ln for ln in src if ln.strip() and not ln.startswith("#")]
+    return ctx.write("motor_eff_map.csv", "\n".join(head + transform(rows)) + "\n")
+
+
+def _scale_eff(rows):
+    return [rows[0]] + [f"{a},{b},{float(c) * 1.5 / 0.92:.6g}" for a, b, c in (r.split(",") for r in rows[1:])]
+
+
+def _nan_cell(rows):
+    r = rows[:]
+    a, b, _ = r[7].split(",")
+    r[7] = f"{a},{b},nan"
+    return r
+
+
+def _results_ok(ctx, proc, needle=None):
+    ok = proc.returncode == 0
+    return ok, ""
+
+
+def _cycle_loaded(expect_max_mps=None, expect_dur_s=119.0):
+    """Check an accepted cycle: the run's summary names the cycle; the loaded cycle's max speed/duration
+    are read back through the API of the same tree."""
+    def chk(ctx, proc):
+        code = ("import json,sys; from shevsim.cycles import load_cycle; c = load_cycle(sys.argv[1]); "
+                "print(json.dumps([float(c.speed_mps.max()), float(c.duration_s)]))")
+        r = subprocess.run([PY, "-c", code, str(ctx.extra["cycle"])], capture_output=True, text=True,
+                           env=_env(ctx.tree), cwd=ctx.tmp, timeout=60)
+        if r.returncode != 0:
+            return False, "reload failed"
+        vmax, dur = json.loads(r.stdout.strip().splitlines()[-1])
+        want = max(v for _, v in _cycle_rows()) if expect_max_mps is None else expect_max_mps
+        good = abs(vmax - want) < 1e-3 and abs(dur - expect_dur_s) < 1e-6
+        return good, f"max {vmax:.4g} m/s, {dur:g} s"
+    return chk
+
+
+def _report_flags_identifiability(ctx, proc):
+    rep = ctx.tmp / "cal" / "report.json"
+    if not rep.is_file():
+        return False, "no report"
+    r = json.loads(rep.read_text())
+    ni = r.get("not_identifiable")
+    if ni:
+        return True, f"not identifiable: {', '.join(ni[:4])}{'...' if len(ni) > 4 else ''}"
+    return False, f"parameters reported as fitted (at bounds: {len(r.get('parameters_at_bounds', []))})"
+
+
+def _sigint_check(ctx, proc):
+    out = proc.stdout + proc.stderr
+    saved = any(ctx.tmp.joinpath("o").glob("*"))
+    return (proc.returncode != 0 and saved), f"exit {proc.returncode}, results saved: {saved}"
+
+
+# ------------------------------------------------------------------------------------------ the cases
+
+def _cases() -> list[Case]:
+    C = []
+
+    def add(*a, **k):
+        C.append(Case(*a, **k))
+
+    base = "hd_udds_rule"
+    # --- scenario files -----------------------------------------------------------------------------
+    add("S01", "scenario", "malformed TOML (unclosed table header)", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s + "\n[components.x\n")), "--out", "o"])
+    add("S02", "scenario", "unknown top-level key 'conections'", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s + '\n[conections]\n"a.b" = "c.d"\n')), "--out", "o"])
+    add("S03", "scenario", 'component type = "os:system"', "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace('type = "bus"', 'type = "os:system"'))),
+                   "--out", "o"])
+    add("S04", "scenario", 'component type = "this:x" (module path)', "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace('type = "bus"', 'type = "this:x"'))),
+                   "--out", "o"])
+    add("S05", "scenario", "unknown component type 'motr'", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace('type = "motor"', 'type = "motr"'))),
+                   "--out", "o"])
+    add("S06", "scenario", "shevsim info on a scenario with type = \"os:system\"", "error",
+        lambda c: ["info", str(c.copy_scenario(base, lambda s: s.replace('type = "bus"', 'type = "os:system"')))])
+    add("S07", "scenario", "dotted component name [components.\"a.b\"]", "error",
+        lambda c: ["run", str(c.write("s.toml", '[scenario]\nstep_s = 0.1\nstop_s = 1.0\n[components."a.b"]\n'
+                                              'type = "gain"\nstart = { in_1 = 1.0 }\n')), "--out", "o"])
+    add("S08", "scenario", "scenario file does not exist", "error", lambda c: ["run", "nosuch.toml", "--out", "o"])
+    add("S09", "scenario", "scenario path is a directory", "error",
+        lambda c: (c.tmp.joinpath("d.toml").mkdir(), ["run", "d.toml", "--out", "o"])[1])
+    add("S10", "scenario", "binary (non-UTF-8) scenario file", "error",
+        lambda c: ["run", str(c.write("bin.toml", bytes(range(256)) * 4)), "--out", "o"])
+    add("S11", "scenario", "step_s = 0 (zero step)", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace("step_s = 0.1", "step_s = 0.0"))), "--out", "o"])
+    add("S12", "scenario", "step_s = 1e6 (huge step)", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace("step_s = 0.1", "step_s = 1e6"))), "--out", "o"])
+    add("S13", "scenario", 'step_s = "abc" (wrong type)', "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace("step_s = 0.1", 'step_s = "abc"'))),
+                   "--out", "o"])
+    add("S14", "scenario", "stop_s = -5 (before t0)", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace("seed = 1", "seed = 1\nstop_s = -5.0"))),
+                   "--out", "o"])
+    add("S15", "scenario", "stop_s = 1e9 (160-hour run, memory grows)", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace("seed = 1", "seed = 1\nstop_s = 1e9"))),
+                   "--out", "o"], timeout=25)
+    add("S16", "scenario", "connection from an unknown port", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace(
+            "[connections]", '[connections]\n"driver.nosuch_n" = "vehicle.nosuch_in"', 1))), "--out", "o"])
+    add("S17", "scenario", "fault scheduled after the end of the run", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s + '\n[[faults]]\nat_s = 99999.0\n'
+                                              'port = "battery.h_conv_w_m2k"\nvalue = 3.0\n')), "--out", "o"])
+    add("S18", "scenario", "fault on an unknown port", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s + '\n[[faults]]\nat_s = 10.0\n'
+                                              'port = "battery.nosuch"\nvalue = 3.0\n')), "--out", "o"])
+    add("S19", "scenario", 'start value for a port the component does not have', "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace(
+            'type = "bus"', 'type = "bus"\nstart = { nosuch = "x" }'))), "--out", "o"])
+    add("S20", "scenario", "empty scenario file", "error", lambda c: ["run", str(c.write("e.toml", "")), "--out", "o"])
+    add("S21", "scenario", "[metrics] fuel_density_kg_per_l = -0.85 (negative km/L)", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s + "\n[metrics]\nfuel_density_kg_per_l = -0.85\n")),
+                   "--out", "o"])
+    # --- --set / parameters -----------------------------------------------------------------------------
+    cool = "uac_proxy_mpc_cooling_fault"
+    add("P01", "parameters", "--set bms.t_core_max_c=nan (protection off)", "error",
+        lambda c: ["run", cool, "--set", "bms.t_core_max_c=nan", "--out", "o"], timeout=120)
+    add("P02", "parameters", "--set bms.i_cell_max_a=nan", "error",
+        lambda c: ["run", base, "--set", "bms.i_cell_max_a=nan", "--out", "o"])
+    add("P03", "parameters", "--set bms.q_soc=nan (DEKF process noise)", "error",
+        lambda c: ["run", base, "--set", "bms.q_soc=nan", "--out", "o"])
+    add("P04", "parameters", "--set bms.p0_soc=nan (DEKF initial covariance)", "error",
+        lambda c: ["run", base, "--set", "bms.p0_soc=nan", "--out", "o"])
+    add("P05", "parameters", "--set battery.t_init_c=nan", "error",
+        lambda c: ["run", base, "--set", "battery.t_init_c=nan", "--out", "o"])
+    add("P06", "parameters", "--set battery.t_init_c=-300 (below absolute zero)", "error",
+        lambda c: ["run", base, "--set", "battery.t_init_c=-300", "--out", "o"])
+    add("P07", "parameters", "--set vehicle.mass_kg=-15554 (negative mass)", "error",
+        lambda c: ["run", base, "--set", "vehicle.mass_kg=-15554", "--out", "o"])
+    add("P08", "parameters", "--set battery.capacity_ah=0", "error",
+        lambda c: ["run", base, "--set", "battery.capacity_ah=0", "--out", "o"])
+    add("P09", "parameters", "--set battery.soc_init_pct=150", "error",
+        lambda c: ["run", base, "--set", "battery.soc_init_pct=150", "--out", "o"])
+    add("P10", "parameters", "--set motor.gear_ratio=0", "error",
+        lambda c: ["run", base, "--set", "motor.gear_ratio=0", "--out", "o"])
+    add("P11", "parameters", "--set engine_generator.fuel_lhv_j_per_g=-42600", "error",
+        lambda c: ["run", base, "--set", "engine_generator.fuel_lhv_j_per_g=-42600", "--out", "o"])
+    add("P12", "parameters", "--set cycle.repeat=0", "error", lambda c: ["run", base, "--set", "cycle.repeat=0", "--out", "o"])
+    add("P13", "parameters", "--set bms.t_core_max_c=inf", "error",
+        lambda c: ["run", base, "--set", "bms.t_core_max_c=inf", "--out", "o"])
+    add("P14", "parameters", "--set without '='", "error", lambda c: ["run", base, "--set", "bms.t_core_max_c", "--out", "o"])
+    add("P15", "parameters", "--set on an unknown component", "error",
+        lambda c: ["run", base, "--set", "bmss.t_core_max_c=40", "--out", "o"])
+    add("P16", "parameters", "--set an unknown parameter", "error",
+        lambda c: ["run", base, "--set", "bms.t_core_max=40", "--out", "o"])
+    add("P17", "parameters", "--set a string for a number", "error",
+        lambda c: ["run", base, "--set", "vehicle.mass_kg=heavy", "--out", "o"])
+    add("P18", "parameters", "--set vehicle.drag_coefficient=-0.7", "error",
+        lambda c: ["run", base, "--set", "vehicle.drag_coefficient=-0.7", "--out", "o"])
+    add("P19", "parameters", "parameter file with malformed TOML", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace(
+            'params = "components/bus/default.toml"', f'params = "{c.write("bus.toml", "[params" + chr(10))}"'))), "--out", "o"])
+    add("P20", "parameters", "parameter file with an unknown key", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace(
+            'params = "components/bus/default.toml"',
+            f'params = "{c.write("bus.toml", "[params]" + chr(10) + "aux_power = 5.0" + chr(10))}"'))), "--out", "o"])
+    add("P21", "parameters", "parameter file path does not exist", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace(
+            'params = "components/bus/default.toml"', 'params = "nosuch/bus.toml"'))), "--out", "o"])
+    add("P22", "parameters", "--params overlay file does not exist", "error",
+        lambda c: ["run", base, "--params", "nosuch.toml", "--out", "o"])
+    add("P23", "parameters", "Python API: BMS built with BMSParams(i_cell_max_a=nan)", "error",
+        lambda c: ("-c", "import math\nfrom shevsim.components.bms import BMS, BMSParams\n"
+                         "from shevsim.core.errors import ShevsimError\ntry:\n"
+                         "    BMS('bms', BMSParams(i_cell_max_a=math.nan))\nexcept ShevsimError as e:\n"
+                         "    import sys; print('error:', e, file=sys.stderr); sys.exit(2)\n"))
+    add("P24", "parameters", "Python API: make_params(BMSParams, {'t_core_max_c': nan})", "error",
+        lambda c: ("-c", "import math, sys\nfrom shevsim.components.bms import BMSParams\n"
+                         "from shevsim.core.params import make_params\nfrom shevsim.core.errors import ShevsimError\n"
+                         "try:\n    make_params(BMSParams, {'t_core_max_c': math.nan}, 'api')\n"
+                         "except ShevsimError as e:\n    print('error:', e, file=sys.stderr); sys.exit(2)\n"))
+    # --- maps and tables -----------------------------------------------------------------------------------
+    add("M01", "maps", "motor efficiency map of 1.5 (negative losses)", "error",
+        lambda c: ["run", base, "--set", f"motor.efficiency_map_file='{motor_map(c, _scale_eff)}'", "--out", "o"])
+    add("M02", "maps", "motor efficiency map with a NaN cell", "error",
+        lambda c: ["run", base, "--set", f"motor.efficiency_map_file='{motor_map(c, _nan_cell)}'", "--out", "o"])
+    add("M03", "maps", "map file does not exist", "error",
+        lambda c: ["run", base, "--set", "motor.efficiency_map_file='/nonexistent/map.csv'", "--out", "o"])
+    add("M04", "maps", "map file is binary garbage", "error",
+        lambda c: ["run", base, "--set", f"motor.efficiency_map_file='{c.write('m.csv', bytes(range(256)) * 8)}'",
+                   "--out", "o"])
+    add("M05", "maps", "map with a column renamed (efficiency instead of efficiency_frac)", "error",
+        lambda c: ["run", base, "--set", "motor.efficiency_map_file='" + str(motor_map(
+            c, lambda r: [r[0].replace("efficiency_frac", "efficiency")] + r[1:])) + "'", "--out", "o"])
+    add("M06", "maps", "battery OCV table with a UTF-8 BOM", "accept",
+        lambda c: ["run", base, "--set", "battery.ocv_file='" + str(c.write(
+            "ocv.csv", b"\xef\xbb\xbf" + (c.tree / "components/battery/a123_26650_ocv.csv").read_bytes())) + "'",
+            "--set", "bms.ocv_file='" + str(c.tmp / "ocv.csv") + "'", "--out", "o"],
+        check=_results_ok)
+    # --- cycles ---------------------------------------------------------------------------------------------
+    def cyc(cid, what, expect, text, check=None):
+        def setup(c):
+            p = c.write("cyc.csv", text) if isinstance(text, (str, bytes)) else c.write("cyc.csv", text(c))
+            c.extra["cycle"] = p
+            return ["run", base, "--set", f"cycle.cycle_file='{p}'", "--out", "o"]
+        add(cid, "cycles", what, expect, setup, check=check)
+
+    cyc("C01", "cycle in km/h (max 72 'm/s')", "error", cycle_csv(_cycle_rows(3.6)))
+    cyc("C02", "cycle at 200 m/s", "error", cycle_csv(_cycle_rows(10.0)))
+    cyc("C03", "cycle time in milliseconds", "error", cycle_csv(_cycle_rows(dt=1000.0)))
+    cyc("C04", "cycle header with a UTF-8 BOM", "accept", "\ufeff" + cycle_csv(_cycle_rows()),
+        check=_cycle_loaded())
+    cyc("C05", "cycle with ';' separators and decimal commas", "accept", cycle_csv(_cycle_rows(), sep=";", dec=","),
+        check=_cycle_loaded())
+    cyc("C06", "cycle with CRLF and trailing empty columns", "accept",
+        cycle_csv(_cycle_rows(), nl="\r\n", trailing=",,"), check=_cycle_loaded())
+    cyc("C07", "cycle declared in km/h (speed_kmh header)", "accept",
+        cycle_csv(_cycle_rows(3.6), header="time_s,speed_kmh"), check=_cycle_loaded())
+    cyc("C08", "empty cycle CSV", "error", "")
+    cyc("C09", "cycle with non-monotonic time", "error", "time_s,speed_mps\n0,0\n1,1\n3,2\n2,2\n4,1\n")
+    cyc("C10", "cycle with a NaN speed", "error", "time_s,speed_mps\n0,0\n1,nan\n2,2\n")
+    cyc("C11", "cycle with a negative speed", "error", "time_s,speed_mps\n0,0\n1,-3\n2,2\n")
+    cyc("C12", "cycle with a gap in time", "error", "time_s,speed_mps\n0,0\n1,1\n2,2\n10,2\n11,1\n")
+    cyc("C13", "cycle saved as UTF-16", "error", cycle_csv(_cycle_rows()).encode("utf-16"))
+    cyc("C14", "cycle header only", "error", "time_s,speed_mps\n")
+    cyc("C15", "cycle with a missing speed column", "error", "time_s,velocity\n0,0\n1,1\n2,2\n")
+    # --- calibration -----------------------------------------------------------------------------------------
+    def cal(cid, what, expect, text, extra=(), check=None, timeout=180):
+        def setup(c):
+            p = c.write("rec.csv", text() if callable(text) else text)
+            return ["calibrate", "cell", str(p), "--out", str(c.tmp / "cal"), "--no-plots", "-q", *extra]
+        add(cid, "calibration", what, expect, setup, check=check, timeout=timeout)
+
+    cal("K01", "cell record with time in milliseconds", "error", lambda: cell_record(time_scale=1000.0))
+    cal("K02", "cell record with current in mA (500 mA pulses)", "error",
+        lambda: cell_record(i_amp=0.5, current_scale=1000.0))
+    cal("K03", "cell record with no excitation (rest): parameters not identifiable", "accept",
+        lambda: cell_record(n=300, rest=True), check=_report_flags_identifiability, timeout=300)
+    cal("K04", "cell record with a UTF-8 BOM and ';' decimal commas", "accept",
+        lambda: "\ufeff" + cell_record(n=200).replace(",", ";").replace(".", ","),
+        check=lambda c, p: (p.returncode == 0, ""), timeout=300)
+    cal("K05", "cell record with a missing column", "error", "time_s,current_a,voltage_v\n0,1,3.3\n1,1,3.3\n2,1,3.3\n")
+    cal("K06", "calibration record does not exist", "error", None)
+    C[-1].setup = lambda c: ["calibrate", "cell", "nosuch.csv", "--out", str(c.tmp / "cal"), "-q"]
+    cal("K07", "empty calibration CSV", "error", "")
+    cal("K08", "calibration record with time going backwards", "error",
+        "time_s,current_a,voltage_v,t_surface_c,t_ambient_c\n0,1,3.3,25,25\n2,1,3.3,25,25\n1,1,3.3,25,25\n3,1,3.3,25,25\n")
+    cal("K09", "temperatures in kelvin", "error",
+        lambda: cell_record(n=100).replace(",25.0\n", ",298.15\n"))
+    cal("K10", "--params file does not exist", "error", lambda: cell_record(n=100),
+        extra=("--params", "/nonexistent_dir/p.toml"))
+    # --- studies --------------------------------------------------------------------------------------------
+    add("T01", "studies", "study tradeoff --supervisor nosuch", "error",
+        lambda c: ["study", "tradeoff", str(c.scen("hd_udds_mpc")), "--supervisor", "nosuch", "--workers", "0",
+                   "--rates", "30", "--stop-s", "20", "--no-plots", "--quiet", "--out", str(c.tmp / "st")], timeout=240)
+    add("T02", "studies", "study on a scenario that does not exist", "error",
+        lambda c: ["study", "tradeoff", "nosuch.toml", "--workers", "0", "--out", str(c.tmp / "st")])
+    add("T03", "studies", "unknown study name", "error", lambda c: ["study", "tradof"])
+    add("T04", "studies", "study tradeoff with a negative rate", "error",
+        lambda c: ["study", "tradeoff", "--synthetic", "--rates", "-5", "--workers", "0", "--out", str(c.tmp / "st")])
+    # --- runs, outputs, interruption (owned by other engineers: classified as observed) -------------------
+    def notebook(c):
+        d = c.tmp / "o"
+        d.mkdir()
+        (d / "analysis.ipynb").write_text('{"cells": []}')
+        return ["run", base, "--out", "o"]
+    add("R01", "runs", "--out at a folder holding a user's notebook", "accept", notebook,
+        check=lambda c, p: ((c.tmp / "o" / "analysis.ipynb").is_file(), "notebook kept"),
+        lost=lambda c: not (c.tmp / "o" / "analysis.ipynb").is_file())
+    add("R02", "runs", "--out is an existing file", "error",
+        lambda c: (c.write("o", "user data"), ["run", base, "--out", "o"])[1],
+        lost=lambda c: not (c.tmp / "o").is_file() or (c.tmp / "o").read_text() != "user data")
+    add("R03", "runs", "engine forced off (generator max 0 W): vehicle misses the trace", "error",
+        lambda c: ["run", base, "--set", "supervisor.power_gen_max_w=0", "--out", "o"], timeout=120)
+    add("R04", "runs", "Ctrl-C two seconds into a run", "accept",
+        lambda c: ["run", "hd_udds_mpc", "--out", "o"], sigint_after=2.0, check=_sigint_check, timeout=60)
+    add("R05", "runs", "unknown CLI sub-command", "error", lambda c: ["rnu", base])
+    add("R06", "fmu", "type = \"fmu\" with a corrupt .fmu file", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace(
+            'type = "bus"\nparams = "components/bus/default.toml"',
+            f'type = "fmu"\nfmu = "{c.write("bad.fmu", b"PK not a zip")}"'))), "--out", "o"])
+    return C
+
+
+# ------------------------------------------------------------------------------------------ running
+
+def _env(tree: Path) -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in ("SHEVSIM_TRACEBACK", "PYTHONPATH")}
+    env["PYTHONPATH"] = str(tree)
+    env["MPLBACKEND"] = "Agg"
+    env["OPENBLAS_NUM_THREADS"] = "1"
+    return env
+
+
+def classify(case: Case, ctx: Ctx, proc, hung: bool) -> tuple[str, str]:
+    out = (proc.stdout or "") + (proc.stderr or "") if proc is not None else ""
+    if case.lost is not None and case.lost(ctx):
+        return "data loss", "a file the user owned was removed or changed"
+    if hung:
+        return "hang", f"killed after {case.timeout:g} s"
+    msg = next((ln.strip() for ln in reversed((proc.stderr or "").splitlines())
+                if ln.strip() and not ln.startswith(" ")), "")
+    if "Traceback (most recent call last)" in out or "internal error" in out:
+        last = [ln for ln in (proc.stderr or "").splitlines() if ln.strip()]
+        return "traceback", (last[-1].strip() if last else "")[:160]
+    if proc.returncode != 0 and case.sigint_after is None:
+        return "clear error", msg[:160]
+    if case.check is not None:
+        ok, note = case.check(ctx, proc)
+        if ok:
+            return "handled", note
+        return ("silent" if proc.returncode == 0 else "clear error"), note or msg[:160]
+    if case.expect == "error":
+        return "silent", "exit 0: the bad input was accepted"
+    return "handled", ""
+
+
+def run_case(case: Case, tree: Path) -> dict:
+    tmp = Path(tempfile.mkdtemp(prefix=f"bad_{case.cid}_"))
+    ctx = Ctx(tree, tmp)
+    t0 = time.perf_counter()
+    try:
+        argv = case.setup(ctx)
+        cmd = [PY, *argv] if isinstance(argv, tuple) else [PY, "-m", "shevsim.cli", *argv]
+        p = subprocess.Popen(cmd, cwd=tmp, env=_env(tree), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True, start_new_session=True)
+        hung = False
+        try:
+            if case.sigint_after is not None:
+                try:
+                    p.wait(timeout=case.sigint_after)
+                except subprocess.TimeoutExpired:
+                    os.kill(p.pid, signal.SIGINT)
+            out, err = p.communicate(timeout=case.timeout)
+        except subprocess.TimeoutExpired:
+            hung = True
+            os.killpg(p.pid, signal.SIGKILL)
+            out, err = p.communicate()
+        proc = subprocess.CompletedProcess(cmd, p.returncode, out, err)
+        outcome, note = classify(case, ctx, proc, hung)
+    except Exception as exc:  # the harness's own failure is reported, not hidden
+        outcome, note = "harness error", f"{type(exc).__name__}: {exc}"
+    wall = time.perf_counter() - t0
+    shutil.rmtree(tmp, ignore_errors=True)
+    return {"id": case.cid, "group": case.group, "what": case.what, "expect": case.expect, "outcome": outcome,
+            "note": note, "wall_s": round(wall, 2)}
+
+
+def merge_markdown(before: dict, after: dict) -> str:
+    b = {r["id"]: r for r in before["results"]}
+    rows = after["results"]
+    L = ["# Bad inputs and faults: before and after (issue 13)", "",
+         f"Generated by `python benchmarks/bad_inputs.py` (see its docstring). **Before**: the session-start "
+         f"commit `{before.get('commit', '?')}` in a separate worktree; **after**: `{after.get('commit', '?')}`"
+         f"{' plus uncommitted work in the tree' if after.get('dirty') else ''}, run {after.get('date', '')}. "
+         "Each case runs as a subprocess (`python -m shevsim.cli ...`, or `python -c` for the Python-API rows) "
+         "in its own temporary folder; the outcome is classified from the exit status, the output and a "
+         "post-check:", "",
+         "- **clear error**: refused, non-zero exit, no traceback (the message is quoted);",
+         "- **handled**: accepted and right (a quirk converted, a fault reported, the user's file kept);",
+         "- **silent**: accepted although wrong, or the problem not said;",
+         "- **traceback**: a Python traceback / internal error reached the user;",
+         "- **hang**: killed at the case's time limit; **data loss**: a user's file removed or changed.", ""]
+    cnt_b, cnt_a = {}, {}
+    for r in rows:
+        cnt_a[r["outcome"]] = cnt_a.get(r["outcome"], 0) + 1
+        ob = b.get(r["id"], {}).get("outcome", "-")
+        cnt_b[ob] = cnt_b.get(ob, 0) + 1
+    keys = ["clear error", "handled", "silent", "traceback", "hang", "data loss", "harness error"]
+    L += ["| outcome | before | after |", "|---|---|---|"]
+    for k in keys:
+        if cnt_b.get(k) or cnt_a.get(k):
+            L.append(f"| {k} | {cnt_b.get(k, 0)} | {cnt_a.get(k, 0)} |")
+    L += ["", f"{len(rows)} cases.", "",
+          "| # | group | input or fault | expected | before | after | message / note (after) |",
+          "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        ob = b.get(r["id"], {}).get("outcome", "-")
+        note = r["note"].replace("|", "\\|").replace("\n", " ")
+        note = note if len(note) < 150 else note[:147] + "..."
+        L.append(f"| {r['id']} | {r['group']} | {r['what']} | {'refuse' if r['expect'] == 'error' else 'accept/report'} "
+                 f"| {ob} | **{r['outcome']}** | {note} |")
+    L.append("")
+    return "\n".join(L)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--tree", type=Path, help="checkout to measure (PYTHONPATH root)")
+    ap.add_argument("--label", default="after")
+    ap.add_argument("--json", type=Path, help="write the results here")
+    ap.add_argument("--only", nargs="+", help="case ids to run")
+    ap.add_argument("--merge", nargs=2, type=Path, metavar=("BEFORE.json", "AFTER.json"))
+    ap.add_argument("--markdown", type=Path, help="with --merge: write the table here")
+    a = ap.parse_args(argv)
+    if a.merge:
+        before, after = (json.loads(p.read_text()) for p in a.merge)
+        text = merge_markdown(before, after)
+        if a.markdown:
+            a.markdown.write_text(text)
+        else:
+            print(text)
+        return 0
+    tree = (a.tree or Path(__file__).resolve().parents[1]).resolve()
+    cases = [c for c in _cases() if not a.only or c.cid in a.only]
+    commit = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True,
+                            text=True).stdout.strip()
+    dirty = bool(subprocess.run(["git", "-C", str(tree), "status", "--porcelain", "--untracked-files=no"],
+                                capture_output=True, text=True).stdout.strip())
+    results = []
+    for c in cases:
+        r = run_case(c, tree)
+        results.append(r)
+        print(f"{r['id']:4s} {r['outcome']:13s} {r['wall_s']:6.1f}s  {r['what'][:60]:60s} {r['note'][:90]}",
+              flush=True)
+    doc = {"label": a.label, "tree": str(tree), "commit": commit, "dirty": dirty,
+           "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "results": results}
+    if a.json:
+        a.json.write_text(json.dumps(doc, indent=1))
+    counts = {}
+    for r in results:
+        counts[r["outcome"]] = counts.get(r["outcome"], 0) + 1
+    print(f"{len(results)} cases: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
