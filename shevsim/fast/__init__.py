@@ -159,12 +159,13 @@ def _pack_bms(c, h):
         raise Declined(f"component '{c.name}': power capability discretisation is not the ZOH of one cell")
     dd, dix = d._tabs
     xe = _f(d.soc, d.v1, d.x2, d.th1, d.th2, *d.px, *d.pth, d.rs, d.r1, d.c1, d.v2, d.r2)
-    coef = np.full(18, np.nan)
+    ckeys = np.full(4096, np.nan)          # memo of the thermal coefficients per rounded h (pure, shared by runs)
+    cvals = np.zeros((4096, 17))
     pd_, pix = c.pc._tabs
     xb = _f(c.t_mean, c.gamma, c.t_core, c.h_est, c.q_est, c.pc.last_i_max_a, c.pc.last_i_min_a)
-    data = (dd, dix, d._k, xe, th._st.copy(), th._c, pd_, pix, c.pc._k, _f(*a_n[:5], a_1[4]), coef,
-            c.tables._d, c.tables._ix, xb, _f(c._ns, c._np, code))
-    return data, (3, 4, 10, 13)
+    data = (dd, dix, d._k, xe, th._st.copy(), th._c, pd_, pix, c.pc._k, _f(*a_n[:5], a_1[4]), ckeys,
+            c.tables._d, c.tables._ix, xb, _f(c._ns, c._np, code), cvals)
+    return data, (3, 4, 13)
 
 
 def _rule_vec(rule, ts):

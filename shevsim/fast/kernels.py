@@ -371,15 +371,21 @@ def battery_kernel(data, sig, ib, ob, t, h):
 
 # ------------------------------------------------------------------------------------------------ BMS
 @njit(cache=True)
-def _pc_coeffs(tp, h_w_m2k, out):
-    """:meth:`shevsim.bms.power_capability.PowerCapability._thermal_coeffs` (without the memo, a pure
-    function of the rounded h): ``tp = [R, k, alpha, bq, dt_N, dt_1]``."""
+def _pc_coeffs(tp, h_w_m2k, keys, vals):
+    """:meth:`shevsim.bms.power_capability.PowerCapability._thermal_coeffs`: the coefficients at ``h``
+    rounded to 1e-3 W/m^2/K (a pure function of the rounded h, ``tp = [R, k, alpha, bq, dt_N, dt_1]``),
+    memoised in a direct-mapped table ``keys`` / ``vals`` (the estimate revisits the same rounded values);
+    returns the row of ``vals`` holding them."""
     hh = round3(h_w_m2k)
-    if hh == out[17]:
-        return
+    n = keys.shape[0]
+    q = hh * 1000.0
+    slot = int(abs(q)) % n if math.isfinite(q) else 0
+    if keys[slot] == hh:
+        return slot
     a = two_state_ad_bd(hh, tp[0], tp[1], tp[2], tp[3], tp[4], False)
     o = two_state_out(hh, tp[0], tp[1])
     b = two_state_ad_bd(hh, tp[0], tp[1], tp[2], tp[3], tp[5], False)
+    out = vals[slot]
     out[0] = a[0]
     out[1] = a[1]
     out[2] = a[2]
@@ -397,13 +403,14 @@ def _pc_coeffs(tp, h_w_m2k, out):
     out[14] = b[3]
     out[15] = b[4]
     out[16] = b[6]
-    out[17] = hh
+    keys[slot] = hh
+    return slot
 
 
 @njit(cache=True)
 def bms_kernel(data, sig, ib, ob, t, h):
     """:meth:`shevsim.components.bms.BMS.do_step`: DEKF -> heat -> thermal filter -> power capability."""
-    dd, dix, dk, xe, tst, tc, pd_, pix, pk, tp, coef, od, oix, xb, p = data
+    dd, dix, dk, xe, tst, tc, pd_, pix, pk, tp, ckeys, od, oix, xb, p, cvals = data
     i = sig[ib]
     v = sig[ib + 1]
     ts = sig[ib + 2]
@@ -456,8 +463,8 @@ def bms_kernel(data, sig, ib, ob, t, h):
     rs = xe[14]
     r1 = xe[15]
     c1 = xe[16]
-    _pc_coeffs(tp, xb[3], coef)
-    lim = power_limits(pd_, pix, pk, coef[:17], soc, v1, rs, r1, c1, xb[0], xb[1], ta, xb[5], xb[6])
+    slot = _pc_coeffs(tp, xb[3], ckeys, cvals)
+    lim = power_limits(pd_, pix, pk, cvals[slot], soc, v1, rs, r1, c1, xb[0], xb[1], ta, xb[5], xb[6])
     xb[5] = lim[0]
     xb[6] = lim[1]
     ns = p[0]
