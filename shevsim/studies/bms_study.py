@@ -19,10 +19,11 @@ Three studies, each writing PNG figures and CSV/JSON tables atomically (temporar
     heat of the UAC proxy run (current x1 and x2); :func:`table_3_3_rates`: core and surface RMSE at
     1 s and 0.1 s, stage III adaptive filters started at a wrong h (2 h* and h*/2).
 :func:`power_capability_study`
-    seed Fig. 5.15 analogue: ``scenarios/uac_proxy_mpc_cooling_fault.toml`` (h 20 -> 3 W/m2K at
-    300 s) with the BMS power limits enforced (motors derated through ``bus.motor_power_max_w`` /
-    ``min_w`` and the MPC's constraints) and the counterfactual ``bus.enforce_battery_limits =
-    false``, same seed.
+    seed Fig. 5.15 analogue: ``scenarios/uac_proxy_mpc_cooling_fault_seed.toml`` (h 20 -> 3 W/m2K at
+    300 s) with the BMS power limits enforced within the step (motors derated through
+    ``motor_limits``, generator shed and floored through ``gen_limits``, and the MPC's constraints)
+    and the counterfactual ``enforce_battery_limits = false`` (bus and both limit components), same
+    seed.  ``FAULT_SCENARIO_ONE_STEP_LATE`` is the previous wiring (limits from the bus's last step).
 
 Command line::
 
@@ -47,7 +48,10 @@ from ..core.results import write_json_atomic
 from ..core.scenario import PROJECT_ROOT, build_master, load_scenario
 
 BASE_SCENARIO = PROJECT_ROOT / "scenarios" / "uac_proxy_mpc.toml"
-FAULT_SCENARIO = PROJECT_ROOT / "scenarios" / "uac_proxy_mpc_cooling_fault.toml"
+#: the cooling-fault run with the battery limits held within the step (issue 14: power_limits before the
+#: motor and the generator, generator floor); the one-step-late wiring is FAULT_SCENARIO_ONE_STEP_LATE
+FAULT_SCENARIO = PROJECT_ROOT / "scenarios" / "uac_proxy_mpc_cooling_fault_seed.toml"
+FAULT_SCENARIO_ONE_STEP_LATE = PROJECT_ROOT / "scenarios" / "uac_proxy_mpc_cooling_fault.toml"
 _MEAS = ("cell_current_meas_a", "cell_voltage_meas_v", "t_surface_meas_c", "t_ambient_meas_c")
 
 QUICK = {"dekf_stop_s": 1800.0, "power_stop_s": 1500.0, "thermal_duration_s": 1200.0}
@@ -495,7 +499,8 @@ def thermal_table(out_dir, seed: int = 0, duration_s: float = 3600.0, uac_proxy:
 # -- 3. power capability under the cooling fault ---------------------------------------------------
 #: counterfactual runs: label -> (--set overrides, description)
 COUNTERFACTUALS = {
-    "unlimited": (("bus.enforce_battery_limits=false",),
+    "unlimited": (("bus.enforce_battery_limits=false", "motor_limits.enforce_battery_limits=false",
+                   "gen_limits.enforce_battery_limits=false"),
                   "motors not derated (bus.enforce_battery_limits=false); the MPC still sees the BMS limits"),
     "no_thermal_limit": (("bms.t_core_max_c=1000",),
                          "BMS power capability without its core-temperature constraint (voltage and SOC "
@@ -535,8 +540,10 @@ def _run_metrics(res) -> dict:
     pmax, pmin = res["bms.power_max_w"], res["bms.power_min_w"]
     spd, ref = res["vehicle.speed_mps"], res["cycle.speed_ref_mps"]
     ref_dist = float(np.sum(0.5 * (ref[1:] + ref[:-1]) * np.diff(t)))
-    # the battery power of step k is judged against the limits published before it (one-step delay)
+    # the battery power of step k against the limits published before it (the one-step-late wiring's
+    # reading) and against the limits of the same step (what the within-step wiring holds, issue 14)
     over = (pb[1:] > pmax[:-1] + 1e3) | (pb[1:] < pmin[:-1] - 1e3)
+    over_same = (pb > pmax + 1e3) | (pb < pmin - 1e3)
     m = {"termination": res.termination, "end_s": float(t[-1]),
          "t_core_max_c": float(tc.max()), "t_core_max_time_s": float(t[int(np.argmax(tc))]),
          "time_above_45c_s": float(dt * np.count_nonzero(tc > 45.0)),
@@ -551,6 +558,8 @@ def _run_metrics(res) -> dict:
          "soc_in_bounds": bool(soc.min() >= s_lo and soc.max() <= s_hi),
          "bms_soc_err_max_pct": float(np.max(np.abs(res["bms.soc_pct"] - soc))),
          "time_battery_power_beyond_limits_s": float(dt * np.count_nonzero(over)),
+         "time_battery_power_beyond_same_step_limits_s": float(dt * np.count_nonzero(over_same)),
+         "battery_power_beyond_same_step_limits_max_w": float(max(0.0, np.max(pb - pmax), np.max(pmin - pb))),
          "speed_rmse_mps": float(np.sqrt(np.mean((spd - ref) ** 2))),
          "speed_shortfall_max_mps": float(np.max(ref - spd)),
          "time_speed_err_gt_1mps_s": float(dt * np.count_nonzero(np.abs(spd - ref) > 1.0)),
@@ -577,7 +586,9 @@ def power_capability_study(out_dir, seed: int = 1, stop_s: float | None = None, 
     for label in counterfactuals:
         if label not in COUNTERFACTUALS:
             raise ShevsimError(f"power capability study: unknown counterfactual '{label}' (known: {list(COUNTERFACTUALS)})")
-        runs[label] = simulate_partial(_scenario(scenario, seed, stop_s, COUNTERFACTUALS[label][0]))
+        names = {c.name for c in load_scenario(scenario).components}
+        sets = [x for x in COUNTERFACTUALS[label][0] if x.split(".", 1)[0] in names]   # the scenario's own limit components
+        runs[label] = simulate_partial(_scenario(scenario, seed, stop_s, sets))
     a = runs["limited"]
     if a.termination != "completed":
         raise ShevsimError(f"power capability study: the run with limits of {scenario} ended with '{a.termination}'")
