@@ -7,7 +7,7 @@ connections (as index arrays), the components' own compiled physics (:mod:`shevs
 the MPC's QP solved by DAQP's C library called from compiled code (:mod:`shevsim.fast.daqp_nb`), and
 the outputs recorded into a preallocated array.  The result equals :meth:`Master.run
 <shevsim.core.master.Master.run>` of the same scenario bit for bit (``tests/unit/test_fast_path.py``);
-the Python master stays the reference and the path for FMUs, faults and debugging.
+the Python master stays the reference and the path for FMUs and debugging.
 
 How a run goes: the scenario is built and initialised by the Python master once (component
 construction, initial state, initial outputs: the reference code itself); the components' states are
@@ -16,7 +16,7 @@ compiled loop from ``t0``.  So one runner serves many runs (a study's evaluation
 the loop alone.
 
 A scenario the path cannot take is declined with the reason: FMUs or component types without a
-kernel, two components of one type, faults, the Jacobi method, a vehicle in speed mode, the 30-node
+kernel, two components of one type (except stateless ``power_limits``), the Jacobi method, a vehicle in speed mode, the 30-node
 battery thermal model, an MPC solver other than DAQP (or a DAQP build whose C structs are not the
 checked ones), uncompiled components, or ports that differ from the kernels' (a component changed
 since).
@@ -38,7 +38,9 @@ import numpy as np
 __all__ = ["runner_for", "FastRunner", "SUPPORTED_TYPES"]
 
 SUPPORTED_TYPES = ("cycle", "driver", "vehicle", "motor", "bus", "engine_generator", "battery", "bms",
-                   "rule_supervisor", "mpc_supervisor")
+                   "rule_supervisor", "mpc_supervisor", "power_limits")
+#: stateless types: any number of instances (rows of one parameter table)
+MULTI_TYPES = ("power_limits",)
 
 # the ports each kernel reads/writes, in the components' declaration order (checked at build time)
 def _engine_floor() -> tuple:
@@ -78,6 +80,8 @@ _PORTS = {
     "mpc_supervisor": (("demand_power_w", "soc_pct", "gen_power_w", "power_max_w", "power_min_w", "ocv_v", "rs_ohm"),
                        ("power_cmd_w", "power_rate_max_wps", "battery_power_plan_w", "fallback_count",
                         "battery_slack_w", "soc_slack_pct")),
+    "power_limits": (("motor_power_w", "gen_power_w", "aux_power_w", "battery_power_max_w", "battery_power_min_w"),
+                     ("motor_power_max_w", "motor_power_min_w", "gen_power_max_w", "gen_power_min_w")),
 }
 
 
@@ -219,6 +223,12 @@ def _pack_mpc(c):
     return data, (4, 5, 28)
 
 
+def _pack_limits(comps):
+    """All ``power_limits`` instances: one row ``[aux_power_w, enforce]`` each."""
+    P = np.array([[c._aux_w, 1.0 if c.params.enforce_battery_limits else 0.0] for c in comps], dtype=np.float64)
+    return (P.reshape(-1, 2),), ()
+
+
 _PACK = {"cycle": _pack_cycle, "driver": _pack_driver, "vehicle": _pack_vehicle, "motor": _pack_motor,
          "bus": _pack_bus, "engine_generator": _pack_engine, "battery": _pack_battery,
          "rule_supervisor": _pack_rule, "mpc_supervisor": _pack_mpc}
@@ -234,7 +244,8 @@ def _dummies() -> dict:
         for typ in SUPPORTED_TYPES:
             comp = get_component_class(typ, "fast path")(typ)
             comp.initialize(0.0)
-            _DUMMY[typ] = (_pack_bms(comp, 0.1) if typ == "bms" else _PACK[typ](comp))[0]
+            _DUMMY[typ] = (_pack_bms(comp, 0.1) if typ == "bms" else _pack_limits([comp]) if typ == "power_limits"
+                           else _PACK[typ](comp))[0]
     return _DUMMY
 
 
@@ -251,11 +262,11 @@ class FastRunner:
     """
 
     def __init__(self, scenario, master):
-        from .kernels import (T_BATTERY, T_BMS, T_BUS, T_CYCLE, T_DRIVER, T_ENGINE, T_MOTOR, T_MPC, T_RULE,
-                              T_VEHICLE)
+        from .kernels import (T_BATTERY, T_BMS, T_BUS, T_CYCLE, T_DRIVER, T_ENGINE, T_LIMITS, T_MOTOR, T_MPC,
+                              T_RULE, T_VEHICLE)
         codes = {"cycle": T_CYCLE, "driver": T_DRIVER, "vehicle": T_VEHICLE, "motor": T_MOTOR, "bus": T_BUS,
                  "engine_generator": T_ENGINE, "battery": T_BATTERY, "bms": T_BMS, "rule_supervisor": T_RULE,
-                 "mpc_supervisor": T_MPC}
+                 "mpc_supervisor": T_MPC, "power_limits": T_LIMITS}
         self.scenario = scenario
         self.master = m = master
         self.h = float(m.settings.step_s)
@@ -302,13 +313,29 @@ class FastRunner:
         self._lptr, self._ldst, self._lsrc = i64(lptr), i64(ldst), i64(lsrc)
         self._names = names
         self._units = dict(zip(m._signal_names, m._signal_units))
+        # instance index within the type (stateless multi-instance types), faults not yet applied
+        count: dict = {}
+        inst = []
+        for n in order:
+            inst.append(count.get(types[n], 0))
+            count[types[n]] = inst[-1] + 1
+        self._inst = i64(inst)
+        pending = m.faults[m._faults_done:]
+        self._f_t = np.array([f.at_s for f in pending], dtype=np.float64)
+        self._f_idx = i64([in_idx[(f.component, f.port)] for f in pending])
+        self._f_val = np.array([f.value for f in pending], dtype=np.float64)
+        self._forced0 = np.zeros(k, dtype=np.int8)
+        for (cn, port) in m._forced:
+            self._forced0[in_idx[(cn, port)]] = 1
         self._row0 = sig[:self.nsig].copy()
         # per-type data (template) and which entries a run mutates
         dummies = _dummies()
         self._data, self._mut = {}, {}
         for n, c in zip(order, comps):
             typ = types[n]
-            if typ == "bms":
+            if typ in MULTI_TYPES:
+                data, mut = _pack_limits([cc for cc in comps if cc.TYPE == typ])
+            elif typ == "bms":
                 data, mut = _pack_bms(c, m.step_multiples[n] * self.h)
             else:
                 data, mut = _PACK[typ](c)
@@ -374,14 +401,17 @@ class FastRunner:
             data["battery"] = b[:6] + (self._noise_for(4 * n_bat),) + b[7:]
         mpc = data["mpc_supervisor"]
         out = np.zeros(3, dtype=np.int64)
+        forced = self._forced0.copy()
+        fstate = np.zeros(1, dtype=np.int64)
         wall = time.perf_counter()
         k0 = 0
         try:
             while True:
                 run_loop(n - k0, k0, self.h, self.t0, self._typ, self._mult, self._ibase, self._obase, self._lptr,
-                         self._ldst, self._lsrc, sig, rec[k0:], nsig, out, data["cycle"], data["driver"],
-                         data["vehicle"], data["motor"], data["bus"], data["engine_generator"], data["battery"],
-                         data["bms"], data["rule_supervisor"], mpc)
+                         self._ldst, self._lsrc, sig, rec[k0:], nsig, out, self._inst, self._f_t, self._f_idx,
+                         self._f_val, forced, fstate, data["cycle"], data["driver"], data["vehicle"], data["motor"],
+                         data["bus"], data["engine_generator"], data["battery"], data["bms"], data["rule_supervisor"],
+                         mpc, data["power_limits"])
                 if out[0] == ERR_NONFINITE_OUTPUT:
                     row = int(out[1])
                     bad = [j for j in range(nsig) if not math.isfinite(rec[row, j])]
@@ -455,15 +485,13 @@ def runner_for(scenario) -> tuple[Callable | None, str]:
 def _static_reason(scenario) -> str:
     if scenario.settings.method != "gauss-seidel":
         return f"method '{scenario.settings.method}' (the fast path steps Gauss-Seidel only)"
-    if scenario.faults:
-        return "the scenario has faults (the Python master applies them)"
     seen = {}
     for spec in scenario.components:
         if spec.type == "fmu":
             return f"component '{spec.name}' is an FMU"
         if spec.type not in SUPPORTED_TYPES:
             return f"component '{spec.name}' has type '{spec.type}', which has no fast-path kernel"
-        if spec.type in seen:
+        if spec.type in seen and spec.type not in MULTI_TYPES:
             return (f"components '{seen[spec.type]}' and '{spec.name}' are both of type '{spec.type}' "
                     "(the fast path takes one component per type)")
         seen[spec.type] = spec.name

@@ -45,7 +45,7 @@ from shevsim.supervisor.rule_based import rule_command
 from . import daqp_nb
 
 # component type codes of the loop
-T_CYCLE, T_DRIVER, T_VEHICLE, T_MOTOR, T_BUS, T_ENGINE, T_BATTERY, T_BMS, T_RULE, T_MPC = range(10)
+T_CYCLE, T_DRIVER, T_VEHICLE, T_MOTOR, T_BUS, T_ENGINE, T_BATTERY, T_BMS, T_RULE, T_MPC, T_LIMITS = range(11)
 
 ERR_NAN_INPUT, ERR_SOC_RANGE, ERR_ENGINE_NONFINITE, ERR_DEKF, ERR_THERMAL_INPUT, ERR_SAMPLE_TIME, \
     ERR_BATTERY_INPUT, ERR_NONFINITE_OUTPUT = range(1, 9)
@@ -207,6 +207,34 @@ def motor_kernel(data, sig, ib, ob, t, h):
 
 # -------------------------------------------------------------------------------------------------- bus
 @njit(cache=True)
+def bus_limits(pm, pg, u_aux, bpmax, bpmin, aux_w, enforce):
+    """:meth:`shevsim.components.bus.PowerBus._limits`: ``(motor_power_max_w, motor_power_min_w,
+    gen_power_max_w)``."""
+    if enforce:
+        pa = bus_aux_w(u_aux, aux_w)
+        base = pg - pa
+        return (pmax(base + bpmax, 0.0), pmin(pmax(pg, 0.0) - pa + bpmin, 0.0), pmax(pm + pa - bpmin, 0.0))
+    return 1e12, -1e12, 1e12
+
+
+@njit(cache=True)
+def power_limits_kernel(data, k, sig, ib, ob):
+    """:meth:`shevsim.components.bus.PowerLimits.do_step` of instance ``k`` (parameters ``data[0][k] =
+    [aux_power_w, enforce]``)."""
+    P = data[0]
+    for j in range(5):
+        if sig[ib + j] != sig[ib + j]:
+            return ERR_NAN_INPUT
+    pm = sig[ib]
+    pg = sig[ib + 1]
+    u_aux = sig[ib + 2]
+    enforce = P[k, 1] > 0.5
+    sig[ob], sig[ob + 1], sig[ob + 2] = bus_limits(pm, pg, u_aux, sig[ib + 3], sig[ib + 4], P[k, 0], enforce)
+    sig[ob + 3] = (pm + bus_aux_w(u_aux, P[k, 0]) - sig[ib + 3]) if enforce else -1e12
+    return 0
+
+
+@njit(cache=True)
 def bus_kernel(data, sig, ib, ob, t, h):
     """:meth:`shevsim.components.bus.PowerBus.do_step` (balance, energies, then the limits)."""
     p, e = data
@@ -226,16 +254,7 @@ def bus_kernel(data, sig, ib, ob, t, h):
     sig[ob + 6] = e[1]
     sig[ob + 7] = e[2]
     sig[ob + 8] = e[3]
-    if p[1] > 0.5:
-        pa2 = bus_aux_w(u_aux, p[0])
-        base = pg - pa2
-        sig[ob] = pmax(base + sig[ib + 3], 0.0)
-        sig[ob + 1] = pmin(pmax(pg, 0.0) - pa2 + sig[ib + 4], 0.0)
-        sig[ob + 2] = pmax(pm + pa2 - sig[ib + 4], 0.0)
-    else:
-        sig[ob] = 1e12
-        sig[ob + 1] = -1e12
-        sig[ob + 2] = 1e12
+    sig[ob], sig[ob + 1], sig[ob + 2] = bus_limits(pm, pg, u_aux, sig[ib + 3], sig[ib + 4], p[0], p[1] > 0.5)
     return 0
 
 

@@ -12,7 +12,9 @@ connections as index pairs::
         record sig[:n_signals] as row k + 1; stop at the first non-finite value
 
 Component data are passed as one tuple per type (:mod:`shevsim.fast.kernels`); a scenario has at most one
-component of each type on this path.
+component of each type on this path, except stateless types (``power_limits``), whose instances index rows
+of their type's parameter table (``inst``).  Faults (``f_t``, ``f_idx``, ``f_val``, sorted by time) force
+an input from their time on and cut its connection, as :meth:`Master._apply_faults` does.
 """
 from __future__ import annotations
 
@@ -34,22 +36,31 @@ _DEPENDS = ("fast/loop.py", "fast/kernels.py", "fast/daqp_nb.py", "battery/model
 
 
 @njit(cache=True)
-def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, nsig, out,
-             cyc, drv, veh, mot, bus, eng, bat, bms, rule, mpc):
+def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, nsig, out, inst,
+             f_t, f_idx, f_val, forced, fstate, cyc, drv, veh, mot, bus, eng, bat, bms, rule, mpc, lim):
     """Step ``n`` communication steps from step index ``k0``; rows ``1..n`` of ``rec`` are recorded.
 
     ``out`` receives ``[status, step index, position in the order]``; status 0 = completed, otherwise
     the kernel's error code (or :data:`~shevsim.fast.kernels.ERR_NONFINITE_OUTPUT`).
     """
     ncomp = typ.shape[0]
+    nf = f_t.shape[0]
     for s in range(n):
         k = k0 + s
         t = t0 + k * h
+        # faults due at this communication point (Master._apply_faults): force the input, cut its connection
+        fd = fstate[0]
+        while fd < nf and f_t[fd] <= t + 1e-9 * max(1.0, abs(t)):
+            sig[f_idx[fd]] = f_val[fd]
+            forced[f_idx[fd]] = 1
+            fd += 1
+        fstate[0] = fd
         for j in range(ncomp):
             m = mult[j]
             if m == 1 or k % m == 0:
                 for q in range(lptr[j], lptr[j + 1]):
-                    sig[ldst[q]] = sig[lsrc[q]]
+                    if forced[ldst[q]] == 0:
+                        sig[ldst[q]] = sig[lsrc[q]]
                 hk = m * h
                 ty = typ[j]
                 ib = ibase[j]
@@ -72,8 +83,12 @@ def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, 
                     st = K.bms_kernel(bms, sig, ib, ob, t, hk)
                 elif ty == K.T_RULE:
                     st = K.rule_kernel(rule, sig, ib, ob, t, hk)
-                else:
+                elif ty == K.T_LIMITS:
+                    st = K.power_limits_kernel(lim, inst[j], sig, ib, ob)
+                elif ty == K.T_MPC:
                     st = K.mpc_kernel(mpc, sig, ib, ob, t, hk)
+                else:
+                    st = K.ERR_NAN_INPUT
                 if st != 0:
                     out[0] = st
                     out[1] = k

@@ -32,6 +32,18 @@ def _replay(kern, data, sig, ib, ob, in_idx, vals, steps, h):
     return 0
 
 
+@njit
+def _replay_limits(data, k, sig, ib, ob, in_idx, vals, steps, h):
+    nin = in_idx.shape[0]
+    for s in range(steps.shape[0]):
+        for q in range(nin):
+            sig[in_idx[q]] = vals[s, q]
+        st = K.power_limits_kernel(data, k, sig, ib, ob)
+        if st != 0:
+            return st
+    return 0
+
+
 _KERN = {K.T_CYCLE: K.cycle_step, K.T_DRIVER: K.driver_kernel, K.T_VEHICLE: K.vehicle_kernel,
          K.T_MOTOR: K.motor_kernel, K.T_BUS: K.bus_kernel, K.T_ENGINE: K.engine_kernel,
          K.T_BATTERY: K.battery_kernel, K.T_BMS: K.bms_kernel, K.T_RULE: K.rule_kernel, K.T_MPC: K.mpc_kernel}
@@ -72,10 +84,13 @@ def profile(runner, t_stop_s: float, repeat: int = 3) -> dict:
                 b = data["battery"]
                 data["battery"] = b[:6] + (runner._noise_for(4 * steps.size),) + b[7:]
             sig = runner._sig0.copy()
-            kern = _KERN[int(runner._typ[j])]
             t = time.perf_counter()
-            st = _replay(kern, data[types[name]], sig, runner._ibase[j], runner._obase[j], in_idx, vals, steps,
-                         runner.h * mult)
+            if int(runner._typ[j]) == K.T_LIMITS:
+                st = _replay_limits(data[types[name]], runner._inst[j], sig, runner._ibase[j], runner._obase[j],
+                                    in_idx, vals, steps, runner.h * mult)
+            else:
+                st = _replay(_KERN[int(runner._typ[j])], data[types[name]], sig, runner._ibase[j], runner._obase[j],
+                             in_idx, vals, steps, runner.h * mult)
             dt = time.perf_counter() - t
             if types[name] == "mpc_supervisor":
                 from . import daqp_nb

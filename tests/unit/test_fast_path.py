@@ -72,8 +72,16 @@ def test_rule_hd_udds_agrees_with_the_master_on_every_signal():
     assert np.ptp(fast["engine_generator.elec_power_w"]) > 1e3
 
 
+def test_faults_and_within_step_power_limits_agree_with_the_master():
+    # the seed's cooling fault (h_conv forced to 3 W/m2K at 300 s, its connection cut) on the within-step
+    # order with two power_limits components (a stateless type with several instances)
+    fast, ref, _ = _compare("uac_proxy_mpc_cooling_fault_seed", 330.0)
+    assert fast["battery.t_core_c"][-1] > fast["battery.t_core_c"][2900]      # the fault acts
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name,stop", [("hd_udds_mpc", 1060.0), ("uac_proxy_mpc", 600.0), ("uac_proxy_rule", 600.0)])
+@pytest.mark.parametrize("name,stop", [("hd_udds_mpc", 1060.0), ("uac_proxy_mpc", 600.0), ("uac_proxy_rule", 600.0),
+                                       ("uac_proxy_mpc_cooling_fault", 900.0), ("hd_udds_rule_seed", 1060.0)])
 def test_longer_runs_agree(name, stop):
     _compare(name, stop)
 
@@ -101,14 +109,12 @@ def _declined(path, sets=(), text=None):
 def test_ineligible_scenarios_are_declined_with_a_reason():
     why = _declined(SCEN / "hd_udds_fmu_battery.toml")
     assert "FMU" in why
-    why = _declined(SCEN / "uac_proxy_mpc_cooling_fault.toml")
-    assert "fault" in why
     text = (SCEN / "hd_udds_rule.toml").read_text().replace('method = "gauss-seidel"', 'method = "jacobi"')
     assert "jacobi" in _declined(None, text=text)
     assert "osqp" in _declined(SCEN / "hd_udds_mpc.toml", ["supervisor.solver=osqp"])
     assert "fd30" in _declined(SCEN / "hd_udds_mpc.toml", ["battery.thermal_model=fd30"])
-    text = (SCEN / "hd_udds_rule.toml").read_text().replace('type = "bus"', 'type = "power_limits"')
-    assert "power_limits" in _declined(None, text=text)
+    text = (SCEN / "hd_udds_rule.toml").read_text().replace('type = "driver"', 'type = "profile"')
+    assert "profile" in _declined(None, text=text)
     # two components of one type
     text = (SCEN / "hd_udds_rule.toml").read_text().replace('"supervisor"]', '"supervisor", "cycle2"]')
     text += '\n[components.cycle2]\ntype = "cycle"\n'
