@@ -375,8 +375,10 @@ def _cases() -> list[Case]:
     add("R02", "runs", "--out is an existing file", "error",
         lambda c: (c.write("o", "user data"), ["run", base, "--out", "o"])[1],
         lost=lambda c: not (c.tmp / "o").is_file() or (c.tmp / "o").read_text() != "user data")
-    add("R03", "runs", "engine forced off (generator max 0 W): vehicle misses the trace", "error",
-        lambda c: ["run", base, "--set", "supervisor.power_gen_max_w=0", "--out", "o"], timeout=120)
+    add("R03", "runs", "engine forced off (fault: power command 0 W from 1 s): vehicle misses the trace", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s + '\n[[faults]]\nat_s = 1.0\n'
+                                              'port = "engine_generator.power_cmd_w"\nvalue = 0.0\n')),
+                   "--out", "o"], timeout=120)
     add("R04", "runs", "Ctrl-C two seconds into a run", "accept",
         lambda c: ["run", "hd_udds_mpc", "--out", "o"], sigint_after=2.0, check=_sigint_check, timeout=60)
     add("R05", "runs", "unknown CLI sub-command", "error", lambda c: ["rnu", base])

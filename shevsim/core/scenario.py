@@ -249,7 +249,10 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
             from .paths import bundled_scenarios
             raise ScenarioError(f"{where}: scenario file not found (bundled scenarios by name: "
                                 f"{', '.join(bundled_scenarios())})")
-        text = spath.read_text()
+        try:   # utf-8-sig: an editor's byte-order mark is not TOML
+            text = spath.read_text(encoding="utf-8-sig")
+        except (UnicodeDecodeError, OSError) as exc:
+            raise ScenarioError(f"{where}: cannot read the scenario as UTF-8 text: {exc}") from None
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
