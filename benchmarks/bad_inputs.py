@@ -262,6 +262,8 @@ def _cases() -> list[Case]:
         lambda c: ["run", base, "--set", "vehicle.mass_kg=heavy", "--out", "o"])
     add("P18", "parameters", "--set vehicle.drag_coefficient=-0.7", "error",
         lambda c: ["run", base, "--set", "vehicle.drag_coefficient=-0.7", "--out", "o"])
+    add("P25", "parameters", "--set supervisor.soc_min_pct=80 (above soc_max_pct = 70)", "error",
+        lambda c: ["run", base, "--set", "supervisor.soc_min_pct=80", "--out", "o"])
     add("P19", "parameters", "parameter file with malformed TOML", "error",
         lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace(
             'params = "components/bus/default.toml"', f'params = "{c.write("bus.toml", "[params" + chr(10))}"'))), "--out", "o"])

@@ -223,6 +223,20 @@ def validate_params(obj: Any, where: str = "<parameters>", sources: Mapping[str,
         elif isinstance(v, bool) or not isinstance(v, (int, float)):
             continue
         check_value(f.name, v, sources.get(f.name, where), field_range(f))
+    # pairs named alike except for min/max (soc_min_pct / soc_max_pct, v_min_v / v_max_v): min <= max
+    names = {f.name for f in dataclasses.fields(obj)}
+    for lo_name in sorted(names):
+        if "_min" not in f"_{lo_name}":
+            continue
+        hi_name = f"_{lo_name}".replace("_min", "_max", 1)[1:]
+        if hi_name == lo_name or hi_name not in names:
+            continue
+        lo_v, hi_v = getattr(obj, lo_name), getattr(obj, hi_name)
+        if (isinstance(lo_v, (int, float)) and isinstance(hi_v, (int, float)) and not isinstance(lo_v, bool)
+                and not isinstance(hi_v, bool) and lo_v > hi_v):
+            src = sources.get(lo_name) or sources.get(hi_name) or where
+            raise ScenarioError(f"{src}: parameter '{lo_name}' = {lo_v!r} is above '{hi_name}' = {hi_v!r} "
+                                f"(a minimum must not exceed its maximum)")
     return obj
 
 

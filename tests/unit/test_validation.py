@@ -207,3 +207,14 @@ def test_cell_tables_bom_and_ranges(tmp_path):
     bad.write_text("\n".join(dis) + "\n")
     with pytest.raises(DataError, match=r"column 'rs_ohm': value -.* outside the physical range > 0"):
         CellTables(discharge_file=bad)
+
+
+def test_min_above_max_refused():
+    """Fields named alike except for min/max are a pair: the minimum must not exceed the maximum."""
+    from shevsim.components.bms import BMSParams
+    from shevsim.components.supervisors import RuleSupervisorParams
+    with pytest.raises(ScenarioError, match=r"'soc_min_pct' = 80.0 is above 'soc_max_pct' = 70.0"):
+        make_params(RuleSupervisorParams, {"soc_min_pct": 80.0}, "sup.toml")
+    with pytest.raises(ScenarioError, match=r"'v_min_v' = 3.7 is above 'v_max_v' = 3.6"):
+        make_params(BMSParams, {"v_min_v": 3.7}, "bms.toml")
+    assert make_params(RuleSupervisorParams, {"soc_min_pct": 70.0}).soc_min_pct == 70.0   # equal is allowed
