@@ -36,6 +36,7 @@ import numpy as np
 
 from .errors import AlgebraicLoopError, ConnectionError_, ScenarioError, SimulationError
 from .variables import units_compatible
+from .units import check_connection, link_source
 from .results import Result
 
 
@@ -199,9 +200,9 @@ class Master:
                 raise ConnectionError_(f"{ctx}: input {c.dst}.{c.dst_port} is already connected to "
                                        f"{seen[key].src}.{seen[key].src_port}")
             seen[key] = c
-            if not units_compatible(so.unit, di.unit):
-                raise ConnectionError_(f"{ctx}: unit mismatch, output {c.src}.{c.src_port} is in '{so.unit}' "
-                                       f"but input {c.dst}.{c.dst_port} expects '{di.unit}'")
+            if not units_compatible(so.unit, di.unit):   # another scale of one dimension converts (core/units.py)
+                check_connection(self.components[c.src], so.unit, self.components[c.dst], di.unit,
+                                 f"{ctx}: output {c.src}.{c.src_port} in '{so.unit}', input {c.dst}.{c.dst_port}")
 
     def _execution_order(self, given: Sequence[str] | None = None) -> list[str]:
         names = list(self.components)
@@ -265,7 +266,11 @@ class Master:
     def _build_links(self) -> None:
         self._links: dict[str, list[tuple[dict, str, dict, str]]] = {n: [] for n in self.components}
         for c in self.connections:
-            self._links[c.dst].append((self.components[c.dst].u, c.dst_port, self.components[c.src].y, c.src_port))
+            src = self.components[c.src]
+            su, du = self._vars[c.src][c.src_port].unit, self._vars[c.dst][c.dst_port].unit
+            # y itself, or a view converting the unit (kW -> W, degC -> K): resolved here, once
+            sy = src.y if units_compatible(su, du) else link_source(src, su, self.components[c.dst], du, str(c))
+            self._links[c.dst].append((self.components[c.dst].u, c.dst_port, sy, c.src_port))
         self._signal_names: list[str] = []
         self._signal_units: list[str] = []
         self._signal_src: list[tuple[dict, str]] = []

@@ -138,3 +138,80 @@ def build_python_fmu(script: str | Path, out_path: str | Path, fmi_version: int 
             out_path.unlink()
         shutil.move(str(built[0]), out_path)
     return out_path
+
+
+def reference_fmu_models() -> list[str]:
+    """Models of the vendored Modelica Reference-FMUs sources (``fmus/src/reference_fmus``)."""
+    root = fmu_sources_dir() / "reference_fmus"
+    return sorted(p.name for p in root.iterdir() if (p / "model.c").is_file())
+
+
+def build_reference_fmu(model: str, out_path: str | Path, fmi_version: int = 2,
+                        interfaces: tuple[str, ...] = ("me", "cs"), drop_types: tuple[str, ...] = ()) -> Path:
+    """Build one of the vendored Modelica Reference-FMUs (BSD-2, ``fmus/src/reference_fmus``).
+
+    Parameters
+    ----------
+    model : str
+        ``BouncingBall``, ``Dahlquist``, ``Feedthrough`` or ``StateSpace`` (FMI 3 only).
+    out_path : path
+        The ``.fmu`` to write.
+    fmi_version : 2 or 3
+    interfaces : tuple of {'me', 'cs'}
+        Interfaces to keep in the model description; ``("me",)`` gives a model-exchange-only FMU
+        (what Modelica tools export by default), ``("cs",)`` a co-simulation-only one.
+    drop_types : tuple of str
+        FMI 3 only: leave the variables of these types out of the model description
+        (``("String", "Binary")`` turns ``Feedthrough`` into an FMU with numeric, integer
+        and Boolean ports only; value references are unchanged, so the binary is the same).
+
+    The template sources (``fmi2Functions.c``/``fmi3Functions.c``, ``cosimulation.c``) and the
+    model's ``model.c``/``config.h`` are compiled as one translation unit ``all.c`` with
+    ``FMI_VERSION`` defined, by :func:`build_c_fmu` (fmpy's cmake helper).
+    """
+    root = fmu_sources_dir() / "reference_fmus"
+    src = root / model
+    xml_file = src / f"FMI{fmi_version}.xml"
+    if not (src / "model.c").is_file():
+        raise FMUError(f"reference FMU '{model}' not found in {root} (have: {', '.join(reference_fmu_models())})")
+    if not xml_file.is_file():
+        raise FMUError(f"reference FMU '{model}' has no FMI {fmi_version} model description")
+    bad = set(interfaces) - {"me", "cs"}
+    if bad or not interfaces:
+        raise FMUError(f"interfaces must be a non-empty subset of ('me', 'cs'), got {interfaces!r}")
+    import re
+    xml = xml_file.read_text()
+    tags = {"me": "ModelExchange", "cs": "CoSimulation"}
+    for key, tag in tags.items():
+        if key not in interfaces:   # drop the element (self-closing or with children)
+            xml = re.sub(rf"<{tag}\b[^>]*/>\s*|<{tag}\b.*?</{tag}>\s*", "", xml, count=1, flags=re.S)
+    if drop_types:
+        if fmi_version != 3:
+            raise FMUError("drop_types needs FMI 3 (FMI 2 model structures refer to variables by index)")
+        for typ in drop_types:
+            vrs = re.findall(rf'<{typ}\b[^>]*valueReference="(\d+)"', xml)
+            xml = re.sub(rf"<{typ}\b[^>]*/>\s*|<{typ}\b[^>]*[^/]>.*?</{typ}>\s*", "", xml, flags=re.S)
+            for vr in vrs:
+                xml = re.sub(rf'<(Output|InitialUnknown|ContinuousStateDerivative)\s+valueReference="{vr}"[^>]*/>\s*',
+                             "", xml)
+    with tempfile.TemporaryDirectory(prefix="shevsim_reffmu_") as tmp:
+        d = Path(tmp)
+        (d / "modelDescription.xml").write_text(xml)
+        for f in (root / "template").iterdir():
+            shutil.copy2(f, d / f.name)
+        for f in ("model.c", "config.h"):
+            shutil.copy2(src / f, d / f)
+        (d / "all.c").write_text(f"#define FMI_VERSION {fmi_version}\n#define DISABLE_PREFIX\n"
+                                 f'#include "fmi{fmi_version}Functions.c"\n#include "model.c"\n'
+                                 f'#include "cosimulation.c"\n')
+        if fmi_version == 3:
+            (d / "buildDescription.xml").write_text(
+                '<?xml version="1.0" encoding="UTF-8"?>\n<fmiBuildDescription fmiVersion="3.0">\n'
+                f'  <BuildConfiguration modelIdentifier="{model}">\n    <SourceFileSet language="C99">\n'
+                '      <SourceFile name="all.c"/>\n    </SourceFileSet>\n  </BuildConfiguration>\n'
+                '</fmiBuildDescription>\n')
+        else:
+            # FMI 2 lists the sources in the model description; the template names all.c already
+            if "<SourceFiles>" not in xml:
+                raise FMUError(f"{xml_file}: no <SourceFiles> (expected all.c)")
+        return build_c_fmu(d, out_path)

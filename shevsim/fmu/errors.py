@@ -70,3 +70,16 @@ class FMUStepError(FMUError, SimulationError):
 
 class FMUStateError(FMUError, SimulationError):
     """Save/restore requested on an FMU whose model description says it cannot get/set its state."""
+
+
+class FMUTimeoutError(FMUStepError):
+    """One communication step of an FMU did not return within its wall-time bound (``step_timeout_s``)."""
+
+    def __init__(self, component: str, time: float, step: float, timeout_s: float, function: str = "doStep",
+                 fmu_file: str = ""):
+        self.timeout_s = timeout_s
+        super().__init__(component, time, 3, function, "", step)
+        where = f"t = {time:.6g} s (step to {time + step:.6g} s)"
+        self.args = (f"FMU component '{component}'{f' ({fmu_file})' if fmu_file else ''}: {function} did not "
+                     f"return within {timeout_s:.6g} s of wall time at {where}; the FMU appears to hang and its "
+                     f"instance is abandoned (raise the bound with step_timeout_s, or 0 for none)",)
