@@ -58,15 +58,27 @@ def _say(a, *args, **kw):
         print(*args, **kw)
 
 
+def _on_sigterm(signum, frame):
+    from .run import Terminated
+    raise Terminated()
+
+
 def _cmd_run(a) -> int:
+    import signal
+
     from .run import DEFAULT_SCENARIO, run
-    interrupted = False
+    # `kill PID` (SIGTERM) stops a run like Ctrl-C: what was simulated is saved
+    try:
+        old = signal.signal(signal.SIGTERM, _on_sigterm)
+    except (ValueError, AttributeError):      # not the main thread, or no SIGTERM on this platform
+        old = None
     try:
         res = run(a.scenario or DEFAULT_SCENARIO, out=a.out, sets=a.set or (), overlays=a.params or (),
                   engine=a.engine, record=a.record, record_every=a.record_every, plots=not a.no_plots,
                   progress=not a.quiet, allow_large=a.allow_large, save=True)
-    except KeyboardInterrupt:          # outside the simulation (loading, saving): nothing to keep
-        raise
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGTERM, old)
     term = res.termination
     interrupted = term.status == "stopped" and term.reason.startswith("interrupted")
     _say(a, f"scenario {res.meta['scenario']}: {term}, {len(res.time_s)} points, engine {res.meta['engine']}, "

@@ -151,9 +151,19 @@ def _guess_port(exc: BaseException, master) -> None:
         exc.port = min(hits)[1]
 
 
+class Terminated(KeyboardInterrupt):
+    """Raised by the command line's SIGTERM handler: the run stops like on Ctrl-C and saves what it has."""
+
+    reason = "interrupted (SIGTERM)"
+
+
+def _interrupt_reason(exc: BaseException) -> str:
+    return getattr(exc, "reason", "interrupted (Ctrl-C)")
+
+
 def _stop_info(exc: BaseException) -> Termination:
     if isinstance(exc, KeyboardInterrupt):
-        return Termination("stopped", "interrupted (Ctrl-C)", None, None, getattr(exc, "time_s", None))
+        return Termination("stopped", _interrupt_reason(exc), None, None, getattr(exc, "time_s", None))
     return Termination("stopped", str(exc), getattr(exc, "component", None), getattr(exc, "port", None),
                        getattr(exc, "time_s", None))
 
@@ -223,7 +233,7 @@ def simulate(scenario: Scenario, progress: bool = False, *, engine: str = "auto"
                 res = master.result(_stop_info(exc))
                 _drop_non_finite_tail(res)
                 if isinstance(exc, KeyboardInterrupt):
-                    res.termination = Termination("stopped", "interrupted (Ctrl-C)", None, None, master.time_s)
+                    res.termination = Termination("stopped", _interrupt_reason(exc), None, None, master.time_s)
                 if not partial:
                     _finish(res, scenario, master, time.perf_counter() - wall, used, why)
                     exc.result = res

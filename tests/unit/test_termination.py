@@ -202,3 +202,31 @@ def test_trace_miss_is_degraded_unless_allowed(tmp_path, capsys):
     # a followed cycle is completed
     res = shevsim.simulate("hd_udds_rule", {"cycle.repeat": 1}, stop_s=120.0)
     assert res.termination == "completed"
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_a_real_interrupt_of_the_command_saves_the_run(tmp_path, sig):
+    # the shevsim process itself, stopped with Ctrl-C (SIGINT) or kill (SIGTERM) while simulating
+    import signal
+    import subprocess
+    import sys
+    import time
+    out = tmp_path / "o"
+    p = subprocess.Popen([sys.executable, "-m", "shevsim.cli", "run", str(TWO_BODY), "-s", "scenario.stop_s=1e5",
+                          "--record-every", "100", "--engine", "python", "-o", str(out), "--no-plots"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        seen = ""
+        t0 = time.time()
+        while "simulating" not in seen and time.time() - t0 < 120:     # the progress bar: it runs
+            seen += p.stderr.read(1)
+        time.sleep(1.0)
+        p.send_signal(getattr(signal, sig))
+        _, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130, err
+    res = load_result(out)
+    assert res.termination.status == "stopped" and "interrupted" in res.termination.reason
+    assert 0 < res.time_s[-1] < 1e5 and len(res) > 2
