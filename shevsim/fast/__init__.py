@@ -189,7 +189,6 @@ def _pack_rule(c):
 
 
 def _pack_mpc(c):
-    from shevsim.supervisor.mpc import _build
     from . import daqp_nb
     m = c.mpc
     if m.solver_name != "daqp":
@@ -197,30 +196,19 @@ def _pack_mpc(c):
     ok, why = daqp_nb.available()
     if not ok:
         raise Declined(f"component '{c.name}': {why}")
-    pr = m.prob
-    if pr._build is not _build:
+    if not m.compiled_call:
         raise Declined(f"component '{c.name}': MPC built with compiled=False")
-    if m.rule is None or m.rule.rate_map is not m.rate_map and \
-            (m.rule.rate_map._inner, m.rule.rate_map.rates_wps) != (m.rate_map._inner, m.rate_map.rates_wps):
-        raise Declined(f"component '{c.name}': MPC fallback rule with its own rate map")
-    if m.rule.engine_on:
-        raise Declined(f"component '{c.name}': MPC fallback rule with its thermostat on")
-    s = m.settings
-    inner, rates = _rate_arrays(m.rate_map)
-    nc = s.n_c
-    mp = _f(c.params.sample_time_s, nc, m._pg_min_kw, m._pg_max_kw, 1.0 if s.fallback == "shift" else 0.0,
-            s.power_gen_min_w, s.power_gen_max_w, s.power_rate_min_wps, s.dt_s)
-    plan = np.zeros(nc)
-    valid = m._plan_kw is not None
-    if valid:
-        plan[:] = m._plan_kw
-    x = _f(c.prev_cmd, m.fallback_count, 1.0 if valid else 0.0, m._plan_age, m.last.battery_slack_w,
-           m.last.soc_slack_pct)
-    ws, qp, res, sense, z, lam, flags = daqp_nb.new_state(pr.n, pr.n + pr.m)
-    data = (mp, _rule_vec(m.rule, c.params.sample_time_s), inner, rates, x, plan, pr.c, pr.fp, pr.fs, pr.fsl,
-            pr.MtM, pr.LtL, pr.Mt1, pr.Mtr, pr.Lt1, pr.soc_idx, np.zeros_like(pr.H), np.zeros_like(pr.f), pr.A,
-            np.zeros_like(pr.bu), np.zeros_like(pr.bl), np.zeros_like(pr.aux), ws, qp, res, sense, z, lam, flags)
-    return data, (4, 5, 28)
+    a = list(m.arrays)
+    a[0] = a[0].copy()
+    a[0][10] = 1.0 if (m.rule is not None and m.rule.engine_on) else 0.0
+    a[6] = a[6].copy()
+    a[6][0] = c.prev_cmd                      # the component's previous command
+    a[7] = a[7].copy()
+    pr = m.prob
+    for i in (18, 19, 21, 22, 23):            # the QP's work arrays: H, f, bu, bl, aux (the runner's own)
+        a[i] = np.zeros_like(a[i])
+    a[24:31] = daqp_nb.new_state(pr.n, pr.n + pr.m)
+    return tuple(a), (6, 7, 30)
 
 
 def _pack_limits(comps):
@@ -432,8 +420,8 @@ class FastRunner:
                     raise self._stopped(err, rec, k + 1, comp, None, self._time(k))
                 break
         finally:
-            if mpc[28][0] != 0:
-                daqp_nb.drop_model(mpc[22], mpc[28])  # free DAQP's workspace (as daqp.Model.__dealloc__)
+            if mpc[30][0] != 0:
+                daqp_nb.drop_model(mpc[24], mpc[30])  # free DAQP's workspace (as daqp.Model.__dealloc__)
             self.last_wall_s = time.perf_counter() - wall
         return self._result(rec, n + 1, "completed")
 

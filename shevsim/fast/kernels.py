@@ -39,7 +39,7 @@ from shevsim.powertrain.motor import bus_aux_w, bus_balance, motor_component_ste
 from shevsim.powertrain.vehicle import vehicle_force_step
 from shevsim.components.cycle import cycle_sample
 from shevsim.powertrain.driver import driver_step
-from shevsim.supervisor.mpc import _build as mpc_build
+from shevsim.supervisor.mpc import mpc_move
 from shevsim.supervisor.rule_based import rule_command
 
 from . import daqp_nb
@@ -540,72 +540,22 @@ def rule_kernel(data, sig, ib, ob, t, h):
 
 
 @njit(cache=True)
-def _mpc_fallback(mp, rp, inner, rates, plan, x, soc, demand, gen, pmax_w, pmin_w, rate):
-    """:meth:`shevsim.supervisor.mpc.MPCSupervisor._fallback` (engine power [W])."""
-    nc = int(mp[1])
-    vo = gen if math.isfinite(gen) else 0.0
-    cand = math.nan
-    have = False
-    if mp[4] > 0.5 and x[2] > 0.5 and x[3] + 1 < nc:
-        x[3] += 1
-        cand = plan[int(x[3])] * 1e3
-        have = True
-    else:
-        on, c = rule_command(rp, inner, rates, False, soc, demand, gen, pmax_w, pmin_w)
-        cand = c
-        have = True
-    if not have or not math.isfinite(cand):
-        cand = vo
-    if math.isfinite(demand) and math.isfinite(pmax_w) and math.isfinite(pmin_w) and pmin_w <= pmax_w:
-        cand = pmin(pmax(cand, demand - pmax_w), demand - pmin_w)
-    cand = pmin(pmax(cand, mp[5]), mp[6])
-    up = rate if (math.isfinite(rate) and rate > 0) else 0.0
-    cand = pmin(pmax(cand, vo + mp[7] * mp[8]), vo + up * mp[8])
-    return cand
-
-
-@njit(cache=True)
 def _mpc_kernel_daqp(data, sig, ib, ob, t, h):
-    """:meth:`shevsim.components.supervisors.MPCSupervisor.do_step` with ``MPCSupervisor.step`` (QP
-    build :func:`shevsim.supervisor.mpc._build`, DAQP through its C library, fallback)."""
-    (mp, rp, inner, rates, x, plan, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx, H, f, A, bu, bl, aux,
-     ws, qp, res, sense, z, lam, flags) = data
+    """:meth:`shevsim.components.supervisors.MPCSupervisor.do_step`: the call itself is
+    :func:`shevsim.supervisor.mpc.mpc_move` (QP build, DAQP's C library, first move or fallback), the one the
+    component's supervisor runs; ``data`` = its arguments (``MPCSupervisor.arrays``), ``x[0]`` the previous
+    command."""
+    (mp, rp, inner, rates, rinner, rrates, x, plan, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx, H, f, A, bu,
+     bl, aux, ws, qp, res, sense, z, lam, flags) = data
     if _check_h(h, mp[0]):
         return ERR_SAMPLE_TIME
     demand = sig[ib]
-    soc = sig[ib + 1]
-    pmax_w = sig[ib + 3]
-    pmin_w = sig[ib + 4]
     gen = x[0]                                    # the previous command u(k-1)
-    rate = _rate(inner, rates, gen)
-    vo = gen * 1e-3
-    nc = int(mp[1])
-    st = mpc_build(soc, demand * 1e-3, vo, sig[ib + 5], sig[ib + 6], pmax_w * 1e-3, pmin_w * 1e-3, rate * 1e-3,
-                   c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx, H, f, bu, bl, aux)
-    ok = False
-    if st == 0:
-        flag = daqp_nb.solve(ws, qp, res, sense, z, lam, flags, H, f, A, bu, bl)
-        ok = flag >= 1
-    if ok:
-        v_cmd = pmin(pmax(vo + z[0], mp[2]), mp[3])
-        acc = 0.0
-        for j in range(nc):                       # the plan: cumsum(z[:nc]) + vo
-            acc += z[j]
-            plan[j] = acc
-        for j in range(nc):
-            plan[j] += vo
-        x[2] = 1.0
-        x[3] = 0.0
-        x[4] = z[nc] * 1e3
-        x[5] = z[nc + 1] * aux[0]
-    else:
-        v_cmd = _mpc_fallback(mp, rp, inner, rates, plan, x, soc, demand, gen, pmax_w, pmin_w, rate) * 1e-3
-        x[1] += 1.0
-        x[4] = 0.0
-        x[5] = 0.0
-    cmd = v_cmd * 1e3
+    cmd, rate = mpc_move(mp, rp, inner, rates, rinner, rrates, x, plan, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1,
+                         soc_idx, H, f, A, bu, bl, aux, ws, qp, res, sense, z, lam, flags, sig[ib + 1], demand, gen,
+                         sig[ib + 3], sig[ib + 4], sig[ib + 5], sig[ib + 6])
     sig[ob] = cmd
-    sig[ob + 1] = _rate(inner, rates, gen)
+    sig[ob + 1] = rate
     sig[ob + 2] = demand - cmd
     sig[ob + 3] = x[1]
     sig[ob + 4] = x[4]

@@ -95,7 +95,7 @@ def profile(runner, t_stop_s: float, repeat: int = 3) -> dict:
             if types[name] == "mpc_supervisor":
                 from . import daqp_nb
                 d = data["mpc_supervisor"]
-                daqp_nb.drop_model(d[22], d[28])
+                daqp_nb.drop_model(d[24], d[30])
             best = dt if best is None else min(best, dt)
         out[name] = (best, int(steps.size), int(st))
     return {"total_s": total, "steps": n, "per_component": out}

@@ -73,8 +73,11 @@ import numpy as np
 
 from shevsim.core.errors import ScenarioError
 
+from shevsim.fast import daqp_nb
+
 from .fuel_curve import SqrtFuelCurve
 from .rate_map import PowerRateMap
+from .rule_based import rule_command
 
 try:  # numba is a dependency; the pure-Python fallback keeps the module importable without it
     from numba import njit as _njit
@@ -302,6 +305,100 @@ def _build(soc, pd, vo, voc, rs, pbmax, pbmin, rate_up, c, fp, fs, fsl, MtM, LtL
     aux[6] = phi_o
     aux[7] = b
     return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# the whole call compiled (solver 'daqp'): build -> DAQP's C library -> first move or fallback
+# ---------------------------------------------------------------------------------------------
+# ``mp`` = [sample_time_s, n_c, pg_min_kw, pg_max_kw, fallback_shift, pg_min_w, pg_max_w, rate_min_wps, dt_s,
+#           has_rule, rule_engine_on];  ``x`` = [prev_cmd_w (the component's), fallback_count, plan_valid,
+#           plan_age, battery_slack_w, soc_slack_pct, status]; status: 0 optimal, 1 unusable inputs, else the
+#           DAQP exit flag (< 1) or -1000 (setup failed)
+X_FIELDS = ("prev_cmd_w", "fallback_count", "plan_valid", "plan_age", "battery_slack_w", "soc_slack_pct", "status")
+
+
+@_njit(cache=True)
+def _pmin(a, b):
+    return b if b < a else a          # Python's min(a, b)
+
+
+@_njit(cache=True)
+def _pmax(a, b):
+    return b if b > a else a          # Python's max(a, b)
+
+
+@_njit(cache=True)
+def _rate(inner, rates, pw):
+    lo = 0
+    hi = inner.shape[0]
+    while lo < hi:                    # bisect.bisect_right
+        mid = (lo + hi) // 2
+        if pw < inner[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return rates[lo]
+
+
+@_njit(cache=True)
+def _fallback(mp, rp, rinner, rrates, plan, x, soc, demand, gen, pmax_w, pmin_w, rate):
+    nc = int(mp[1])
+    vo = gen if math.isfinite(gen) else 0.0
+    cand = math.nan
+    if mp[4] > 0.5 and x[2] > 0.5 and x[3] + 1 < nc:         # 'shift': the previous plan, one step on
+        x[3] += 1
+        cand = plan[int(x[3])] * 1e3
+    elif mp[9] > 0.5:                                          # the rule-based split
+        on, cand = rule_command(rp, rinner, rrates, mp[10] > 0.5, soc, demand, gen, pmax_w, pmin_w)
+    if not math.isfinite(cand):
+        cand = vo
+    if math.isfinite(demand) and math.isfinite(pmax_w) and math.isfinite(pmin_w) and pmin_w <= pmax_w:
+        cand = _pmin(_pmax(cand, demand - pmax_w), demand - pmin_w)
+    cand = _pmin(_pmax(cand, mp[5]), mp[6])
+    up = rate if (math.isfinite(rate) and rate > 0) else 0.0
+    return _pmin(_pmax(cand, vo + mp[7] * mp[8]), vo + up * mp[8])
+
+
+@_njit(cache=True)
+def mpc_move(mp, rp, inner, rates, rinner, rrates, x, plan, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx,
+             H, f, A, bu, bl, aux, ws, qp, res, sense, z, lam, flags, soc, demand, gen, pmax_w, pmin_w, ocv, rs):
+    """One supervisor call (:meth:`MPCSupervisor.step` with solver 'daqp'): ``(command_w, rate_max_wps)``;
+    the plan, fallback count, slacks and status are left in ``x`` / ``plan``."""
+    rate = _rate(inner, rates, gen)
+    vo = gen * 1e-3
+    nc = int(mp[1])
+    st = _build(soc, demand * 1e-3, vo, ocv, rs, pmax_w * 1e-3, pmin_w * 1e-3, rate * 1e-3, c, fp, fs, fsl,
+                MtM, LtL, Mt1, Mtr, Lt1, soc_idx, H, f, bu, bl, aux)
+    if st == 0:
+        flag = daqp_nb.solve(ws, qp, res, sense, z, lam, flags, H, f, A, bu, bl)
+        x[6] = 0.0 if flag >= 1 else float(flag)
+    else:
+        x[6] = 1.0
+    if x[6] == 0.0:
+        # solver tolerance (~1e-9 kW) may put the move a hair outside the engine limits
+        v_cmd = _pmin(_pmax(vo + z[0], mp[2]), mp[3])
+        acc = 0.0
+        for j in range(nc):                   # the plan: cumsum(z[:nc]) + vo
+            acc += z[j]
+            plan[j] = acc
+        for j in range(nc):
+            plan[j] += vo
+        x[2] = 1.0
+        x[3] = 0.0
+        x[4] = z[nc] * 1e3
+        x[5] = z[nc + 1] * aux[0]
+    else:
+        v_cmd = _fallback(mp, rp, rinner, rrates, plan, x, soc, demand, gen, pmax_w, pmin_w, rate) * 1e-3
+        x[1] += 1.0
+        x[4] = 0.0
+        x[5] = 0.0
+    return v_cmd * 1e3, rate
+
+
+def daqp_move():
+    """:func:`mpc_move`, or None when DAQP's C library cannot be bound (:mod:`shevsim.fast.daqp_nb`; it is
+    then never compiled, its external symbols never linked)."""
+    return mpc_move if daqp_nb.available()[0] else None
 
 
 class MPCProblem:
@@ -583,21 +680,90 @@ class MPCSupervisor:
         self.rate_map = rate_map
         self.prob = MPCProblem(settings, fuel_curve, compiled=compiled)
         self.rule = rule
-        self._make_solver(settings.solver)
-        self.fallback_count = 0
-        self.last = MPCResult()
-        self._plan_kw = None          # absolute engine powers of the last optimal plan (N_c)
-        self._plan_age = 0
         self._nc = settings.n_c
         self._dv_min_kw = settings.power_rate_min_wps / 1e3 * settings.dt_s
         self._pg_min_kw = settings.power_gen_min_w / 1e3
         self._pg_max_kw = settings.power_gen_max_w / 1e3
+        # solver 'daqp', compiled: the whole call is :func:`mpc_move` (the fast path's kernel calls it too);
+        # its state lives in the arrays of ``self.arrays`` (X_FIELDS); otherwise the Python solve path
+        self._move = daqp_move() if (compiled and settings.solver == "daqp") else None
+        if self._move is not None:
+            self.solver_name = "daqp"
+            self.solver = None
+            self._pack()
+        else:
+            self._make_solver(settings.solver)
+        self.fallback_count = 0
+        self.last = MPCResult()
+        self._plan_kw = None          # absolute engine powers of the last optimal plan (N_c)
+        self._plan_age = 0
+
+    # -- the compiled call's state ------------------------------------------------------------------
+    def _pack(self) -> None:
+        s, p = self.settings, self.prob
+        inner = np.array(self.rate_map._inner, dtype=np.float64)
+        rates = np.array(self.rate_map.rates_wps, dtype=np.float64)
+        r = self.rule
+        if r is not None:
+            rs = r.settings
+            rp = np.array([rs.soc_min_pct, rs.soc_max_pct, rs.soc_ref_pct, rs.soc_on_pct, rs.soc_off_pct,
+                           rs.charge_power_w, rs.engine_on_min_power_w, rs.engine_on_demand_w, rs.power_gen_min_w,
+                           rs.power_gen_max_w, rs.power_rate_min_wps, r.dt_s], dtype=np.float64)
+            rinner = np.array(r.rate_map._inner, dtype=np.float64)
+            rrates = np.array(r.rate_map.rates_wps, dtype=np.float64)
+        else:
+            rp, rinner, rrates = np.zeros(12), np.zeros(0), np.ones(1)
+        mp = np.array([s.dt_s, s.n_c, self._pg_min_kw, self._pg_max_kw, 1.0 if s.fallback == "shift" else 0.0,
+                       s.power_gen_min_w, s.power_gen_max_w, s.power_rate_min_wps, s.dt_s,
+                       1.0 if r is not None else 0.0, 0.0], dtype=np.float64)
+        self._x = np.zeros(len(X_FIELDS))
+        self._plan_arr = np.zeros(s.n_c)
+        self._daqp = daqp_nb.new_state(p.n, p.n + p.m)
+        self.arrays = (mp, rp, inner, rates, rinner, rrates, self._x, self._plan_arr, p.c, p.fp, p.fs, p.fsl, p.MtM,
+                       p.LtL, p.Mt1, p.Mtr, p.Lt1, p.soc_idx, p.H, p.f, p.A, p.bu, p.bl, p.aux) + self._daqp
+
+    def __del__(self):
+        d = getattr(self, "_daqp", None)
+        if d is not None and d[6][0] != 0:
+            try:
+                daqp_nb.drop_model(d[0], d[6])
+            except Exception:  # pragma: no cover - interpreter shutdown
+                pass
+
+    @property
+    def compiled_call(self) -> bool:
+        """True when :meth:`step` is the compiled :func:`mpc_move` (solver 'daqp', compiled)."""
+        return self._move is not None
+
+    @property
+    def fallback_count(self) -> int:
+        return int(self._x[1]) if self._move is not None else self._fallback_count
+
+    @fallback_count.setter
+    def fallback_count(self, v) -> None:
+        if self._move is not None:
+            self._x[1] = float(v)
+        else:
+            self._fallback_count = v
+
+    @property
+    def _plan_age(self) -> int:
+        return int(self._x[3]) if self._move is not None else self._plan_age_py
+
+    @_plan_age.setter
+    def _plan_age(self, v) -> None:
+        if self._move is not None:
+            self._x[3] = float(v)
+        else:
+            self._plan_age_py = v
 
     # the plan (absolute engine powers [kW] of the last optimal solution) is formed from the solution
     # only when read (fallback 'shift', state snapshots, tests): the solvers return a fresh array per
     # solve (DAQP, cvxpy) or a copy is kept (OSQP), so the values are those of the eager computation
     @property
     def _plan_kw(self):
+        if self._move is not None:
+            return self._plan_arr.copy() if self._x[2] > 0.5 else None
         pend = self._plan_pending
         if pend is not None:
             z, vo = pend
@@ -609,6 +775,13 @@ class MPCSupervisor:
 
     @_plan_kw.setter
     def _plan_kw(self, value) -> None:
+        if self._move is not None:
+            if value is None:
+                self._x[2] = 0.0
+            else:
+                self._plan_arr[:] = value
+                self._x[2] = 1.0
+            return
         self._plan_val = value
         self._plan_pending = None
 
@@ -625,7 +798,10 @@ class MPCSupervisor:
         """Forget the previous plan and the solver's warm start (not the fallback count)."""
         self._plan_kw = None
         self._plan_age = 0
-        if self.solver_name == "daqp":
+        if self._move is not None:
+            d = self._daqp
+            daqp_nb.drop_model(d[0], d[6])    # next call sets DAQP up from scratch
+        elif self.solver_name == "daqp":
             self.solver.model = None          # next call sets DAQP up from scratch
         elif self.solver_name == "osqp":
             self.solver.solver = None
@@ -633,6 +809,8 @@ class MPCSupervisor:
     def step(self, soc_pct: float, demand_w: float, gen_power_w: float, power_max_w: float,
              power_min_w: float, ocv_v: float, rs_ohm: float) -> float:
         """One supervisor call: state -> QP -> first move.  Returns the engine power command [W]."""
+        if self._move is not None:
+            return self._step_compiled(soc_pct, demand_w, gen_power_w, power_max_w, power_min_w, ocv_v, rs_ohm)
         try:
             rate = self.rate_map(gen_power_w)
         except TypeError:
@@ -669,6 +847,24 @@ class MPCSupervisor:
         res.status = status
         res.power_cmd_w = v_cmd * 1e3
         return res.power_cmd_w
+
+    _STATUS = {1.0: "unusable inputs (non-finite, V_oc <= 0, R_s <= 0 or P_b,max < P_b,min)",
+               -1000.0: "daqp setup failed"}
+
+    def _step_compiled(self, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w, ocv_v, rs_ohm) -> float:
+        a = self.arrays
+        a[0][10] = 1.0 if (self.rule is not None and self.rule.engine_on) else 0.0
+        cmd, rate = self._move(*a, float(soc_pct), float(demand_w), float(gen_power_w), float(power_max_w),
+                               float(power_min_w), float(ocv_v), float(rs_ohm))
+        x = self._x
+        res = self.last
+        res.rate_max_wps = rate
+        res.ok = x[6] == 0.0
+        res.status = "optimal" if res.ok else self._STATUS.get(float(x[6]), f"daqp exitflag {int(x[6])}")
+        res.battery_slack_w = float(x[4])
+        res.soc_slack_pct = float(x[5])
+        res.power_cmd_w = cmd
+        return cmd
 
     # ----------------------------------------------------------------------------------------
     def _fallback(self, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w, rate_wps) -> float:

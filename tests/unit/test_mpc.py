@@ -22,8 +22,8 @@ V_OC, R_S = 429.0, 0.156          # pack: 130 x 3.3 V, 130/10 x 12 mOhm
 MAP = PowerRateMap([0.0, 75e3, 150e3, 236e3], [30e3, 20e3, 10e3])
 
 
-def make(solver="daqp", **kw):
-    return MPCSupervisor(MPCSettings(solver=solver, **kw), placeholder_fuel_curve(), MAP)
+def make(solver="daqp", compiled=True, rule=None, **kw):
+    return MPCSupervisor(MPCSettings(solver=solver, **kw), placeholder_fuel_curve(), MAP, rule=rule, compiled=compiled)
 
 
 def problem_sequence(n=220, seed=3):
@@ -264,7 +264,7 @@ def test_infeasible_and_bad_inputs_fall_back_without_crashing():
 
 
 def test_solver_exception_and_shift_fallback():
-    sup = make("daqp")
+    sup = make("daqp", compiled=False)        # the Python solve path (a solver object to break)
     args = (45.0, 120e3, 60e3, 150e3, -150e3, V_OC, R_S)
     sup.step(*args)
     plan = sup._plan_kw.copy() * 1e3
@@ -344,3 +344,39 @@ def test_component_defaults_step_state_and_errors():
     c2.initialize(0.0)
     c2.do_step(0.0, 0.2)
     assert c2.y["fallback_count"] == 1.0 and c2.y["power_cmd_w"] == pytest.approx(260e3 - 60e3 * 0.2)
+
+
+@pytest.mark.parametrize("kw", [{}, {"battery_limits_soft": False, "fallback": "rule"},
+                                {"battery_limits_soft": False, "fallback": "shift"}])
+def test_compiled_call_equals_the_python_path_with_daqp_model(kw):
+    """The whole call compiled (build, DAQP's C library, first move, fallbacks: :func:`mpc_move`) against
+    the Python path (``daqp.Model`` and the Python first move / fallback), bit for bit, over a closed-loop
+    like sequence with non-finite inputs, unusable and infeasible limits."""
+    from shevsim.supervisor.rule_based import RuleBasedSupervisor, RuleSettings
+    fast = make("daqp", rule=RuleBasedSupervisor(RuleSettings(), MAP, 0.2), **kw)
+    if not fast.compiled_call:
+        pytest.skip("DAQP's C library cannot be bound here")
+    ref = make("daqp", compiled=False, rule=RuleBasedSupervisor(RuleSettings(), MAP, 0.2), **kw)
+    rng = np.random.default_rng(7)
+    gen, n_fb = 20e3, 0
+    for k in range(500):
+        args = [float(np.clip(50 + 10 * math.sin(k / 30) + rng.normal(), 1, 99)), 60e3 * math.sin(k / 7) + 30e3,
+                gen, abs(rng.normal(120e3, 30e3)), -abs(rng.normal(90e3, 20e3)), V_OC, R_S]
+        r = rng.random()
+        if r < 0.04:
+            args[0] = math.nan
+        elif r < 0.08:
+            args[3], args[4] = -5e3, -1e3
+        elif r < 0.14:
+            args[1] = 380e3
+        a, b = fast.step(*args), ref.step(*args)
+        assert a == b or (math.isnan(a) and math.isnan(b)), (k, a, b, fast.last.status, ref.last.status)
+        assert fast.fallback_count == ref.fallback_count and fast.last.ok == ref.last.ok, k
+        assert fast.last.battery_slack_w == ref.last.battery_slack_w and fast.last.soc_slack_pct == ref.last.soc_slack_pct
+        pa, pb = fast._plan_kw, ref._plan_kw
+        assert (pa is None) == (pb is None) and (pa is None or np.array_equal(pa, pb)), k
+        gen = a
+        if k % 150 == 149:
+            fast.reset()
+            ref.reset()
+    assert fast.fallback_count > 10
