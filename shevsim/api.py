@@ -203,6 +203,8 @@ def _call_cli(fn, argv: list[str], what: str) -> int:
 def run_study(which: str, scenario: str | Path | None = None, *, out: str | Path | None = None, **options) -> dict:
     """Run a study (``tradeoff``, ``powerrate-map``, ``thermal``, ``bms``) with the CLI's options.
 
+    ``scenario`` is a scenario file or a bundled scenario's name.
+
     Keyword arguments are the options of ``shevsim study WHICH --help`` with ``_`` for ``-``
     (``workers=0``, ``stop_s=120.0``, ``rates_kwps=[10, 20]``, ``set=["cycle.repeat=1"]``,
     ``synthetic=True``); the study writes its tables and figures to ``out``.
@@ -217,7 +219,10 @@ def run_study(which: str, scenario: str | Path | None = None, *, out: str | Path
     ShevsimError
         When the study exits non-zero (its message is printed on stderr).
     """
+    from .core.paths import bundled_scenario
     from .studies.cli import main_study
+    if scenario is not None and not Path(scenario).is_file() and bundled_scenario(str(scenario)) is not None:
+        scenario = bundled_scenario(str(scenario))          # a bundled scenario by name
     argv = [which] + _argv([scenario], {"out": out, **options})
     code = _call_cli(main_study, argv, f"study {which}")
     if code != 0:

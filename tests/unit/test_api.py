@@ -219,3 +219,13 @@ def test_internal_error_has_its_own_exit_code(monkeypatch, capsys):
     monkeypatch.setattr(run_mod, "run", bug)
     assert main(["run", str(TWO_BODY), "-q"]) == 3
     assert "internal error: ZeroDivisionError: a bug" in capsys.readouterr().err
+
+
+def test_study_wrapper_takes_a_bundled_scenario_by_name(monkeypatch):
+    import shevsim.studies.cli as scli
+    seen = {}
+    monkeypatch.setattr(scli, "main_study", lambda argv: seen.setdefault("argv", argv) and 0)
+    shevsim.run_study("tradeoff", "uac_proxy_mpc", out="o", rates_kwps=[30, 20], set=["cycle.repeat=1"], workers=0)
+    from shevsim.core.paths import bundled_scenario
+    assert seen["argv"] == ["tradeoff", str(bundled_scenario("uac_proxy_mpc")), "--out", "o", "--rates-kwps", "30",
+                            "20", "--set", "cycle.repeat=1", "--workers", "0"]
