@@ -52,7 +52,11 @@ variables (moves, battery slack, SOC slack) and ``3 N_c + 2 (N_c + 1)`` rows.
 Solve paths
 -----------
 ``'daqp'`` (default) builds ``H, f`` and the bounds with one compiled (numba) function into
-preallocated arrays and calls DAQP with its active set warm-started from the previous call;
+preallocated arrays and calls DAQP with its active set warm-started from the previous call.  The whole
+call is compiled (:func:`mpc_move`: build, DAQP's C library through :mod:`shevsim.fast.daqp_nb` - the
+call sequence of ``daqp.Model`` -, first move, fallback); the compiled whole-vehicle loop calls the same
+function.  ``compiled=False`` (or a DAQP build the binding does not know) runs the Python form
+(``daqp.Model`` and the Python first move/fallback), the independent reference it equals bit for bit;
 ``'osqp'`` calls OSQP natively (eps 1e-6 + polish; measured 1-20 ms per call here and it can stop at its
 iteration limit when a soft constraint is far from satisfied - that call then falls back; not
 recommended, kept for comparison); ``'cvxpy'`` is the readable reference
