@@ -445,22 +445,25 @@ class FastRunner:
         return Result(times, signals, dict(self._units), {k: dict(v) for k, v in self._params.items()}, termination)
 
 
-def runner_for(scenario) -> tuple[Callable | None, str]:
+def runner_for(scenario, master=None) -> tuple[Callable | None, str]:
     """``(runner, why)``: a :class:`FastRunner` for ``scenario`` and ``""``, or ``None`` and the reason the
     scenario cannot take the fast path.
 
     ``runner(t_stop_s)`` returns a :class:`~shevsim.core.results.Result` equal to ``Master.run(t_stop_s,
-    t0=scenario.t0_s)`` of the same scenario.
+    t0=scenario.t0_s)`` of the same scenario.  ``master``: a master already built from ``scenario``
+    (``build_master``, not yet run) to take the components from instead of building them again; the
+    runner initialises it (it must not be stepped by anyone else afterwards).
     """
     from shevsim.core.errors import ShevsimError
     why = _static_reason(scenario)
     if why:
         return None, why
     from shevsim.core.scenario import build_master
-    try:
-        master = build_master(scenario)
-    except ShevsimError as exc:
-        return None, f"the scenario does not build: {exc}"
+    if master is None:
+        try:
+            master = build_master(scenario)
+        except ShevsimError as exc:
+            return None, f"the scenario does not build: {exc}"
     why = _component_reason(master)
     if why:
         return None, why
