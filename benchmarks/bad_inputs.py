@@ -489,8 +489,45 @@ def merge_markdown(before: dict, after: dict) -> str:
         note = note if len(note) < 150 else note[:147] + "..."
         L.append(f"| {r['id']} | {r['group']} | {r['what']} | {'refuse' if r['expect'] == 'error' else 'accept/report'} "
                  f"| {ob} | **{r['outcome']}** | {note} |")
-    L.append("")
+    L += ["", HOW_CHECKED]
     return "\n".join(L)
+
+
+HOW_CHECKED = """## How inputs are checked (what the "after" column relies on)
+
+- **One validation layer for every number** (`shevsim/core/params.py`). Each numeric field of a component's
+  parameter dataclass has one physical range, declared once: `dataclasses.field(metadata=rng(...))` on the
+  field, or else the unit-suffix convention of its name (`NAME_RULES`: `_pct` in [0, 100], `_frac` in [0, 1],
+  `_c` above absolute zero, `_kg`/`_ah`/`_ohm`/`_f`/densities/heat capacities > 0, durations `_s` and
+  lengths `_m` >= 0, noise and covariance tunings `sigma_`/`q_`/`r_`/`p0_`/`s0_` >= 0, efficiencies in
+  (0, 1], counts `n_*` >= 1, ...). NaN is always refused, +-inf only where a field declares `allow_inf`
+  ("no limit": `bms.i_cell_max_a`, `motor.regen_power_max_w`). Fields named alike except for min/max are a
+  pair (min <= max). The check runs in `make_params` (parameter files, scenario `set` tables, `--set`,
+  overlays; defaults included) and in `Component.__init__` (objects built through the Python API). The
+  message names the file or the `--set` option, the field and the valid range.
+- **Maps and tables** (`shevsim/powertrain/maps.py`, `shevsim/battery/cell.py`): the same name rules apply to
+  the columns a loader reads (`efficiency_frac` in (0, 1], `fuel_gps` >= 0, `rs_ohm` > 0); a NaN cell is
+  named by its file line and column; duplicate grid nodes are refused.
+- **Scenario options**: the `[metrics]` table and `--set metrics.*` are checked by the same name rules
+  (`fuel_density_kg_per_l` > 0).
+- **Units on data** (`shevsim/cycles.py`, `shevsim/calibrate/data.py`): a unit declared in the header
+  (`speed_kmh`, `speed_mph`, `time_ms`, `current_ma`, `power_kw`, `t_surface_k`, `voltage_mv`) or by
+  `shevsim calibrate --unit time_s=ms` is converted; an undeclared unit that looks wrong is refused saying
+  what was detected and how to declare it: cycle speed > 50 m/s (km/h), cycle or record step >= 10 s (ms),
+  cycle acceleration > 10 m/s^2, vehicle-record speed changing slower than 0.02 m/s^2 (ms), a cell's
+  dV/dI below 0.1 mOhm with currents above 50 (mA), temperatures > 150 degC median (K), voltage median > 100
+  (mV), engine power below 2 kW (kW).
+- **Spreadsheet quirks** are read as they come: UTF-8 byte-order mark, CRLF, `;` separators with decimal
+  commas, tabs, trailing empty columns. A record row longer than its header is an error (never truncated).
+- **Identifiability** (`shevsim/calibrate/workflow.py: identifiability`): after the fit, the Jacobian of the
+  training residual with respect to each parameter (normalised to its bound range) is taken by central
+  differences; each channel is scaled by max(RMSE, noise floor), inflated for lag-1 autocorrelation. The
+  covariance (J^T J)^-1 gives each parameter's 1-sigma uncertainty as a fraction of its range; above 0.1 the
+  parameter is reported as **not identifiable** (report.json `not_identifiable`, report.md, the log), with its
+  most correlated partner. Parameters on a bound are flagged as before, now with `identifiable`.
+- **Studies** (`shevsim/studies/`): `--supervisor` must name a component whose parameters hold the power-rate
+  map, and a probe map must build, before any evaluation; a trade-off whose evaluations all failed exits 1.
+"""
 
 
 def main(argv=None) -> int:

@@ -130,6 +130,8 @@ def main_calibrate(argv=None) -> int:
     for c, b in rep["rmse_before"].items():
         a = rep["rmse_after"][c]
         print(f"  {c}: held-out RMSE {b['holdout']:.4g} -> {a['holdout']:.4g} (train {b['train']:.4g} -> {a['train']:.4g})")
+    if rep.get("not_identifiable"):
+        print(f"not identifiable from this record (values are not measurements): {', '.join(rep['not_identifiable'])}")
     print(f"report: {Path(args.out) / 'report.md'} ({rep['elapsed_s']:.1f} s)")
     return 0
 
