@@ -16,7 +16,7 @@ compiled loop from ``t0``.  So one runner serves many runs (a study's evaluation
 the loop alone.
 
 A scenario the path cannot take is declined with the reason: FMUs or component types without a
-kernel, two components of one type (except stateless ``power_limits``), the Jacobi method, a vehicle in speed mode, the 30-node
+kernel, the Jacobi method, a vehicle in speed mode, the 30-node
 battery thermal model, an MPC solver other than DAQP (or a DAQP build whose C structs are not the
 checked ones), uncompiled components, or ports that differ from the kernels' (a component changed
 since).
@@ -39,8 +39,6 @@ __all__ = ["runner_for", "FastRunner", "SUPPORTED_TYPES"]
 
 SUPPORTED_TYPES = ("cycle", "driver", "vehicle", "motor", "bus", "engine_generator", "battery", "bms",
                    "rule_supervisor", "mpc_supervisor", "power_limits")
-#: stateless types: any number of instances (rows of one parameter table)
-MULTI_TYPES = ("power_limits",)
 
 # the ports each kernel reads/writes, in the components' declaration order (checked at build time)
 def _engine_floor() -> tuple:
@@ -211,13 +209,11 @@ def _pack_mpc(c):
     return tuple(a), (6, 7, 30)
 
 
-def _pack_limits(comps):
-    """All ``power_limits`` instances: one row ``[aux_power_w, enforce]`` each."""
-    P = np.array([[c._aux_w, 1.0 if c.params.enforce_battery_limits else 0.0] for c in comps], dtype=np.float64)
-    return (P.reshape(-1, 2),), ()
+def _pack_limits(c):
+    return (_f(c._aux_w, 1.0 if c.params.enforce_battery_limits else 0.0),), ()
 
 
-_PACK = {"cycle": _pack_cycle, "driver": _pack_driver, "vehicle": _pack_vehicle, "motor": _pack_motor,
+_PACK = {"power_limits": _pack_limits, "cycle": _pack_cycle, "driver": _pack_driver, "vehicle": _pack_vehicle, "motor": _pack_motor,
          "bus": _pack_bus, "engine_generator": _pack_engine, "battery": _pack_battery,
          "rule_supervisor": _pack_rule, "mpc_supervisor": _pack_mpc}
 
@@ -232,8 +228,7 @@ def _dummies() -> dict:
         for typ in SUPPORTED_TYPES:
             comp = get_component_class(typ, "fast path")(typ)
             comp.initialize(0.0)
-            _DUMMY[typ] = (_pack_bms(comp, 0.1) if typ == "bms" else _pack_limits([comp]) if typ == "power_limits"
-                           else _PACK[typ](comp))[0]
+            _DUMMY[typ] = (_pack_bms(comp, 0.1) if typ == "bms" else _PACK[typ](comp))[0]
     return _DUMMY
 
 
@@ -316,29 +311,32 @@ class FastRunner:
         for (cn, port) in m._forced:
             self._forced0[in_idx[(cn, port)]] = 1
         self._row0 = sig[:self.nsig].copy()
-        # per-type data (template) and which entries a run mutates
+        # per-instance data (template) and which entries a run mutates; the loop gets one typed list per
+        # type (the instances in execution order; a default component's data for a type the scenario lacks)
+        from numba import typed
         dummies = _dummies()
-        self._data, self._mut = {}, {}
+        self._data = {typ: [] for typ in SUPPORTED_TYPES}
+        self._mut = {typ: () for typ in SUPPORTED_TYPES}
+        self._batteries = []               # (instance, component, step multiple, noise, rng)
         for n, c in zip(order, comps):
             typ = types[n]
-            if typ in MULTI_TYPES:
-                data, mut = _pack_limits([cc for cc in comps if cc.TYPE == typ])
-            elif typ == "bms":
+            if typ == "bms":
                 data, mut = _pack_bms(c, m.step_multiples[n] * self.h)
             else:
                 data, mut = _PACK[typ](c)
-            self._data[typ], self._mut[typ] = data, mut
+            if typ == "battery":
+                import copy
+                self._batteries.append([len(self._data[typ]), m.step_multiples[n],
+                                        np.array(c._buf[c._k:], dtype=np.float64), copy.deepcopy(c.rng)])
+            self._data[typ].append(data)
+            self._mut[typ] = mut
+        self._live = {}
         for typ in SUPPORTED_TYPES:
-            if typ not in self._data:
-                self._data[typ], self._mut[typ] = dummies[typ], ()
+            if not self._data[typ]:
+                self._live[typ] = typed.List([dummies[typ]])
+            else:
+                self._live[typ] = typed.List([self._fresh(typ, i) for i in range(len(self._data[typ]))])
         self._comp_names = order
-        self._battery = next((c for c in comps if c.TYPE == "battery"), None)
-        self._battery_mult = next((m.step_multiples[n] for n in order if types[n] == "battery"), 1)
-        if self._battery is not None:
-            import copy
-            b = self._battery
-            self._noise = np.array(b._buf[b._k:], dtype=np.float64)
-            self._rng = copy.deepcopy(b.rng)
         from shevsim.core.params import params_to_dict
         self._params = {}
         for n, c in m.components.items():
@@ -349,11 +347,12 @@ class FastRunner:
         self.last_wall_s = 0.0
 
     # ------------------------------------------------------------------------------------------
-    def _noise_for(self, n_draws: int) -> np.ndarray:
+    def _noise_for(self, b, n_draws: int) -> np.ndarray:
+        """The first ``n_draws`` measurement-noise draws of battery entry ``b`` (its generator's blocks)."""
         from shevsim.components.battery import _NOISE_BLOCK
-        while self._noise.size < n_draws:       # the battery's blocks of standard normals, in order
-            self._noise = np.concatenate([self._noise, np.array(self._rng.standard_normal(_NOISE_BLOCK).tolist())])
-        return self._noise
+        while b[2].size < n_draws:       # the battery's blocks of standard normals, in order
+            b[2] = np.concatenate([b[2], np.array(b[3].standard_normal(_NOISE_BLOCK).tolist())])
+        return b[2]
 
     def n_steps(self, t_stop_s: float) -> int:
         """Communication steps to ``t_stop_s`` (the rule of :meth:`Master.run`)."""
@@ -361,12 +360,27 @@ class FastRunner:
         n_total = round(x) if abs(x - round(x)) <= 1e-9 * max(1.0, abs(x)) else math.ceil(x)
         return max(int(n_total), 0)
 
-    def _fresh(self, typ):
-        data = self._data[typ]
+    def _fresh(self, typ, i=0):
+        """A copy of instance ``i``'s template data (the arrays a run mutates copied)."""
+        data = self._data[typ][i]
         mut = self._mut[typ]
-        if not mut:
-            return data
-        return tuple(a.copy() if i in mut else a for i, a in enumerate(data))
+        return tuple(a.copy() if j in mut else a for j, a in enumerate(data))
+
+    def _reset_live(self, n: int) -> None:
+        """Bring the loop's data back to the template (in place) and give each battery its noise for ``n``
+        steps."""
+        for typ in SUPPORTED_TYPES:
+            tmpl = self._data[typ]
+            live = self._live[typ]
+            for i in range(len(tmpl)):
+                for j in self._mut[typ]:
+                    np.copyto(live[i][j], tmpl[i][j])
+        for b in self._batteries:
+            i = b[0]
+            need = 4 * (-(-n // b[1]))
+            cur = self._live["battery"][i]
+            if cur[6].size < need:
+                self._live["battery"][i] = cur[:6] + (self._noise_for(b, need),) + cur[7:]
 
     def __call__(self, t_stop_s: float):
         import time
@@ -382,12 +396,8 @@ class FastRunner:
         rec = np.empty((n + 1, nsig))
         rec[0] = self._row0
         sig = self._sig0.copy()
-        data = {typ: self._fresh(typ) for typ in SUPPORTED_TYPES}
-        if self._battery is not None:
-            b = data["battery"]
-            n_bat = -(-n // self._battery_mult)
-            data["battery"] = b[:6] + (self._noise_for(4 * n_bat),) + b[7:]
-        mpc = data["mpc_supervisor"]
+        self._reset_live(n)
+        data = self._live
         out = np.zeros(3, dtype=np.int64)
         forced = self._forced0.copy()
         fstate = np.zeros(1, dtype=np.int64)
@@ -399,7 +409,7 @@ class FastRunner:
                          self._ldst, self._lsrc, sig, rec[k0:], nsig, out, self._inst, self._f_t, self._f_idx,
                          self._f_val, forced, fstate, data["cycle"], data["driver"], data["vehicle"], data["motor"],
                          data["bus"], data["engine_generator"], data["battery"], data["bms"], data["rule_supervisor"],
-                         mpc, data["power_limits"])
+                         data["mpc_supervisor"], data["power_limits"])
                 if out[0] == ERR_NONFINITE_OUTPUT:
                     row = int(out[1])
                     bad = [j for j in range(nsig) if not math.isfinite(rec[row, j])]
@@ -420,8 +430,10 @@ class FastRunner:
                     raise self._stopped(err, rec, k + 1, comp, None, self._time(k))
                 break
         finally:
-            if mpc[30][0] != 0:
-                daqp_nb.drop_model(mpc[24], mpc[30])  # free DAQP's workspace (as daqp.Model.__dealloc__)
+            if self._data["mpc_supervisor"]:
+                for mpc in data["mpc_supervisor"]:
+                    if mpc[30][0] != 0:
+                        daqp_nb.drop_model(mpc[24], mpc[30])  # free DAQP's workspace (daqp.Model.__dealloc__)
             self.last_wall_s = time.perf_counter() - wall
         return self._result(rec, n + 1, "completed")
 
@@ -482,10 +494,6 @@ def _static_reason(scenario) -> str:
             return f"component '{spec.name}' is an FMU"
         if spec.type not in SUPPORTED_TYPES:
             return f"component '{spec.name}' has type '{spec.type}', which has no fast-path kernel"
-        if spec.type in seen and spec.type not in MULTI_TYPES:
-            return (f"components '{seen[spec.type]}' and '{spec.name}' are both of type '{spec.type}' "
-                    "(the fast path takes one component per type)")
-        seen[spec.type] = spec.name
     return ""
 
 

@@ -218,9 +218,8 @@ def bus_limits(pm, pg, u_aux, bpmax, bpmin, aux_w, enforce):
 
 
 @njit(cache=True)
-def power_limits_kernel(data, k, sig, ib, ob):
-    """:meth:`shevsim.components.bus.PowerLimits.do_step` of instance ``k`` (parameters ``data[0][k] =
-    [aux_power_w, enforce]``)."""
+def power_limits_kernel(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.bus.PowerLimits.do_step` (parameters ``data[0] = [aux_power_w, enforce]``)."""
     P = data[0]
     for j in range(5):
         if sig[ib + j] != sig[ib + j]:
@@ -228,9 +227,9 @@ def power_limits_kernel(data, k, sig, ib, ob):
     pm = sig[ib]
     pg = sig[ib + 1]
     u_aux = sig[ib + 2]
-    enforce = P[k, 1] > 0.5
-    sig[ob], sig[ob + 1], sig[ob + 2] = bus_limits(pm, pg, u_aux, sig[ib + 3], sig[ib + 4], P[k, 0], enforce)
-    sig[ob + 3] = (pm + bus_aux_w(u_aux, P[k, 0]) - sig[ib + 3]) if enforce else -1e12
+    enforce = P[1] > 0.5
+    sig[ob], sig[ob + 1], sig[ob + 2] = bus_limits(pm, pg, u_aux, sig[ib + 3], sig[ib + 4], P[0], enforce)
+    sig[ob + 3] = (pm + bus_aux_w(u_aux, P[0]) - sig[ib + 3]) if enforce else -1e12
     return 0
 
 

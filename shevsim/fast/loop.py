@@ -11,9 +11,9 @@ connections as index pairs::
                 step component j over multiple[j] * h      (kernels.py, by type code)
         record sig[:n_signals] as row k + 1; stop at the first non-finite value
 
-Component data are passed as one tuple per type (:mod:`shevsim.fast.kernels`); a scenario has at most one
-component of each type on this path, except stateless types (``power_limits``), whose instances index rows
-of their type's parameter table (``inst``).  Faults (``f_t``, ``f_idx``, ``f_val``, sorted by time) force
+Component data are passed as one typed list per type holding one tuple per instance
+(:mod:`shevsim.fast.kernels`); ``inst[j]`` is the position of the j-th component (execution order) in its
+type's list.  Faults (``f_t``, ``f_idx``, ``f_val``, sorted by time) force
 an input from their time on and cut its connection, as :meth:`Master._apply_faults` does.
 """
 from __future__ import annotations
@@ -45,6 +45,19 @@ def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, 
     """
     ncomp = typ.shape[0]
     nf = f_t.shape[0]
+    # the first instance of each type held in locals (taking an item out of a typed list increfs every array
+    # of its tuple: done once here rather than at every call)
+    cyc0 = cyc[0]
+    drv0 = drv[0]
+    veh0 = veh[0]
+    mot0 = mot[0]
+    bus0 = bus[0]
+    eng0 = eng[0]
+    bat0 = bat[0]
+    bms0 = bms[0]
+    rule0 = rule[0]
+    mpc0 = mpc[0]
+    lim0 = lim[0]
     for s in range(n):
         k = k0 + s
         t = t0 + k * h
@@ -66,27 +79,27 @@ def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, 
                 ib = ibase[j]
                 ob = obase[j]
                 if ty == K.T_CYCLE:
-                    st = K.cycle_step(cyc, sig, ib, ob, t, hk)
+                    st = K.cycle_step(cyc0 if inst[j] == 0 else cyc[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_DRIVER:
-                    st = K.driver_kernel(drv, sig, ib, ob, t, hk)
+                    st = K.driver_kernel(drv0 if inst[j] == 0 else drv[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_VEHICLE:
-                    st = K.vehicle_kernel(veh, sig, ib, ob, t, hk)
+                    st = K.vehicle_kernel(veh0 if inst[j] == 0 else veh[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_MOTOR:
-                    st = K.motor_kernel(mot, sig, ib, ob, t, hk)
+                    st = K.motor_kernel(mot0 if inst[j] == 0 else mot[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_BUS:
-                    st = K.bus_kernel(bus, sig, ib, ob, t, hk)
+                    st = K.bus_kernel(bus0 if inst[j] == 0 else bus[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_ENGINE:
-                    st = K.engine_kernel(eng, sig, ib, ob, t, hk)
+                    st = K.engine_kernel(eng0 if inst[j] == 0 else eng[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_BATTERY:
-                    st = K.battery_kernel(bat, sig, ib, ob, t, hk)
+                    st = K.battery_kernel(bat0 if inst[j] == 0 else bat[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_BMS:
-                    st = K.bms_kernel(bms, sig, ib, ob, t, hk)
+                    st = K.bms_kernel(bms0 if inst[j] == 0 else bms[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_RULE:
-                    st = K.rule_kernel(rule, sig, ib, ob, t, hk)
+                    st = K.rule_kernel(rule0 if inst[j] == 0 else rule[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_LIMITS:
-                    st = K.power_limits_kernel(lim, inst[j], sig, ib, ob)
+                    st = K.power_limits_kernel(lim0 if inst[j] == 0 else lim[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_MPC:
-                    st = K.mpc_kernel(mpc, sig, ib, ob, t, hk)
+                    st = K.mpc_kernel(mpc0 if inst[j] == 0 else mpc[inst[j]], sig, ib, ob, t, hk)
                 else:
                     st = K.ERR_NAN_INPUT
                 if st != 0:

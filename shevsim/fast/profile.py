@@ -32,18 +32,6 @@ def _replay(kern, data, sig, ib, ob, in_idx, vals, steps, h):
     return 0
 
 
-@njit
-def _replay_limits(data, k, sig, ib, ob, in_idx, vals, steps, h):
-    nin = in_idx.shape[0]
-    for s in range(steps.shape[0]):
-        for q in range(nin):
-            sig[in_idx[q]] = vals[s, q]
-        st = K.power_limits_kernel(data, k, sig, ib, ob)
-        if st != 0:
-            return st
-    return 0
-
-
 _KERN = {K.T_CYCLE: K.cycle_step, K.T_DRIVER: K.driver_kernel, K.T_VEHICLE: K.vehicle_kernel,
          K.T_MOTOR: K.motor_kernel, K.T_BUS: K.bus_kernel, K.T_ENGINE: K.engine_kernel,
          K.T_BATTERY: K.battery_kernel, K.T_BMS: K.bms_kernel, K.T_RULE: K.rule_kernel, K.T_MPC: K.mpc_kernel}
@@ -51,7 +39,6 @@ _KERN = {K.T_CYCLE: K.cycle_step, K.T_DRIVER: K.driver_kernel, K.T_VEHICLE: K.ve
 
 def profile(runner, t_stop_s: float, repeat: int = 3) -> dict:
     """``{"total_s", "steps", "per_component": {name: (seconds, calls)}}`` for a :class:`FastRunner`."""
-    from . import SUPPORTED_TYPES
     t = time.perf_counter()
     res = runner(t_stop_s)
     total = time.perf_counter() - t
@@ -79,23 +66,25 @@ def profile(runner, t_stop_s: float, repeat: int = 3) -> dict:
             vals[:, q - lo] = rec[row, src]
         best = None
         for _ in range(repeat):
-            data = {typ: runner._fresh(typ) for typ in SUPPORTED_TYPES}
-            if types[name] == "battery":
-                b = data["battery"]
-                data["battery"] = b[:6] + (runner._noise_for(4 * steps.size),) + b[7:]
+            typ = types[name]
+            i = int(runner._inst[j])
+            d = runner._fresh(typ, i)
+            if typ == "battery":
+                b = next(b for b in runner._batteries if b[0] == i)
+                d = d[:6] + (runner._noise_for(b, 4 * steps.size),) + d[7:]
             sig = runner._sig0.copy()
             t = time.perf_counter()
             if int(runner._typ[j]) == K.T_LIMITS:
-                st = _replay_limits(data[types[name]], runner._inst[j], sig, runner._ibase[j], runner._obase[j],
-                                    in_idx, vals, steps, runner.h * mult)
+                st = _replay(K.power_limits_kernel, d, sig, runner._ibase[j], runner._obase[j], in_idx, vals, steps,
+                             runner.h * mult)
             else:
-                st = _replay(_KERN[int(runner._typ[j])], data[types[name]], sig, runner._ibase[j], runner._obase[j],
+                st = _replay(_KERN[int(runner._typ[j])], d, sig, runner._ibase[j], runner._obase[j],
                              in_idx, vals, steps, runner.h * mult)
             dt = time.perf_counter() - t
-            if types[name] == "mpc_supervisor":
+            if typ == "mpc_supervisor":
                 from . import daqp_nb
-                d = data["mpc_supervisor"]
-                daqp_nb.drop_model(d[24], d[30])
+                if d[30][0] != 0:
+                    daqp_nb.drop_model(d[24], d[30])
             best = dt if best is None else min(best, dt)
         out[name] = (best, int(steps.size), int(st))
     return {"total_s": total, "steps": n, "per_component": out}

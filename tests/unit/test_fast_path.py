@@ -115,10 +115,20 @@ def test_ineligible_scenarios_are_declined_with_a_reason():
     assert "fd30" in _declined(SCEN / "hd_udds_mpc.toml", ["battery.thermal_model=fd30"])
     text = (SCEN / "hd_udds_rule.toml").read_text().replace('type = "driver"', 'type = "profile"')
     assert "profile" in _declined(None, text=text)
-    # two components of one type
+
+
+def test_several_components_of_one_type_each_keep_their_own_state():
+    # a second cycle (another trace, played from the same start) beside the first: one kernel, two states
     text = (SCEN / "hd_udds_rule.toml").read_text().replace('"supervisor"]', '"supervisor", "cycle2"]')
-    text += '\n[components.cycle2]\ntype = "cycle"\n'
-    assert "one component per type" in _declined(None, text=text)
+    text += '\n[components.cycle2]\ntype = "cycle"\nparams = "components/cycle/uac_proxy.toml"\n'
+    sc = load_scenario(SCEN / "hd_udds_rule.toml", ["cycle.repeat=1"], text=text)
+    run, why = runner_for(sc)
+    assert run is not None, why
+    fast = run(60.0)
+    ref = build_master(load_scenario(SCEN / "hd_udds_rule.toml", ["cycle.repeat=1"], text=text)).run(60.0)
+    for k in ref.signals:
+        assert np.array_equal(fast[k], ref[k]), k
+    assert not np.array_equal(fast["cycle.speed_ref_mps"], fast["cycle2.speed_ref_mps"])
 
 
 def test_runtime_error_names_the_component_like_the_master():
