@@ -44,7 +44,7 @@ SUPPORTED_TYPES = ("cycle", "driver", "vehicle", "motor", "bus", "engine_generat
 def _engine_floor() -> tuple:
     import inspect
     from shevsim.powertrain.engine import step
-    return ("elec_power_min_w",) if "elec_min_w" in inspect.signature(step.py_func).parameters else ()
+    return ("elec_power_min_w",) if "elec_min_w" in inspect.signature(getattr(step, "py_func", step)).parameters else ()
 
 
 _ENGINE_FLOOR = _engine_floor()
@@ -486,6 +486,9 @@ def runner_for(scenario, master=None) -> tuple[Callable | None, str]:
 
 
 def _static_reason(scenario) -> str:
+    from numba.core import config as _nb_config
+    if _nb_config.DISABLE_JIT:
+        return "NUMBA_DISABLE_JIT is set (the fast path is compiled code)"
     if scenario.settings.method != "gauss-seidel":
         return f"method '{scenario.settings.method}' (the fast path steps Gauss-Seidel only)"
     seen = {}

@@ -49,6 +49,10 @@ def _load() -> str | None:
     except Exception as exc:  # pragma: no cover - daqp is a dependency
         _WHY = f"daqp is not importable ({exc})"
         return _WHY
+    from numba.core import config as _nb_config
+    if _nb_config.DISABLE_JIT:
+        _WHY = "NUMBA_DISABLE_JIT is set (DAQP's C library is called from compiled code only)"
+        return _WHY
     if struct.calcsize("P") != 8:
         _WHY = "DAQP binding needs a 64-bit platform"
         return _WHY
