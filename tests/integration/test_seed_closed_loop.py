@@ -57,8 +57,8 @@ def test_four_hd_udds_cycles_under_the_mpc_soc_error_below_1pct_after_600s_and_0
 @pytest.mark.slow
 @pytest.mark.parametrize("path", [MPC, RULE], ids=["mpc", "rule"])
 def test_a1_windows_exist_after_the_settling_cycle(path):
-    """Six HD-UDDS cycles: A.1 windows (SOC(t) = SOC(t + T), exactly) start after the first cycle, for
-    the MPC and the rule supervisor; the A.1 figure is reported by the run's metrics."""
+    """Four HD-UDDS cycles (the seed scenarios): A.1 windows (SOC(t) = SOC(t + T), exactly) start after
+    the first (settling) cycle, for the MPC and the rule supervisor; the run's metrics report A.1."""
     res, sc = _run(path)
     m = compute_run_metrics(res, sc)
     starts = sustainable_window_starts(res.time_s, res["battery.soc_pct"], T_CYCLE_S)
