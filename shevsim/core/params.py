@@ -128,6 +128,7 @@ NAME_RULES: tuple[tuple[str, str, Range], ...] = (
     ("suffix", "horizon_s", Range(lo=0.0, lo_open=True, what="a horizon")),
     ("suffix", "_substep_s", Range(lo=0.0, lo_open=True, what="a step size")),
     ("suffix", "_time_s", Range(what="a point in time")),
+    ("exact", "time_s", Range(what="a time axis")),
     ("suffix", "_max_n", Range(lo=0.0, what="a force limit")),
     ("suffix", "_max_wps", Range(lo=0.0, lo_open=True, what="a rate limit")),
     ("suffix", "max_rate_wps", Range(lo=0.0, lo_open=True, what="a rate limit")),
