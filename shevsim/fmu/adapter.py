@@ -304,16 +304,26 @@ def sweep_stale_unpack_dirs(tmp_root: str | Path | None = None, min_age_s: float
     return removed
 
 
-def _cleanup(fmu_box: list, unzipdir: str | None, hung: list) -> None:
-    """Finaliser: free the FMU instance (if any and not hung) and delete the extracted files."""
+#: fmpy objects of instances that hung in a step: kept alive for the life of the process, so that
+#: their shared library is never unloaded under the thread still running inside it
+_ABANDONED: list = []
+
+
+def _cleanup(fmu_box: list, unzipdir: str | None, hung: list, keep: list) -> None:
+    """Finaliser: free the FMU instance (if any and not hung) and delete the extracted files.
+
+    ``keep`` holds the logger callbacks: alive until after ``freeInstance`` (which may still log)."""
     fmu = fmu_box[0] if fmu_box else None
     if fmu is not None:
         fmu_box[0] = None
-        if not hung[0]:          # an instance blocked in a call on the helper thread is never touched again
+        if hung[0]:              # an instance blocked in a call on the helper thread is never touched again
+            _ABANDONED.append((fmu, list(keep)))
+        else:
             try:
                 fmu.freeInstance()
             except Exception:
                 pass
+    keep.clear()
     if unzipdir:
         shutil.rmtree(unzipdir, ignore_errors=True)
 
@@ -783,7 +793,8 @@ class FMUComponent(Component):
         sweep_stale_unpack_dirs()
         try:
             self._unzipdir = str(Path(tempfile.mkdtemp(prefix=f"{_PREFIX}{name}_")).absolute())
-            self._finalizer = weakref.finalize(self, _cleanup, self._fmu_box, self._unzipdir, self._hung)
+            self._keep: list = []
+            self._finalizer = weakref.finalize(self, _cleanup, self._fmu_box, self._unzipdir, self._hung, self._keep)
             if self.path.is_dir():
                 shutil.copytree(self.path, self._unzipdir, dirs_exist_ok=True)
             else:
@@ -800,7 +811,10 @@ class FMUComponent(Component):
                 cls = FMU3Model if self._me else FMU3Slave
                 fmu = cls(guid=md.instantiationToken, unzipDirectory=self._unzipdir,
                           modelIdentifier=ident, instanceName=name)
-                fmu.instantiate(loggingOn=True, logMessage=_make_logger(self._log, fmi3=True))
+                logger = _make_logger(self._log, fmi3=True)
+                self._keep.append(logger)
+                fmu.instantiate(loggingOn=True, logMessage=logger)
+                self._keep.append(fmu.logMessage)
             else:
                 from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackAllocateMemoryTYPE,
                                        fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
@@ -814,7 +828,7 @@ class FMUComponent(Component):
                     addLoggerProxy(byref(cb))  # formats the variadic FMI 2 log message in C
                 except Exception:
                     pass
-                self._callbacks = cb  # keep alive
+                self._keep.append(cb)  # alive until after freeInstance (see _cleanup)
                 cls = FMU2Model if self._me else FMU2Slave
                 fmu = cls(guid=md.guid, unzipDirectory=self._unzipdir, modelIdentifier=ident, instanceName=name)
                 fmu.instantiate(callbacks=cb, loggingOn=True)
@@ -884,6 +898,10 @@ class FMUComponent(Component):
     def _call_failed(self, t: float, status: int, function: str, detail: str = "",
                      h: float | None = None) -> FMUStepError:
         self._failed = True
+        if status == 4 and not self._hung[0]:
+            # fmi2Fatal/fmi3Fatal: FMI allows no further call, freeInstance included (pythonfmu, for one,
+            # releases its Python objects a second time if freed after a fatal error)
+            self._hung[0] = "fatal"
         return FMUStepError(self.name, t, status, function, (detail + self._log_tail()).lstrip(" |"), h)
 
     def _typed_setter(self, typ: str):
@@ -952,7 +970,8 @@ class FMUComponent(Component):
         if fmu is None:
             raise FMUError(f"FMU component '{self.name}': initialize() after terminate()")
         if self._hung[0]:
-            raise FMUError(f"FMU component '{self.name}': the FMU did not return from a step (timeout); "
+            raise FMUError(f"FMU component '{self.name}': the FMU was abandoned after a "
+                           f"{'fatal error' if self._hung[0] == 'fatal' else 'step that did not return (timeout)'}; "
                            f"it cannot be used again")
         if self._initialized:
             try:
@@ -1033,13 +1052,14 @@ class FMUComponent(Component):
             self._step_impl(t, h)
             return
         if self._hung[0]:
-            raise FMUError(f"FMU component '{self.name}': the FMU did not return from an earlier step (timeout); "
+            raise FMUError(f"FMU component '{self.name}': the FMU was abandoned after a "
+                           f"{'fatal error' if self._hung[0] == 'fatal' else 'step that did not return (timeout)'}; "
                            f"it cannot be used again")
         if self._stepper is None:
             self._stepper = _StepThread(self.name)
             weakref.finalize(self, self._stepper.stop)
         if not self._stepper.run(self._step_impl, (t, h), self.step_timeout_s):
-            self._hung[0] = True
+            self._hung[0] = "timeout"
             self._failed = True
             what = "the integration over the step (model exchange)" if self._me else (
                 "fmi3DoStep" if self._is3 else "fmi2DoStep")

@@ -17,18 +17,31 @@ with the port's name, unit and description; outputs declare their direct
 dependencies; numeric parameters become ``fixed`` parameters (start = the
 file's value); the FMU can get/set its state.
 
-Requirements of the exported FMU
---------------------------------
-The FMU runs the component's Python code: it imports ``shevsim`` (and
-NumPy/SciPy as the component needs) from the Python interpreter that executes
-it - the importing process when that is Python (fmpy), otherwise the Python
-the pythonfmu binary finds. **shevsim must be installed (importable) in that
-Python**; a pythonfmu FMU is never self-contained. The class must live in an
-importable module (not ``__main__``).
+Self-contained: what the exported FMU carries
+---------------------------------------------
+The FMU runs the component's Python code in the Python that executes it (the
+importing process when that is Python, e.g. fmpy; otherwise the Python the
+pythonfmu binary finds). It carries in ``resources/``:
+
+* the ``shevsim`` package source (no data folders, no caches) - and pythonfmu/pythonfmu3
+  embed their own runtime modules - so neither needs to be installed;
+* the parameter values and the files named by ``*_file`` parameters.
+
+What it still needs installed are the numeric packages the component imports,
+found at export time by importing the component in a clean interpreter and
+intersecting the imported top-level modules with shevsim's own requirements
+(typically ``numpy``, plus ``scipy`` and ``numba`` for the physics components).
+They are listed in the FMU's description and checked before anything else is
+imported: a missing one prints (to stderr, visible without debug logging) and
+raises ``shevsim FMU ...: missing Python package(s) numba ...`` naming the
+packages, the interpreter and the pip command. The class must live in an
+importable module of the shevsim package or of an installed plugin package
+(not ``__main__``); a plugin's own package is not bundled.
 """
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import re
 import shutil
@@ -65,8 +78,51 @@ def _model_name(cls) -> str:
     return "Shevsim" + (camel or "Component")
 
 
+def _bundle_sources(dest: Path) -> list[Path]:
+    """Copy the shevsim package source (no data, caches or tests) into ``dest``; return the folder.
+
+    (pythonfmu/pythonfmu3 embed their own runtime modules in every FMU they build.)"""
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "_data", "*.so", "*.fmu", "tests")
+    pkg = Path(__file__).resolve().parents[1]
+    shutil.copytree(pkg, dest / "shevsim", ignore=ignore)
+    return [dest / "shevsim"]
+
+
+@functools.lru_cache(maxsize=None)
+def required_packages(module: str) -> list[str]:
+    """Distributions the component module needs at run time (import names, e.g. ``numpy``).
+
+    The module is imported in a clean interpreter; the third-party top-level modules it loads are
+    intersected with shevsim's own declared requirements (so optional imports of those packages,
+    like numba's of PyYAML, are not required)."""
+    import subprocess
+    import sys
+    code = ("import sys, importlib; importlib.import_module('shevsim.fmu.slave'); "
+            f"importlib.import_module({module!r}); "
+            "print(' '.join(sorted({m.split('.')[0] for m in sys.modules})))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    if res.returncode:
+        raise FMUError(f"fmu export: importing {module} failed in a clean interpreter:\n{res.stderr[-2000:]}")
+    loaded = set(res.stdout.split())
+    try:
+        from importlib.metadata import packages_distributions, requires
+        declared = {re.split(r"[<>=!~;\[ ]", r, maxsplit=1)[0].lower() for r in (requires("shevsim") or [])
+                    if "extra ==" not in r}
+        dists = packages_distributions()
+    except Exception:  # no metadata (source checkout not installed): the usual numeric stack
+        declared, dists = {"numpy", "scipy", "numba"}, {}
+    need = set()
+    for top in loaded:
+        for dist in dists.get(top, [top]):
+            if dist.lower() in declared:
+                need.add(top)
+    return sorted(need)
+
+
 def export_component(type_name_or_class: Any, params_path: str | Path | None, out_path: str | Path,
-                     fmi_version: int | str = 2, model_name: str | None = None) -> Path:
+                     fmi_version: int | str = 2, model_name: str | None = None,
+                     extra_requires: tuple[str, ...] = (), step_multiple: int = 1, params: Any = None,
+                     start_values: dict[str, float] | None = None) -> Path:
     """Export a native component as a co-simulation FMU.
 
     Parameters
@@ -81,6 +137,15 @@ def export_component(type_name_or_class: Any, params_path: str | Path | None, ou
         2 -> pythonfmu (FMI 2.0), 3 -> pythonfmu3 (FMI 3.0).
     model_name : str, optional
         Model identifier (default ``Shevsim<Type>``).
+    extra_requires : tuple of str
+        More import names to check for when the FMU is loaded (besides those found).
+    params : Params instance, optional
+        Ready parameters (instead of ``params_path``), e.g. those of a component built from a scenario.
+    start_values : dict, optional
+        ``{input: value}`` held by inputs until set (the FMU's input start values).
+    step_multiple : int
+        The component steps every ``step_multiple``-th ``doStep`` over that many steps (holding its
+        outputs between), as the master's multi-rate ``step_multiple`` (SSP export of a scenario).
 
     Returns
     -------
@@ -95,12 +160,16 @@ def export_component(type_name_or_class: Any, params_path: str | Path | None, ou
         raise FMUError(f"fmu export: {cls.__qualname__} is defined in {module}; the FMU imports the class by "
                        f"module path, so it must live in an importable module")
     target = f"{module}:{cls.__qualname__}"
-    params = load_params(cls.Params, params_path) if cls.Params is not None else None
+    if params is None:
+        params = load_params(cls.Params, params_path) if cls.Params is not None else None
     if params is None and params_path is not None:
         raise ScenarioError(f"{params_path}: component {target} takes no parameters")
     # instantiate once here: a component that cannot even be built fails now, not inside the FMU
     probe = cls("probe", params)
     ports = [v for v in probe.variables() if v.causality in ("input", "output")]
+    bad = [k for k in (start_values or {}) if k not in {v.name for v in ports if v.causality == "input"}]
+    if bad:
+        raise FMUError(f"fmu export: start values for unknown input(s) {bad} of {target}")
     if not ports:
         raise FMUError(f"fmu export: {target} declares no inputs or outputs")
     model = model_name or _model_name(cls)
@@ -124,8 +193,12 @@ def export_component(type_name_or_class: Any, params_path: str | Path | None, ou
                     values[f.name] = _jsonable(v)
         if resource_files:
             extra.append(tmp / "shevsim_data")
+        requires = sorted(set(required_packages(module)) | set(extra_requires))  # (cached per module)
+        if isinstance(step_multiple, bool) or not isinstance(step_multiple, int) or step_multiple < 1:
+            raise FMUError(f"fmu export: step_multiple must be an integer >= 1, got {step_multiple!r}")
         spec = {"component": target, "params": values, "resource_files": resource_files,
-                "params_source": str(params_path) if params_path else None}
+                "params_source": str(params_path) if params_path else None, "requires": requires,
+                "step_multiple": step_multiple, "start": {k: float(v) for k, v in (start_values or {}).items()}}
         (tmp / PARAMS_JSON).write_text(json.dumps(spec, indent=1))
         extra.append(tmp / PARAMS_JSON)
         # the slave module is imported into the executing Python by name: make the name unique
@@ -133,7 +206,7 @@ def export_component(type_name_or_class: Any, params_path: str | Path | None, ou
         import hashlib
         digest = hashlib.sha1(json.dumps([spec, fmi_version, model], sort_keys=True).encode()).hexdigest()[:10]
         script = tmp / f"{model.lower()}_fmi{fmi_version}_{digest}.py"
-        script.write_text(slave_script(target, model, fmi_version))
+        script.write_text(slave_script(target, model, fmi_version, requires))
         # keep the script's folder out of the project files (pythonfmu copies project files
         # into resources/); put them in a sibling folder
         proj = tmp / "project"
@@ -143,5 +216,6 @@ def export_component(type_name_or_class: Any, params_path: str | Path | None, ou
             dest = proj / p.name
             shutil.move(str(p), dest)
             moved.append(dest)
+        moved += _bundle_sources(proj)
         return build_python_fmu(script, out_path, fmi_version=fmi_version, handle_state=True,
                                 project_files=tuple(moved))
