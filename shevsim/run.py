@@ -109,7 +109,7 @@ def check_faults_in_run(scenario: Scenario, t_stop: float) -> None:
                                 f"it would never act")
 
 
-def _fast_runner(scenario: Scenario, engine: str):
+def _fast_runner(scenario: Scenario, engine: str, master=None):
     """(runner, why): the fast path's runner for ``scenario`` or None with the reason."""
     if engine not in ENGINES:
         raise ScenarioError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
@@ -121,7 +121,7 @@ def _fast_runner(scenario: Scenario, engine: str):
         if engine == "fast":
             raise ScenarioError(f"engine 'fast': the fast path is not available ({exc})") from None
         return None, f"no fast path ({exc})"
-    runner, why = runner_for(scenario)
+    runner, why = runner_for(scenario, master)      # reuses the master built by simulate (one build)
     if runner is None and engine == "fast":
         raise ScenarioError(f"engine 'fast': scenario '{scenario.name}' is not eligible for the fast path: {why}")
     return runner, why
@@ -201,7 +201,7 @@ def simulate(scenario: Scenario, progress: bool = False, *, engine: str = "auto"
         x = (t_stop - scenario.t0_s) / scenario.settings.step_s
         check_run_size(int(math.ceil(x)), len(master._signal_names), record_every,
                        allow_large=allow_large, where=where)
-        runner, why = _fast_runner(scenario, engine)
+        runner, why = _fast_runner(scenario, engine, master)
     except BaseException:
         master.terminate()
         raise
