@@ -229,3 +229,15 @@ def test_study_wrapper_takes_a_bundled_scenario_by_name(monkeypatch):
     from shevsim.core.paths import bundled_scenario
     assert seen["argv"] == ["tradeoff", str(bundled_scenario("uac_proxy_mpc")), "--out", "o", "--rates-kwps", "30",
                             "20", "--set", "cycle.repeat=1", "--workers", "0"]
+
+
+def test_quiet_works_for_study_and_calibrate(tmp_path, capsys):
+    from shevsim.cli import main
+    assert main(["-q", "study", "tradeoff", "--synthetic", "--workers", "0", "--out", str(tmp_path / "s"),
+                 "--rates-kwps", "20", "40", "--no-plots"]) == 0
+    assert main(["study", "tradeoff", "--synthetic", "--workers", "0", "--out", str(tmp_path / "t"),
+                 "--rates-kwps", "20", "40", "--no-plots", "-q"]) == 0
+    assert capsys.readouterr().out == ""
+    assert main(["-q", "calibrate", "cell", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "c")]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and "missing.csv" in cap.err
