@@ -229,9 +229,9 @@ def check_out_dir(out_dir: str | Path) -> Path:
         probe = probe.parent
     if not probe.is_dir():
         raise ShevsimError(f"output folder '{out_dir}': '{probe}' is a file, so the folder cannot be created")
-    try:                                 # a real write test (permission bits lie for root and on some mounts)
-        parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=parent, prefix=f".{out_dir.name}.probe-")
+    try:                                 # a real write test (permission bits lie for root and on some mounts),
+        # in the nearest folder that exists: nothing is created before the run
+        fd, tmp = tempfile.mkstemp(dir=probe, prefix=f".{out_dir.name}.probe-")
         os.close(fd)
         os.unlink(tmp)
     except OSError as exc:

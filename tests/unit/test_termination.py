@@ -230,3 +230,10 @@ def test_a_real_interrupt_of_the_command_saves_the_run(tmp_path, sig):
     res = load_result(out)
     assert res.termination.status == "stopped" and "interrupted" in res.termination.reason
     assert 0 < res.time_s[-1] < 1e5 and len(res) > 2
+
+
+def test_bad_input_leaves_no_output_folder_behind(tmp_path):
+    out = tmp_path / "a" / "b" / "o"
+    with pytest.raises(ScenarioError):
+        shevsim.simulate(TWO_BODY, {"body1.mass_kg": -1.0}, out=out)
+    assert list(tmp_path.iterdir()) == []
