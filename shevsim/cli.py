@@ -132,6 +132,9 @@ def _cmd_info(a) -> int:
         if sc.description:
             print(f"  {sc.description}")
         print(m.describe())
+        if m.delayed:                   # a connection that carries the previous step's value
+            print(f"delayed connections ({len(m.delayed)}, previous step's value): "
+                  + ", ".join(str(c) for c in m.delayed))
         if sc.faults:
             print("faults:")
             for f in sc.faults:
@@ -178,6 +181,14 @@ def _cmd_calibrate(rest, quiet: bool) -> int:
 
 
 def _cmd_fmu(a) -> int:
+    if a.fmu_cmd == "export-ssp":       # shevsim.fmu.ssp (issue 16)
+        from .fmu.ssp import export_ssp
+        _say(a, f"wrote {export_ssp(a.scenario, a.output, stop_s=a.stop_s, sets=tuple(a.set or ()))}")
+        return EXIT_OK
+    if a.fmu_cmd == "import-ssp":
+        from .fmu.ssp import import_ssp
+        _say(a, f"wrote {import_ssp(a.ssp, a.output, step_s=a.step_s)}")
+        return EXIT_OK
     from .fmu.export import export_component
     out = export_component(a.type, a.params, a.output, fmi_version=a.fmi_version)
     _say(a, f"wrote {out}")
@@ -244,6 +255,15 @@ def build_parser() -> argparse.ArgumentParser:
     fe.add_argument("--params", help="parameter file")
     fe.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     fe.add_argument("--fmi-version", default="2", choices=["2", "3"], help="FMI version (default 2)")
+    fs = fsub.add_parser("export-ssp", parents=[q], help="export a scenario as an SSP package (FMUs + .ssd)")
+    fs.add_argument("scenario", help="bundled scenario name or scenario TOML")
+    fs.add_argument("-o", "--output", required=True, help="the .ssp file to write")
+    fs.add_argument("--stop-s", type=float, help="stop time of the default experiment (default: the scenario's)")
+    fs.add_argument("--set", action="append", metavar="COMP.PARAM=VALUE", help="parameter override")
+    fi = fsub.add_parser("import-ssp", parents=[q], help="extract an SSP package into a folder with a scenario")
+    fi.add_argument("ssp", help="the .ssp file")
+    fi.add_argument("-o", "--output", required=True, help="folder to write the FMUs and the scenario TOML into")
+    fi.add_argument("--step-s", type=float, help="communication step (default: from the package)")
     return ap
 
 

@@ -4,10 +4,14 @@ Prints the FMI version, model name and generating tool, the interfaces (with
 ``canGetAndSetFMUstate``), the platforms it has binaries for, the default
 experiment, and a table of variables (name, causality, variability, type,
 unit, start, description) followed by the outputs' direct dependencies.
+A last section says what shevsim supports of the FMU and what it does not
+(interfaces, platform binary, array variables and how they become ports,
+integer/Boolean ports, String/Binary inputs/outputs that make it refused).
 Nothing is extracted or instantiated.
 """
 from __future__ import annotations
 
+import zipfile
 from pathlib import Path
 
 from .adapter import _var_unit, read_fmi_version
@@ -90,7 +94,73 @@ def fmu_info(path: str | Path, causalities: tuple[str, ...] | None = None) -> st
             deps = ("all inputs (not declared)" if unk.dependencies is None
                     else ", ".join(d.name for d in unk.dependencies) or "none (state only)")
             lines.append(f"  {unk.variable.name}: {deps}")
+    lines.append("")
+    lines += support_report(md, path, version)
     return "\n".join(lines)
+
+
+def support_report(md, path: Path, version: str) -> list[str]:
+    """What shevsim can and cannot do with this FMU (the ``shevsim support`` section of the info)."""
+    import fmpy
+
+    from .adapter import _PORT_TYPES, element_names, variable_shape
+
+    ok: list[str] = []
+    no: list[str] = []
+    if not (version == "2.0" or version.startswith("3.")):
+        no.append(f"FMI {version}: shevsim imports FMI 2.0 and 3.0 only")
+    cs, me = md.coSimulation, md.modelExchange
+    if cs is not None:
+        ok.append("co-simulation: used by default (doStep, bounded by step_timeout_s)")
+    if me is not None:
+        ok.append("model exchange: " + ("available with interface = \"me\"" if cs is not None else "used")
+                  + " (solver cvode, or BDF/Radau/LSODA/RK45/DOP853; events as fmpy)")
+    if cs is None and me is None:
+        no.append("no co-simulation or model-exchange interface (scheduled execution is not supported)")
+    if getattr(md, "scheduledExecution", None) is not None:
+        no.append("scheduled execution interface: not supported (ignored)")
+    iface = cs or me
+    if iface is not None and not path.is_dir():
+        plat = fmpy.platform_tuple if version.startswith("3.") else fmpy.platform
+        try:
+            with zipfile.ZipFile(path) as zf:
+                have = any(n.startswith(f"binaries/{plat}/{iface.modelIdentifier}.") for n in zf.namelist())
+        except (zipfile.BadZipFile, OSError):
+            have = False
+        (ok if have else no).append(f"binary for this platform ({plat}): {'yes' if have else 'missing'}")
+    ports = 0
+    for v in md.modelVariables:
+        if v.causality not in ("input", "output", "parameter"):
+            continue
+        try:
+            shape = variable_shape(v)
+        except Exception as exc:
+            no.append(f"{v.causality} '{v.name}': {exc}")
+            continue
+        if v.type not in _PORT_TYPES:
+            if v.causality == "parameter":
+                ok.append(f"parameter '{v.name}' ({v.type}): settable with parameters/set, not a port")
+            else:
+                no.append(f"{v.causality} '{v.name}' ({v.type}): {v.type} ports are not supported - the FMU "
+                          f"is refused")
+            continue
+        if shape:
+            names = element_names(v.name, shape)
+            what = "settable elements" if v.causality == "parameter" else "ports"
+            ok.append(f"{v.causality} '{v.name}' (array {'x'.join(map(str, shape))} of {v.type}): "
+                      f"{len(names)} {what} {names[0]} ... {names[-1]}")
+        elif v.type not in ("Real", "Float64") and v.causality != "parameter":
+            ok.append(f"{v.causality} '{v.name}' ({v.type}): carried as a float port")
+        if v.causality != "parameter":
+            ports += max(1, len(element_names(v.name, shape)))
+    can_state = bool(getattr(iface, "canGetAndSetFMUstate", False) or getattr(iface, "canGetAndSetFMUState", False))
+    ok.append(f"save/restore (get/set FMU state): {'yes' if can_state else 'no'}")
+    fatal = any(("refused" in n or "only" in n or "no co-simulation" in n or ": missing" in n) for n in no)
+    status = "NOT usable as is" if fatal else ("usable, with limits" if no else "usable")
+    out = [f"shevsim support ({status}; {ports} ports)"]
+    out += [f"  supported:     {x}" for x in ok]
+    out += [f"  NOT supported: {x}" for x in no]
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:

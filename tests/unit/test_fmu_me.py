@@ -281,3 +281,24 @@ def test_unit_table_conversions():
         class baseUnit:
             kg, m, s, factor, offset = 1, 2, -3, 1000.0, 0.0
     assert conversion("myW", "W", {"myW": _Def}, None) == pytest.approx((1000.0, 0.0))
+
+
+# ------------------------------------------------------------------ shevsim info
+def test_info_says_what_is_supported(statespace, fmu_dir, ball):
+    from shevsim.fmu.info import fmu_info
+    text = fmu_info(statespace)
+    assert "shevsim support (usable; 6 ports)" in text
+    assert "input 'u' (array 3 of Float64): 3 ports u[1] ... u[3]" in text
+    assert "model exchange: used" in text
+    p = build_reference_fmu("Feedthrough", fmu_dir / "feedthrough_info.fmu", 3, interfaces=("cs",))
+    text = fmu_info(p)
+    assert "shevsim support (NOT usable as is" in text
+    assert "NOT supported: input 'String_input' (String)" in text
+
+
+def test_cli_info_lists_delayed_connections(capsys):
+    from shevsim.cli import main
+    assert main(["info", "hd_udds_rule"]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("delayed connections"))
+    assert "bus.motor_power_max_w -> motor.elec_power_max_w" in line
