@@ -262,6 +262,21 @@ def _finish(res: Result, scenario: Scenario, master, wall: float, engine: str, w
 
 
 # --------------------------------------------------------------------------------- judging a run
+def check_trace_options(options: Mapping[str, Any], where: str = "<scenario>") -> None:
+    """Refuse (ScenarioError) trace-check options out of range: ``trace_distance_tolerance`` in [0, 1],
+    ``trace_speed_tolerance_kmh`` and ``trace_speed_window_s`` >= 0, ``trace_allow_miss`` true/false."""
+    ranges = {"trace_distance_tolerance": (0.0, 1.0), "trace_speed_tolerance_kmh": (0.0, math.inf),
+              "trace_speed_window_s": (0.0, math.inf)}
+    for key, (lo, hi) in ranges.items():
+        if key in options:
+            v = options[key]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi) or math.isnan(v):
+                raise ScenarioError(f"{where}: [metrics] {key} = {v!r}: valid range [{lo:g}, {hi:g}]")
+    if "trace_allow_miss" in options and not isinstance(options["trace_allow_miss"], bool):
+        raise ScenarioError(f"{where}: [metrics] trace_allow_miss = {options['trace_allow_miss']!r}: "
+                            f"expected true/false")
+
+
 def trace_check(res: Result, options: Mapping[str, Any] | None = None) -> Termination | None:
     """A 'degraded' termination when a completed run missed its speed trace beyond tolerance
     (distance shortfall or a sustained speed error), else None. Needs ``vehicle.speed_mps`` and
@@ -340,6 +355,7 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
         sc.set("scenario.stop_s", stop_s, "stop_s=")
     if record is not None:
         sc.set("record.signals", list(record), "record=")
+    check_trace_options(sc.metrics, str(sc.path or "<scenario>"))
     out_dir = None
     if save is None:
         save = out is not None

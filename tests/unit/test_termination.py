@@ -237,3 +237,10 @@ def test_bad_input_leaves_no_output_folder_behind(tmp_path):
     with pytest.raises(ScenarioError):
         shevsim.simulate(TWO_BODY, {"body1.mass_kg": -1.0}, out=out)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("key, value", [("trace_distance_tolerance", -0.1), ("trace_distance_tolerance", 1.5),
+                                        ("trace_speed_window_s", -1.0), ("trace_allow_miss", 1)])
+def test_trace_options_out_of_range_are_refused(key, value):
+    with pytest.raises(ScenarioError, match=rf"\[metrics\] {key} = "):
+        shevsim.simulate(TWO_BODY, {f"metrics.{key}": value}, stop_s=0.1)
