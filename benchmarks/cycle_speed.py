@@ -15,7 +15,9 @@ Prints
   mean, median and p99 [us];
 * the same run with the supervisor on the readable cvxpy reference path
   (``--set supervisor.solver="cvxpy"``), measured in the same process, and the wall-time ratio;
-* a cProfile table (top 15 functions by own time) of one fast run.
+* the compiled whole-vehicle loop (``shevsim.fast``) on the same scenario: wall times, the ratio to the
+  master and whether every recorded signal equals the master's;
+* a cProfile table (top 15 functions by own time) of one master run.
 
     python benchmarks/cycle_speed.py [--runs 3] [--no-cvxpy] [--no-profile] [--cpu N]
 
@@ -112,11 +114,31 @@ def main(argv=None) -> int:
     best, med = min(walls), statistics.median(walls)
     print(f"simulated {sim_s:.0f} s in {n_steps} steps; {len(res.signals)} signals recorded; "
           f"MPC fallbacks {fb:.0f}")
-    print(f"fast path (daqp): wall best {best:.3f} s, median {med:.3f} s over {args.runs} runs "
+    print(f"Python master (MPC daqp): wall best {best:.3f} s, median {med:.3f} s over {args.runs} runs "
           f"(CPU best {min(cpus):.3f} s); {sim_s / best:.0f} simulated s per wall s; "
           f"{best / n_steps * 1e6:.1f} us per step")
     print(f"supervisor call (state -> QP -> first move), {len(calls)} calls: mean {statistics.fmean(calls):.1f} us, "
           f"median {statistics.median(calls):.1f} us, p99 {_p99(calls):.1f} us")
+
+    # the compiled whole-vehicle loop (shevsim.fast) on the same scenario, same process
+    from shevsim.fast import runner_for
+    run, why = runner_for(sc)
+    if run is None:
+        print(f"compiled whole-vehicle loop: not eligible ({why})")
+    else:
+        stop = stop_time(sc, run.master)
+        t0 = time.perf_counter()
+        run(stop)                        # loads (or compiles) the loop
+        t_first = time.perf_counter() - t0
+        fw = []
+        for _ in range(max(args.runs, 5)):
+            t0 = time.perf_counter()
+            rf = run(stop)
+            fw.append(time.perf_counter() - t0)
+        same = all(bool((rf[k] == res[k]).all()) for k in res.signals)
+        print(f"compiled whole-vehicle loop (shevsim.fast): wall best {min(fw):.3f} s, median {statistics.median(fw):.3f} s "
+              f"over {len(fw)} runs ({min(fw) / n_steps * 1e6:.1f} us per step; first run {t_first:.2f} s); "
+              f"master / loop {best / min(fw):.1f}x; every signal equal to the master's: {same}")
 
     # the same call in CPU time (thread_time: not inflated by waiting for the core on a shared machine),
     # one extra run with MPCSupervisor.step wrapped

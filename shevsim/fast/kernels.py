@@ -24,7 +24,6 @@ from __future__ import annotations
 import inspect
 import math
 
-import numpy as np
 from numba import njit
 
 from shevsim.battery.model import (S_AH, S_CLAMPS, S_ECHEM, S_ELOSS, S_SOC, Y_I, Y_Q, Y_TCORE, Y_TMEAN, Y_TSURF,
