@@ -242,6 +242,11 @@ class FastRunner:
         The initialised Python master the template was taken from (not stepped).
     last_wall_s : float
         Wall time of the last run's compiled loop [s].
+
+    Notes
+    -----
+    A runner reuses its arrays from run to run: call it from one thread at a time (Dask workers run one
+    task per process here); build one runner per thread otherwise.
     """
 
     def __init__(self, scenario, master):
