@@ -189,7 +189,10 @@ def _bad_number(v: Any, r: Range) -> str | None:
     """Why number ``v`` is not valid for ``r`` (None when it is)."""
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         return None
-    v = float(v)
+    try:
+        v = float(v)
+    except OverflowError:
+        return "too large for a number"
     if v != v:
         return "NaN is not a valid value"
     if r.ok(v):
@@ -262,7 +265,10 @@ def _coerce(value: Any, typ: Any, where: str) -> Any:
     if typ is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ScenarioError(f"{where}: expected a number, got {value!r}")
-        return float(value)
+        try:
+            return float(value)
+        except OverflowError:
+            raise ScenarioError(f"{where}: {value!r} is too large for a number") from None
     if typ is int:
         if isinstance(value, bool) or not isinstance(value, int):
             if isinstance(value, float) and value.is_integer():

@@ -268,9 +268,12 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
         v = d.get(k, default)
         if v is None:
             return None
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or (typ is int and not float(v).is_integer()):
-            raise ScenarioError(f"{w}: field '{k}' must be {'an integer' if typ is int else 'a number'}, got {v!r}")
-        return typ(v)
+        try:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or (typ is int and not float(v).is_integer()):
+                raise ScenarioError(f"{w}: field '{k}' must be {'an integer' if typ is int else 'a number'}, got {v!r}")
+            return typ(v)
+        except OverflowError:
+            raise ScenarioError(f"{w}: field '{k}' = {v!r} is too large for a number") from None
 
     settings = MasterSettings(step_s=num(sc, "step_s", 0.1, f"{where}: [scenario]"),
                               method=str(sc.get("method", "gauss-seidel")))

@@ -38,7 +38,7 @@ def _own_error_or_value(fn, *args, **kw):
         return None
 
 
-numbers = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**20, 10**20))
+numbers = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**20, 10**20), st.just(10**400))
 scalars = st.one_of(numbers, st.booleans(), st.text(max_size=12), st.none())
 values = st.one_of(scalars, st.lists(scalars, max_size=4), st.dictionaries(st.text(max_size=5), scalars, max_size=2))
 
