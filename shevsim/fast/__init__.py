@@ -16,7 +16,7 @@ compiled loop from ``t0``.  So one runner serves many runs (a study's evaluation
 the loop alone.
 
 A scenario the path cannot take is declined with the reason: FMUs or component types without a
-kernel, the Jacobi method, a vehicle in speed mode, the 30-node
+kernel, a vehicle in speed mode, the 30-node
 battery thermal model, an MPC solver other than DAQP (or a DAQP build whose C structs are not the
 checked ones), uncompiled components, or ports that differ from the kernels' (a component changed
 since).
@@ -258,6 +258,7 @@ class FastRunner:
         self.scenario = scenario
         self.master = m = master
         self.h = float(m.settings.step_s)
+        self._jacobi = m.settings.method == "jacobi"
         self.t0 = float(scenario.t0_s)
         m.initialize(self.t0)
         order = list(m.order)
@@ -412,7 +413,7 @@ class FastRunner:
             while True:
                 run_loop(n - k0, k0, self.h, self.t0, self._typ, self._mult, self._ibase, self._obase, self._lptr,
                          self._ldst, self._lsrc, sig, rec[k0:], nsig, out, self._inst, self._f_t, self._f_idx,
-                         self._f_val, forced, fstate, data["cycle"], data["driver"], data["vehicle"], data["motor"],
+                         self._f_val, forced, fstate, self._jacobi, data["cycle"], data["driver"], data["vehicle"], data["motor"],
                          data["bus"], data["engine_generator"], data["battery"], data["bms"], data["rule_supervisor"],
                          data["mpc_supervisor"], data["power_limits"])
                 if out[0] == ERR_NONFINITE_OUTPUT:
@@ -494,8 +495,6 @@ def _static_reason(scenario) -> str:
     from numba.core import config as _nb_config
     if _nb_config.DISABLE_JIT:
         return "NUMBA_DISABLE_JIT is set (the fast path is compiled code)"
-    if scenario.settings.method != "gauss-seidel":
-        return f"method '{scenario.settings.method}' (the fast path steps Gauss-Seidel only)"
     seen = {}
     for spec in scenario.components:
         if spec.type == "fmu":

@@ -5,9 +5,10 @@ float array ``sig`` (outputs first, in the master's recording order, then inputs
 connections as index pairs::
 
     for k in range(n):                              # communication steps, t = t0 + k h
+        force the inputs of faults due at t
         for j in execution order:
             if k % multiple[j] == 0:
-                sig[dst] = sig[src] for the connections into component j
+                sig[dst] = sig[src] for the connections into component j   (Jacobi: all before any step)
                 step component j over multiple[j] * h      (kernels.py, by type code)
         record sig[:n_signals] as row k + 1; stop at the first non-finite value
 
@@ -37,7 +38,7 @@ _DEPENDS = ("fast/loop.py", "fast/kernels.py", "fast/daqp_nb.py", "battery/model
 
 @njit(cache=True)
 def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, nsig, out, inst,
-             f_t, f_idx, f_val, forced, fstate, cyc, drv, veh, mot, bus, eng, bat, bms, rule, mpc, lim):
+             f_t, f_idx, f_val, forced, fstate, jacobi, cyc, drv, veh, mot, bus, eng, bat, bms, rule, mpc, lim):
     """Step ``n`` communication steps from step index ``k0``; rows ``1..n`` of ``rec`` are recorded.
 
     ``out`` receives ``[status, step index, position in the order]``; status 0 = completed, otherwise
@@ -68,12 +69,20 @@ def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, 
             forced[f_idx[fd]] = 1
             fd += 1
         fstate[0] = fd
+        if jacobi:
+            # Jacobi: every due component reads the outputs at t before any of them steps
+            for j in range(ncomp):
+                if k % mult[j] == 0:
+                    for q in range(lptr[j], lptr[j + 1]):
+                        if forced[ldst[q]] == 0:
+                            sig[ldst[q]] = sig[lsrc[q]]
         for j in range(ncomp):
             m = mult[j]
             if m == 1 or k % m == 0:
-                for q in range(lptr[j], lptr[j + 1]):
-                    if forced[ldst[q]] == 0:
-                        sig[ldst[q]] = sig[lsrc[q]]
+                if not jacobi:
+                    for q in range(lptr[j], lptr[j + 1]):
+                        if forced[ldst[q]] == 0:
+                            sig[ldst[q]] = sig[lsrc[q]]
                 hk = m * h
                 ty = typ[j]
                 ib = ibase[j]
