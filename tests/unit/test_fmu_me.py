@@ -302,3 +302,18 @@ def test_cli_info_lists_delayed_connections(capsys):
     out = capsys.readouterr().out
     line = next(x for x in out.splitlines() if x.startswith("delayed connections"))
     assert "bus.motor_power_max_w -> motor.elec_power_max_w" in line
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_model_exchange_time_events(fmu_dir, fmi_version):
+    # Reference-FMUs Stair: counter = 1 at t = 0, +1 at every whole second (time events), and the FMU
+    # requests termination when it reaches 10 (t = 9 s)
+    p = build_reference_fmu("Stair", fmu_dir / f"stair{fmi_version}.fmu", fmi_version, interfaces=("me",))
+    for solver in ("cvode", "RK45"):
+        comp = FMUComponent("stair", p, solver=solver)
+        rows = run_steps(comp, 34, 0.25)                  # to 8.5 s
+        assert [r["counter"] for r in rows] == [1 + math.floor((k + 1) * 0.25 + 1e-9) for k in range(34)]
+        with pytest.raises(Exception, match="requested terminateSimulation"):
+            for k in range(34, 40):
+                comp.do_step(k * 0.25, 0.25)
+        comp.terminate()
