@@ -189,6 +189,8 @@ def import_ssp(ssp_path: str | Path, out_dir: str | Path, step_s: float | None =
     """
     ssp_path = Path(ssp_path)
     out_dir = Path(out_dir)
+    if not ssp_path.is_file():
+        raise ScenarioError(f"{ssp_path}: SSP file not found")
     if not zipfile.is_zipfile(ssp_path):
         raise ScenarioError(f"{ssp_path}: not an SSP package (not a ZIP archive)")
     with zipfile.ZipFile(ssp_path) as zf:

@@ -134,6 +134,8 @@ def test_import_rejects_non_ssp(tmp_path):
     bad.write_text("not a zip")
     with pytest.raises(ScenarioError, match="not an SSP package"):
         import_ssp(bad, tmp_path / "out")
+    with pytest.raises(ScenarioError, match="SSP file not found"):
+        import_ssp(tmp_path / "nowhere.ssp", tmp_path / "out")
 
 
 @pytest.mark.slow
