@@ -176,13 +176,17 @@ def _toml_value(v: Any) -> str:
     return _toml_str(str(v))
 
 
+_HEADER = "# imported from an SSP package by shevsim.fmu.ssp.import_ssp"
+
+
 def import_ssp(ssp_path: str | Path, out_dir: str | Path, step_s: float | None = None) -> Path:
     """Extract an SSP into ``out_dir`` and write ``out_dir/<system>.toml``, a scenario running it.
 
     Parameters
     ----------
     ssp_path : the ``.ssp`` file
-    out_dir : folder to create (must not hold files other than a previous import's)
+    out_dir : folder to write into; files of the names it writes are replaced only when they come
+        from an earlier import (else a ScenarioError: nothing a user wrote is overwritten)
     step_s : communication step; default: the shevsim annotation's, else 1/100 of the stop time
 
     Returns the scenario path. Errors name the SSP file and the element.
@@ -240,13 +244,21 @@ def import_ssp(ssp_path: str | Path, out_dir: str | Path, step_s: float | None =
         t0 = float(de.get("startTime", 0.0)) if de is not None else 0.0
         stop = float(de.get("stopTime")) if de is not None and de.get("stopTime") else None
         out_dir.mkdir(parents=True, exist_ok=True)
+        # never overwrite what a user wrote: files of the same names are replaced only when the
+        # folder holds a previous import (its scenario file starts with our header)
+        scen_file = out_dir / f"{sysname}.toml"
+        ours = scen_file.is_file() and scen_file.read_text(errors="replace").startswith(_HEADER)
+        clash = [f.name for f in [scen_file] + [out_dir / f"{n}.fmu" for n, _, _ in comps] if f.exists()]
+        if clash and not ours:
+            raise ScenarioError(f"{ssp_path}: {out_dir} already holds {', '.join(clash)} (not from an earlier "
+                                f"import); choose another folder")
         for name, source, _ in comps:
             (out_dir / f"{name}.fmu").write_bytes(zf.read(source))
     step = step_s or meta.get("step_s") or ((stop - t0) / 100.0 if stop else None)
     if not step:
         raise ScenarioError(f"{ssp_path}: no communication step (no shevsim annotation and no stop time): "
                             f"give step_s")
-    lines = ["# imported from an SSP package by shevsim.fmu.ssp.import_ssp", "[scenario]",
+    lines = [_HEADER, "[scenario]",
              f"name = {_toml_str(sysname)}", f"step_s = {step!r}",
              f"method = {_toml_str(meta.get('method', 'jacobi'))}", f"t0_s = {t0!r}"]
     if stop is not None:

@@ -116,7 +116,15 @@ def test_fmpy_ssp_run_matches_ours(short):
 
 
 def test_imported_ssp_equals_native_scenario(short, tmp_path):
+    from shevsim.core.errors import ScenarioError
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "battery.fmu").write_text("a user's file")
+    with pytest.raises(ScenarioError, match="already holds battery.fmu"):
+        import_ssp(short[0], user)
+    assert (user / "battery.fmu").read_text() == "a user's file"
     scen = import_ssp(short[0], tmp_path / "imported")
+    assert import_ssp(short[0], tmp_path / "imported") == scen       # re-import into its own folder
     si = load_scenario(scen)
     si.stop_s = 30.0
     sn = load_scenario(_scenario_path())
