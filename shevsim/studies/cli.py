@@ -38,7 +38,7 @@ def _common(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--fe-metric", default=None,
                     help="fuel-economy metric key (default fuel_economy_dsoc_corrected_kmpl; the seed's A.1 "
                          "definition is fuel_economy_soc_sustained_kmpl, which needs SOC-sustained windows)")
-    ap.add_argument("--soot-metric", default=None, help="soot metric key (default soot_g_per_km)")
+    ap.add_argument("--soot-metric", default=None, help="soot metric key (default soot_dsoc_corrected_g_per_km, the fuel economy's basis)")
     ap.add_argument("--no-plots", action="store_true")
     ap.add_argument("--quiet", action="store_true", help="no progress bars")
 
