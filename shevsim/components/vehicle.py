@@ -43,7 +43,7 @@ from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
 from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.vehicle import G_MPS2, grade_total_rad, speed_follow_step, vehicle_force_step
+from shevsim.powertrain.vehicle import G_MPS2, grade_total_rad, vehicle_force_step, vehicle_speed_mode_step
 
 INPUT_MODES = ("force", "speed")
 
@@ -176,19 +176,6 @@ class Vehicle(Component):
             y[k] = 0.0
         y["kinetic_energy_j"] = 0.5 * self._m * self.v * self.v
 
-    def _step_speed(self, t: float, h: float):
-        """Speed mode: follow ``speed_ref_mps`` (:func:`~shevsim.powertrain.vehicle.speed_follow_step`, the
-        calibration's step too); book the works; output the force for the next step."""
-        u = self.u
-        vr, ar, th_in = u["speed_ref_mps"], u["accel_ref_mps2"], u["grade_rad"]
-        if vr != vr or ar != ar or th_in != th_in:
-            raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
-                                  f"(speed_ref_mps={vr}, accel_ref_mps2={ar}, grade_rad={th_in})")
-        v1, self.dist, self.th, f_req, dist, wp, wr, wa, wg = speed_follow_step(
-            self.v, self.th, self.dist, vr, ar, th_in, h, self._kd, self._kg, self._m, self._c, self._fr, self._g)
-        self.y["force_req_n"] = f_req
-        return v1, dist, wp, 0.0, wr, wa, wg
-
     def do_step(self, t: float, h: float) -> None:
         v0 = self.v
         y = self.y
@@ -211,19 +198,22 @@ class Vehicle(Component):
             y["aero_energy_j"] = e[3]
             y["grade_energy_j"] = e[4]
             return
-        v1, dist, wp, wb, wr, wa, wg = self._step_speed(t, h)
+        # speed mode: follow speed_ref_mps (speed_follow_step, the calibration's step too), book the works,
+        # output the force for the next step
+        u = self.u
+        vr, ar, th_in = u["speed_ref_mps"], u["accel_ref_mps2"], u["grade_rad"]
+        if vr != vr or ar != ar or th_in != th_in:
+            raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
+                                  f"(speed_ref_mps={vr}, accel_ref_mps2={ar}, grade_rad={th_in})")
+        (v1, y["accel_mps2"], self.dist, self.th, y["force_req_n"], e[0], e[1], e[2], e[3], e[4],
+         y["kinetic_energy_j"]) = vehicle_speed_mode_step(
+            v0, self.th, self.dist, e[0], e[1], e[2], e[3], e[4], vr, ar, th_in, h, self._kd, self._kg, self._m,
+            self._c, self._fr, self._g)
         self.v = v1
-        e[0] += wp
-        e[1] += wb
-        e[2] += wr
-        e[3] += wa
-        e[4] += wg
         y["speed_mps"] = v1
-        y["accel_mps2"] = (v1 - v0) / h
         y["distance_m"] = self.dist
         y["traction_energy_j"] = e[0]
         y["brake_energy_j"] = e[1]
         y["rolling_energy_j"] = e[2]
         y["aero_energy_j"] = e[3]
         y["grade_energy_j"] = e[4]
-        y["kinetic_energy_j"] = 0.5 * self._m * v1 * v1

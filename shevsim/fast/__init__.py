@@ -16,8 +16,7 @@ compiled loop from ``t0``.  So one runner serves many runs (a study's evaluation
 the loop alone.
 
 A scenario the path cannot take is declined with the reason: FMUs or component types without a
-kernel, a vehicle in speed mode, the 30-node
-battery thermal model, an MPC solver other than DAQP (or a DAQP build whose C structs are not the
+kernel, the 30-node battery thermal model, an MPC solver other than DAQP (or a DAQP build whose C structs are not the
 checked ones), uncompiled components, or ports that differ from the kernels' (a component changed
 since).
 
@@ -38,7 +37,13 @@ import numpy as np
 __all__ = ["runner_for", "FastRunner", "SUPPORTED_TYPES"]
 
 SUPPORTED_TYPES = ("cycle", "driver", "vehicle", "motor", "bus", "engine_generator", "battery", "bms",
-                   "rule_supervisor", "mpc_supervisor", "power_limits")
+                   "rule_supervisor", "mpc_supervisor", "power_limits", "profile")
+#: the kernels: one per type, the vehicle's speed mode its own
+KINDS = SUPPORTED_TYPES + ("vehicle_speed",)
+
+
+def _kind(c) -> str:
+    return "vehicle_speed" if c.TYPE == "vehicle" and getattr(c, "_speed", False) else c.TYPE
 
 # the ports each kernel reads/writes, in the components' declaration order (checked at build time)
 def _engine_floor() -> tuple:
@@ -80,6 +85,10 @@ _PORTS = {
                         "battery_slack_w", "soc_slack_pct")),
     "power_limits": (("motor_power_w", "gen_power_w", "aux_power_w", "battery_power_max_w", "battery_power_min_w"),
                      ("motor_power_max_w", "motor_power_min_w", "gen_power_max_w", "gen_power_min_w")),
+    "vehicle_speed": (("speed_ref_mps", "accel_ref_mps2", "grade_rad"),
+                      ("force_req_n", "speed_mps", "accel_mps2", "distance_m", "traction_energy_j", "aero_energy_j",
+                       "rolling_energy_j", "brake_energy_j", "grade_energy_j", "kinetic_energy_j")),
+    "profile": ((), ("current_a", "power_w", "speed_mps", "t_ambient_c", "h_conv_w_m2k")),
 }
 
 
@@ -104,9 +113,24 @@ def _pack_driver(c):
                p.force_prop_max_n), _f(c.integ)), (1,)
 
 
+def _pack_vehicle_speed(c):
+    return (_f(c._m, c._c, c._fr, c._g), np.ascontiguousarray(c._kd, dtype=np.float64),
+            np.ascontiguousarray(c._kg, dtype=np.float64), _f(c.v, c.dist, c.th, *c.e)), (3,)
+
+
+def _pack_profile(c):
+    from shevsim.components.profile import _PORTS as ports
+    ts = np.array(c._t, dtype=np.float64)
+    cols = np.zeros((len(ports), ts.size))
+    has = np.zeros(len(ports))
+    for q, name in enumerate(ports):
+        if name in c._cols:
+            cols[q] = c._cols[name]
+            has[q] = 1.0
+    return (ts, cols, has), ()
+
+
 def _pack_vehicle(c):
-    if c._speed:
-        raise Declined(f"component '{c.name}': vehicle input_mode 'speed' has no fast-path kernel")
     return (_f(c._m, c._c, c._fr, c._g, 1.0 if c._knots else 0.0), np.ascontiguousarray(c._kd, dtype=np.float64),
             np.ascontiguousarray(c._kg, dtype=np.float64), _f(c.v, c.dist, *c.e)), (3,)
 
@@ -213,7 +237,7 @@ def _pack_limits(c):
     return (_f(c._aux_w, 1.0 if c.params.enforce_battery_limits else 0.0),), ()
 
 
-_PACK = {"power_limits": _pack_limits, "cycle": _pack_cycle, "driver": _pack_driver, "vehicle": _pack_vehicle, "motor": _pack_motor,
+_PACK = {"vehicle_speed": _pack_vehicle_speed, "profile": _pack_profile, "power_limits": _pack_limits, "cycle": _pack_cycle, "driver": _pack_driver, "vehicle": _pack_vehicle, "motor": _pack_motor,
          "bus": _pack_bus, "engine_generator": _pack_engine, "battery": _pack_battery,
          "rule_supervisor": _pack_rule, "mpc_supervisor": _pack_mpc}
 
@@ -225,10 +249,14 @@ def _dummies() -> dict:
     never stepped, but it keeps one compiled signature for every scenario)."""
     if not _DUMMY:
         from shevsim.components import get_component_class
-        for typ in SUPPORTED_TYPES:
-            comp = get_component_class(typ, "fast path")(typ)
+        for kind in KINDS:
+            if kind == "vehicle_speed":
+                from shevsim.components.vehicle import Vehicle, VehicleParams
+                comp = Vehicle(kind, VehicleParams(input_mode="speed"))
+            else:
+                comp = get_component_class(kind, "fast path")(kind)
             comp.initialize(0.0)
-            _DUMMY[typ] = (_pack_bms(comp, 0.1) if typ == "bms" else _PACK[typ](comp))[0]
+            _DUMMY[kind] = (_pack_bms(comp, 0.1) if kind == "bms" else _PACK[kind](comp))[0]
     return _DUMMY
 
 
@@ -251,10 +279,11 @@ class FastRunner:
 
     def __init__(self, scenario, master):
         from .kernels import (T_BATTERY, T_BMS, T_BUS, T_CYCLE, T_DRIVER, T_ENGINE, T_LIMITS, T_MOTOR, T_MPC,
-                              T_RULE, T_VEHICLE)
+                              T_PROFILE, T_RULE, T_VEHICLE, T_VEHICLE_SPEED)
         codes = {"cycle": T_CYCLE, "driver": T_DRIVER, "vehicle": T_VEHICLE, "motor": T_MOTOR, "bus": T_BUS,
                  "engine_generator": T_ENGINE, "battery": T_BATTERY, "bms": T_BMS, "rule_supervisor": T_RULE,
-                 "mpc_supervisor": T_MPC, "power_limits": T_LIMITS}
+                 "mpc_supervisor": T_MPC, "power_limits": T_LIMITS, "vehicle_speed": T_VEHICLE_SPEED,
+                 "profile": T_PROFILE}
         self.scenario = scenario
         self.master = m = master
         self.h = float(m.settings.step_s)
@@ -263,7 +292,7 @@ class FastRunner:
         m.initialize(self.t0)
         order = list(m.order)
         comps = [m.components[n] for n in order]
-        types = {n: m.components[n].TYPE for n in order}
+        types = {n: _kind(m.components[n]) for n in order}
         # port layout: outputs in the master's recording order, then inputs
         out_idx, in_idx = {}, {}
         obase, ibase = [], []
@@ -321,8 +350,8 @@ class FastRunner:
         # type (the instances in execution order; a default component's data for a type the scenario lacks)
         from numba import typed
         dummies = _dummies()
-        self._data = {typ: [] for typ in SUPPORTED_TYPES}
-        self._mut = {typ: () for typ in SUPPORTED_TYPES}
+        self._data = {typ: [] for typ in KINDS}
+        self._mut = {typ: () for typ in KINDS}
         self._batteries = []               # (instance, component, step multiple, noise, rng)
         for n, c in zip(order, comps):
             typ = types[n]
@@ -337,7 +366,7 @@ class FastRunner:
             self._data[typ].append(data)
             self._mut[typ] = mut
         self._live = {}
-        for typ in SUPPORTED_TYPES:
+        for typ in KINDS:
             if not self._data[typ]:
                 self._live[typ] = typed.List([dummies[typ]])
             else:
@@ -375,7 +404,7 @@ class FastRunner:
     def _reset_live(self, n: int) -> None:
         """Bring the loop's data back to the template (in place) and give each battery its noise for ``n``
         steps."""
-        for typ in SUPPORTED_TYPES:
+        for typ in KINDS:
             tmpl = self._data[typ]
             live = self._live[typ]
             for i in range(len(tmpl)):
@@ -415,7 +444,7 @@ class FastRunner:
                          self._ldst, self._lsrc, sig, rec[k0:], nsig, out, self._inst, self._f_t, self._f_idx,
                          self._f_val, forced, fstate, self._jacobi, data["cycle"], data["driver"], data["vehicle"], data["motor"],
                          data["bus"], data["engine_generator"], data["battery"], data["bms"], data["rule_supervisor"],
-                         data["mpc_supervisor"], data["power_limits"])
+                         data["mpc_supervisor"], data["power_limits"], data["vehicle_speed"], data["profile"])
                 if out[0] == ERR_NONFINITE_OUTPUT:
                     row = int(out[1])
                     bad = [j for j in range(nsig) if not math.isfinite(rec[row, j])]
@@ -508,10 +537,10 @@ def _component_reason(master) -> str:
     from shevsim.components import get_component_class
     for n, c in master.components.items():
         typ = getattr(c, "TYPE", None)
-        if typ not in _PORTS or type(c) is not get_component_class(typ, "fast path"):
+        if typ not in SUPPORTED_TYPES or type(c) is not get_component_class(typ, "fast path"):
             return f"component '{n}' ({type(c).__name__}) is not the native '{typ}' class"
         ins = tuple(v.name for v in c.variables() if v.causality == "input")
         outs = tuple(v.name for v in c.variables() if v.causality == "output")
-        if (ins, outs) != _PORTS[typ]:
+        if (ins, outs) != _PORTS[_kind(c)]:
             return f"component '{n}': its ports differ from the fast-path kernel's for type '{typ}'"
     return ""

@@ -35,7 +35,7 @@ from shevsim.bms.thermal_estimators import dkf_step, jekf_step, kf_step
 from shevsim.core.lookup import _t1_value
 from shevsim.powertrain.engine import step as engine_step
 from shevsim.powertrain.motor import bus_aux_w, bus_balance, motor_component_step
-from shevsim.powertrain.vehicle import vehicle_force_step
+from shevsim.powertrain.vehicle import vehicle_force_step, vehicle_speed_mode_step
 from shevsim.components.cycle import cycle_sample
 from shevsim.powertrain.driver import driver_step
 from shevsim.supervisor.mpc import mpc_move
@@ -44,7 +44,8 @@ from shevsim.supervisor.rule_based import rule_command
 from . import daqp_nb
 
 # component type codes of the loop
-T_CYCLE, T_DRIVER, T_VEHICLE, T_MOTOR, T_BUS, T_ENGINE, T_BATTERY, T_BMS, T_RULE, T_MPC, T_LIMITS = range(11)
+(T_CYCLE, T_DRIVER, T_VEHICLE, T_MOTOR, T_BUS, T_ENGINE, T_BATTERY, T_BMS, T_RULE, T_MPC, T_LIMITS, T_VEHICLE_SPEED,
+ T_PROFILE) = range(13)
 
 ERR_NAN_INPUT, ERR_SOC_RANGE, ERR_ENGINE_NONFINITE, ERR_DEKF, ERR_THERMAL_INPUT, ERR_SAMPLE_TIME, \
     ERR_BATTERY_INPUT, ERR_NONFINITE_OUTPUT = range(1, 9)
@@ -170,6 +171,55 @@ def vehicle_kernel(data, sig, ib, ob, t, h):
     sig[ob + 6] = e1            # brake
     sig[ob + 7] = e4            # grade
     sig[ob + 8] = ke
+    return 0
+
+
+@njit(cache=True)
+def vehicle_speed_kernel(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.vehicle.Vehicle.do_step` in speed mode
+    (:func:`~shevsim.powertrain.vehicle.vehicle_speed_mode_step`); ``x = [v, dist, grade, works (5)]``."""
+    p, kd, kg, x = data
+    vr = sig[ib]
+    ar = sig[ib + 1]
+    th = sig[ib + 2]
+    if vr != vr or ar != ar or th != th:
+        return ERR_NAN_INPUT
+    v1, acc, dist, th1, f_req, e0, e1, e2, e3, e4, ke = vehicle_speed_mode_step(
+        x[0], x[2], x[1], x[3], x[4], x[5], x[6], x[7], vr, ar, th, h, kd, kg, p[0], p[1], p[2], p[3])
+    x[0] = v1
+    x[1] = dist
+    x[2] = th1
+    x[3] = e0
+    x[4] = e1
+    x[5] = e2
+    x[6] = e3
+    x[7] = e4
+    sig[ob] = f_req
+    sig[ob + 1] = v1
+    sig[ob + 2] = acc
+    sig[ob + 3] = dist
+    sig[ob + 4] = e0            # traction
+    sig[ob + 5] = e3            # aero
+    sig[ob + 6] = e2            # rolling
+    sig[ob + 7] = e1            # brake
+    sig[ob + 8] = e4            # grade
+    sig[ob + 9] = ke
+    return 0
+
+
+@njit(cache=True)
+def profile_kernel(data, sig, ib, ob, t, h):
+    """:meth:`shevsim.components.profile.ProfileSource.do_step`: the last sample at or before ``t + h``
+    (tolerance 1e-9 of the time) for every port with a column (``has``); the others hold."""
+    ts, cols, has = data
+    te = t + h
+    tol = 1e-9 * pmax(1.0, abs(te))
+    k = bisect_right(ts, te + tol) - 1
+    if k < 0:
+        k = 0
+    for q in range(has.shape[0]):
+        if has[q] > 0.5:
+            sig[ob + q] = cols[q, k]
     return 0
 
 

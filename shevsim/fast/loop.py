@@ -38,7 +38,8 @@ _DEPENDS = ("fast/loop.py", "fast/kernels.py", "fast/daqp_nb.py", "battery/model
 
 @njit(cache=True)
 def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, nsig, out, inst,
-             f_t, f_idx, f_val, forced, fstate, jacobi, cyc, drv, veh, mot, bus, eng, bat, bms, rule, mpc, lim):
+             f_t, f_idx, f_val, forced, fstate, jacobi, cyc, drv, veh, mot, bus, eng, bat, bms, rule, mpc, lim,
+             vsp, prof):
     """Step ``n`` communication steps from step index ``k0``; rows ``1..n`` of ``rec`` are recorded.
 
     ``out`` receives ``[status, step index, position in the order]``; status 0 = completed, otherwise
@@ -59,6 +60,8 @@ def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, 
     rule0 = rule[0]
     mpc0 = mpc[0]
     lim0 = lim[0]
+    vsp0 = vsp[0]
+    prof0 = prof[0]
     for s in range(n):
         k = k0 + s
         t = t0 + k * h
@@ -107,6 +110,10 @@ def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, 
                     st = K.rule_kernel(rule0 if inst[j] == 0 else rule[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_LIMITS:
                     st = K.power_limits_kernel(lim0 if inst[j] == 0 else lim[inst[j]], sig, ib, ob, t, hk)
+                elif ty == K.T_VEHICLE_SPEED:
+                    st = K.vehicle_speed_kernel(vsp0 if inst[j] == 0 else vsp[inst[j]], sig, ib, ob, t, hk)
+                elif ty == K.T_PROFILE:
+                    st = K.profile_kernel(prof0 if inst[j] == 0 else prof[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_MPC:
                     st = K.mpc_kernel(mpc0 if inst[j] == 0 else mpc[inst[j]], sig, ib, ob, t, hk)
                 else:

@@ -188,6 +188,23 @@ def vehicle_force_step(v0: float, dist: float, e_trac: float, e_brake: float, e_
             0.5 * mass_kg * v1 * v1)
 
 
+@_njit(cache=True)
+def vehicle_speed_mode_step(v0: float, grade0: float, dist: float, e_trac: float, e_brake: float, e_roll: float,
+                            e_aero: float, e_grade: float, v_ref: float, a_ref: float, grade_in: float, h: float,
+                            knot_d, knot_frac, mass_kg: float, c_aero: float, f_roll_coeff: float, g: float):
+    """The vehicle component's speed-mode step: :func:`speed_follow_step` and the works accumulated (the
+    brake work stays 0: the split of a negative force is the motor's).
+
+    Returns ``(speed_mps, accel_mps2, distance_m, grade_rad, force_req_n, traction_energy_j, brake_energy_j,
+    rolling_energy_j, aero_energy_j, grade_energy_j, kinetic_energy_j)`` at t + h.  The component
+    (:class:`shevsim.components.vehicle.Vehicle`) and the compiled whole-vehicle loop both call it.
+    """
+    v1, d1, th1, f_req, dd, wp, wr, wa, wg = speed_follow_step(v0, grade0, dist, v_ref, a_ref, grade_in, h, knot_d,
+                                                               knot_frac, mass_kg, c_aero, f_roll_coeff, g)
+    return (v1, (v1 - v0) / h, d1, th1, f_req, e_trac + wp, e_brake + 0.0, e_roll + wr, e_aero + wa, e_grade + wg,
+            0.5 * mass_kg * v1 * v1)
+
+
 def coast_down_aero_only(v0: float, t: float, mass_kg: float, c_aero: float) -> float:
     """Analytical speed of ``M dv/dt = -c v^2``: ``v = v0 / (1 + c v0 t / M)``."""
     return v0 / (1.0 + c_aero * v0 * t / mass_kg)

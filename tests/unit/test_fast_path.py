@@ -111,8 +111,8 @@ def test_ineligible_scenarios_are_declined_with_a_reason():
     assert "FMU" in why
     assert "osqp" in _declined(SCEN / "hd_udds_mpc.toml", ["supervisor.solver=osqp"])
     assert "fd30" in _declined(SCEN / "hd_udds_mpc.toml", ["battery.thermal_model=fd30"])
-    text = (SCEN / "hd_udds_rule.toml").read_text().replace('type = "driver"', 'type = "profile"')
-    assert "profile" in _declined(None, text=text)
+    text = (SCEN / "hd_udds_rule.toml").read_text().replace('type = "driver"', 'type = "gain"')
+    assert "gain" in _declined(None, text=text)
 
 
 def test_jacobi_method_agrees_with_the_master():
@@ -126,6 +126,48 @@ def test_jacobi_method_agrees_with_the_master():
         assert np.array_equal(fast[k], ref[k]), k
     gs = build_master(load_scenario(SCEN / "hd_udds_mpc.toml", ["cycle.repeat=1"])).run(60.0)
     assert not np.array_equal(fast["vehicle.speed_mps"], gs["vehicle.speed_mps"])      # Jacobi really differs
+
+
+SPEED_REPLAY = """
+[scenario]
+name = "speed_replay"
+step_s = 0.1
+[components.cycle]
+type = "cycle"
+params = "components/cycle/hd_udds.toml"
+[components.vehicle]
+type = "vehicle"
+params = "components/vehicle/matv.toml"
+set = { input_mode = "speed" }
+[components.motor]
+type = "motor"
+params = "components/motor/default.toml"
+[components.amb]
+type = "profile"
+set = { time_s = [0.0, 10.0, 20.05, 30.0], t_ambient_c = [20.0, 30.0, 25.0, 21.0], h_conv_w_m2k = [10.0, 40.0, 5.0, 8.0] }
+[components.battery]
+type = "battery"
+params = "components/battery/default.toml"
+[connections]
+"vehicle.speed_ref_mps" = "cycle.speed_ref_mps"
+"vehicle.accel_ref_mps2" = "cycle.accel_ref_mps2"
+"motor.force_req_n" = "vehicle.force_req_n"
+"motor.speed_mps" = "vehicle.speed_mps"
+"battery.power_w" = "motor.elec_power_w"
+"battery.t_ambient_c" = "amb.t_ambient_c"
+"battery.h_conv_w_m2k" = "amb.h_conv_w_m2k"
+"""
+
+
+def test_speed_mode_vehicle_and_profile_source_agree_with_the_master():
+    sc = load_scenario(SCEN / "speed_replay.toml", text=SPEED_REPLAY)
+    run, why = runner_for(sc)
+    assert run is not None, why
+    fast = run(90.0)
+    ref = build_master(load_scenario(SCEN / "speed_replay.toml", text=SPEED_REPLAY)).run(90.0)
+    for k in ref.signals:
+        assert np.array_equal(fast[k], ref[k]), k
+    assert np.ptp(fast["vehicle.force_req_n"]) > 1e3 and np.ptp(fast["amb.t_ambient_c"]) == 10.0
 
 
 def test_several_components_of_one_type_each_keep_their_own_state():
