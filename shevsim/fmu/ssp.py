@@ -154,11 +154,14 @@ def export_ssp(scenario, out_path: str | Path, stop_s: float | None = None, sets
             ET.ElementTree(root).write(tmp / "SystemStructure.ssd", xml_declaration=True, encoding="UTF-8")
             out_path.parent.mkdir(parents=True, exist_ok=True)
             part = out_path.with_name(out_path.name + ".part")
-            with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
-                zf.write(tmp / "SystemStructure.ssd", "SystemStructure.ssd")
-                for f in sorted((tmp / "resources").iterdir()):
-                    zf.write(f, f"resources/{f.name}")
-            part.replace(out_path)
+            try:
+                with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
+                    zf.write(tmp / "SystemStructure.ssd", "SystemStructure.ssd")
+                    for f in sorted((tmp / "resources").iterdir()):
+                        zf.write(f, f"resources/{f.name}")
+                part.replace(out_path)
+            finally:
+                part.unlink(missing_ok=True)
     finally:
         m.terminate()
     return out_path

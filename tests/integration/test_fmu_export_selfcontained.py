@@ -40,12 +40,13 @@ def _spec(fmu: Path) -> dict:
         return json.loads(zf.read("resources/shevsim_component.json"))
 
 
-def test_exported_fmu_carries_shevsim_and_declares_its_packages(tmp_path):
-    fmu = export_component(RCThermalNode, None, tmp_path / "node.fmu", 2)
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_exported_fmu_carries_shevsim_and_declares_its_packages(tmp_path, fmi_version):
+    fmu = export_component(RCThermalNode, None, tmp_path / "node.fmu", fmi_version)
     with zipfile.ZipFile(fmu) as zf:
         names = zf.namelist()
     assert "resources/shevsim/fmu/slave.py" in names and "resources/shevsim/core/component.py" in names
-    assert "resources/pythonfmu/fmi2slave.py" in names
+    assert f"resources/pythonfmu{'' if fmi_version == 2 else '3'}/fmi{fmi_version}slave.py" in names
     assert not any("__pycache__" in n for n in names)
     assert _spec(fmu)["requires"] == ["numpy"]   # the node is pure Python + numpy (through shevsim.core)
 
