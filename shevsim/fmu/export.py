@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import os
 import json
 import re
 import shutil
@@ -100,7 +101,10 @@ def required_packages(module: str) -> list[str]:
     code = ("import sys, importlib; importlib.import_module('shevsim.fmu.slave'); "
             f"importlib.import_module({module!r}); "
             "print(' '.join(sorted({m.split('.')[0] for m in sys.modules})))")
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    from .build import _python_env      # the package's root on PYTHONPATH, as for the build
+    env = _python_env()
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parents[2]) + os.pathsep + env.get("PYTHONPATH", "")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
     if res.returncode:
         raise FMUError(f"fmu export: importing {module} failed in a clean interpreter:\n{res.stderr[-2000:]}")
     loaded = set(res.stdout.split())
