@@ -1,12 +1,14 @@
 """Exported FMUs are self-contained: they carry the shevsim code they run.
 
-* (slow) the exported thermal node runs in a fresh virtual environment holding only the packages the
-  FMU declares (from PyPI by name) plus fmpy - shevsim is not importable there - and reproduces the
-  closed-form solution;
+* (slow) the exported thermal node and battery pack run in a fresh virtual environment holding only
+  the packages the FMUs declare (from PyPI by name: numpy, scipy, numba) plus fmpy - shevsim is not
+  importable there: the node reproduces the closed-form solution, the pack the numbers of a run
+  where shevsim is installed;
 * a missing dependency is named on stderr (no debug logging needed) and in shevsim's load error.
 """
 from __future__ import annotations
 
+import ast
 import json
 import math
 import os
@@ -63,13 +65,26 @@ def test_missing_dependency_is_named_without_debug_logging(tmp_path):
         FMUComponent("node", fmu)
 
 
+RUN_BATTERY = """
+import sys
+from fmpy import simulate_fmu
+r = simulate_fmu(sys.argv[1], stop_time=60.0, step_size=0.1, output_interval=1.0,
+                 start_values={"power_w": 20000.0}, output=["soc_pct", "voltage_v", "t_core_c"])
+print(repr([float(r[k][-1]) for k in ("soc_pct", "voltage_v", "t_core_c")]))
+"""
+
+
 @pytest.mark.slow
 def test_exported_fmu_runs_in_a_venv_without_shevsim(tmp_path):
+    from shevsim.core.paths import data_path
     fmu = export_component(RCThermalNode, None, tmp_path / "node.fmu", 2)
+    battery = export_component("battery", data_path("components", "battery", "default.toml"),
+                               tmp_path / "battery.fmu", 2)
+    assert _spec(battery)["requires"] == ["numba", "numpy", "scipy"]
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
     py = venv / ("Scripts/python.exe" if os.name == "nt" else "bin/python")
-    pkgs = _spec(fmu)["requires"] + ["fmpy"]
+    pkgs = sorted(set(_spec(fmu)["requires"]) | set(_spec(battery)["requires"])) + ["fmpy"]
     inst = subprocess.run([str(py), "-m", "pip", "install", "-q", *pkgs], capture_output=True, text=True,
                           timeout=900)
     if inst.returncode:
@@ -84,3 +99,14 @@ def test_exported_fmu_runs_in_a_venv_without_shevsim(tmp_path):
     # closed form: T = T_inf + (T0 - T_inf) exp(-t / (R C)), defaults R = 0.02 K/W, C = 5000 J/K, T0 = 25 degC
     t_inf = 25.0 + 0.02 * 1500.0
     assert t_c == pytest.approx(t_inf + (25.0 - t_inf) * math.exp(-10.0 / 100.0), abs=1e-9)
+    # the battery pack (numba-compiled physics, scipy) runs there too, equal to the run where shevsim is
+    # installed (same code, same numbers)
+    there = subprocess.run([str(py), "-c", RUN_BATTERY, str(battery)], capture_output=True, text=True,
+                           cwd=tmp_path, env=env, timeout=600)
+    assert there.returncode == 0, there.stderr[-2000:]
+    here = subprocess.run([sys.executable, "-c", RUN_BATTERY, str(battery)], capture_output=True, text=True,
+                          cwd=tmp_path, timeout=600)
+    assert here.returncode == 0, here.stderr[-2000:]
+    a = ast.literal_eval(there.stdout.strip().splitlines()[-1])
+    b = ast.literal_eval(here.stdout.strip().splitlines()[-1])
+    assert a == b and 0.0 < a[0] < 100.0
