@@ -241,7 +241,7 @@ class Evaluation:
 
     @classmethod
     def make(cls, scenario: str | Path, overrides: dict | None = None, stop_s: float | None = None,
-             final_signals=()) -> "Evaluation":
+             final_signals=(), engine: str = "auto") -> "Evaluation":
         ov = tuple(sorted((str(k), _freeze(v)) for k, v in (overrides or {}).items()))
         for k, _ in ov:
             if "." not in k:
@@ -252,7 +252,9 @@ class Evaluation:
         except OSError as exc:
             from ..core.errors import ScenarioError
             raise ScenarioError(f"{scenario}: scenario file not readable: {exc}") from exc
-        return cls(str(path), ov, None if stop_s is None else float(stop_s), tuple(final_signals), text)
+        if engine not in ("auto", "python", "fast"):
+            raise ValueError(f"engine must be 'auto', 'python' or 'fast', got {engine!r}")
+        return cls(str(path), ov, None if stop_s is None else float(stop_s), tuple(final_signals), text, engine)
 
     def overrides_dict(self) -> dict:
         return {k: _thaw(v) for k, v in self.overrides}
