@@ -2,15 +2,20 @@
 
 Each ``*_step(data, sig, ib, ob, t, h)`` advances one component from ``t`` to ``t + h``: it reads its
 inputs from ``sig[ib + j]`` (``j`` = the input's position among the component's declared inputs),
-calls the component's own compiled physics (the very functions the component's ``do_step`` calls:
-:func:`shevsim.powertrain.motor.motor_step`, :func:`shevsim.powertrain.engine.step`,
-:func:`shevsim.battery.model.cell_step`, :func:`shevsim.bms.electrical.dekf_step`, the thermal filter
-steps, :func:`shevsim.bms.power_capability.power_limits`, :func:`shevsim.supervisor.mpc._build`, DAQP's C
-library, ...) and writes its outputs to ``sig[ob + j]`` in declaration order.  What is left here is the
-components' bookkeeping around those calls (unit scaling, cumulative energies, output publishing),
-written to give the same floating-point operations in the same order as the components' Python
-methods, so the loop reproduces :class:`shevsim.core.master.Master` bit for bit (the agreement test,
-``tests/unit/test_fast_path.py``, fails on any drift).
+calls the component's own compiled functions (the very ones the component's ``do_step`` calls:
+:func:`~shevsim.components.cycle.cycle_sample`, :func:`~shevsim.powertrain.driver.driver_step`,
+:func:`~shevsim.powertrain.vehicle.vehicle_force_step` / ``vehicle_speed_mode_step``,
+:func:`~shevsim.powertrain.motor.motor_component_step`, :func:`~shevsim.powertrain.motor.bus_balance`,
+:func:`shevsim.powertrain.engine.step`, :func:`shevsim.battery.model.cell_step`,
+:func:`shevsim.bms.electrical.dekf_step`, the thermal filter steps,
+:func:`shevsim.bms.power_capability.power_limits`, :func:`shevsim.supervisor.rule_based.rule_command`,
+:func:`shevsim.supervisor.mpc.mpc_move` with DAQP's C library) and writes its outputs to ``sig[ob + j]`` in
+declaration order.  What is left here is the bookkeeping of components whose methods are not compiled
+functions (battery and BMS output publishing and the BMS's estimator sequence, the bus / power_limits
+limit law, the engine-generator's outputs, the profile source's sample-and-hold), written to give the
+same floating-point operations in the same order as those Python methods, so the loop reproduces
+:class:`shevsim.core.master.Master` bit for bit (the agreement tests, ``tests/unit/test_fast_path.py``,
+fail on any drift).
 
 Return value: 0, or an error code (:data:`ERRORS`) that the runner turns into the component's
 :class:`~shevsim.core.errors.SimulationError`.
