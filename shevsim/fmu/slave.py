@@ -8,9 +8,12 @@ the slave class inherits from a class defined in another module, so no
 shared base class is used). The runtime reads the component class
 (``module:Class``) and its parameter values from a JSON file in the FMU's
 ``resources/``.
-The FMU therefore imports ``shevsim`` (and numpy/scipy as the component
-needs) from the Python that executes it: **shevsim must be installed in that
-Python** (pythonfmu FMUs always need a Python environment).
+The FMU carries the ``shevsim`` source in ``resources/shevsim`` (first on
+``sys.path`` when pythonfmu loads the slave; a process that already imported
+shevsim keeps its own), so the Python that executes it needs only the
+packages listed in the slave's ``REQUIRES`` (numpy, and scipy/numba for the
+physics components); a missing one is named on stderr and in the ImportError
+before anything else is imported.
 
 Mapping of the native contract to FMI:
 
@@ -22,7 +25,11 @@ Mapping of the native contract to FMI:
   rebuilds the component with the new parameters (checked by the
   component's ``Params`` dataclass);
 * ``exitInitializationMode`` -> ``initialize(t0)``, ``doStep`` -> ``do_step``,
-  ``getFMUstate``/``setFMUstate`` -> ``get_state``/``set_state``.
+  ``getFMUstate``/``setFMUstate`` -> ``get_state``/``set_state``;
+* a parameter named like a port, and non-finite parameter values, stay inside
+  (FMI names are unique; xs:double has no inf/nan);
+* ``step_multiple`` (SSP export of a multi-rate scenario): the component steps
+  over ``k`` calls every ``k``-th ``doStep`` and holds its outputs between.
 """
 from __future__ import annotations
 
