@@ -360,6 +360,9 @@ class _StepThread:
                 done.put(None)
             except BaseException as exc:  # handed to the caller
                 done.put(exc)
+            # drop the references to the component while waiting, so that it can be collected
+            # (its finaliser then stops this thread and frees the FMU)
+            del job, fn, args
 
     def run(self, fn, args, timeout: float) -> bool:
         """Run ``fn(*args)``; False when it did not finish within ``timeout`` seconds."""

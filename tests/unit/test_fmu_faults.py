@@ -133,3 +133,18 @@ def test_model_exchange_fmu_in_a_scenario_file(tmp_path):
     h_exact = v * (t - t1) - 0.5 * g * (t - t1) ** 2
     assert t1 < t < t1 + 2 * v / g
     assert abs(res.signals["ball.h"][-1] - h_exact) < 1e-8
+
+
+def test_stepped_component_dropped_without_terminate_is_freed(faulty):
+    # the helper thread that runs bounded steps must not keep the component alive
+    import gc
+    comp = FMUComponent("dropped", faulty, step_timeout_s=30.0)
+    comp.initialize(0.0)
+    comp.do_step(0.0, 0.1)
+    assert _unpack_dirs("dropped")
+    del comp
+    gc.collect()
+    deadline = time.time() + 5.0
+    while _unpack_dirs("dropped") and time.time() < deadline:
+        time.sleep(0.05)
+    assert not _unpack_dirs("dropped")
