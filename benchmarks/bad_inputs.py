@@ -359,7 +359,7 @@ def _cases() -> list[Case]:
     # --- studies --------------------------------------------------------------------------------------------
     add("T01", "studies", "study tradeoff --supervisor nosuch", "error",
         lambda c: ["study", "tradeoff", str(c.scen("hd_udds_mpc")), "--supervisor", "nosuch", "--workers", "0",
-                   "--rates", "30", "--stop-s", "20", "--no-plots", "--quiet", "--out", str(c.tmp / "st")], timeout=240)
+                   "--rates", "30", "--no-plots", "--quiet", "--out", str(c.tmp / "st")], timeout=300)
     add("T02", "studies", "study on a scenario that does not exist", "error",
         lambda c: ["study", "tradeoff", "nosuch.toml", "--workers", "0", "--out", str(c.tmp / "st")])
     add("T03", "studies", "unknown study name", "error", lambda c: ["study", "tradof"])
@@ -367,13 +367,16 @@ def _cases() -> list[Case]:
         lambda c: ["study", "tradeoff", "--synthetic", "--rates", "-5", "--workers", "0", "--out", str(c.tmp / "st")])
     # --- runs, outputs, interruption (owned by other engineers: classified as observed) -------------------
     def notebook(c):
+        # the case: a re-run into an earlier result folder the user has put a notebook in
+        subprocess.run([PY, "-m", "shevsim.cli", "run", base, "--out", "o"], cwd=c.tmp, env=_env(c.tree),
+                       capture_output=True, timeout=300)
         d = c.tmp / "o"
-        d.mkdir()
+        d.mkdir(exist_ok=True)
         (d / "analysis.ipynb").write_text('{"cells": []}')
         return ["run", base, "--out", "o"]
-    add("R01", "runs", "--out at a folder holding a user's notebook", "accept", notebook,
+    add("R01", "runs", "--out at an earlier result folder holding a user's notebook (re-run)", "accept", notebook,
         check=lambda c, p: ((c.tmp / "o" / "analysis.ipynb").is_file(), "notebook kept"),
-        lost=lambda c: not (c.tmp / "o" / "analysis.ipynb").is_file())
+        lost=lambda c: not (c.tmp / "o" / "analysis.ipynb").is_file(), timeout=120)
     add("R02", "runs", "--out is an existing file", "error",
         lambda c: (c.write("o", "user data"), ["run", base, "--out", "o"])[1],
         lost=lambda c: not (c.tmp / "o").is_file() or (c.tmp / "o").read_text() != "user data")
@@ -381,8 +384,9 @@ def _cases() -> list[Case]:
         lambda c: ["run", str(c.copy_scenario(base, lambda s: s + '\n[[faults]]\nat_s = 1.0\n'
                                               'port = "engine_generator.power_cmd_w"\nvalue = 0.0\n')),
                    "--out", "o"], timeout=120)
-    add("R04", "runs", "Ctrl-C two seconds into a run", "accept",
-        lambda c: ["run", "hd_udds_mpc", "--out", "o"], sigint_after=2.0, check=_sigint_check, timeout=60)
+    add("R04", "runs", "Ctrl-C six seconds into a long run (HD-UDDS x50)", "accept",
+        lambda c: ["run", base, "--set", "cycle.repeat=50", "--out", "o"], sigint_after=6.0, check=_sigint_check,
+        timeout=90)
     add("R05", "runs", "unknown CLI sub-command", "error", lambda c: ["rnu", base])
     add("R06", "fmu", "type = \"fmu\" with a corrupt .fmu file", "error",
         lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace(
@@ -411,14 +415,14 @@ def classify(case: Case, ctx: Ctx, proc, hung: bool) -> tuple[str, str]:
                 if ln.strip() and not ln.startswith(" ")), "")
     if "Traceback (most recent call last)" in out or "internal error" in out:
         last = [ln for ln in (proc.stderr or "").splitlines() if ln.strip()]
-        return "traceback", (last[-1].strip() if last else "")[:160]
+        return "traceback", (last[-1].strip() if last else "")[:400]
     if proc.returncode != 0 and case.sigint_after is None:
-        return "clear error", msg[:160]
+        return "clear error", msg[:400]
     if case.check is not None:
         ok, note = case.check(ctx, proc)
         if ok:
             return "handled", note
-        return ("silent" if proc.returncode == 0 else "clear error"), note or msg[:160]
+        return ("silent" if proc.returncode == 0 else "clear error"), note or msg[:400]
     if case.expect == "error":
         return "silent", "exit 0: the bad input was accepted"
     return "handled", ""
@@ -480,15 +484,19 @@ def merge_markdown(before: dict, after: dict) -> str:
     for k in keys:
         if cnt_b.get(k) or cnt_a.get(k):
             L.append(f"| {k} | {cnt_b.get(k, 0)} | {cnt_a.get(k, 0)} |")
-    L += ["", f"{len(rows)} cases.", "",
-          "| # | group | input or fault | expected | before | after | message / note (after) |",
-          "|---|---|---|---|---|---|---|"]
+    L += ["", f"{len(rows)} cases. Messages are quoted with the case's temporary folder removed.", "",
+          "| # | group | input or fault | expected | before | after | message / note (after) | before: message / note |",
+          "|---|---|---|---|---|---|---|---|"]
+
+    def short(text, n):
+        import re
+        text = re.sub(r"/tmp/bad_[A-Z][0-9]+_[^/ ]+/", "", text or "").replace("|", "\\|").replace("\n", " ")
+        return text if len(text) <= n else text[:n - 3] + "..."
     for r in rows:
-        ob = b.get(r["id"], {}).get("outcome", "-")
-        note = r["note"].replace("|", "\\|").replace("\n", " ")
-        note = note if len(note) < 150 else note[:147] + "..."
+        rb = b.get(r["id"], {})
+        ob = rb.get("outcome", "-")
         L.append(f"| {r['id']} | {r['group']} | {r['what']} | {'refuse' if r['expect'] == 'error' else 'accept/report'} "
-                 f"| {ob} | **{r['outcome']}** | {note} |")
+                 f"| {ob} | **{r['outcome']}** | {short(r['note'], 300)} | {short(rb.get('note', ''), 110)} |")
     L += ["", HOW_CHECKED]
     return "\n".join(L)
 

@@ -283,7 +283,7 @@ def load_cycle(path: str | Path, name: str | None = None, check_units: bool = Tr
             arr[k] = val * factor[col]
         if v[k] < 0.0:
             if v[k] < -NEG_SPEED_TOL_MPS:
-                raise _fail(path, lineno, declared["speed_mps"], f"negative speed {v[k]!r} m/s")
+                raise _fail(path, lineno, declared["speed_mps"], f"negative speed {float(v[k])!r} m/s")
             v[k] = 0.0
 
     dt = np.diff(t)
@@ -292,14 +292,14 @@ def load_cycle(path: str | Path, name: str | None = None, check_units: bool = Tr
         k = int(bad[0]) + 1
         kind = "duplicate time" if dt[k - 1] == 0 else "time decreases (non-monotonic)"
         raise _fail(path, int(lines[k]), declared["time_s"],
-                    f"{kind}: {t[k]!r} s after {t[k - 1]!r} s on line {int(lines[k - 1])}")
+                    f"{kind}: {float(t[k])!r} s after {float(t[k - 1])!r} s on line {int(lines[k - 1])}")
     step = float(dt[0])
     tol = DT_REL_TOL * step + 1e-9
     bad = np.nonzero(np.abs(dt - step) > tol)[0]
     if bad.size:
         k = int(bad[0]) + 1
         raise _fail(path, int(lines[k]), declared["time_s"],
-                    f"non-uniform time step (gap?): {dt[k - 1]:.6g} s from {t[k - 1]!r} s, "
+                    f"non-uniform time step (gap?): {dt[k - 1]:.6g} s from {float(t[k - 1])!r} s, "
                     f"the cycle's step is {step:.6g} s")
     if check_units:
         check_plausible(path, t, v, lines)
@@ -324,7 +324,7 @@ def cycle_from_arrays(name: str, time_s, speed_mps, source: str = "<arrays>", ch
             raise DataError(f"{source}, row {int(badv[0])}, column '{col}': non-finite value")
     neg = np.nonzero(v < -NEG_SPEED_TOL_MPS)[0]
     if neg.size:
-        raise DataError(f"{source}, row {int(neg[0])}, column 'speed_mps': negative speed {v[neg[0]]!r} m/s")
+        raise DataError(f"{source}, row {int(neg[0])}, column 'speed_mps': negative speed {float(v[neg[0]])!r} m/s")
     dt = np.diff(t)
     if np.any(dt <= 0) or np.any(np.abs(dt - dt[0]) > DT_REL_TOL * dt[0] + 1e-9):
         k = int(np.nonzero((dt <= 0) | (np.abs(dt - dt[0]) > DT_REL_TOL * dt[0] + 1e-9))[0][0]) + 1
