@@ -392,7 +392,40 @@ def _cases() -> list[Case]:
         lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace(
             'type = "bus"\nparams = "components/bus/default.toml"',
             f'type = "fmu"\nfmu = "{c.write("bad.fmu", b"PK not a zip")}"'))), "--out", "o"])
+    add("F01", "fmu", "FMU whose doStep blocks for an hour (after: default bound 600 s, beyond this 30 s case limit)",
+        "error",
+        lambda c: ["run", str(_faulty_scenario(c, "block_at_s = 0.2, block_for_s = 3600.0")), "--out", "o"],
+        timeout=30)
+    add("F02", "fmu", "FMU whose doStep blocks, scenario bound step_timeout_s = 2", "error",
+        lambda c: ["run", str(_faulty_scenario(c, "block_at_s = 0.2, block_for_s = 3600.0, step_timeout_s = 2.0")),
+                   "--out", "o"], timeout=60)
+    add("F03", "fmu", "FMU whose doStep raises RuntimeError (its text must reach the user)", "error",
+        lambda c: ["run", str(_faulty_scenario(c, "fail_at_s = 0.2")), "--out", "o"], timeout=60,
+        check=None)
     return C
+
+
+_FMU_CACHE = Path(tempfile.gettempdir()) / "shevsim_bad_inputs_fmu"
+
+
+def _faulty_fmu() -> Path:
+    """py_faulty.fmu (fmus/src/py_faulty, pythonfmu) built once with this script's own checkout, so both
+    columns step the same FMU file."""
+    out = _FMU_CACHE / "py_faulty.fmu"
+    if not out.is_file():
+        _FMU_CACHE.mkdir(parents=True, exist_ok=True)
+        own = Path(__file__).resolve().parents[1]
+        code = ("import sys; from pathlib import Path; from shevsim.fmu.build import build_python_fmu; "
+                "build_python_fmu(Path(sys.argv[1]), Path(sys.argv[2]), 2)")
+        subprocess.run([PY, "-c", code, str(own / "fmus" / "src" / "py_faulty" / "py_faulty.py"), str(out)],
+                       env=_env(own), check=True, capture_output=True, timeout=300)
+    return out
+
+
+def _faulty_scenario(c, sets: str) -> Path:
+    fmu = _faulty_fmu()
+    return c.write("f.toml", f'[scenario]\nstep_s = 0.1\nstop_s = 1.0\n[components.pump]\ntype = "fmu"\n'
+                             f'fmu = "{fmu}"\nset = {{ {sets} }}\nstart = {{ u = 2.0 }}\n')
 
 
 # ------------------------------------------------------------------------------------------ running
