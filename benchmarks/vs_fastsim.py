@@ -11,7 +11,8 @@ FASTSim is a benchmark dependency, not a project one: it lives in its own virtua
 What is timed (median of ``--repeat`` >= 5 runs each, start-up excluded and reported separately):
 
 * FASTSim: its bundled HEV (``2016_TOYOTA_Prius_Two.yaml``) over our HD-UDDS trace (``cycles/hd_udds.csv``,
-  1 s samples; FASTSim does not bundle HD-UDDS); one run = ``SimDrive(vehicle, cycle)`` + ``walk()``.
+  1 s samples; FASTSim does not bundle HD-UDDS); one run = ``SimDrive(vehicle, cycle)`` + ``run()`` (``walk()``
+  before 3.1), the vehicle's history saved every step (its ``save_interval = 1``).
   Start-up = import + vehicle/cycle load + first run.
 * shevsim: ``scenarios/hd_udds_rule.toml`` and ``scenarios/hd_udds_mpc.toml`` with ``cycle.repeat=1`` (one
   HD-UDDS, 1060 s at the scenario's 0.1 s communication step, BMS in the loop, every output recorded);
