@@ -331,7 +331,7 @@ class FastRunner:
         self._lptr, self._ldst, self._lsrc = i64(lptr), i64(ldst), i64(lsrc)
         self._names = names
         self._units = dict(zip(m._signal_names, m._signal_units))
-        # instance index within the type (stateless multi-instance types), faults not yet applied
+        # each component's position in its kind's instance list; the faults not yet applied at t0
         count: dict = {}
         inst = []
         for n in order:
@@ -352,7 +352,7 @@ class FastRunner:
         dummies = _dummies()
         self._data = {typ: [] for typ in KINDS}
         self._mut = {typ: () for typ in KINDS}
-        self._batteries = []               # (instance, component, step multiple, noise, rng)
+        self._batteries = []               # [instance, step multiple, noise drawn so far, generator]
         for n, c in zip(order, comps):
             typ = types[n]
             if typ == "bms":
