@@ -108,7 +108,8 @@ def main(argv=None) -> int:
     run, why = runner_for(sc)
     if run is None:
         raise SystemExit(f"not eligible for the fast path: {why}")
-    stop = a.stop if a.stop is not None else float(run.master.components["cycle"].natural_stop_time())
+    from shevsim.core.scenario import stop_time
+    stop = a.stop if a.stop is not None else float(stop_time(sc, run.master))
     run(min(stop, 1.0))                      # compile / load off the clock
     p = profile(run, stop, a.repeat)
     tot, n = p["total_s"], p["steps"]
