@@ -65,7 +65,7 @@ def profile(runner, t_stop_s: float, repeat: int = 3) -> dict:
             row = steps + (1 if pos[src_comp] < j else 0)
             vals[:, q - lo] = rec[row, src]
         best = None
-        for _ in range(repeat):
+        for rep in range(repeat + 1):             # the first pass compiles the replay: not timed
             typ = types[name]
             i = int(runner._inst[j])
             d = runner._fresh(typ, i)
@@ -85,7 +85,8 @@ def profile(runner, t_stop_s: float, repeat: int = 3) -> dict:
                 from . import daqp_nb
                 if d[30][0] != 0:
                     daqp_nb.drop_model(d[24], d[30])
-            best = dt if best is None else min(best, dt)
+            if rep > 0:
+                best = dt if best is None else min(best, dt)
         out[name] = (best, int(steps.size), int(st))
     return {"total_s": total, "steps": n, "per_component": out}
 
