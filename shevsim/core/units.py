@@ -75,7 +75,17 @@ UNITS: dict[str, tuple[tuple[int, ...], float, float]] = {
     "K/W": (_d(kg=-1, m=-2, s=3, K=1), 1.0, 0.0), "J/(kg.K)": (_d(m=2, s=-2, K=-1), 1.0, 0.0),
     "W/(m.K)": (_d(kg=1, m=1, s=-3, K=-1), 1.0, 0.0), "kg/m3": (_d(kg=1, m=-3), 1.0, 0.0),
 }
-_LOWER = {k.lower(): k for k in UNITS}
+UNITS.update({"Hz": (_d(s=-1), 1.0, 0.0), "1/s": (_d(s=-1), 1.0, 0.0)})
+#: other spellings of the same units met in FMUs and spreadsheets. Case is never folded in general:
+#: it carries the SI prefix (mS is millisiemens, Ms megasecond; H henry, T tesla, Mm megametre).
+ALIASES: dict[str, str] = {
+    "ohm": "Ohm", "Ω": "Ohm", "mohm": "mOhm", "mΩ": "mOhm", "Ah": "A.h", "mAh": "mA.h",
+    "Nm": "N.m", "N*m": "N.m", "kNm": "kN.m", "Wh": "Wh", "W*h": "W.h", "kW*h": "kW.h",
+    "kmh": "km/h", "kph": "km/h", "km/hr": "km/h", "RPM": "rpm", "r/min": "rpm", "rev/min": "rpm",
+    "°C": "degC", "°F": "degF", "deg_C": "degC", "m/s^2": "m/s2", "m/s/s": "m/s2", "hr": "h",
+    "sec": "s", "W/m2K": "W/(m2.K)", "W/(m^2.K)": "W/(m2.K)", "J/kgK": "J/(kg.K)", "W/mK": "W/(m.K)",
+    "kg/m^3": "kg/m3",
+}
 
 
 def _from_definition(defn) -> tuple[tuple[int, ...], float, float] | None:
@@ -99,9 +109,9 @@ def resolve_unit(unit: str, definitions: Mapping[str, Any] | None = None):
     for key in (unit, canonical_unit(unit)):
         if key in UNITS:
             return UNITS[key]
-    low = unit.lower().replace(" ", "")
-    if low in _LOWER and low not in ("ma", "mv", "mw", "mohm"):   # case matters for milli/mega
-        return UNITS[_LOWER[low]]
+    alias = ALIASES.get(unit.replace(" ", ""))
+    if alias is not None:
+        return UNITS[alias]
     return None
 
 

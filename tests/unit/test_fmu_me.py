@@ -283,6 +283,15 @@ def test_unit_table_conversions():
     assert conversion("myW", "W", {"myW": _Def}, None) == pytest.approx((1000.0, 0.0))
 
 
+def test_unit_case_is_never_folded():
+    """Case carries the SI prefix: mS (millisiemens) is not ms, H (henry) not h, T (tesla) not t, Mm not mm."""
+    for src, dst in (("mS", "s"), ("H", "s"), ("T", "kg"), ("Mm", "m"), ("MS", "s")):
+        with pytest.raises(ValueError, match="unknown"):
+            conversion(src, dst)
+    assert conversion("ohm", "mOhm") == pytest.approx((1000.0, 0.0))     # a listed alias
+    assert conversion("Hz", "1/s") is None
+
+
 # ------------------------------------------------------------------ shevsim info
 def test_info_says_what_is_supported(statespace, fmu_dir, ball):
     from shevsim.fmu.info import fmu_info
