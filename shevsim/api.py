@@ -83,7 +83,7 @@ def simulate(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | Non
         Bad input (unknown scenario, component, parameter or value; unusable ``out``), before running.
     """
     from .run import run
-    return run(scenario, overrides, stop_s=stop_s, out=out, engine=engine, record=list(record) if record else None,
+    return run(scenario, overrides, stop_s=stop_s, out=out, engine=engine, record=([record] if isinstance(record, str) else list(record)) if record else None,
                record_every=record_every, plots=plots, progress=progress, allow_large=allow_large)
 
 
