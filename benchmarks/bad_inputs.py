@@ -530,8 +530,25 @@ def merge_markdown(before: dict, after: dict) -> str:
         ob = rb.get("outcome", "-")
         L.append(f"| {r['id']} | {r['group']} | {r['what']} | {'refuse' if r['expect'] == 'error' else 'accept/report'} "
                  f"| {ob} | **{r['outcome']}** | {short(r['note'], 300)} | {short(rb.get('note', ''), 110)} |")
-    L += ["", HOW_CHECKED]
+    L += ["", NOTES, "", HOW_CHECKED]
     return "\n".join(L)
+
+
+NOTES = """## Reading the table
+
+- Rows whose class did not change can still differ in the message: e.g. P05-P18 were refused before too, but
+  the message blamed the parameter file and named no range; they now name the `--set` option, the field
+  and the valid range. F03 was refused before too, but the FMU's own exception text was dropped
+  ("fmi2DoStep failed ... FMI status 4"); it now reaches the user. F02 was refused before only because
+  `step_timeout_s` did not exist (an unknown FMU variable), not because of the hang.
+- **S12 (step_s = 1e6) is a traceback after**: the compiled fast path (issue 15) divides by zero inside its
+  loop and the error reaches the user as "internal error: ZeroDivisionError"; before (the master) it was a
+  clear error naming the BMS and the time. Owner: the fast path.
+- **F01 is a hang in this harness after**: a blocking FMU is now bounded by `step_timeout_s`, default 600 s,
+  longer than this case's 30 s limit; F02 shows the bound with `step_timeout_s = 2`.
+- K03 counts as handled when the calibration report lists the parameters the record cannot identify; the
+  run itself still exits 0 (a record with no excitation is not an input error: the report says what it
+  cannot tell)."""
 
 
 HOW_CHECKED = """## How inputs are checked (what the "after" column relies on)
