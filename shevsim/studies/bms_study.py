@@ -19,11 +19,12 @@ Three studies, each writing PNG figures and CSV/JSON tables atomically (temporar
     heat of the UAC proxy run (current x1 and x2); :func:`table_3_3_rates`: core and surface RMSE at
     1 s and 0.1 s, stage III adaptive filters started at a wrong h (2 h* and h*/2).
 :func:`power_capability_study`
-    seed Fig. 5.15 analogue: ``scenarios/uac_proxy_mpc_cooling_fault_seed.toml`` (h 20 -> 3 W/m2K at
+    seed Fig. 5.15 analogue: ``scenarios/uac_proxy_mpc_cooling_fault.toml`` (h 20 -> 3 W/m2K at
     300 s) with the BMS power limits enforced within the step (motors derated through
     ``motor_limits``, generator shed and floored through ``gen_limits``, and the MPC's constraints)
     and the counterfactual ``enforce_battery_limits = false`` (bus and both limit components), same
-    seed.  ``FAULT_SCENARIO_ONE_STEP_LATE`` is the previous wiring (limits from the bus's last step).
+    seed.  ``FAULT_SCENARIO_ONE_STEP_LATE`` (``scenarios/uac_proxy_mpc_cooling_fault_one_step_late.toml``)
+    is the previous wiring (limits from the bus's last step).
 
 Command line::
 
@@ -49,9 +50,10 @@ from ..core.scenario import PROJECT_ROOT, build_master, load_scenario
 
 BASE_SCENARIO = PROJECT_ROOT / "scenarios" / "uac_proxy_mpc.toml"
 #: the cooling-fault run with the battery limits held within the step (issue 14: power_limits before the
-#: motor and the generator, generator floor); the one-step-late wiring is FAULT_SCENARIO_ONE_STEP_LATE
-FAULT_SCENARIO = PROJECT_ROOT / "scenarios" / "uac_proxy_mpc_cooling_fault_seed.toml"
-FAULT_SCENARIO_ONE_STEP_LATE = PROJECT_ROOT / "scenarios" / "uac_proxy_mpc_cooling_fault.toml"
+#: motor and the generator, generator floor; the default wiring of every SHEV scenario since the follow-up
+#: of issue 14); the one-step-late wiring is FAULT_SCENARIO_ONE_STEP_LATE
+FAULT_SCENARIO = PROJECT_ROOT / "scenarios" / "uac_proxy_mpc_cooling_fault.toml"
+FAULT_SCENARIO_ONE_STEP_LATE = PROJECT_ROOT / "scenarios" / "uac_proxy_mpc_cooling_fault_one_step_late.toml"
 _MEAS = ("cell_current_meas_a", "cell_voltage_meas_v", "t_surface_meas_c", "t_ambient_meas_c")
 
 QUICK = {"dekf_stop_s": 1800.0, "power_stop_s": 1500.0, "thermal_duration_s": 1200.0}

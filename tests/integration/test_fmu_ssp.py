@@ -94,7 +94,8 @@ def test_ssp_package_structure(short):
         root = ET.fromstring(zf.read("SystemStructure.ssd"))
     comps = root.findall("ssd:System/ssd:Elements/ssd:Component", NS)
     assert sorted(c.get("name") for c in comps) == sorted(
-        ["cycle", "driver", "motor", "vehicle", "bus", "engine_generator", "battery", "bms", "supervisor"])
+        ["cycle", "driver", "motor", "vehicle", "bus", "engine_generator", "battery", "bms", "supervisor",
+         "motor_limits", "gen_limits"])             # limits held within the step (power_limits, issue 14)
     assert all(f"resources/{c.get('name')}.fmu" in names for c in comps)
     scen = load_scenario(_scenario_path())
     n_conn = len(root.findall("ssd:System/ssd:Connections/ssd:Connection", NS))

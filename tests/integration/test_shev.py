@@ -82,7 +82,10 @@ def test_mpc_keeps_soc_window_without_fallbacks(rate_map_pair):
 
 @pytest.fixture(scope="module")
 def cooling_fault_1500():
-    return run("uac_proxy_mpc_cooling_fault", stop_s=1500.0)
+    # the one-step-late wiring (motor and generator on the bus's limits of the previous step), whose
+    # mechanism this test checks; the default scenarios hold the limits within the step
+    # (tests/unit/test_bms_limits_within_step.py, tests/integration/test_bms_study.py)
+    return run("uac_proxy_mpc_cooling_fault_one_step_late", stop_s=1500.0)
 
 
 def test_load_shedding_keeps_the_battery_within_its_power_capability(cooling_fault_1500):

@@ -55,8 +55,8 @@ def test_seed_order_holds_the_limits_better_than_the_one_step_late_order():
     """The whole cooling-fault run (2926 s, fault at 300 s, ~3 s wall each): the within-step order leaves
     the same-step BMS limits (1 kW tolerance) for a fraction of the time the previous order does, and the
     core stays at the limit."""
-    late = _run("uac_proxy_mpc_cooling_fault.toml")
-    now = _run("uac_proxy_mpc_cooling_fault_seed.toml")
+    late = _run("uac_proxy_mpc_cooling_fault_one_step_late.toml")
+    now = _run("uac_proxy_mpc_cooling_fault.toml")      # the default wiring (same as *_seed.toml)
     v_late, v_now = _violation_s(late), _violation_s(now)
     assert v_late > 10.0                     # the one-step-late order leaves the limits (issue 14: ~50 s)
     assert v_now < 0.25 * v_late, (v_now, v_late)

@@ -37,6 +37,20 @@
   of > 1800 s); previous values SOC 44.07201468117775 %, BMS SOC 44.03048503085864 %, fuel
   196.09283542972273 g, soot 282.6661919042985 mg.  The one-branch and seed-DEKF references below run
   with the previous ``q_soc = 1e-5`` (``PREVIOUS_Q_SOC``).
+  Re-recorded a sixth time, on purpose - intended physics change: limits act within the step (follow-up
+  of issue 14).  ``scenarios/hd_udds_mpc.toml`` now has the wiring of the seed scenarios: ``power_limits``
+  components ``motor_limits`` (before the motor) and ``gen_limits`` (before the engine-generator, with the
+  generator floor ``elec_power_min_w``) evaluate the BMS limits of the same step, order ``bms,
+  motor_limits, motor, gen_limits, engine_generator, bus``, instead of the motor and the generator using
+  the bus's limits of the previous step.  Nothing else changed: the previous wiring (a copy of the
+  scenario at the parent commit) still gives all three sets of previous values below bit for bit (the
+  one-branch set to 2e-13).  Previous values: default SOC 44.07126127736606 %, BMS SOC
+  44.022147563314334 %, fuel 196.07719997857853 g, soot 282.6351522539737 mg; one-branch DEKF SOC
+  44.2004025991401 %, BMS SOC 43.579559296697454 %, fuel 198.64494328612892 g, soot 285.0518991723172 mg;
+  seed DEKF SOC 43.78000122438462 %, BMS SOC 45.358845973617825 %, fuel 188.93224294907384 g, soot
+  273.16921416306144 mg (shifts -3e-5 to -9e-5 relative in SOC, -0.08 to -0.10 % in fuel, -0.03 to
+  -0.5 % in soot after 120 s).  The one-step-late wiring is kept for the cooling-fault comparison in
+  ``scenarios/uac_proxy_mpc_cooling_fault_one_step_late.toml``.
 * Two identical runs give bit-identical DataFrames (no wall-clock or other non-deterministic
   quantity among the recorded outputs; the battery's measurement noise is seeded).
 """
@@ -52,29 +66,31 @@ from shevsim.core.scenario import build_master, load_scenario
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "scenarios" / "hd_udds_mpc.toml"
 
-# recorded before the optimisation, re-recorded with load shedding and with the table-scaled BMS DEKF,
-# stop_s = 120 s (see the module docstring)
+# recorded before the optimisation, re-recorded with load shedding, with the table-scaled BMS DEKF, with the
+# slow-branch DEKF and its q_soc, and with the limits held within the step; stop_s = 120 s (module docstring)
 REFERENCE_120S = {
-    "battery.soc_pct": 44.07126127736606,
-    "bms.soc_pct": 44.022147563314334,
-    "engine_generator.fuel_mass_g": 196.07719997857853,
-    "engine_generator.soot_mass_mg": 282.6351522539737,
+    "battery.soc_pct": 44.069278170207,
+    "bms.soc_pct": 44.020171385366915,
+    "engine_generator.fuel_mass_g": 195.91732130147454,
+    "engine_generator.soot_mass_mg": 282.5411553026654,
 }
 #: the DEKF SOC random walk before its re-tune with the slow branch (components/bms/default.toml)
 PREVIOUS_Q_SOC = "bms.q_soc=1e-5"
-# the same run with the one-branch DEKF (bms.v2_model = "none"): the values before issue 14
+# the same run with the one-branch DEKF (bms.v2_model = "none"): the values before issue 14's DEKF change
+# (re-recorded with the limits held within the step, see the module docstring)
 REFERENCE_120S_ONE_BRANCH = {
-    "battery.soc_pct": 44.2004025991401,
-    "bms.soc_pct": 43.579559296697454,
-    "engine_generator.fuel_mass_g": 198.64494328612892,
-    "engine_generator.soot_mass_mg": 285.0518991723172,
+    "battery.soc_pct": 44.19899956926717,
+    "bms.soc_pct": 43.577935643625096,
+    "engine_generator.fuel_mass_g": 198.46857845069894,
+    "engine_generator.soot_mass_mg": 284.97244625219435,
 }
 # the same run with the seed's DEKF (bms.rs_model = bms.rc_model = "free"): the values before the BMS change
+# (re-recorded with the limits held within the step, see the module docstring)
 REFERENCE_120S_SEED_DEKF = {
-    "battery.soc_pct": 43.78000122438462,
-    "bms.soc_pct": 45.358845973617825,
-    "engine_generator.fuel_mass_g": 188.93224294907384,
-    "engine_generator.soot_mass_mg": 273.16921416306144,
+    "battery.soc_pct": 43.776154344896035,
+    "bms.soc_pct": 45.355922494594374,
+    "engine_generator.fuel_mass_g": 188.7418928848167,
+    "engine_generator.soot_mass_mg": 271.8590800156963,
 }
 
 

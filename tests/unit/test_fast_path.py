@@ -81,7 +81,8 @@ def test_faults_and_within_step_power_limits_agree_with_the_master():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name,stop", [("hd_udds_mpc", 1060.0), ("uac_proxy_mpc", 600.0), ("uac_proxy_rule", 600.0),
-                                       ("uac_proxy_mpc_cooling_fault", 900.0), ("hd_udds_rule_seed", 1060.0)])
+                                       ("uac_proxy_mpc_cooling_fault", 900.0), ("hd_udds_rule_seed", 1060.0),
+                                       ("uac_proxy_mpc_cooling_fault_one_step_late", 900.0)])
 def test_longer_runs_agree(name, stop):
     _compare(name, stop)
 

@@ -310,7 +310,9 @@ def test_cli_info_lists_delayed_connections(capsys):
     assert main(["info", "hd_udds_rule"]) == 0
     out = capsys.readouterr().out
     line = next(x for x in out.splitlines() if x.startswith("delayed connections"))
-    assert "bus.motor_power_max_w -> motor.elec_power_max_w" in line
+    # the limits held within the step (issue 14): motor_limits runs before the generator, so it takes
+    # the generator's power of the previous step
+    assert "engine_generator.elec_power_w -> motor_limits.gen_power_w" in line
 
 
 @pytest.mark.parametrize("fmi_version", [2, 3])
