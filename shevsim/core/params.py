@@ -41,6 +41,8 @@ import typing
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
+
 from .errors import ScenarioError
 
 
@@ -262,6 +264,10 @@ def _suggest(key: str, options) -> str:
 
 def _coerce(value: Any, typ: Any, where: str) -> Any:
     origin = typing.get_origin(typ)
+    if isinstance(value, np.generic) and not isinstance(value, (np.str_, np.bytes_)):
+        value = value.item()              # numpy scalars (np.arange, np.linspace in a sweep) as Python numbers
+    elif isinstance(value, np.ndarray) and value.ndim == 1 and origin in (tuple, list):
+        value = value.tolist()
     if typ is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ScenarioError(f"{where}: expected a number, got {value!r}")

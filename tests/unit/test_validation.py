@@ -11,7 +11,7 @@ import pytest
 
 from shevsim.components import REGISTRY, get_component_class
 from shevsim.core.errors import DataError, ScenarioError, ShevsimError
-from shevsim.core.params import (Range, check_options, field_range, load_params, make_params, name_rule, rng,
+from shevsim.core.params import (Range, check_options, field_range, load_params, make_params, name_rule, params_to_dict, rng,
                                  validate_params)
 from shevsim.core.paths import data_path
 from shevsim.core.scenario import build_master, load_scenario
@@ -218,3 +218,17 @@ def test_min_above_max_refused():
     with pytest.raises(ScenarioError, match=r"'v_min_v' = 3.7 is above 'v_max_v' = 3.6"):
         make_params(BMSParams, {"v_min_v": 3.7}, "bms.toml")
     assert make_params(RuleSupervisorParams, {"soc_min_pct": 70.0}).soc_min_pct == 70.0   # equal is allowed
+
+
+def test_numpy_scalars_are_numbers_and_still_range_checked():
+    """A sweep in a notebook passes np.int64/np.float32 values (np.arange, np.linspace): accepted as the
+    Python numbers they are, and still checked (a NaN or a negative mass from numpy is refused)."""
+    from shevsim.components.vehicle import VehicleParams
+    base = dict(params_to_dict(load_params(VehicleParams, data_path("components", "vehicle", "matv.toml"))))
+    p = make_params(VehicleParams, {**base, "mass_kg": np.int64(18000)}, "<api>")
+    assert p.mass_kg == 18000.0 and type(p.mass_kg) is float
+    p = make_params(VehicleParams, {**base, "mass_kg": np.float32(12000.5)}, "<api>")
+    assert p.mass_kg == 12000.5
+    for bad in (np.float64("nan"), np.float32(-1.0)):
+        with pytest.raises(ScenarioError, match="mass_kg"):
+            make_params(VehicleParams, {**base, "mass_kg": bad}, "<api>")
