@@ -85,8 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
                                              "effect, add it and report the error before and after.")
     ap.add_argument("model", choices=sorted(MODELS), help="calibration model")
     ap.add_argument("data", help="measured CSV (or .csv.gz); '#' lines are comments")
-    ap.add_argument("--out", required=True, help="output directory (report.json, report.md, plots)")
-    ap.add_argument("--params", help="TOML with known parameters / starting values / OCV curve")
+    ap.add_argument("-o", "--out", required=True, help="output directory (report.json, report.md, plots)")
+    ap.add_argument("-p", "--params", help="TOML with known parameters / starting values / OCV curve")
     ap.add_argument("--map", action="append", default=[], metavar="CANONICAL=COLUMN",
                     help="use file column COLUMN as canonical column CANONICAL (repeatable)")
     ap.add_argument("--holdout", type=float, default=0.3, help="held-out fraction (default 0.3)")
@@ -103,7 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "power_w=kW, t_surface_c=K, voltage_v=mV; CANONICAL=its SI unit skips the unit sniffing)")
     ap.add_argument("--effects", nargs="+", help="restrict the candidate effects to these names")
     ap.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    ap.add_argument("-q", "--quiet", action="store_true")
+    ap.add_argument("-q", "--quiet", action="store_true", help="errors only (no progress or summary logging)")
     return ap
 
 

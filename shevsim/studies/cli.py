@@ -26,11 +26,11 @@ def _common(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("scenario", nargs="?", help="scenario TOML (its MPC supervisor component: --supervisor)")
     ap.add_argument("--workers", type=int, default=2, help="Dask worker processes (0 = serial; default 2)")
     ap.add_argument("--scheduler", help="address of an existing Dask scheduler (e.g. tcp://host:8786)")
-    ap.add_argument("--out", help="output folder")
+    ap.add_argument("-o", "--out", help="output folder")
     ap.add_argument("--cache", help="SQLite evaluation cache (default OUT/cache.sqlite)")
     ap.add_argument("--supervisor", default="supervisor", help="name of the supervisor component in the scenario")
     ap.add_argument("--stop-s", type=float, help="override the scenario stop time (s)")
-    ap.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE",
+    ap.add_argument("-s", "--set", action="append", default=[], metavar="COMP.PARAM=VALUE",
                     help="override applied to every run")
     ap.add_argument("--edges-kw", type=float, nargs="+", help="power partition edges (kW), first 0, last P_max")
     ap.add_argument("--max-evaluations", type=int, help="stop after this many new evaluations (resume later)")
@@ -39,7 +39,7 @@ def _common(ap: argparse.ArgumentParser) -> None:
                     help="fuel-economy metric key (default fuel_economy_dsoc_corrected_kmpl; the seed's A.1 "
                          "definition is fuel_economy_soc_sustained_kmpl, which needs SOC-sustained windows)")
     ap.add_argument("--soot-metric", default=None, help="soot metric key (default soot_dsoc_corrected_g_per_km, the fuel economy's basis)")
-    ap.add_argument("--no-plots", action="store_true")
+    ap.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     ap.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -128,11 +128,11 @@ def cmd_powerrate_map(argv) -> int:
                                  description="power-rate constraint map: GA + narrowed exhaustive search (seed A.3)")
     _common(ap)
     ap.add_argument("--levels-kwps", type=float, nargs="+", help="discrete rate levels (kW/s)")
-    ap.add_argument("--generations", type=int, default=50)
-    ap.add_argument("--population", type=int, default=30)
+    ap.add_argument("--generations", type=int, default=50, help="GA generations (seed 50)")
+    ap.add_argument("--population", type=int, default=30, help="GA population size (seed 30)")
     ap.add_argument("--crossover", type=float, default=0.8, help="crossover probability")
     ap.add_argument("--mutation", type=float, default=0.01, help="mutation probability per gene")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="GA random seed (same seed, same maps)")
     ap.add_argument("--fe-loss-pct", type=float, default=0.4, help="fuel-economy loss allowed (%%, seed 0.4)")
     ap.add_argument("--top-k", type=int, default=10, help="best GA maps that set the narrowed bounds")
     ap.add_argument("--max-cases", type=int, default=1000, help="cap on the exhaustive-search cases")
@@ -155,7 +155,7 @@ def cmd_powerrate_map(argv) -> int:
 def cmd_thermal(argv) -> int:
     ap = argparse.ArgumentParser(prog="shevsim study thermal", description="battery thermal-model verification")
     ap.add_argument("out_dir", nargs="?", help="output folder (same as --out)")
-    ap.add_argument("--out", default="results/study_thermal")
+    ap.add_argument("-o", "--out", default="results/study_thermal", help="output folder (default results/study_thermal)")
     a = ap.parse_args(argv)
     from ..battery.verification import run_thermal_verification
     out = a.out_dir or a.out
