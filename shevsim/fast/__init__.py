@@ -346,9 +346,9 @@ class FastRunner:
         for (cn, port) in m._forced:
             self._forced0[in_idx[(cn, port)]] = 1
         self._row0 = sig[:self.nsig].copy()
-        # per-instance data (template) and which entries a run mutates; the loop gets one typed list per
-        # type (the instances in execution order; a default component's data for a type the scenario lacks)
-        from numba import typed
+        # per-instance data (template) and which entries a run mutates; the loop gets one tuple per kind
+        # holding one tuple per instance (execution order; a default component's data for a kind the scenario
+        # lacks). Tuples, not numba typed lists: a typed list compiles its methods in every new process.
         dummies = _dummies()
         self._data = {typ: [] for typ in KINDS}
         self._mut = {typ: () for typ in KINDS}
@@ -368,9 +368,9 @@ class FastRunner:
         self._live = {}
         for typ in KINDS:
             if not self._data[typ]:
-                self._live[typ] = typed.List([dummies[typ]])
+                self._live[typ] = (dummies[typ],)
             else:
-                self._live[typ] = typed.List([self._fresh(typ, i) for i in range(len(self._data[typ]))])
+                self._live[typ] = tuple(self._fresh(typ, i) for i in range(len(self._data[typ])))
         self._comp_names = order
         from shevsim.core.params import params_to_dict
         self._params = {}
@@ -413,9 +413,10 @@ class FastRunner:
         for b in self._batteries:
             i = b[0]
             need = 4 * (-(-n // b[1]))
-            cur = self._live["battery"][i]
+            live = self._live["battery"]
+            cur = live[i]
             if cur[6].size < need:
-                self._live["battery"][i] = cur[:6] + (self._noise_for(b, need),) + cur[7:]
+                self._live["battery"] = live[:i] + (cur[:6] + (self._noise_for(b, need),) + cur[7:],) + live[i + 1:]
 
     def __call__(self, t_stop_s: float):
         import time

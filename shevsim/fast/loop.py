@@ -12,7 +12,7 @@ connections as index pairs::
                 step component j over multiple[j] * h      (kernels.py, by type code)
         record sig[:n_signals] as row k + 1; stop at the first non-finite value
 
-Component data are passed as one typed list per type holding one tuple per instance
+Component data are passed as one tuple per kind holding one tuple per instance
 (:mod:`shevsim.fast.kernels`); ``inst[j]`` is the position of the j-th component (execution order) in its
 type's list.  Faults (``f_t``, ``f_idx``, ``f_val``, sorted by time) force
 an input from their time on and cut its connection, as :meth:`Master._apply_faults` does.
@@ -47,8 +47,8 @@ def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, 
     """
     ncomp = typ.shape[0]
     nf = f_t.shape[0]
-    # the first instance of each type held in locals (taking an item out of a typed list increfs every array
-    # of its tuple: done once here rather than at every call)
+    # the first instance of each kind held in locals (taking an item out of the tuple of instances by a
+    # run-time index copies its arrays' descriptors: done once here rather than at every call)
     cyc0 = cyc[0]
     drv0 = drv[0]
     veh0 = veh[0]

@@ -303,12 +303,14 @@ def warm_up_fast_path() -> str:
         from ..core.paths import bundled_scenario
         from ..core.scenario import load_scenario
         from ..fast import runner_for
-        sc = load_scenario(bundled_scenario("hd_udds_rule"), ["cycle.repeat=1"])
-        run, why = runner_for(sc)
-        if run is None:
-            return why
-        run(2 * sc.settings.step_s)
-        return ""
+        why = ""
+        for name in ("hd_udds_mpc", "hd_udds_rule"):      # the MPC one also loads the DAQP binding's calls
+            sc = load_scenario(bundled_scenario(name), ["cycle.repeat=1"])
+            run, why = runner_for(sc)
+            if run is not None:
+                run(2 * sc.settings.step_s)
+                return ""
+        return why
     except Exception as exc:  # noqa: BLE001 - a warm-up must never stop a study
         return f"{type(exc).__name__}: {exc}"
 
