@@ -22,7 +22,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .core.errors import ScenarioError, ShevsimError, SimulationError
+from .core.errors import FastPathError, ScenarioError, ShevsimError, SimulationError
 from .core.results import Result, Termination, check_out_dir, git_commit, save_result
 from .core.scenario import PROJECT_ROOT, Scenario, build_master, load_scenario, stop_time
 
@@ -199,6 +199,10 @@ def simulate(scenario: Scenario, progress: bool = False, *, engine: str = "auto"
         t_stop = stop_time(scenario, master)
         check_faults_in_run(scenario, t_stop)
         x = (t_stop - scenario.t0_s) / scenario.settings.step_s
+        if x < 1.0 - 1e-9:
+            raise ScenarioError(f"{where}: [scenario] step_s = {scenario.settings.step_s:g} s is longer than the run "
+                                f"({t_stop - scenario.t0_s:g} s from t0_s = {scenario.t0_s:g} s to {t_stop:g} s): "
+                                f"not one communication step fits; use a step of at most the run's length")
         check_run_size(int(math.ceil(x)), len(master._signal_names), record_every,
                        allow_large=allow_large, where=where)
         runner, why = _fast_runner(scenario, engine, master)
@@ -212,6 +216,20 @@ def simulate(scenario: Scenario, progress: bool = False, *, engine: str = "auto"
         used = "fast"
         try:
             res = runner(t_stop)
+        except FastPathError as exc:
+            if engine != "auto":
+                res = Result(np.zeros(0), {}, {}, {}, _stop_info(exc))
+                if not partial:
+                    exc.result = res
+                    raise
+            else:   # an exception inside compiled code names no component or time: rerun on the master
+                log.warning("%s: fast path failed (%s); rerunning on the Python master", where, exc)
+                why = f"the fast path failed ({exc}); ran on the Python master"
+                runner = None
+                master = build_master(scenario)
+                master.settings.progress = progress
+                master.record_every = record_every
+                used = "python"
         except (SimulationError, KeyboardInterrupt) as exc:
             res = getattr(exc, "result", None)
             if res is None:
@@ -220,11 +238,11 @@ def simulate(scenario: Scenario, progress: bool = False, *, engine: str = "auto"
             if not partial:
                 exc.result = res
                 raise
-        if record_every > 1 and len(res.time_s) > 2:
+        if runner is not None and record_every > 1 and len(res.time_s) > 2:
             keep = np.unique(np.r_[np.arange(0, len(res.time_s), record_every), len(res.time_s) - 1])
             res.time_s = res.time_s[keep]
             res.signals = {k: v[keep] for k, v in res.signals.items()}
-    else:
+    if runner is None:
         try:
             try:
                 res = master.run(t_stop, t0=scenario.t0_s)

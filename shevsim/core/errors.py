@@ -22,5 +22,10 @@ class SimulationError(ShevsimError):
     """A run failed: message names component, variable and time."""
 
 
+
+class FastPathError(SimulationError):
+    """The compiled whole-system loop (:mod:`shevsim.fast`) raised inside compiled code: no component,
+    port or time is known (``engine='auto'`` then reruns on the Python master, which names them)."""
+
 class DataError(ShevsimError):
     """Input data (cycle, measurement) is malformed: message names the file and column/row."""

@@ -34,7 +34,9 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["runner_for", "FastRunner", "SUPPORTED_TYPES"]
+from shevsim.core.errors import FastPathError
+
+__all__ = ["runner_for", "FastRunner", "FastPathError", "SUPPORTED_TYPES"]
 
 SUPPORTED_TYPES = ("cycle", "driver", "vehicle", "motor", "bus", "engine_generator", "battery", "bms",
                    "rule_supervisor", "mpc_supervisor", "power_limits", "profile")
@@ -441,11 +443,19 @@ class FastRunner:
         k0 = 0
         try:
             while True:
-                run_loop(n - k0, k0, self.h, self.t0, self._typ, self._mult, self._ibase, self._obase, self._lptr,
-                         self._ldst, self._lsrc, sig, rec[k0:], nsig, out, self._inst, self._f_t, self._f_idx,
-                         self._f_val, forced, fstate, self._jacobi, data["cycle"], data["driver"], data["vehicle"], data["motor"],
-                         data["bus"], data["engine_generator"], data["battery"], data["bms"], data["rule_supervisor"],
-                         data["mpc_supervisor"], data["power_limits"], data["vehicle_speed"], data["profile"])
+                try:
+                    run_loop(n - k0, k0, self.h, self.t0, self._typ, self._mult, self._ibase, self._obase,
+                             self._lptr, self._ldst, self._lsrc, sig, rec[k0:], nsig, out, self._inst, self._f_t,
+                             self._f_idx, self._f_val, forced, fstate, self._jacobi, data["cycle"], data["driver"],
+                             data["vehicle"], data["motor"], data["bus"], data["engine_generator"], data["battery"],
+                             data["bms"], data["rule_supervisor"], data["mpc_supervisor"], data["power_limits"],
+                             data["vehicle_speed"], data["profile"])
+                except (ArithmeticError, ValueError, IndexError) as exc:
+                    # an exception raised inside compiled code carries no component or time: the caller
+                    # (shevsim.run.simulate, engine 'auto') reruns on the Python master, which names them
+                    raise FastPathError(f"the compiled loop raised {type(exc).__name__}: {exc} (between t="
+                                        f"{self._time(k0):.6g} s and the stop; run with engine 'python' to name "
+                                        f"the component and time)") from exc
                 if out[0] == ERR_NONFINITE_OUTPUT:
                     row = int(out[1])
                     bad = [j for j in range(nsig) if not math.isfinite(rec[row, j])]

@@ -359,3 +359,29 @@ def test_mpc_kernel_equals_the_component_with_hard_limits(sets):
 
 def test_rule_kernel_equals_the_component():
     _kernel_vs_component("rule_supervisor", n=2000, seed=2)
+
+
+def test_an_exception_inside_the_compiled_loop_reruns_on_the_master(monkeypatch):
+    """Numba raises without component or time; engine 'auto' reruns the scenario on the Python master
+    (same numbers, its diagnosis when it fails), engine 'fast' reports the stop as such."""
+    import shevsim
+    from shevsim.core.errors import FastPathError
+    from shevsim.fast import FastRunner
+    ref = shevsim.simulate("hd_udds_rule", {"cycle.repeat": 1}, stop_s=30.0, engine="python")
+
+    def boom(self, t_stop_s):
+        raise FastPathError("the compiled loop raised ZeroDivisionError: division by zero")
+    monkeypatch.setattr(FastRunner, "__call__", boom)
+    res = shevsim.simulate("hd_udds_rule", {"cycle.repeat": 1}, stop_s=30.0, engine="auto")
+    assert res.termination == "completed" and res.meta["engine"] == "python"
+    for name, v in ref.signals.items():
+        np.testing.assert_array_equal(res.signals[name], v, err_msg=name)
+    res = shevsim.simulate("hd_udds_rule", {"cycle.repeat": 1}, stop_s=30.0, engine="fast")
+    assert res.termination.status == "stopped" and "ZeroDivisionError" in res.termination.reason
+
+
+def test_a_step_longer_than_the_run_is_refused_before_running():
+    import shevsim
+    from shevsim.core.errors import ScenarioError
+    with pytest.raises(ScenarioError, match="step_s = 1e\\+06 s is longer than the run"):
+        shevsim.simulate("hd_udds_rule", {"scenario.step_s": 1e6})
