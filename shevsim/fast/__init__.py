@@ -525,6 +525,12 @@ def runner_for(scenario, master=None) -> tuple[Callable | None, str]:
     why = _component_reason(master)
     if why:
         return None, why
+    from shevsim.core.variables import units_compatible
+    for c in master.connections:            # the loop copies values: a unit-converting link stays on the master
+        su = master._vars[c.src][c.src_port].unit
+        du = master._vars[c.dst][c.dst_port].unit
+        if not units_compatible(su, du):
+            return None, f"connection {c} converts '{su}' to '{du}' (unit conversion runs on the Python master)"
     try:
         return FastRunner(scenario, master), ""
     except Declined as exc:

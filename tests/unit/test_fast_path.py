@@ -385,3 +385,14 @@ def test_a_step_longer_than_the_run_is_refused_before_running():
     from shevsim.core.errors import ScenarioError
     with pytest.raises(ScenarioError, match="step_s = 1e\\+06 s is longer than the run"):
         shevsim.simulate("hd_udds_rule", {"scenario.step_s": 1e6})
+
+
+def test_a_unit_converting_connection_is_declined():
+    """The compiled loop copies values by index: a connection the master converts (kW -> W) stays there."""
+    import dataclasses
+    sc = load_scenario("hd_udds_rule")
+    m = build_master(sc)
+    v = m._vars["motor"]["elec_power_max_w"]
+    m._vars["motor"]["elec_power_max_w"] = dataclasses.replace(v, unit="kW")
+    run, why = runner_for(sc, m)
+    assert run is None and "converts" in why and "motor.elec_power_max_w" in why
