@@ -44,6 +44,7 @@ from shevsim.powertrain.vehicle import vehicle_force_step, vehicle_speed_mode_st
 from shevsim.components.cycle import cycle_sample
 from shevsim.powertrain.driver import driver_step
 from shevsim.supervisor.mpc import mpc_move
+from shevsim.supervisor.rule_based import _bisect_right as bisect_right  # Python's bisect.bisect_right
 from shevsim.supervisor.rule_based import rule_command
 
 from . import daqp_nb
@@ -74,20 +75,6 @@ def pmin(a, b):
 def pmax(a, b):
     """Python's ``max(a, b)``."""
     return b if b > a else a
-
-
-@njit(cache=True)
-def bisect_right(a, x):
-    """Python's ``bisect.bisect_right`` (the power-rate map's partition)."""
-    lo = 0
-    hi = a.shape[0]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if x < a[mid]:
-            hi = mid
-        else:
-            lo = mid + 1
-    return lo
 
 
 @njit(cache=True)
