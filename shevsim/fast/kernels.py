@@ -26,7 +26,6 @@ may pick the other one of two equal values (signed zeros), so the bookkeeping us
 """
 from __future__ import annotations
 
-import inspect
 import math
 
 from numba import njit
@@ -340,49 +339,7 @@ def _engine_kernel_floor(data, sig, ib, ob, t, h):
     return 0
 
 
-@njit(cache=True)
-def _engine_kernel_plain(data, sig, ib, ob, t, h):
-    """:meth:`shevsim.components.engine_generator.EngineGenerator.do_step` (engine step without a floor input)."""
-    md, mi, c, p, s = data
-    pc = sig[ib]
-    rate = sig[ib + 1]
-    lim = sig[ib + 2]
-    if pc != pc or rate != rate or lim != lim:
-        return ERR_NAN_INPUT
-    r = engine_step(md, mi, c, p[0], s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8], s[9], s[10], s[11],
-                    s[12], s[13], s[14], s[15], s[16], s[17], s[18], s[19], s[20], pc, rate, h, lim)
-    if not math.isfinite(r[21] + r[22] + r[24] + r[1] + r[5]):
-        return ERR_ENGINE_NONFINITE
-    (s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8], s[9], s[10], s[11], s[12], s[13], s[14], s[15], s[16],
-     s[17], s[18], s[19], s[20]) = (r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11],
-                                    r[12], r[13], r[14], r[15], r[16], r[17], r[18], r[19], r[20])
-    # _write(e_el / h, fuel / h, soot / h, soot_meas); state order of engine.STATE
-    sig[ob] = r[21] / h
-    sig[ob + 1] = s[5] * s[1]
-    sig[ob + 2] = s[1]
-    sig[ob + 3] = s[5]
-    sig[ob + 4] = s[3]
-    sig[ob + 5] = r[22] / h
-    sig[ob + 6] = r[23] / h
-    sig[ob + 7] = s[0]
-    sig[ob + 8] = p[1]
-    sig[ob + 9] = s[18]
-    sig[ob + 10] = s[19]
-    sig[ob + 11] = s[7]
-    sig[ob + 12] = s[8]
-    sig[ob + 13] = s[14]
-    sig[ob + 14] = s[15]
-    sig[ob + 15] = s[9]
-    sig[ob + 16] = s[12]
-    sig[ob + 17] = s[13]
-    sig[ob + 18] = s[11]
-    sig[ob + 19] = r[24]
-    return 0
-
-
-# the engine-generator's step gained a generator-floor input (issue 14); the kernel follows the installed one
-ENGINE_HAS_FLOOR = "elec_min_w" in inspect.signature(getattr(engine_step, "py_func", engine_step)).parameters
-engine_kernel = _engine_kernel_floor if ENGINE_HAS_FLOOR else _engine_kernel_plain
+engine_kernel = _engine_kernel_floor
 
 
 # -------------------------------------------------------------------------------------------- battery
