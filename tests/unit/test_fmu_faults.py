@@ -148,3 +148,33 @@ def test_stepped_component_dropped_without_terminate_is_freed(faulty):
     while _unpack_dirs("dropped") and time.time() < deadline:
         time.sleep(0.05)
     assert not _unpack_dirs("dropped")
+
+
+@pytest.mark.parametrize("fault", ["fail", "timeout"])
+def test_a_run_stopped_by_an_fmu_keeps_its_trajectory(faulty, tmp_path, fault):
+    """Issue 12 item 4 / issue 13 item 6 at run level: an FMU that fails (its own message) or hangs
+    (doStep timeout) stops the run; the CLI saves the trajectory up to the stop, names the FMU component
+    and the time, and exits 1."""
+    import json
+
+    import pandas as pd
+
+    from shevsim.cli import main
+    (tmp_path / "py_faulty.fmu").write_bytes(Path(faulty).read_bytes())
+    opts = 'fail_at_s = 0.5' if fault == "fail" else 'block_at_s = 0.5, block_for_s = 3.0, step_timeout_s = 0.3'
+    sc = tmp_path / "pump.toml"
+    sc.write_text('[scenario]\nname = "pump"\nstep_s = 0.1\nstop_s = 2.0\n\n'
+                  '[components.pump]\ntype = "fmu"\nfmu = "py_faulty.fmu"\n'
+                  f'set = {{ {opts} }}\n')
+    out = tmp_path / "out"
+    assert main(["run", str(sc), "-o", str(out), "--no-plots"]) == 1
+    run = json.loads((out / "run.json").read_text())
+    term = run["termination_detail"]
+    assert term["status"] == "stopped" and term["component"] == "pump"
+    assert term["time_s"] == pytest.approx(0.5)
+    if fault == "fail":
+        assert "coolant pump model diverged" in term["reason"]
+    else:
+        assert "0.3 s of wall time" in term["reason"]
+    df = pd.read_parquet(out / "timeseries.parquet")
+    assert len(df) == 6 and df["time_s"].iloc[-1] == pytest.approx(0.5)     # t = 0 ... 0.5 s kept
