@@ -52,13 +52,17 @@ UNIT_COLUMNS = {
     "speed_mps": ("speed_mps", 1.0), "speed_kmh": ("speed_mps", 1.0 / 3.6), "speed_kph": ("speed_mps", 1.0 / 3.6),
     "speed_mph": ("speed_mps", 0.44704),
 }
-#: Highest plausible road-vehicle cycle speed (m/s, 180 km/h): above it the column looks like km/h.
-MAX_PLAUSIBLE_SPEED_MPS = 50.0
-#: Largest plausible cycle sample step (s): drive cycles are sampled at 0.1-1 s; a step of 10 or more
-#: "seconds" is a time column in milliseconds (or a trace too coarse to follow).
+#: Highest plausible road-vehicle cycle speed (m/s, 252 km/h): above it the column looks like km/h.
+MAX_PLAUSIBLE_SPEED_MPS = 70.0
+#: A time column in milliseconds read as seconds: steps of 10 "s" or more over more than 12 hours (a
+#: one-minute cycle logged in ms spans 16.7 "hours"). A coarse trace, sampled every 10-60 s over a few
+#: hours, is plausible and accepted.
 MAX_PLAUSIBLE_STEP_S = 10.0
-#: Largest plausible acceleration magnitude of a drive cycle (m/s^2, ~1 g).
+MAX_PLAUSIBLE_DURATION_S = 43200.0
+#: Largest plausible acceleration magnitude of a drive cycle (m/s^2, ~1 g), measured as the speed change
+#: over 1 s windows (sensor noise of a 10-100 Hz log does not count); a km/h column read as m/s is 3.6x.
 MAX_PLAUSIBLE_ACCEL_MPS2 = 10.0
+ACCEL_WINDOW_S = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,32 +164,44 @@ def _split_row(line: str, sep: str) -> list[str]:
     return next(csv.reader([line], delimiter=sep))
 
 
-def check_plausible(path, t: np.ndarray, v: np.ndarray, lines=None) -> None:
-    """Unit sniffing on a cycle in SI: a speed above :data:`MAX_PLAUSIBLE_SPEED_MPS` looks like km/h, a
-    sample step of :data:`MAX_PLAUSIBLE_STEP_S` or more looks like milliseconds, an acceleration above
-    :data:`MAX_PLAUSIBLE_ACCEL_MPS2` is no road vehicle's.  The error says what was detected and how to
-    declare the unit (a header ``speed_kmh`` / ``speed_mph`` / ``time_ms`` converts)."""
+def check_plausible(path, t: np.ndarray, v: np.ndarray, lines=None, declared=None) -> None:
+    """Unit sniffing on a cycle in SI: a speed above :data:`MAX_PLAUSIBLE_SPEED_MPS` looks like km/h;
+    steps of :data:`MAX_PLAUSIBLE_STEP_S` or more over more than :data:`MAX_PLAUSIBLE_DURATION_S` look like
+    milliseconds; a speed change faster than :data:`MAX_PLAUSIBLE_ACCEL_MPS2` over 1 s windows is no road
+    vehicle's.  A unit declared in the header other than the default (``time_min``, ``speed_kmh`` ...)
+    skips its column's check.  The error says what was detected, how to declare the unit, and how to
+    turn the check off (``check_units = false`` in the cycle's parameters) for a legitimate trace."""
+    declared = declared or {}
+    off = " (or set check_units = false in the cycle's parameters if the trace is right as it is)"
+
     def line(k):
         return int(lines[k]) if lines is not None else None
+    speed_declared = declared.get("speed_mps", "speed_mps") != "speed_mps"
+    time_declared = declared.get("time_s", "time_s") != "time_s"
     k = int(np.argmax(v))
-    if v[k] > MAX_PLAUSIBLE_SPEED_MPS:
+    if not speed_declared and v[k] > MAX_PLAUSIBLE_SPEED_MPS:
         raise _fail(path, line(k), "speed_mps",
                     f"speed {v[k]:g} m/s (= {v[k] * 3.6:.0f} km/h) is beyond any road vehicle (> "
                     f"{MAX_PLAUSIBLE_SPEED_MPS:g} m/s); the column looks like km/h (or mph): name it 'speed_kmh' "
-                    f"(or 'speed_mph') in the header and it is converted, or convert it to m/s")
+                    f"(or 'speed_mph') in the header and it is converted, or convert it to m/s{off}")
     dt = np.diff(t)
-    if dt.size and float(np.median(dt)) >= MAX_PLAUSIBLE_STEP_S:
+    if (not time_declared and dt.size and float(np.median(dt)) >= MAX_PLAUSIBLE_STEP_S
+            and t[-1] - t[0] > MAX_PLAUSIBLE_DURATION_S):
         raise _fail(path, line(1), "time_s",
-                    f"sample step {float(np.median(dt)):g} s: a drive cycle is sampled every 0.1-1 s, so the "
-                    f"time column looks like milliseconds; name it 'time_ms' in the header and it is converted")
-    if dt.size:
-        a = np.abs(np.diff(v)) / dt
-        k = int(np.argmax(a))
-        if a[k] > MAX_PLAUSIBLE_ACCEL_MPS2:
-            raise _fail(path, line(k + 1), "speed_mps",
-                        f"acceleration {a[k]:.3g} m/s^2 between {t[k]:g} s and {t[k + 1]:g} s is beyond any road "
-                        f"vehicle (> {MAX_PLAUSIBLE_ACCEL_MPS2:g} m/s^2): are speed (m/s) and time (s) in the "
-                        f"declared units?")
+                    f"sample step {float(np.median(dt)):g} s over {(t[-1] - t[0]) / 3600.0:.3g} hours: the time "
+                    f"column looks like milliseconds; name it 'time_ms' in the header and it is converted{off}")
+    if dt.size and not (speed_declared and time_declared):
+        # speed change over windows of at least ACCEL_WINDOW_S (one sample when coarser)
+        step = float(np.median(dt))
+        w = max(1, int(round(ACCEL_WINDOW_S / step))) if step > 0 else 1
+        if v.size > w:
+            a = np.abs(v[w:] - v[:-w]) / (t[w:] - t[:-w])
+            k = int(np.argmax(a))
+            if a[k] > MAX_PLAUSIBLE_ACCEL_MPS2:
+                raise _fail(path, line(k + w), "speed_mps",
+                            f"acceleration {a[k]:.3g} m/s^2 between {t[k]:g} s and {t[k + w]:g} s is beyond any "
+                            f"road vehicle (> {MAX_PLAUSIBLE_ACCEL_MPS2:g} m/s^2): are speed (m/s) and time (s) "
+                            f"in the declared units?{off}")
 
 
 def load_cycle(path: str | Path, name: str | None = None, check_units: bool = True) -> Cycle:
@@ -302,7 +318,7 @@ def load_cycle(path: str | Path, name: str | None = None, check_units: bool = Tr
                     f"non-uniform time step (gap?): {dt[k - 1]:.6g} s from {float(t[k - 1])!r} s, "
                     f"the cycle's step is {step:.6g} s")
     if check_units:
-        check_plausible(path, t, v, lines)
+        check_plausible(path, t, v, lines, declared)
     offset = float(t[0])
     # rebuild a clean uniform grid (removes accumulated rounding of the file's times)
     tt = np.arange(len(t)) * step

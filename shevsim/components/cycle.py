@@ -28,16 +28,21 @@ class CycleParams:
     cycle_file : str
         Path of the cycle CSV (relative paths in a parameter file resolve against that file).
     repeat : int
-        Number of consecutive repetitions of the cycle (>= 1). The seed's fuel
+        Number of consecutive repetitions of the cycle (1 to 1e6). The seed's fuel
         economy (A.1) is evaluated over two consecutive cycles.
+    check_units : bool
+        Unit sniffing on the cycle file (speeds that look like km/h, times like ms, impossible
+        accelerations; :func:`shevsim.cycles.check_plausible`). ``false`` for a legitimate trace the
+        checks refuse (a synthetic step, a race car).
     """
 
     cycle_file: str = _DEFAULT_CYCLE
     repeat: int = 1
+    check_units: bool = True
 
     def __post_init__(self):
-        if self.repeat < 1:
-            raise ValueError(f"parameter 'repeat' must be >= 1, got {self.repeat}")
+        if not 1 <= self.repeat <= 1_000_000:
+            raise ValueError(f"parameter 'repeat' must be in [1, 1000000], got {self.repeat}")
 
 
 @_njit(cache=True)
@@ -103,7 +108,7 @@ class CycleSource(Component):
 
     def __init__(self, name: str, params: CycleParams | None = None):
         super().__init__(name, params)
-        self.cycle = load_cycle(self.params.cycle_file)
+        self.cycle = load_cycle(self.params.cycle_file, check_units=self.params.check_units)
         self._v = [float(x) for x in self.cycle.speed_mps]
         self._dt = self.cycle.dt_s
         self._slope = [(self._v[i + 1] - self._v[i]) / self._dt for i in range(len(self._v) - 1)] + [0.0]

@@ -43,11 +43,29 @@ def test_cycle_at_200_mps_refused():
 
 def test_cycle_time_in_ms_refused_then_declared(tmp_path):
     p = _cycle_csv(tmp_path / "ms.csv", ("time_s", "speed_mps"), T * 1000, V)
-    with pytest.raises(DataError, match=r"column 'time_s': sample step 1000 s: .* looks like milliseconds; name it "
+    with pytest.raises(DataError, match=r"column 'time_s': sample step 1000 s over 16.7 hours: .* looks like milliseconds; name it "
                                         r"'time_ms'"):
         load_cycle(p)
     c = load_cycle(_cycle_csv(tmp_path / "ms2.csv", ("time_ms", "speed_mps"), T * 1000, V))
     assert c.dt_s == pytest.approx(1.0) and c.duration_s == pytest.approx(60.0)
+
+
+def test_legitimate_coarse_fast_noisy_and_declared_traces_are_accepted(tmp_path):
+    """The sniffing must not refuse real data: a highway trace sampled every 10 s, a cycle declared in
+    minutes, a car at 55 m/s, a 10 Hz log with sensor noise; a synthetic step passes with check_units=False."""
+    t10 = np.arange(0.0, 7200.0, 10.0)                                    # 2 h every 10 s
+    load_cycle(_cycle_csv(tmp_path / "c10.csv", ("time_s", "speed_mps"), t10, 25 + 5 * np.sin(t10 / 600)))
+    tm = np.arange(0.0, 60.0, 0.5)                                         # every 30 s, declared in minutes
+    c = load_cycle(_cycle_csv(tmp_path / "cmin.csv", ("time_min", "speed_mps"), tm, 20 + 0 * tm))
+    assert c.dt_s == pytest.approx(30.0)
+    load_cycle(_cycle_csv(tmp_path / "fast.csv", ("time_s", "speed_mps"), T, V * 55.0 / 22.0))
+    t = np.arange(0.0, 120.0, 0.1)
+    noisy = np.clip(20 + 0.3 * np.random.default_rng(0).standard_normal(t.size), 0, None)
+    load_cycle(_cycle_csv(tmp_path / "gps.csv", ("time_s", "speed_mps"), t, noisy))
+    step = [0.0, 0.0, 12.0, 12.0]
+    with pytest.raises(DataError, match="check_units = false"):
+        cycle_from_arrays("step", [0, 1, 2, 3], step)
+    assert cycle_from_arrays("step", [0, 1, 2, 3], step, check_units=False).speed_mps.max() == 12.0
 
 
 def test_cycle_implausible_acceleration_refused():
