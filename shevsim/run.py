@@ -295,17 +295,30 @@ def check_trace_options(options: Mapping[str, Any], where: str = "<scenario>") -
                             f"expected true/false")
 
 
-def trace_check(res: Result, options: Mapping[str, Any] | None = None) -> Termination | None:
+def trace_signals(scenario: Scenario) -> tuple[str, str] | None:
+    """``(vehicle speed, cycle reference speed)`` signal names of a scenario with one component of type
+    ``vehicle`` and one of type ``cycle`` (whatever their names), else None."""
+    veh = [c.name for c in scenario.components if c.type == "vehicle"]
+    cyc = [c.name for c in scenario.components if c.type == "cycle"]
+    if len(veh) == 1 and len(cyc) == 1:
+        return f"{veh[0]}.speed_mps", f"{cyc[0]}.speed_ref_mps"
+    return None
+
+
+def trace_check(res: Result, options: Mapping[str, Any] | None = None, speed: str = "vehicle.speed_mps",
+                ref_speed: str = "cycle.speed_ref_mps") -> Termination | None:
     """A 'degraded' termination when a completed run missed its speed trace beyond tolerance
-    (distance shortfall or a sustained speed error), else None. Needs ``vehicle.speed_mps`` and
-    ``cycle.speed_ref_mps``; see :data:`TRACE_DEFAULTS` for the options."""
+    (distance shortfall or a sustained speed error), else None. ``speed`` and ``ref_speed`` name the
+    vehicle's and the cycle's speed signals (:func:`trace_signals`); see :data:`TRACE_DEFAULTS` for the
+    options."""
     opts = {**TRACE_DEFAULTS, **{k: v for k, v in dict(options or {}).items() if k in TRACE_DEFAULTS}}
-    if opts["trace_allow_miss"] is True or "vehicle.speed_mps" not in res.signals \
-            or "cycle.speed_ref_mps" not in res.signals or len(res.time_s) < 2:
+    if opts["trace_allow_miss"] is True or speed not in res.signals \
+            or ref_speed not in res.signals or len(res.time_s) < 2:
         return None
     t = np.asarray(res.time_s, float)
-    v = np.asarray(res["vehicle.speed_mps"], float)
-    ref = np.asarray(res["cycle.speed_ref_mps"], float)
+    v = np.asarray(res[speed], float)
+    ref = np.asarray(res[ref_speed], float)
+    comp, port = speed.split(".", 1)
     dt = np.diff(t)
     d_ref = float(np.sum(0.5 * (ref[1:] + ref[:-1]) * dt))
     d_veh = float(np.sum(0.5 * (v[1:] + v[:-1]) * dt))
@@ -314,7 +327,7 @@ def trace_check(res: Result, options: Mapping[str, Any] | None = None) -> Termin
         return Termination("degraded", f"trace miss: the vehicle covered {d_veh / 1000:.4g} km of the cycle's "
                            f"{d_ref / 1000:.4g} km (shortfall {100 * (1 - d_veh / d_ref):.3g} % > "
                            f"{100 * tol:.3g} % tolerance; [metrics] trace_distance_tolerance / trace_allow_miss)",
-                           "vehicle", "speed_mps", None)
+                           comp, port, None)
     err = np.abs(v - ref) * 3.6 > float(opts["trace_speed_tolerance_kmh"])
     window = float(opts["trace_speed_window_s"])
     if np.any(err):
@@ -327,7 +340,7 @@ def trace_check(res: Result, options: Mapping[str, Any] | None = None) -> Termin
             return Termination("degraded", f"trace miss: speed error above {opts['trace_speed_tolerance_kmh']:g} "
                                f"km/h for {lengths[i]:.4g} s from t={t[starts[i]]:.6g} s (> {window:g} s; "
                                f"[metrics] trace_speed_tolerance_kmh / trace_speed_window_s / trace_allow_miss)",
-                               "vehicle", "speed_mps", float(t[starts[i]]))
+                               comp, port, float(t[starts[i]]))
     return None
 
 
@@ -374,6 +387,12 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
     if record is not None:
         sc.set("record.signals", list(record), "record=")
     check_trace_options(sc.metrics, str(sc.path or "<scenario>"))
+    trace = trace_signals(sc)
+    if trace and sc.record is not None and sc.metrics.get("trace_allow_miss") is not True:
+        missing = [x for x in trace if x not in sc.record]
+        if missing:          # the trace check needs them: recorded too (a partial record must not hide a miss)
+            log.info("%s: %s recorded too (the speed-trace check needs them)", sc.name, ", ".join(missing))
+            sc.record = list(sc.record) + missing
     out_dir = None
     if save is None:
         save = out is not None
@@ -382,7 +401,7 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
     res = simulate(sc, progress=progress, engine=engine, partial=True, record_every=record_every,
                    allow_large=allow_large)
     if res.termination.ok:
-        degraded = trace_check(res, sc.metrics)
+        degraded = trace_check(res, sc.metrics, *trace) if trace else None
         if degraded is not None:
             res.termination = degraded
     res.metrics = compute_run_metrics(res, sc)

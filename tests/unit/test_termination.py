@@ -199,6 +199,12 @@ def test_trace_miss_is_degraded_unless_allowed(tmp_path, capsys):
     assert t.status == "degraded" and "trace miss" in t.reason and t.component == "vehicle"
     assert main(["run", "hd_udds_rule", "-o", str(tmp_path / "b"), *sets,
                  "-s", "metrics.trace_allow_miss=true"]) == 0
+    # a partial record does not hide the miss: the trace signals are recorded too
+    assert main(["run", "hd_udds_rule", "-o", str(tmp_path / "c"), *sets,
+                 "--record", "battery.soc_pct", "vehicle.distance_m"]) == 1
+    r = load_result(tmp_path / "c")
+    assert r.termination.status == "degraded"
+    assert {"battery.soc_pct", "vehicle.speed_mps", "cycle.speed_ref_mps"} <= set(r.signals)
     # a followed cycle is completed
     res = shevsim.simulate("hd_udds_rule", {"cycle.repeat": 1}, stop_s=120.0)
     assert res.termination == "completed"
