@@ -23,7 +23,7 @@ from ..core.errors import ShevsimError
 
 
 def _common(ap: argparse.ArgumentParser) -> None:
-    ap.add_argument("scenario", nargs="?", help="scenario TOML (its MPC supervisor component: --supervisor)")
+    ap.add_argument("scenario", nargs="?", help="scenario TOML or a bundled scenario's name (its MPC supervisor component: --supervisor)")
     ap.add_argument("--workers", type=int, default=2, help="Dask worker processes (0 = serial; default 2)")
     ap.add_argument("--scheduler", help="address of an existing Dask scheduler (e.g. tcp://host:8786)")
     ap.add_argument("-o", "--out", help="output folder")
@@ -51,7 +51,12 @@ def _problem(a, name: str):
         raise ShevsimError(f"study {name}: a SCENARIO file is needed (or --synthetic)")
     p = Path(a.scenario)
     if not p.is_file():
-        raise ShevsimError(f"{p}: scenario file not found")
+        from ..core.paths import bundled_scenario, bundled_scenarios
+        b = bundled_scenario(a.scenario)
+        if b is None:
+            raise ShevsimError(f"{p}: scenario file not found (bundled scenarios by name: "
+                               f"{', '.join(bundled_scenarios())})")
+        p = b
     from ..core.scenario import parse_value
     extra = {}
     for s in a.set:
