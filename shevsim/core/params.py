@@ -147,6 +147,11 @@ NAME_RULES: tuple[tuple[str, str, Range], ...] = (
     ("suffix", "_eff", Range(lo=0.0, hi=1.0, lo_open=True, what="an efficiency")),
     ("suffix", "efficiency_frac", Range(lo=0.0, hi=1.0, lo_open=True, what="an efficiency")),
     ("exact", "efficiency", Range(lo=0.0, hi=1.0, lo_open=True, what="an efficiency")),
+    ("prefix", "n_", Range(lo=1.0, what="a count")),            # before the '_c' suffix (n_c: control horizon)
+    ("suffix", "_n_per_m", Range(lo=0.0, what="a stiffness")),
+    ("suffix", "_ns_per_m", Range(lo=0.0, what="a damping coefficient")),
+    ("suffix", "_per_s", Range(lo=0.0, what="a rate")),
+    ("suffix", "_v", Range(lo=0.0, what="a voltage magnitude")),
     ("suffix", "_pct", Range(lo=0.0, hi=100.0, what="a percentage")),
     ("suffix", "_frac", Range(lo=0.0, hi=1.0, what="a fraction")),
     ("suffix", "_c", Range(lo=ABSOLUTE_ZERO_C, lo_open=True, what="a temperature in degC, above absolute zero")),
@@ -168,7 +173,6 @@ NAME_RULES: tuple[tuple[str, str, Range], ...] = (
     ("suffix", "_hz", Range(lo=0.0, lo_open=True, what="a frequency")),
     ("suffix", "_s", Range(lo=0.0, what="a duration or time")),
     ("suffix", "_m", Range(lo=0.0, what="a length")),
-    ("prefix", "n_", Range(lo=1.0, what="a count")),
 )
 
 

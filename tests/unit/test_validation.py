@@ -232,3 +232,14 @@ def test_numpy_scalars_are_numbers_and_still_range_checked():
     for bad in (np.float64("nan"), np.float32(-1.0)):
         with pytest.raises(ScenarioError, match="mass_kg"):
             make_params(VehicleParams, {**base, "mass_kg": bad}, "<api>")
+
+
+def test_name_rules_give_each_field_its_meaning():
+    """The first matching rule decides: n_c is the MPC's control horizon (a count), not a temperature;
+    stiffness, damping and rates are non-negative, voltages too."""
+    assert name_rule("n_c").what == "a count" and name_rule("n_c").lo == 1.0
+    assert name_rule("t_core_max_c").what.startswith("a temperature")
+    assert name_rule("stiffness_n_per_m").what == "a stiffness"
+    assert name_rule("damping_ns_per_m").what == "a damping coefficient"
+    assert name_rule("heat_rate_per_s").what == "a rate"
+    assert name_rule("v_min_v").lo == 0.0
