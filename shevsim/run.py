@@ -23,6 +23,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .core.errors import FastPathError, ScenarioError, ShevsimError, SimulationError
+from .core.params import check_options
 from .core.results import Result, Termination, check_out_dir, git_commit, save_result
 from .core.scenario import PROJECT_ROOT, Scenario, build_master, load_scenario, stop_time
 
@@ -387,6 +388,7 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
     if record is not None:
         sc.set("record.signals", list(record), "record=")
     check_trace_options(sc.metrics, str(sc.path or "<scenario>"))
+    check_options(sc.metrics, f"{sc.path or '<scenario>'}: [metrics]")   # also when changed by attribute
     trace = trace_signals(sc)
     if trace and sc.record is not None and sc.metrics.get("trace_allow_miss") is not True:
         missing = [x for x in trace if x not in sc.record]

@@ -719,8 +719,17 @@ def build_master(scenario: Scenario) -> Master:
 
 
 def stop_time(scenario: Scenario, master: Master) -> float:
-    """The scenario's stop time, else the longest natural stop time among components."""
+    """The scenario's stop time, else the longest natural stop time among components. The scenario's
+    time fields are checked here too (an object changed by attribute in Python skipped ``Scenario.set``)."""
+    where = f"{scenario.path or '<scenario>'}: [scenario]"
+    for key, val in (("t0_s", scenario.t0_s), ("stop_s", scenario.stop_s), ("step_s", scenario.settings.step_s)):
+        if val is not None and (isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val)):
+            raise ScenarioError(f"{where} field '{key}' must be a finite number, got {val!r}")
+    if not scenario.settings.step_s > 0:
+        raise ScenarioError(f"{where} field 'step_s' must be > 0, got {scenario.settings.step_s!r}")
     if scenario.stop_s is not None:
+        if scenario.stop_s <= scenario.t0_s:
+            raise ScenarioError(f"{where} field 'stop_s' ({scenario.stop_s} s) must be after t0_s ({scenario.t0_s} s)")
         return scenario.stop_s
     natural = [c.natural_stop_time() for c in master.components.values()
                if hasattr(c, "natural_stop_time") and c.natural_stop_time() is not None]

@@ -241,3 +241,16 @@ def test_quiet_works_for_study_and_calibrate(tmp_path, capsys):
     assert main(["-q", "calibrate", "cell", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "c")]) == 2
     cap = capsys.readouterr()
     assert cap.out == "" and "missing.csv" in cap.err
+
+
+def test_a_scenario_changed_by_attribute_is_still_checked():
+    """Scenario.set validates; a field changed as a plain attribute is checked before the run too."""
+    from shevsim.core.errors import ScenarioError
+    sc = shevsim.load_scenario("hd_udds_rule")
+    sc.stop_s = float("nan")
+    with pytest.raises(ScenarioError, match="'stop_s' must be a finite number"):
+        shevsim.simulate(sc)
+    sc = shevsim.load_scenario("hd_udds_rule")
+    sc.metrics["fuel_density_kg_per_l"] = -0.85
+    with pytest.raises(ScenarioError, match="fuel_density_kg_per_l"):
+        shevsim.simulate(sc)
