@@ -232,7 +232,9 @@ def _pack_mpc(c):
     for i in (18, 19, 21, 22, 23):            # the QP's work arrays: H, f, bu, bl, aux (the runner's own)
         a[i] = np.zeros_like(a[i])
     a[24:31] = daqp_nb.new_state(pr.n, pr.n + pr.m)
-    return tuple(a), (6, 7, 30)
+    from shevsim.supervisor.mpc import new_guess_state
+    a[31:37] = new_guess_state(pr.n, pr.n + pr.m)
+    return tuple(a), (6, 7, 30, 31)
 
 
 def _pack_limits(c):

@@ -67,6 +67,11 @@ def test_mpc_hd_udds_120s_agrees_with_the_other_dekf_variants(sets):
     _compare("hd_udds_mpc", 120.0, sets)
 
 
+def test_mpc_with_daqp_on_every_call_agrees_with_the_master():
+    """``supervisor.warm_active_set = false`` (no active-set guess) takes the same compiled call."""
+    _compare("hd_udds_mpc", 60.0, ("supervisor.warm_active_set=false",))
+
+
 def test_rule_hd_udds_agrees_with_the_master_on_every_signal():
     fast, ref, _ = _compare("hd_udds_rule", 200.0)
     assert np.ptp(fast["engine_generator.elec_power_w"]) > 1e3

@@ -206,6 +206,77 @@ def test_kkt_conditions_of_the_daqp_solution():
     assert n_active > 80
 
 
+def _closed_loop_like(n=400, seed=11):
+    """Slowly varying calls (what a supervisor sees every 0.2 s), with occasional jumps."""
+    rng = np.random.default_rng(seed)
+    soc, gen = 52.0, 40e3
+    for k in range(n):
+        soc = float(np.clip(soc + rng.normal(0, 0.05), 25, 75))
+        demand = 60e3 + 80e3 * math.sin(k / 25) + (rng.uniform(-150e3, 300e3) if k % 53 == 0 else 0.0)
+        gen = float(np.clip(gen + rng.normal(0, 3e3), 0.0, 236e3))
+        yield soc, demand, gen, 150e3 + 30e3 * math.sin(k / 40), -120e3, 429.0 + rng.normal(0, 0.5), 0.156
+
+
+def test_the_previous_active_set_gives_daqps_optimum_when_accepted():
+    """The active-set guess (:func:`solve_on_active_set`) against DAQP solved from scratch on every call of
+    a closed-loop-like sequence: an accepted point is DAQP's optimum to 1e-9 (scaled QP units), and an
+    accepted point satisfies the KKT conditions checked here independently (stationarity with the
+    multipliers recomputed by least squares on the active rows, feasibility)."""
+    import daqp
+    from shevsim.supervisor.mpc import new_guess_state, set_active_from_lam, solve_on_active_set
+    p = MPCProblem(MPCSettings(), placeholder_fuel_curve())
+    Afull = np.vstack([np.eye(p.n), p.A])
+    g = new_guess_state(p.n, p.n + p.m)
+    z = np.zeros(p.n)
+    accepted = rejected = 0
+    for soc, d, gen, pmax, pmin, ocv, rs in _closed_loop_like():
+        assert p.build(soc, d / 1e3, gen / 1e3, pmax / 1e3, pmin / 1e3, ocv, rs, MAP(gen) / 1e3) == 0
+        x, _, flag, info = daqp.solve(p.H, p.f, p.A, p.bu, p.bl)
+        assert flag >= 1
+        ok = solve_on_active_set(p.H, p.f, p.A, p.bu, p.bl, *g, z)
+        if ok:
+            accepted += 1
+            scale = max(1.0, np.abs(x).max())
+            assert np.abs(z - x).max() <= 1e-9 * scale
+            r = Afull @ z
+            assert np.all(r <= p.bu + 1e-8 * (1 + np.abs(p.bu))) and np.all(r >= p.bl - 1e-8 * (1 + np.abs(p.bl)))
+            act = g[0][1:1 + g[0][0]]
+            lam_w = np.linalg.lstsq(Afull[act].T, -(p.H @ z + p.f), rcond=None)[0] if act.size else np.zeros(0)
+            assert np.abs(p.H @ z + p.f + Afull[act].T @ lam_w).max() <= 1e-8 * max(1.0, np.abs(p.f).max())
+        else:
+            rejected += 1
+        set_active_from_lam(np.asarray(info["lam"]), p.n + p.m, g[0], g[1])
+    assert accepted > 0 and rejected > 0, (accepted, rejected)
+
+
+def test_active_set_guess_rejects_wrong_sign_dependent_rows_and_violations():
+    """The guess is accepted only when it is the optimum: a multiplier of the wrong sign, dependent active
+    rows and a violated constraint each give 0."""
+    from shevsim.supervisor.mpc import new_guess_state, solve_on_active_set
+    n = 2
+    H = np.eye(n)
+    A = np.array([[1.0, 1.0]])                  # one row: z0 + z1 in [bl[2], bu[2]]
+    bu = np.array([1.0, 1.0, 1.0])
+    bl = np.array([-1.0, -1.0, -1.0])
+    g = new_guess_state(n, 3)
+    z = np.zeros(n)
+
+    def guess(f, active, signs):
+        g[0][0] = len(active)
+        g[0][1:1 + len(active)] = active
+        g[1][:len(active)] = signs
+        return solve_on_active_set(H, np.asarray(f, float), A, bu, bl, *g, z)
+
+    assert guess([-0.2, 0.1], [], []) == 1 and np.allclose(z, [0.2, -0.1])      # interior optimum
+    assert guess([-3.0, 0.0], [0], [1.0]) == 1 and np.allclose(z, [1.0, 0.0])   # z0 at its upper bound
+    assert guess([-0.2, 0.1], [0], [1.0]) == 0          # z0 held at 1: its multiplier has the wrong sign
+    assert guess([-3.0, 0.0], [], []) == 0              # unconstrained minimiser z0 = 3 violates z0 <= 1
+    assert guess([-3.0, 0.0], [0, 0], [1.0, 1.0]) == 0  # the same row twice: dependent
+    assert guess([-3.0, -3.0], [2], [1.0]) == 1 and np.allclose(z, [0.5, 0.5])  # the row active: the optimum
+    assert guess([-3.0, -3.0], [0, 1], [1.0, 1.0]) == 0  # both bounds held: z = (1, 1) violates z0 + z1 <= 1
+    assert guess([-3.0, -3.0], [2], [-1.0]) == 0        # the row held at its lower bound: wrong sign
+
+
 def test_brute_force_optimum_tiny_horizon():
     """N_c = 1, N_p = 3: minimise the cost (linearised model simulated step by step, minimal slacks)
     over the single move by bounded scalar search and compare with the QP's first move."""
