@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from shevsim.core.errors import DataError
+from shevsim.core.filecache import memo_file
 
 #: Speed below which the vehicle counts as standing still (m/s).
 IDLE_SPEED_MPS = 0.1
@@ -204,6 +205,7 @@ def check_plausible(path, t: np.ndarray, v: np.ndarray, lines=None, declared=Non
                             f"in the declared units?{off}")
 
 
+@memo_file
 def load_cycle(path: str | Path, name: str | None = None, check_units: bool = True) -> Cycle:
     """Load and validate a ``time_s,speed_mps`` drive-cycle CSV.
 

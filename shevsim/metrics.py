@@ -91,8 +91,21 @@ _WANG_Z = 0.55
 def _col(df, name: str) -> np.ndarray:
     if name not in df.columns:
         raise DataError(f"results: missing column '{name}' (have {sorted(df.columns)[:12]}...)")
-    x = df[name].to_numpy(dtype=float)
-    return x
+    return np.asarray(df[name], dtype=float)
+
+
+class ResultColumns:
+    """A result's columns as :func:`compute_metrics` reads them (``columns``, ``[name]``), without building a
+    DataFrame: ``time_s`` then the signals, each a read-only view of the result's own array."""
+
+    def __init__(self, time_s, signals: Mapping[str, np.ndarray]):
+        self._cols = {"time_s": time_s, **signals}
+        self.columns = list(self._cols)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        v = np.asarray(self._cols[name]).view()
+        v.flags.writeable = False
+        return v
 
 
 def _has(df, *names) -> bool:
@@ -608,7 +621,8 @@ def result_metrics(res, options: Mapping | None = None) -> dict:
     if "vehicle.speed_mps" in res.signals:
         try:
             with np.errstate(divide="ignore", invalid="ignore"):
-                m = compute_metrics(res.to_pandas(), {"scenario": opts, "parameters": res.parameters})
+                m = compute_metrics(ResultColumns(res.time_s, res.signals),
+                                    {"scenario": opts, "parameters": res.parameters})
             notes = notes + list(m.pop("notes", []))
             out.update(m)
         except Exception as exc:  # noqa: BLE001 - a metric never costs the run: null and the reason

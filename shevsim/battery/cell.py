@@ -37,6 +37,7 @@ from shevsim.core.errors import DataError
 from shevsim.core.params import name_rule
 from shevsim.core.lookup import _t1_integral, _t1_slope, _t1_value, ecm_lookup
 from shevsim.core.paths import data_path
+from shevsim.core.filecache import memo_file
 
 __all__ = [
     "FARADAY_C_MOL",
@@ -54,6 +55,7 @@ DATA_DIR = data_path("components", "battery")
 _ECM_COLS = ("soc_frac", "t_c", "rs_ohm", "r1_ohm", "c1_f", "r2_ohm", "c2_f")
 
 
+@memo_file
 def _read_csv(path: Path, cols: tuple[str, ...]) -> list[list[float]]:
     path = Path(path)
     if not path.is_file():

@@ -34,6 +34,7 @@ and field (or the ``--set`` option that gave the value) and the valid range.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import difflib
 import math
 import tomllib
@@ -176,6 +177,13 @@ NAME_RULES: tuple[tuple[str, str, Range], ...] = (
 )
 
 
+@functools.lru_cache(maxsize=None)
+def _type_hints(cls) -> dict:
+    """``typing.get_type_hints`` of a parameter class (resolved once: it compiles every string annotation)."""
+    return typing.get_type_hints(cls)
+
+
+@functools.lru_cache(maxsize=4096)
 def name_rule(name: str) -> Range:
     """The range the unit-suffix convention gives a field or column ``name`` (:data:`NAME_RULES`)."""
     for kind, tok, r in NAME_RULES:
@@ -315,7 +323,7 @@ def make_params(cls: type, values: Mapping[str, Any], where: str = "<parameters>
         raise ScenarioError(f"{where}: parameters must be a table of name = value, got {type(values).__name__}")
     sources = dict(sources or {})
     fields = {f.name: f for f in dataclasses.fields(cls)}
-    hints = typing.get_type_hints(cls)
+    hints = _type_hints(cls)
     kwargs = {}
     for key, value in values.items():
         src = sources.get(key, where)

@@ -30,6 +30,7 @@ import numpy as np
 from shevsim.core.errors import DataError
 from shevsim.core.params import name_rule
 from shevsim.core.lookup import EXTRAPOLATION_CODES, _curve_ex, _grid_ex, curve_eval_array, grid_eval_array
+from shevsim.core.filecache import memo_file
 
 _MODES = ("clamp", "linear", "error")
 
@@ -158,6 +159,7 @@ def _split(line: str, sep: str) -> list[str]:
     return [v.strip() for v in line.split(sep)]
 
 
+@memo_file
 def _read_table(path: Path) -> tuple[list[str], np.ndarray, list[str], list[int]]:
     """Header, data, comment lines and the file line of each data row.  Spreadsheet quirks are accepted:
     a UTF-8 byte-order mark, CRLF line ends, ``;`` separators (with decimal commas), trailing empty columns."""

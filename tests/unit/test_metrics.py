@@ -333,3 +333,23 @@ def test_a_run_stopped_after_one_sample_gives_notes_not_an_exception():
     assert m["bus.clamp_count"] == 0.0
     assert any("did not complete" in n for n in m["notes"])
     assert any("could not be computed" in n and "2 samples" in n for n in m["notes"])
+
+
+def test_result_metrics_read_the_result_without_a_dataframe_and_equal_the_dataframe_path():
+    """:func:`result_metrics` reads the result's arrays through :class:`ResultColumns` (read-only views, no
+    DataFrame): every metric equals :func:`compute_metrics` on ``res.to_pandas()``, and the result's arrays
+    are left untouched."""
+    from shevsim.core.scenario import build_master, load_scenario
+    sc = load_scenario("hd_udds_mpc", ["cycle.repeat=1"])
+    res = build_master(sc).run(300.0)
+    before = {k: v.copy() for k, v in res.signals.items()}
+    opts = dict(sc.metrics)
+    fast = M.result_metrics(res, opts)
+    ref = M.compute_metrics(res.to_pandas(), {"scenario": opts, "parameters": res.parameters})
+    ref_notes = ref.pop("notes")
+    assert fast.pop("notes") == M._clean(ref_notes)
+    for k, v in M._clean(ref).items():
+        assert fast[k] == v, k
+    assert fast["distance_km"] > 0.5 and sum(v is not None for v in fast.values()) > 10
+    for k, v in res.signals.items():
+        assert np.array_equal(v, before[k], equal_nan=True), k
