@@ -35,7 +35,7 @@ The bus computes its limit outputs in its own step, *after* the motor and the ge
 books their power), so a motor or generator connected to them is clamped against the previous step's
 BMS limits and the previous step's other machine: over the cooling-fault run the battery then leaves the
 same-step BMS limits for ~50 s (up to 170 kW in a step, issue 14).  ``power_limits`` is the same limit
-algebra (:meth:`PowerBus._limits`) as a component of its own, so a scenario can evaluate it where the
+algebra (:func:`shevsim.powertrain.motor.bus_limits`) as a component of its own, so a scenario can evaluate it where the
 limits act, in the step they are computed for (``scenarios/*seed*.toml``)::
 
     order = [..., "bms", "motor_limits", "motor", "gen_limits", "engine_generator", "bus", "battery", ...]
@@ -56,7 +56,7 @@ from dataclasses import dataclass
 from shevsim.core.component import Component
 from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.motor import bus_aux_w, bus_balance
+from shevsim.powertrain.motor import bus_aux_w, bus_balance, bus_limits
 
 _ALL = ("motor_power_w", "gen_power_w", "aux_power_w")
 
@@ -113,18 +113,9 @@ class PowerBus(Component):
 
     def _limits(self) -> None:
         u, y = self.u, self.y
-        if self.params.enforce_battery_limits:
-            pa = self._aux()
-            base = u["gen_power_w"] - pa
-            y["motor_power_max_w"] = max(base + u["battery_power_max_w"], 0.0)
-            # the generator can be shed to any power >= 0 within the step but not made to motor: the regen
-            # limit counts on max(gen, 0) (a motoring generator may stop within the step)
-            y["motor_power_min_w"] = min(max(u["gen_power_w"], 0.0) - pa + u["battery_power_min_w"], 0.0)
-            y["gen_power_max_w"] = max(u["motor_power_w"] + pa - u["battery_power_min_w"], 0.0)
-        else:
-            y["motor_power_max_w"] = 1e12
-            y["motor_power_min_w"] = -1e12
-            y["gen_power_max_w"] = 1e12
+        (y["motor_power_max_w"], y["motor_power_min_w"], y["gen_power_max_w"], _floor) = bus_limits(
+            u["motor_power_w"], u["gen_power_w"], u["aux_power_w"], u["battery_power_max_w"],
+            u["battery_power_min_w"], self._aux_w, self.params.enforce_battery_limits)
 
     def __init__(self, name: str = "bus", params: BusParams | None = None):
         super().__init__(name, params)
@@ -197,10 +188,10 @@ class PowerLimits(Component):
     _aux = PowerBus._aux
 
     def _limits(self) -> None:
-        PowerBus._limits(self)
-        u = self.u
-        self.y["gen_power_min_w"] = (u["motor_power_w"] + self._aux() - u["battery_power_max_w"]
-                                     if self.params.enforce_battery_limits else -1e12)
+        u, y = self.u, self.y
+        (y["motor_power_max_w"], y["motor_power_min_w"], y["gen_power_max_w"], y["gen_power_min_w"]) = bus_limits(
+            u["motor_power_w"], u["gen_power_w"], u["aux_power_w"], u["battery_power_max_w"],
+            u["battery_power_min_w"], self._aux_w, self.params.enforce_battery_limits)
 
     def initialize(self, t0: float) -> None:
         self._limits()

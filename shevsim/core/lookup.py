@@ -249,3 +249,16 @@ def interp_held(xa, ox, ya, oy, n, x):  # pragma: no cover - compiled
     j = _bisect_right(xa, ox, n, x) - 1
     f = (x - xa[ox + j]) / (xa[ox + j + 1] - xa[ox + j])
     return ya[oy + j] + f * (ya[oy + j + 1] - ya[oy + j])
+
+
+@_njit(cache=True)
+def py_min(a, b):
+    """Python's ``min(a, b)`` in compiled code: the first argument unless the second is strictly smaller
+    (numba's ``min`` may pick the other one of two equal values, e.g. signed zeros)."""
+    return b if b < a else a
+
+
+@_njit(cache=True)
+def py_max(a, b):
+    """Python's ``max(a, b)`` in compiled code (see :func:`py_min`)."""
+    return b if b > a else a

@@ -10,9 +10,10 @@ calls the component's own compiled functions (the very ones the component's ``do
 :func:`shevsim.bms.electrical.dekf_step`, the thermal filter steps,
 :func:`shevsim.bms.power_capability.power_limits`, :func:`shevsim.supervisor.rule_based.rule_command`,
 :func:`shevsim.supervisor.mpc.mpc_move` with DAQP's C library) and writes its outputs to ``sig[ob + j]`` in
-declaration order.  What is left here is the bookkeeping of components whose methods are not compiled
-functions (battery and BMS output publishing and the BMS's estimator sequence, the bus / power_limits
-limit law, the engine-generator's outputs, the profile source's sample-and-hold), written to give the
+declaration order; the bus and ``power_limits`` call :func:`shevsim.powertrain.motor.bus_limits`, the same
+limit law as the components.  What is left here is the bookkeeping of components whose methods are not
+compiled functions (battery and BMS output publishing and the BMS's estimator sequence, the engine-generator's
+outputs, the profile source's sample-and-hold), written to give the
 same floating-point operations in the same order as those Python methods, so the loop reproduces
 :class:`shevsim.core.master.Master` bit for bit (the agreement tests, ``tests/unit/test_fast_path.py``,
 fail on any drift).
@@ -21,8 +22,8 @@ Return value: 0, or an error code (:data:`ERRORS`) that the runner turns into th
 :class:`~shevsim.core.errors.SimulationError`.
 
 Python's ``min``/``max`` keep the first argument unless the second is strictly smaller/larger; numba's
-may pick the other one of two equal values (signed zeros), so the bookkeeping uses :func:`pmin` /
-:func:`pmax`, which mirror Python.
+may pick the other one of two equal values (signed zeros), so the bookkeeping uses
+:func:`shevsim.core.lookup.py_min` / ``py_max`` (imported as ``pmin`` / ``pmax``), which mirror Python.
 """
 from __future__ import annotations
 
@@ -37,8 +38,10 @@ from shevsim.bms.electrical import dekf_step
 from shevsim.bms.power_capability import power_limits
 from shevsim.bms.thermal_estimators import dkf_step, jekf_step, kf_step
 from shevsim.core.lookup import _t1_value
+from shevsim.core.lookup import py_max as pmax
+from shevsim.core.lookup import py_min as pmin
 from shevsim.powertrain.engine import step as engine_step
-from shevsim.powertrain.motor import bus_aux_w, bus_balance, motor_component_step
+from shevsim.powertrain.motor import bus_aux_w, bus_balance, bus_limits, motor_component_step
 from shevsim.powertrain.vehicle import vehicle_force_step, vehicle_speed_mode_step
 from shevsim.components.cycle import cycle_sample
 from shevsim.powertrain.driver import driver_step
@@ -62,18 +65,6 @@ ERRORS = {ERR_NAN_INPUT: "NaN input", ERR_SOC_RANGE: "SOC left [0, 100] %",
           ERR_SAMPLE_TIME: "supervisor called with a step that is not its sample_time_s",
           ERR_BATTERY_INPUT: "bad input (non-finite, or h_conv_w_m2k < 0)",
           ERR_NONFINITE_OUTPUT: "non-finite output"}
-
-
-@njit(cache=True)
-def pmin(a, b):
-    """Python's ``min(a, b)``."""
-    return b if b < a else a
-
-
-@njit(cache=True)
-def pmax(a, b):
-    """Python's ``max(a, b)``."""
-    return b if b > a else a
 
 
 @njit(cache=True)
@@ -247,17 +238,6 @@ def motor_kernel(data, sig, ib, ob, t, h):
 
 # -------------------------------------------------------------------------------------------------- bus
 @njit(cache=True)
-def bus_limits(pm, pg, u_aux, bpmax, bpmin, aux_w, enforce):
-    """:meth:`shevsim.components.bus.PowerBus._limits`: ``(motor_power_max_w, motor_power_min_w,
-    gen_power_max_w)``."""
-    if enforce:
-        pa = bus_aux_w(u_aux, aux_w)
-        base = pg - pa
-        return (pmax(base + bpmax, 0.0), pmin(pmax(pg, 0.0) - pa + bpmin, 0.0), pmax(pm + pa - bpmin, 0.0))
-    return 1e12, -1e12, 1e12
-
-
-@njit(cache=True)
 def power_limits_kernel(data, sig, ib, ob, t, h):
     """:meth:`shevsim.components.bus.PowerLimits.do_step` (parameters ``data[0] = [aux_power_w, enforce]``)."""
     P = data[0]
@@ -267,9 +247,8 @@ def power_limits_kernel(data, sig, ib, ob, t, h):
     pm = sig[ib]
     pg = sig[ib + 1]
     u_aux = sig[ib + 2]
-    enforce = P[1] > 0.5
-    sig[ob], sig[ob + 1], sig[ob + 2] = bus_limits(pm, pg, u_aux, sig[ib + 3], sig[ib + 4], P[0], enforce)
-    sig[ob + 3] = (pm + bus_aux_w(u_aux, P[0]) - sig[ib + 3]) if enforce else -1e12
+    sig[ob], sig[ob + 1], sig[ob + 2], sig[ob + 3] = bus_limits(pm, pg, u_aux, sig[ib + 3], sig[ib + 4], P[0],
+                                                                 P[1] > 0.5)
     return 0
 
 
@@ -293,7 +272,7 @@ def bus_kernel(data, sig, ib, ob, t, h):
     sig[ob + 6] = e[1]
     sig[ob + 7] = e[2]
     sig[ob + 8] = e[3]
-    sig[ob], sig[ob + 1], sig[ob + 2] = bus_limits(pm, pg, u_aux, sig[ib + 3], sig[ib + 4], p[0], p[1] > 0.5)
+    sig[ob], sig[ob + 1], sig[ob + 2], _floor = bus_limits(pm, pg, u_aux, sig[ib + 3], sig[ib + 4], p[0], p[1] > 0.5)
     return 0
 
 

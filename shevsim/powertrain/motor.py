@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shevsim.core.lookup import _curve_nb, _grid_nb, _njit
+from shevsim.core.lookup import _curve_nb, _grid_nb, _njit, py_max, py_min
 
 from .maps import Curve, Grid2D
 
@@ -192,6 +192,28 @@ def bus_balance(motor_w: float, gen_w: float, aux_in_w: float, aux_param_w: floa
     pa = bus_aux_w(aux_in_w, aux_param_w)
     d = motor_w + pa
     return pa, d, d - gen_w
+
+
+@_njit(cache=True)
+def bus_limits(motor_w: float, gen_w: float, aux_in_w: float, bpmax_w: float, bpmin_w: float, aux_param_w: float,
+               enforce: bool):
+    """The bus's limit law (:class:`shevsim.components.bus.PowerBus` and ``PowerLimits``):
+    ``(motor_power_max_w, motor_power_min_w, gen_power_max_w, gen_power_min_w)`` [W] from the machines'
+    powers, the auxiliary load and the battery's power capability ``bpmax_w >= 0 >= bpmin_w``:
+
+    * motor max = max(gen - aux + bpmax, 0); motor min = min(max(gen, 0) - aux + bpmin, 0) (the generator
+      can be shed to any power >= 0 within the step but not made to motor: the regen limit counts on
+      max(gen, 0));
+    * generator max = max(motor + aux - bpmin, 0) (load shedding); generator min = motor + aux - bpmax
+      (the floor: what the generator must deliver for the battery to stay within its discharge capability).
+
+    ``enforce = False``: +-1e12 (no limits)."""
+    if not enforce:
+        return 1e12, -1e12, 1e12, -1e12
+    pa = bus_aux_w(aux_in_w, aux_param_w)
+    base = gen_w - pa
+    return (py_max(base + bpmax_w, 0.0), py_min(py_max(gen_w, 0.0) - pa + bpmin_w, 0.0),
+            py_max(motor_w + pa - bpmin_w, 0.0), motor_w + pa - bpmax_w)
 
 
 class MotorMaps:

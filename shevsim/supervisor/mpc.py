@@ -78,6 +78,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from shevsim.core.errors import ScenarioError
+from shevsim.core.lookup import py_max as _pmax
+from shevsim.core.lookup import py_min as _pmin
 
 from shevsim.fast import daqp_nb
 
@@ -490,16 +492,6 @@ def solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kU, kY, kS, kv, z):
         if r > bu[i] + GUESS_PRIMAL_TOL * (1.0 + abs(bu[i])) or r < bl[i] - GUESS_PRIMAL_TOL * (1.0 + abs(bl[i])):
             return 0
     return 1
-
-
-@_njit(cache=True)
-def _pmin(a, b):
-    return b if b < a else a          # Python's min(a, b)
-
-
-@_njit(cache=True)
-def _pmax(a, b):
-    return b if b > a else a          # Python's max(a, b)
 
 
 @_njit(cache=True)
