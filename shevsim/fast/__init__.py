@@ -433,8 +433,8 @@ class FastRunner:
             raise ScenarioError(f"fast path: stop time must be a finite number, got {t_stop_s!r}")
         n = self.n_steps(float(t_stop_s))
         nsig = self.nsig
-        rec = np.empty((n + 1, nsig))
-        rec[0] = self._row0
+        rec = np.empty((nsig, n + 1))          # one row per signal: each signal's samples contiguous
+        rec[:, 0] = self._row0
         sig = self._sig0.copy()
         self._reset_live(n)
         data = self._live
@@ -447,7 +447,7 @@ class FastRunner:
             while True:
                 try:
                     run_loop(n - k0, k0, self.h, self.t0, self._typ, self._mult, self._ibase, self._obase,
-                             self._lptr, self._ldst, self._lsrc, sig, rec[k0:], nsig, out, self._inst, self._f_t,
+                             self._lptr, self._ldst, self._lsrc, sig, rec, nsig, out, self._inst, self._f_t,
                              self._f_idx, self._f_val, forced, fstate, self._jacobi, data["cycle"], data["driver"],
                              data["vehicle"], data["motor"], data["bus"], data["engine_generator"], data["battery"],
                              data["bms"], data["rule_supervisor"], data["mpc_supervisor"], data["power_limits"],
@@ -460,10 +460,10 @@ class FastRunner:
                                         f"the component and time)") from exc
                 if out[0] == ERR_NONFINITE_OUTPUT:
                     row = int(out[1])
-                    bad = [j for j in range(nsig) if not math.isfinite(rec[row, j])]
+                    bad = [j for j in range(nsig) if not math.isfinite(rec[j, row])]
                     if bad:
                         comp, port = self._names[bad[0]].split(".", 1)
-                        err = SimulationError(f"component '{comp}' output '{port}' is {float(rec[row, bad[0]])!r} "
+                        err = SimulationError(f"component '{comp}' output '{port}' is {float(rec[bad[0], row])!r} "
                                               f"at t={self._time(row):.6g} s (step {row})")
                         raise self._stopped(err, rec, row, comp, port, self._time(row))
                     k0 = row                # a row whose sum overflowed, every value finite: go on
@@ -501,7 +501,7 @@ class FastRunner:
         if nrows:
             times[0] = self.t0
             times[1:] = self.t0 + np.arange(1, nrows, dtype=np.int64) * self.h
-        signals = {name: rec[:nrows, j] for j, name in enumerate(self._names)}
+        signals = {name: rec[j, :nrows] for j, name in enumerate(self._names)}
         return Result(times, signals, dict(self._units), {k: dict(v) for k, v in self._params.items()}, termination)
 
 

@@ -10,7 +10,7 @@ connections as index pairs::
             if k % multiple[j] == 0:
                 sig[dst] = sig[src] for the connections into component j   (Jacobi: all before any step)
                 step component j over multiple[j] * h      (kernels.py, by type code)
-        record sig[:n_signals] as row k + 1; stop at the first non-finite value
+        record sig[:n_signals] as column k + 1 of rec (signals x samples); stop at the first non-finite value
 
 Component data are passed as one tuple per kind holding one tuple per instance
 (:mod:`shevsim.fast.kernels`); ``inst[j]`` is the position of the j-th component (execution order) in its
@@ -40,7 +40,8 @@ _DEPENDS = ("fast/loop.py", "fast/kernels.py", "fast/daqp_nb.py", "battery/model
 def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, nsig, out, inst,
              f_t, f_idx, f_val, forced, fstate, jacobi, cyc, drv, veh, mot, bus, eng, bat, bms, rule, mpc, lim,
              vsp, prof):
-    """Step ``n`` communication steps from step index ``k0``; rows ``1..n`` of ``rec`` are recorded.
+    """Step ``n`` communication steps from step index ``k0``; columns ``k0 + 1 .. k0 + n`` of ``rec`` (one row per
+    signal: each signal's samples contiguous) are recorded.
 
     ``out`` receives ``[status, step index, position in the order]``; status 0 = completed, otherwise
     the kernel's error code (or :data:`~shevsim.fast.kernels.ERR_NONFINITE_OUTPUT`).
@@ -124,10 +125,10 @@ def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, 
                     out[2] = j
                     return
         acc = 0.0
-        row = s + 1
+        row = k + 1
         for i in range(nsig):
             x = sig[i]
-            rec[row, i] = x
+            rec[i, row] = x
             acc += x
         if not math.isfinite(acc):
             out[0] = K.ERR_NONFINITE_OUTPUT
