@@ -44,6 +44,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from shevsim.core.filecache import memo_file
+
 from .errors import ScenarioError
 
 
@@ -70,6 +72,20 @@ class Range:
         if v > self.hi or (self.hi_open and v == self.hi):
             return False
         return True
+
+    def ok_array(self, values: np.ndarray) -> np.ndarray:
+        """:meth:`ok` of every element of a float array (vectorised)."""
+        v = np.asarray(values, dtype=float)
+        fin = np.isfinite(v)
+        good = fin & (v >= self.lo) & (v <= self.hi)
+        if self.lo_open:
+            good &= v != self.lo
+        if self.hi_open:
+            good &= v != self.hi
+        if self.allow_inf:
+            good |= (v == math.inf) & (self.hi == math.inf)
+            good |= (v == -math.inf) & (self.lo == -math.inf)
+        return good
 
     def describe(self) -> str:
         if self.lo == -math.inf and self.hi == math.inf:
@@ -348,6 +364,15 @@ def make_params(cls: type, values: Mapping[str, Any], where: str = "<parameters>
     return validate_params(obj, where, sources)
 
 
+@memo_file
+def _read_param_toml(path: Path) -> dict:
+    """The parsed TOML of a parameter file (parsed once per process while the file is unchanged)."""
+    try:
+        return tomllib.loads(Path(path).read_text(encoding="utf-8-sig"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"{path}: malformed TOML: {exc}") from exc
+
+
 def load_params(cls: type, path: str | Path | None, overrides: Mapping[str, Any] | None = None,
                 sources: Mapping[str, str] | None = None) -> Any:
     """Load ``cls`` from a TOML parameter file (``[params]`` table) plus overrides.
@@ -361,10 +386,7 @@ def load_params(cls: type, path: str | Path | None, overrides: Mapping[str, Any]
         path = Path(path)
         if not path.is_file():
             raise ScenarioError(f"{path}: parameter file not found")
-        try:
-            doc = tomllib.loads(path.read_text(encoding="utf-8-sig"))
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ScenarioError(f"{path}: malformed TOML: {exc}") from exc
+        doc = _read_param_toml(path)
         extra = set(doc) - {"meta", "params"}
         if extra:
             k = sorted(extra)[0]

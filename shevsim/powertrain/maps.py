@@ -233,7 +233,7 @@ def check_column(path, name: str, values: np.ndarray, lines: list[int] | None = 
     bad = np.flatnonzero(~np.isfinite(values))
     why = "not a finite number (NaN/inf)"
     if not bad.size:
-        bad = np.flatnonzero([not r.ok(float(v)) for v in values])
+        bad = np.flatnonzero(~r.ok_array(values))
         why = f"outside the physical range {r.describe()}"
     if bad.size:
         k = int(bad[0])

@@ -243,3 +243,20 @@ def test_name_rules_give_each_field_its_meaning():
     assert name_rule("damping_ns_per_m").what == "a damping coefficient"
     assert name_rule("heat_rate_per_s").what == "a rate"
     assert name_rule("v_min_v").lo == 0.0
+
+
+def test_vectorised_range_check_equals_the_scalar_one():
+    """``Range.ok_array`` (map columns are checked with it) gives ``Range.ok`` element by element on every
+    unit-suffix rule and on open, closed and "no limit" bounds, at the edges, infinities and NaN."""
+    import math
+
+    import numpy as np
+
+    from shevsim.core.params import ANY, NAME_RULES, Range
+    vals = np.array([0.0, -0.0, 1.0, -1.0, 1e-300, math.inf, -math.inf, math.nan, 0.5, 2.0, 273.15, -273.15,
+                     -273.16, 1e12, 100.0, 100.0000001])
+    ranges = [r for _, _, r in NAME_RULES] + [ANY, Range(lo=0, hi=1, lo_open=True),
+                                              Range(lo=0, hi=1, hi_open=True, allow_inf=True),
+                                              Range(allow_inf=True), Range(lo=0, allow_inf=True)]
+    for r in ranges:
+        assert np.array_equal(r.ok_array(vals), [r.ok(float(v)) for v in vals]), r
