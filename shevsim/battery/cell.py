@@ -56,7 +56,7 @@ _ECM_COLS = ("soc_frac", "t_c", "rs_ohm", "r1_ohm", "c1_f", "r2_ohm", "c2_f")
 
 
 @memo_file
-def _read_csv(path: Path, cols: tuple[str, ...]) -> list[list[float]]:
+def _read_csv(path: Path, cols: tuple[str, ...]) -> tuple[tuple[float, ...], ...]:
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: table file not found")
@@ -88,7 +88,7 @@ def _read_csv(path: Path, cols: tuple[str, ...]) -> list[list[float]]:
         rows.append(vals)
     if len(rows) < 2:
         raise DataError(f"{path}: need at least two data rows")
-    return rows
+    return tuple(tuple(r) for r in rows)
 
 
 def _check_increasing(xs: list[float], path: Path, col: str) -> None:

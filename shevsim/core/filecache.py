@@ -3,7 +3,8 @@
 A study builds the same scenario for every evaluation (only its overrides differ), so the same cycle,
 map and cell-table files are read again and again.  :func:`memo_file` wraps a *pure* reader of one file
 (its result depends only on the file's bytes and the reader's other arguments): the first call parses,
-later calls with the same resolved path, size and modification time (ns) get a copy of that result.
+later calls on the same file (device and inode, symlinks followed), size and modification time (ns) get a
+copy of that result (a result made of tuples of numbers and strings is shared: it cannot be changed).
 A file edited in between is read again; a reader that raises is never cached (the error is raised on
 every call); each caller gets its own copy (arrays copied, lists and dicts rebuilt), so a caller that
 changes what it got cannot change what the next one gets.
@@ -31,6 +32,8 @@ def _copy(x):
     if isinstance(x, list):
         return [v if type(v) in _IMMUTABLE else _copy(v) for v in x]
     if isinstance(x, tuple):
+        if all(type(v) in _IMMUTABLE or (type(v) is tuple and all(type(w) in _IMMUTABLE for w in v)) for v in x):
+            return x                                 # immutable all the way down: shared, not copied
         return tuple(_copy(v) for v in x)
     if isinstance(x, dict):
         return {k: _copy(v) for k, v in x.items()}
@@ -45,14 +48,13 @@ def _copy(x):
 
 
 def memo_file(fn):
-    """Decorator: memoise ``fn(path, *args, **kwargs)`` on (resolved path, size, mtime_ns, args, kwargs)."""
+    """Decorator: memoise ``fn(path, *args, **kwargs)`` on (device, inode, size, mtime_ns, args, kwargs)."""
 
     @functools.wraps(fn)
     def wrapper(path, *args, **kwargs):
         try:
-            real = os.path.realpath(path)
-            st = os.stat(real)
-            key = (fn.__module__, fn.__qualname__, real, st.st_size, st.st_mtime_ns, args,
+            st = os.stat(path)                       # the file itself (symlinks followed): device + inode
+            key = (fn.__module__, fn.__qualname__, st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, args,
                    tuple(sorted(kwargs.items())))
             hash(key)
         except (OSError, TypeError, ValueError):
