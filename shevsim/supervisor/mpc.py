@@ -485,10 +485,21 @@ def solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kU, kY, kS, kv, z):
     for k in range(n):
         if not math.isfinite(z[k]):
             return 0
+    n4 = n - n % 4
     for i in range(n, m_total):
-        r = 0.0
-        for k in range(n):
-            r += A[i - n, k] * z[k]
+        a = A[i - n]
+        s0 = 0.0                                  # four partial sums: independent chains (a check only:
+        s1 = 0.0                                  # the answer z does not depend on their order)
+        s2 = 0.0
+        s3 = 0.0
+        for k in range(0, n4, 4):
+            s0 += a[k] * z[k]
+            s1 += a[k + 1] * z[k + 1]
+            s2 += a[k + 2] * z[k + 2]
+            s3 += a[k + 3] * z[k + 3]
+        for k in range(n4, n):
+            s0 += a[k] * z[k]
+        r = (s0 + s1) + (s2 + s3)
         if r > bu[i] + GUESS_PRIMAL_TOL * (1.0 + abs(bu[i])) or r < bl[i] - GUESS_PRIMAL_TOL * (1.0 + abs(bl[i])):
             return 0
     return 1
