@@ -160,6 +160,8 @@ class MPCSupervisor(Component):
     """Linear MPC power split (seed Sec. 5.2.2): TYPE ``mpc_supervisor``; ports in the module docstring."""
 
     TYPE = "mpc_supervisor"
+    #: the step it must be called with (checked when the scenario is built: step_s x step_multiple)
+    SAMPLE_TIME_PARAM = "sample_time_s"
     Params = MPCSupervisorParams
     VARIABLES = _INPUTS + (
         out("power_cmd_w", "W", 0.0, "engine-generator electrical power command, + to the bus", _IN),
@@ -293,6 +295,8 @@ class RuleSupervisor(Component):
     """Thermostat / power-follower baseline: TYPE ``rule_supervisor``; ports in the module docstring."""
 
     TYPE = "rule_supervisor"
+    #: the step it must be called with (checked when the scenario is built: step_s x step_multiple)
+    SAMPLE_TIME_PARAM = "sample_time_s"
     Params = RuleSupervisorParams
     VARIABLES = _INPUTS + (
         out("power_cmd_w", "W", 0.0, "engine-generator electrical power command, + to the bus", _IN[:5]),

@@ -709,6 +709,19 @@ def build_master(scenario: Scenario) -> Master:
             if c.dst == spec.name and c.dst_port in spec.start:
                 raise ScenarioError(f"{where}: [components.{spec.name}] field 'start.{c.dst_port}': the input is "
                                     f"connected to {c.src}.{c.src_port}, so its start value is never used")
+    step = scenario.settings.step_s
+    for spec, comp in zip(scenario.components, comps):   # a sampled controller must get its own step
+        pname = getattr(comp, "SAMPLE_TIME_PARAM", None)
+        ts = getattr(getattr(comp, "params", None), pname, None) if pname else None
+        if isinstance(ts, (int, float)) and math.isfinite(ts):
+            hk = step * spec.step_multiple
+            if abs(hk - ts) > 1e-9 * max(1.0, ts):
+                k = ts / step
+                fix = (f"set step_multiple = {round(k)}" if abs(k - round(k)) <= 1e-9 * max(1.0, k) and round(k) >= 1
+                       else f"use a step_s that divides {ts:g} s")
+                raise ScenarioError(f"{where}: [components.{spec.name}] {pname} = {ts:g} s but the component "
+                                    f"steps every {hk:g} s (step_s {step:g} s x step_multiple "
+                                    f"{spec.step_multiple}): {fix}")
     if scenario.record is not None:     # checked before the run, not after it
         known = set(m._signal_names)
         for sig in scenario.record:

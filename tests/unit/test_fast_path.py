@@ -389,7 +389,8 @@ def test_a_step_longer_than_the_run_is_refused_before_running():
     import shevsim
     from shevsim.core.errors import ScenarioError
     with pytest.raises(ScenarioError, match="step_s = 1e\\+06 s is longer than the run"):
-        shevsim.simulate("hd_udds_rule", {"scenario.step_s": 1e6})
+        # the supervisor's sample time follows the step (else the scenario is refused for that first)
+        shevsim.simulate("hd_udds_rule", {"scenario.step_s": 1e6, "supervisor.sample_time_s": 2e6})
 
 
 def test_a_unit_converting_connection_is_declined():

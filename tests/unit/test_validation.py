@@ -260,3 +260,13 @@ def test_vectorised_range_check_equals_the_scalar_one():
                                               Range(allow_inf=True), Range(lo=0, allow_inf=True)]
     for r in ranges:
         assert np.array_equal(r.ok_array(vals), [r.ok(float(v)) for v in vals]), r
+
+
+@pytest.mark.parametrize("sets,fix", [(["scenario.step_s=0.05"], "set step_multiple = 4"),
+                                      (["scenario.step_s=0.03"], "use a step_s that divides 0.2 s")])
+def test_a_supervisor_whose_step_is_not_its_sample_time_is_refused_when_built(sets, fix):
+    """A supervisor called with a step other than its sample_time_s used to stop the run at t = 0; the scenario is
+    now refused before it runs, naming the component, the field and the fix."""
+    from shevsim.core.scenario import build_master, load_scenario
+    with pytest.raises(ScenarioError, match=r"\[components\.supervisor\] sample_time_s = 0\.2 s .*" + fix):
+        build_master(load_scenario("hd_udds_mpc", sets))
