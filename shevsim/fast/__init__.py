@@ -94,6 +94,10 @@ _PORTS = {
 }
 
 
+#: measurement-noise draws per (generator state, leftover block): shared by the runners of one process
+_NOISE_CACHE: dict = {}
+
+
 class Declined(Exception):
     """The scenario cannot take the fast path (the message says why)."""
 
@@ -356,7 +360,9 @@ class FastRunner:
         dummies = _dummies()
         self._data = {typ: [] for typ in KINDS}
         self._mut = {typ: () for typ in KINDS}
-        self._batteries = []               # [instance, step multiple, noise drawn so far, generator]
+        # [instance, step multiple, noise drawn so far, generator at build, key of (generator state, leftover
+        # block), leftover of the component's current block]
+        self._batteries = []
         for n, c in zip(order, comps):
             typ = types[n]
             if typ == "bms":
@@ -365,8 +371,11 @@ class FastRunner:
                 data, mut = _PACK[typ](c)
             if typ == "battery":
                 import copy
-                self._batteries.append([len(self._data[typ]), m.step_multiples[n],
-                                        np.array(c._buf[c._k:], dtype=np.float64), copy.deepcopy(c.rng)])
+                import pickle
+                lead = np.array(c._buf[c._k:], dtype=np.float64)
+                key = (pickle.dumps(c.rng.bit_generator.state), lead.tobytes())
+                self._batteries.append([len(self._data[typ]), m.step_multiples[n], lead, copy.deepcopy(c.rng), key,
+                                        lead])
             self._data[typ].append(data)
             self._mut[typ] = mut
         self._live = {}
@@ -387,11 +396,24 @@ class FastRunner:
 
     # ------------------------------------------------------------------------------------------
     def _noise_for(self, b, n_draws: int) -> np.ndarray:
-        """The first ``n_draws`` measurement-noise draws of battery entry ``b`` (its generator's blocks)."""
+        """The first ``n_draws`` measurement-noise draws of battery entry ``b``: the rest of the component's
+        current block, then its generator's next blocks of standard normals, in order (what
+        ``BatteryPack._noise`` draws).  A pure function of the generator's state: kept per process
+        (:data:`_NOISE_CACHE`), so the runners of a study's evaluations share it (the loop only reads it)."""
+        if b[2].size >= n_draws:
+            return b[2]
+        import copy
         from shevsim.components.battery import _NOISE_BLOCK
-        while b[2].size < n_draws:       # the battery's blocks of standard normals, in order
-            b[2] = np.concatenate([b[2], np.array(b[3].standard_normal(_NOISE_BLOCK).tolist())])
-        return b[2]
+        hit = _NOISE_CACHE.get(b[4])
+        if hit is None or hit.size < n_draws:
+            rng = copy.deepcopy(b[3])
+            nb = -(-(n_draws - b[5].size) // _NOISE_BLOCK)
+            hit = np.concatenate([b[5]] + [rng.standard_normal(_NOISE_BLOCK) for _ in range(nb)])
+            if len(_NOISE_CACHE) >= 16:
+                _NOISE_CACHE.clear()
+            _NOISE_CACHE[b[4]] = hit
+        b[2] = hit
+        return hit
 
     def n_steps(self, t_stop_s: float) -> int:
         """Communication steps to ``t_stop_s`` (the rule of :meth:`Master.run`)."""
