@@ -237,7 +237,7 @@ def _pack_mpc(c):
         a[i] = np.zeros_like(a[i])
     a[24:31] = daqp_nb.new_state(pr.n, pr.n + pr.m)
     from shevsim.supervisor.mpc import new_guess_state
-    a[31:37] = new_guess_state(pr.n, pr.n + pr.m)
+    a[31:39] = new_guess_state(pr.n, pr.n + pr.m)
     return tuple(a), (6, 7, 30, 31)
 
 

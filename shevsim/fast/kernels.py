@@ -522,14 +522,14 @@ def _mpc_kernel_daqp(data, sig, ib, ob, t, h):
     component's supervisor runs; ``data`` = its arguments (``MPCSupervisor.arrays``), ``x[0]`` the previous
     command."""
     (mp, rp, inner, rates, rinner, rrates, x, plan, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx, H, f, A, bu,
-     bl, aux, ws, qp, res, sense, z, lam, flags, wset, wsgn, kL, kY, kS, kv) = data
+     bl, aux, ws, qp, res, sense, z, lam, flags, wset, wsgn, kL, kY, kS, kv, kLU, kfac) = data
     if _check_h(h, mp[0]):
         return ERR_SAMPLE_TIME
     demand = sig[ib]
     gen = x[0]                                    # the previous command u(k-1)
     cmd, rate = mpc_move(mp, rp, inner, rates, rinner, rrates, x, plan, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1,
                          soc_idx, H, f, A, bu, bl, aux, ws, qp, res, sense, z, lam, flags, wset, wsgn, kL, kY, kS,
-                         kv, sig[ib + 1], demand, gen,
+                         kv, kLU, kfac, sig[ib + 1], demand, gen,
                          sig[ib + 3], sig[ib + 4], sig[ib + 5], sig[ib + 6])
     sig[ob] = cmd
     sig[ob + 1] = rate

@@ -349,11 +349,12 @@ GUESS_PIVOT_TOL = 1e-12     # Schur-complement pivot (relative to its diagonal) 
 
 def new_guess_state(n: int, m_total: int):
     """Buffers of the active-set guess for a QP with ``n`` variables and ``m_total`` bounds + rows:
-    ``(wset, wsgn, kL, kY, kS, kv)``; ``wset[0]`` = number of active constraints (-1: none known),
-    ``wset[1:]`` their indices, ``wsgn`` +1 (upper bound active) or -1 (lower)."""
+    ``(wset, wsgn, kL, kY, kS, kv, kLU, kfac)``; ``wset[0]`` = number of active constraints (-1: none known),
+    ``wset[1:]`` their indices, ``wsgn`` +1 (upper bound active) or -1 (lower); ``kLU``, ``kfac`` the LU
+    factors of the last vertex set (``n`` active constraints) and ``[valid, its indices, row pivots]``."""
     wset = np.full(m_total + 1, -1, dtype=np.int64)
     return (wset, np.zeros(max(m_total, 1)), np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)),
-            np.zeros((3, n)))
+            np.zeros((3, n)), np.zeros((n, n)), np.zeros(2 * n + 1, dtype=np.int64))
 
 
 @_njit(cache=True)
@@ -370,18 +371,163 @@ def set_active_from_lam(lam, m_total, wset, wsgn):
 
 
 @_njit(cache=True)
-def solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kU, kY, kS, kv, z):
+def _primal_ok(A, bu, bl, z):
+    """Every constraint ``bl <= [I; A] z <= bu`` holds (to :data:`GUESS_PRIMAL_TOL`) and ``z`` is finite."""
+    n = z.shape[0]
+    m_total = bu.shape[0]
+    for i in range(n):
+        if z[i] > bu[i] + GUESS_PRIMAL_TOL * (1.0 + abs(bu[i])) or z[i] < bl[i] - GUESS_PRIMAL_TOL * (1.0 + abs(bl[i])):
+            return False
+    for k in range(n):
+        if not math.isfinite(z[k]):
+            return False
+    n4 = n - n % 4
+    for i in range(n, m_total):
+        a = A[i - n]
+        s0 = 0.0                                  # four partial sums: independent chains (a check only:
+        s1 = 0.0                                  # the answer z does not depend on their order)
+        s2 = 0.0
+        s3 = 0.0
+        for k in range(0, n4, 4):
+            s0 += a[k] * z[k]
+            s1 += a[k + 1] * z[k + 1]
+            s2 += a[k + 2] * z[k + 2]
+            s3 += a[k + 3] * z[k + 3]
+        for k in range(n4, n):
+            s0 += a[k] * z[k]
+        r = (s0 + s1) + (s2 + s3)
+        if r > bu[i] + GUESS_PRIMAL_TOL * (1.0 + abs(bu[i])) or r < bl[i] - GUESS_PRIMAL_TOL * (1.0 + abs(bl[i])):
+            return False
+    return True
+
+
+@_njit(cache=True)
+def _signs_ok(mu, wset, wsgn, bu, bl, nw):
+    """Every active inequality's multiplier has its sign (an equality, bl == bu, may take either)."""
+    mmax = 0.0
+    for c in range(nw):
+        if abs(mu[c]) > mmax:
+            mmax = abs(mu[c])
+    for c in range(nw):
+        ic = wset[1 + c]
+        if bu[ic] > bl[ic] and mu[c] * wsgn[c] < -GUESS_DUAL_TOL * (1.0 + mmax):
+            return False
+    return True
+
+
+@_njit(cache=True)
+def _vertex_factor(A, wset, LU, fac):
+    """LU factors (partial pivoting) of the ``n`` active rows of ``[I; A]`` into ``LU`` / ``fac``; False when
+    a pivot is below :data:`GUESS_PIVOT_TOL` times the largest entry (dependent rows)."""
+    n = LU.shape[0]
+    fac[0] = 0
+    big = 0.0
+    for c in range(n):
+        ic = wset[1 + c]
+        for k in range(n):
+            LU[c, k] = 0.0 if ic < n else A[ic - n, k]
+        if ic < n:
+            LU[c, ic] = 1.0
+        for k in range(n):
+            if abs(LU[c, k]) > big:
+                big = abs(LU[c, k])
+        fac[1 + c] = ic
+        fac[1 + n + c] = c
+    for j in range(n):
+        p = j
+        amax = abs(LU[j, j])
+        for i in range(j + 1, n):
+            if abs(LU[i, j]) > amax:
+                amax = abs(LU[i, j])
+                p = i
+        if not amax > GUESS_PIVOT_TOL * big:
+            return False
+        if p != j:
+            for k in range(n):
+                tmp = LU[j, k]
+                LU[j, k] = LU[p, k]
+                LU[p, k] = tmp
+            q = fac[1 + n + j]
+            fac[1 + n + j] = fac[1 + n + p]
+            fac[1 + n + p] = q
+        d = LU[j, j]
+        for i in range(j + 1, n):
+            li = LU[i, j] / d
+            LU[i, j] = li
+            if li != 0.0:
+                for k in range(j + 1, n):
+                    LU[i, k] -= li * LU[j, k]
+    fac[0] = 1
+    return True
+
+
+@_njit(cache=True)
+def _solve_on_vertex(H, f, A, bu, bl, wset, wsgn, kv, LU, fac, z):
+    """:func:`solve_on_active_set` when ``n`` constraints are active: the point is the one where they all
+    hold (``C z = b``, ``C`` their rows, LU-factored once per set and kept while the set is unchanged) and the
+    multipliers solve ``C' mu = -(H z + f)``; 1 when it is the optimum, else 0."""
+    n = H.shape[0]
+    same = fac[0] == 1
+    if same:
+        for c in range(n):
+            if fac[1 + c] != wset[1 + c]:
+                same = False
+                break
+    if not same and not _vertex_factor(A, wset, LU, fac):
+        return 0
+    y = kv[0]
+    for j in range(n):                        # P C = L U:  L y = P b,  U z = y
+        r = fac[1 + n + j]
+        ic = wset[1 + r]
+        s = bu[ic] if wsgn[r] > 0.0 else bl[ic]
+        for k in range(j):
+            s -= LU[j, k] * y[k]
+        y[j] = s
+    for j in range(n - 1, -1, -1):
+        s = y[j]
+        for k in range(j + 1, n):
+            s -= LU[j, k] * z[k]
+        z[j] = s / LU[j, j]
+    g = kv[1]                                 # g = -(H z + f)
+    for i in range(n):
+        s = f[i]
+        for k in range(n):
+            s += H[i, k] * z[k]
+        g[i] = -s
+    for j in range(n):                        # C' = U' L' P:  U' s = g,  L' t = s,  mu = P' t
+        s = g[j]
+        for k in range(j):
+            s -= LU[k, j] * g[k]
+        g[j] = s / LU[j, j]
+    for j in range(n - 1, -1, -1):
+        s = g[j]
+        for k in range(j + 1, n):
+            s -= LU[k, j] * g[k]
+        g[j] = s
+    mu = kv[2]
+    for j in range(n):
+        mu[fac[1 + n + j]] = g[j]
+    if not _signs_ok(mu, wset, wsgn, bu, bl, n):
+        return 0
+    return 1 if _primal_ok(A, bu, bl, z) else 0
+
+
+@_njit(cache=True)
+def solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kU, kY, kS, kv, kLU, kfac, z):
     """Minimise ``0.5 z'Hz + f'z`` with the constraints of ``wset`` held as equalities; return 1 and the
     minimiser in ``z`` when it satisfies every constraint ``bl <= [I; A] z <= bu`` and every multiplier has
     its sign (the point is then the QP's optimum), else 0 (``z`` then holds no answer).
 
     ``H`` symmetric positive definite (n x n), ``A`` the general rows (the first ``n`` constraints are the
-    simple bounds of ``bu, bl``), work buffers ``kU, kY, kS`` (n x n) and ``kv`` (3 x n)."""
+    simple bounds of ``bu, bl``), work buffers ``kU, kY, kS, kLU`` (n x n), ``kv`` (3 x n) and ``kfac``
+    (``2 n + 1`` integers).  With ``n`` active constraints (a vertex: half the calls of the UAC proxy) the
+    point is fixed by them alone (:func:`_solve_on_vertex`); otherwise the range-space solve below."""
     nw = wset[0]
     n = H.shape[0]
     if nw < 0 or nw > n:
         return 0
-    m_total = bu.shape[0]
+    if nw == n:
+        return _solve_on_vertex(H, f, A, bu, bl, wset, wsgn, kv, kLU, kfac, z)
     # Cholesky H = U'U (U upper, in kU; U' is the L of the notes below)
     for j in range(n):
         d = H[j, j]
@@ -457,15 +603,8 @@ def solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kU, kY, kS, kv, z):
         for k in range(i + 1, nw):
             s -= kS[k, i] * mu[k]
         mu[i] = s / kS[i, i]
-    # multiplier signs (an equality, bl == bu, may take either)
-    mmax = 0.0
-    for c in range(nw):
-        if abs(mu[c]) > mmax:
-            mmax = abs(mu[c])
-    for c in range(nw):
-        ic = wset[1 + c]
-        if bu[ic] > bl[ic] and mu[c] * wsgn[c] < -GUESS_DUAL_TOL * (1.0 + mmax):
-            return 0
+    if not _signs_ok(mu, wset, wsgn, bu, bl, nw):
+        return 0
     # z = -L^-T (g + Y' mu)
     w = kv[2]
     for i in range(n):
@@ -478,31 +617,7 @@ def solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kU, kY, kS, kv, z):
         for k in range(i + 1, n):
             s += kU[i, k] * z[k]                # z = -u with L'u = w
         z[i] = -s / kU[i, i]
-    # every constraint satisfied: the simple bounds, then the rows
-    for i in range(n):
-        if z[i] > bu[i] + GUESS_PRIMAL_TOL * (1.0 + abs(bu[i])) or z[i] < bl[i] - GUESS_PRIMAL_TOL * (1.0 + abs(bl[i])):
-            return 0
-    for k in range(n):
-        if not math.isfinite(z[k]):
-            return 0
-    n4 = n - n % 4
-    for i in range(n, m_total):
-        a = A[i - n]
-        s0 = 0.0                                  # four partial sums: independent chains (a check only:
-        s1 = 0.0                                  # the answer z does not depend on their order)
-        s2 = 0.0
-        s3 = 0.0
-        for k in range(0, n4, 4):
-            s0 += a[k] * z[k]
-            s1 += a[k + 1] * z[k + 1]
-            s2 += a[k + 2] * z[k + 2]
-            s3 += a[k + 3] * z[k + 3]
-        for k in range(n4, n):
-            s0 += a[k] * z[k]
-        r = (s0 + s1) + (s2 + s3)
-        if r > bu[i] + GUESS_PRIMAL_TOL * (1.0 + abs(bu[i])) or r < bl[i] - GUESS_PRIMAL_TOL * (1.0 + abs(bl[i])):
-            return 0
-    return 1
+    return 1 if _primal_ok(A, bu, bl, z) else 0
 
 
 @_njit(cache=True)
@@ -539,7 +654,7 @@ def _fallback(mp, rp, rinner, rrates, plan, x, soc, demand, gen, pmax_w, pmin_w,
 
 @_njit(cache=True)
 def mpc_move(mp, rp, inner, rates, rinner, rrates, x, plan, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx,
-             H, f, A, bu, bl, aux, ws, qp, res, sense, z, lam, flags, wset, wsgn, kL, kY, kS, kv,
+             H, f, A, bu, bl, aux, ws, qp, res, sense, z, lam, flags, wset, wsgn, kL, kY, kS, kv, kLU, kfac,
              soc, demand, gen, pmax_w, pmin_w, ocv, rs):
     """One supervisor call (:meth:`MPCSupervisor.step` with solver 'daqp'): ``(command_w, rate_max_wps)``;
     the plan, fallback count, slacks and status are left in ``x`` / ``plan``.  The QP is first solved on the
@@ -550,7 +665,7 @@ def mpc_move(mp, rp, inner, rates, rinner, rrates, x, plan, c, fp, fs, fsl, MtM,
     st = _build(soc, demand * 1e-3, vo, ocv, rs, pmax_w * 1e-3, pmin_w * 1e-3, rate * 1e-3, c, fp, fs, fsl,
                 MtM, LtL, Mt1, Mtr, Lt1, soc_idx, H, f, bu, bl, aux)
     if st == 0:
-        if mp[11] > 0.5 and solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kL, kY, kS, kv, z) == 1:
+        if mp[11] > 0.5 and solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kL, kY, kS, kv, kLU, kfac, z) == 1:
             x[6] = 0.0
         else:
             flag = daqp_nb.solve(ws, qp, res, sense, z, lam, flags, H, f, A, bu, bl)

@@ -6,6 +6,7 @@ component's default (the powertrain's fuel_vs_power.csv) is exercised.
 """
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -206,6 +207,16 @@ def test_kkt_conditions_of_the_daqp_solution():
     assert n_active > 80
 
 
+def _engine_off_like(n=80, seed=12):
+    """Light demand at a high SOC with the engine off: the optimum holds the engine at 0 kW over the whole
+    horizon with both slacks at 0 - n active constraints, a vertex (half the calls over the UAC proxy)."""
+    rng = np.random.default_rng(seed)
+    soc = 64.0
+    for k in range(n):
+        soc = float(soc - 0.01 + rng.normal(0, 0.002))
+        yield soc, 8e3 + 4e3 * math.sin(k / 9) + rng.normal(0, 300.0), 0.0, 150e3, -120e3, 431.0, 0.156
+
+
 def _closed_loop_like(n=400, seed=11):
     """Slowly varying calls (what a supervisor sees every 0.2 s), with occasional jumps."""
     rng = np.random.default_rng(seed)
@@ -228,14 +239,15 @@ def test_the_previous_active_set_gives_daqps_optimum_when_accepted():
     Afull = np.vstack([np.eye(p.n), p.A])
     g = new_guess_state(p.n, p.n + p.m)
     z = np.zeros(p.n)
-    accepted = rejected = 0
-    for soc, d, gen, pmax, pmin, ocv, rs in _closed_loop_like():
+    accepted = rejected = vertices = 0
+    for soc, d, gen, pmax, pmin, ocv, rs in itertools.chain(_closed_loop_like(), _engine_off_like()):
         assert p.build(soc, d / 1e3, gen / 1e3, pmax / 1e3, pmin / 1e3, ocv, rs, MAP(gen) / 1e3) == 0
         x, _, flag, info = daqp.solve(p.H, p.f, p.A, p.bu, p.bl)
         assert flag >= 1
         ok = solve_on_active_set(p.H, p.f, p.A, p.bu, p.bl, *g, z)
         if ok:
             accepted += 1
+            vertices += int(g[0][0] == p.n)          # n constraints active: the LU branch (_solve_on_vertex)
             scale = max(1.0, np.abs(x).max())
             assert np.abs(z - x).max() <= 1e-9 * scale
             r = Afull @ z
@@ -246,7 +258,7 @@ def test_the_previous_active_set_gives_daqps_optimum_when_accepted():
         else:
             rejected += 1
         set_active_from_lam(np.asarray(info["lam"]), p.n + p.m, g[0], g[1])
-    assert accepted > 0 and rejected > 0, (accepted, rejected)
+    assert accepted > 0 and rejected > 0 and 0 < vertices < accepted, (accepted, rejected, vertices)
 
 
 def test_active_set_guess_rejects_wrong_sign_dependent_rows_and_violations():
@@ -275,6 +287,47 @@ def test_active_set_guess_rejects_wrong_sign_dependent_rows_and_violations():
     assert guess([-3.0, -3.0], [2], [1.0]) == 1 and np.allclose(z, [0.5, 0.5])  # the row active: the optimum
     assert guess([-3.0, -3.0], [0, 1], [1.0, 1.0]) == 0  # both bounds held: z = (1, 1) violates z0 + z1 <= 1
     assert guess([-3.0, -3.0], [2], [-1.0]) == 0        # the row held at its lower bound: wrong sign
+
+
+def test_vertex_branch_solves_kkt_and_keeps_its_factors_only_for_the_same_set():
+    """With n constraints active the point is where they hold (LU of the active rows, kept while the set is
+    unchanged): the optimum is accepted, a wrong-sign multiplier or a violated row rejects, dependent rows
+    reject, and a different set of the same size is factored afresh (not answered from the kept factors)."""
+    from shevsim.supervisor.mpc import new_guess_state, solve_on_active_set
+    n = 2
+    H = np.array([[2.0, 0.5], [0.5, 1.0]])
+    A = np.array([[1.0, 1.0], [1.0, -1.0]])       # rows: z0 + z1 in [bl[2], bu[2]], z0 - z1 in [bl[3], bu[3]]
+    bu = np.array([1.0, 1.0, 1.5, 5.0])
+    bl = np.array([-1.0, -1.0, -5.0, -5.0])
+    g = new_guess_state(n, 4)
+    z = np.zeros(n)
+
+    def guess(f, active, signs):
+        g[0][0] = len(active)
+        g[0][1:1 + len(active)] = active
+        g[1][:len(active)] = signs
+        return solve_on_active_set(H, np.asarray(f, float), A, bu, bl, *g, z)
+
+    def kkt_optimum(f):            # brute force over a fine grid of the feasible box, then polished
+        zs = np.linspace(-1, 1, 401)
+        Z0, Z1 = np.meshgrid(zs, zs, indexing="ij")
+        q = 0.5 * (H[0, 0] * Z0**2 + 2 * H[0, 1] * Z0 * Z1 + H[1, 1] * Z1**2) + f[0] * Z0 + f[1] * Z1
+        q[(Z0 + Z1 > 1.5 + 1e-12) | (Z0 - Z1 > 5) | (Z0 - Z1 < -5)] = np.inf
+        k = np.unravel_index(np.argmin(q), q.shape)
+        return np.array([Z0[k], Z1[k]])
+
+    f = [-6.0, -6.0]                               # optimum: z0 + z1 = 1.5 with z1 = 1 (row 2 and bound 1 active)
+    assert guess(f, [1, 2], [1.0, 1.0]) == 1 and np.allclose(z, [0.5, 1.0], atol=1e-14)
+    assert np.allclose(z, kkt_optimum(f), atol=5e-3)
+    assert g[7][0] == 1 and list(g[7][1:3]) == [1, 2]          # the factors kept for this set
+    f2 = [-6.0, -7.0]                              # same set, another gradient: answered from the kept factors
+    assert guess(f2, [1, 2], [1.0, 1.0]) == 1 and np.allclose(z, [0.5, 1.0], atol=1e-14)
+    assert guess([-0.2, 0.1], [1, 2], [1.0, 1.0]) == 0         # interior optimum: the multipliers' signs wrong
+    assert guess([-6.0, -6.0], [0, 1], [1.0, 1.0]) == 0        # a different set of two: z = (1, 1) violates row 2
+    assert list(g[7][1:3]) == [0, 1]                            # factored afresh for it
+    assert guess([-6.0, -6.0], [1, 2], [-1.0, 1.0]) == 0       # bound 1 held at its lower end: z1 = -1, wrong sign
+    assert guess([-6.0, -6.0], [2, 2], [1.0, 1.0]) == 0        # the same row twice: dependent, rejected
+    assert guess([-6.0, -6.0], [1, 2], [1.0, 1.0]) == 1 and np.allclose(z, [0.5, 1.0], atol=1e-14)
 
 
 def test_brute_force_optimum_tiny_horizon():
