@@ -92,31 +92,70 @@ def run_loop(n, k0, h, t0, typ, mult, ibase, obase, lptr, ldst, lsrc, sig, rec, 
                 ib = ibase[j]
                 ob = obase[j]
                 if ty == K.T_CYCLE:
-                    st = K.cycle_step(cyc0 if inst[j] == 0 else cyc[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.cycle_step(cyc0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.cycle_step(cyc[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_DRIVER:
-                    st = K.driver_kernel(drv0 if inst[j] == 0 else drv[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.driver_kernel(drv0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.driver_kernel(drv[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_VEHICLE:
-                    st = K.vehicle_kernel(veh0 if inst[j] == 0 else veh[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.vehicle_kernel(veh0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.vehicle_kernel(veh[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_MOTOR:
-                    st = K.motor_kernel(mot0 if inst[j] == 0 else mot[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.motor_kernel(mot0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.motor_kernel(mot[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_BUS:
-                    st = K.bus_kernel(bus0 if inst[j] == 0 else bus[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.bus_kernel(bus0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.bus_kernel(bus[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_ENGINE:
-                    st = K.engine_kernel(eng0 if inst[j] == 0 else eng[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.engine_kernel(eng0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.engine_kernel(eng[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_BATTERY:
-                    st = K.battery_kernel(bat0 if inst[j] == 0 else bat[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.battery_kernel(bat0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.battery_kernel(bat[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_BMS:
-                    st = K.bms_kernel(bms0 if inst[j] == 0 else bms[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.bms_kernel(bms0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.bms_kernel(bms[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_RULE:
-                    st = K.rule_kernel(rule0 if inst[j] == 0 else rule[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.rule_kernel(rule0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.rule_kernel(rule[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_LIMITS:
-                    st = K.power_limits_kernel(lim0 if inst[j] == 0 else lim[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.power_limits_kernel(lim0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.power_limits_kernel(lim[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_VEHICLE_SPEED:
-                    st = K.vehicle_speed_kernel(vsp0 if inst[j] == 0 else vsp[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.vehicle_speed_kernel(vsp0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.vehicle_speed_kernel(vsp[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_PROFILE:
-                    st = K.profile_kernel(prof0 if inst[j] == 0 else prof[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.profile_kernel(prof0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.profile_kernel(prof[inst[j]], sig, ib, ob, t, hk)
                 elif ty == K.T_MPC:
-                    st = K.mpc_kernel(mpc0 if inst[j] == 0 else mpc[inst[j]], sig, ib, ob, t, hk)
+                    if inst[j] == 0:
+                        st = K.mpc_kernel(mpc0, sig, ib, ob, t, hk)
+                    else:
+                        st = K.mpc_kernel(mpc[inst[j]], sig, ib, ob, t, hk)
                 else:
                     st = K.ERR_NAN_INPUT
                 if st != 0:
