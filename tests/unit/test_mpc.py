@@ -261,23 +261,30 @@ def test_the_previous_active_set_gives_daqps_optimum_when_accepted():
     assert accepted > 0 and rejected > 0 and 0 < vertices < accepted, (accepted, rejected, vertices)
 
 
-def test_active_set_guess_rejects_wrong_sign_dependent_rows_and_violations():
-    """The guess is accepted only when it is the optimum: a multiplier of the wrong sign, dependent active
-    rows and a violated constraint each give 0."""
+def _guess_on(H, A, bu, bl):
+    """``(state, z, guess)``: ``guess(f, active, signs)`` runs :func:`solve_on_active_set` on the QP
+    ``(H, f, A, bu, bl)`` with that active set (indices into ``[I; A]``, +1 upper / -1 lower)."""
     from shevsim.supervisor.mpc import new_guess_state, solve_on_active_set
-    n = 2
-    H = np.eye(n)
-    A = np.array([[1.0, 1.0]])                  # one row: z0 + z1 in [bl[2], bu[2]]
-    bu = np.array([1.0, 1.0, 1.0])
-    bl = np.array([-1.0, -1.0, -1.0])
-    g = new_guess_state(n, 3)
-    z = np.zeros(n)
+    g = new_guess_state(H.shape[0], bu.shape[0])
+    z = np.zeros(H.shape[0])
 
     def guess(f, active, signs):
         g[0][0] = len(active)
         g[0][1:1 + len(active)] = active
         g[1][:len(active)] = signs
         return solve_on_active_set(H, np.asarray(f, float), A, bu, bl, *g, z)
+    return g, z, guess
+
+
+def test_active_set_guess_rejects_wrong_sign_dependent_rows_and_violations():
+    """The guess is accepted only when it is the optimum: a multiplier of the wrong sign, dependent active
+    rows and a violated constraint each give 0."""
+    n = 2
+    H = np.eye(n)
+    A = np.array([[1.0, 1.0]])                  # one row: z0 + z1 in [bl[2], bu[2]]
+    bu = np.array([1.0, 1.0, 1.0])
+    bl = np.array([-1.0, -1.0, -1.0])
+    g, z, guess = _guess_on(H, A, bu, bl)
 
     assert guess([-0.2, 0.1], [], []) == 1 and np.allclose(z, [0.2, -0.1])      # interior optimum
     assert guess([-3.0, 0.0], [0], [1.0]) == 1 and np.allclose(z, [1.0, 0.0])   # z0 at its upper bound
@@ -293,20 +300,12 @@ def test_vertex_branch_solves_kkt_and_keeps_its_factors_only_for_the_same_set():
     """With n constraints active the point is where they hold (LU of the active rows, kept while the set is
     unchanged): the optimum is accepted, a wrong-sign multiplier or a violated row rejects, dependent rows
     reject, and a different set of the same size is factored afresh (not answered from the kept factors)."""
-    from shevsim.supervisor.mpc import new_guess_state, solve_on_active_set
     n = 2
     H = np.array([[2.0, 0.5], [0.5, 1.0]])
     A = np.array([[1.0, 1.0], [1.0, -1.0]])       # rows: z0 + z1 in [bl[2], bu[2]], z0 - z1 in [bl[3], bu[3]]
     bu = np.array([1.0, 1.0, 1.5, 5.0])
     bl = np.array([-1.0, -1.0, -5.0, -5.0])
-    g = new_guess_state(n, 4)
-    z = np.zeros(n)
-
-    def guess(f, active, signs):
-        g[0][0] = len(active)
-        g[0][1:1 + len(active)] = active
-        g[1][:len(active)] = signs
-        return solve_on_active_set(H, np.asarray(f, float), A, bu, bl, *g, z)
+    g, z, guess = _guess_on(H, A, bu, bl)
 
     def kkt_optimum(f):            # brute force over a fine grid of the feasible box, then polished
         zs = np.linspace(-1, 1, 401)
