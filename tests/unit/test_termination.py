@@ -218,9 +218,16 @@ def test_a_real_interrupt_of_the_command_saves_the_run(tmp_path, sig):
     import sys
     import time
     out = tmp_path / "o"
+
+    def default_sigint():
+        # a test run started in the background by a non-interactive shell inherits SIGINT ignored, and Python
+        # then keeps it ignored; a user's Ctrl-C reaches a foreground process, whose SIGINT is the default
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+
     p = subprocess.Popen([sys.executable, "-m", "shevsim.cli", "run", str(TWO_BODY), "-s", "scenario.stop_s=1e5",
                           "--record-every", "100", "--engine", "python", "-o", str(out), "--no-plots"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+                         preexec_fn=default_sigint)
     try:
         seen = ""
         t0 = time.time()
