@@ -406,6 +406,8 @@ def _signs_ok(mu, wset, wsgn, bu, bl, nw):
     """Every active inequality's multiplier has its sign (an equality, bl == bu, may take either)."""
     mmax = 0.0
     for c in range(nw):
+        if not math.isfinite(mu[c]):
+            return False
         if abs(mu[c]) > mmax:
             mmax = abs(mu[c])
     for c in range(nw):
@@ -1136,9 +1138,19 @@ class MPCSupervisor:
             return
         if value is None:
             g[0][0] = -1
-        else:
-            g[0][:] = value[0]
-            g[1][:] = value[1]
+            return
+        wset = np.asarray(value[0])
+        wsgn = np.asarray(value[1])
+        n, m_total = g[2].shape[0], g[0].shape[0] - 1
+        k = int(wset[0]) if wset.shape == g[0].shape else -2
+        # the compiled solve indexes A with these: refuse anything that is not a set of this QP's constraints
+        if (wsgn.shape != g[1].shape or not -1 <= k <= n
+                or (k > 0 and not (np.all((wset[1:1 + k] >= 0) & (wset[1:1 + k] < m_total))
+                                   and np.all(np.abs(wsgn[:k]) == 1.0)))):
+            raise ValueError(f"MPC active set: expected (indices of shape {g[0].shape} with a count in [-1, {n}] "
+                             f"and indices in [0, {m_total}), signs of shape {g[1].shape} = +-1)")
+        g[0][:] = wset
+        g[1][:] = wsgn
 
     def _guess_state(self):
         if self._move is not None:

@@ -329,6 +329,31 @@ def test_vertex_branch_solves_kkt_and_keeps_its_factors_only_for_the_same_set():
     assert guess([-6.0, -6.0], [1, 2], [1.0, 1.0]) == 1 and np.allclose(z, [0.5, 1.0], atol=1e-14)
 
 
+def test_active_set_state_is_checked_and_non_finite_multipliers_reject():
+    """A supervisor's active set (its state) is set only to indices of its own QP's constraints (the
+    compiled solve indexes A with them), and a guess whose multipliers are not finite is not accepted."""
+    sup = MPCSupervisor(MPCSettings(), placeholder_fuel_curve(), MAP)
+    wset, wsgn = sup.active_set
+    sup.active_set = (wset, wsgn)                       # its own state round-trips
+    bad = wset.copy()
+    bad[0], bad[1] = 1, wset.shape[0] + 5                # an index beyond the constraints
+    with pytest.raises(ValueError, match="active set"):
+        sup.active_set = (bad, wsgn)
+    bad = wset.copy()
+    bad[0] = sup.prob.n + 1                              # more active constraints than variables
+    with pytest.raises(ValueError, match="active set"):
+        sup.active_set = (bad, wsgn)
+    with pytest.raises(ValueError, match="active set"):
+        sup.active_set = (wset[:3], wsgn)                # another QP's shape
+    n = 2
+    H = np.array([[np.nan, 0.0], [0.0, 1.0]])           # the point comes from the rows, the multipliers from H
+    A = np.array([[1.0, 1.0]])
+    bu = np.array([1.0, 1.0, 5.0])
+    bl = np.array([-1.0, -1.0, -5.0])
+    _, z, guess = _guess_on(H, A, bu, bl)
+    assert guess([-3.0, -3.0], [0, 1], [1.0, 1.0]) == 0
+
+
 def test_brute_force_optimum_tiny_horizon():
     """N_c = 1, N_p = 3: minimise the cost (linearised model simulated step by step, minimal slacks)
     over the single move by bounded scalar search and compare with the QP's first move."""
