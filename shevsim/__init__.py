@@ -6,7 +6,8 @@ The Python API (see :mod:`shevsim.api`)::
     res = shevsim.simulate("hd_udds_rule", overrides={"vehicle.mass_kg": 18000.0, "cycle.repeat": 1})
     res.to_pandas(); res.metrics; res.termination; res.plot(["vehicle.speed_mps"]); res.save("out")
 """
-__version__ = "0.1.0"
+from .version import __version__  # noqa: E402
+from . import providers  # noqa: E402,F401  (registers component types, the FMU adapter and metrics with core)
 
 from .api import (Result, Scenario, compare, load_result, load_scenario, metrics_table,  # noqa: E402
                   new_scenario, run_calibration, run_study, scenarios, simulate)

@@ -207,7 +207,7 @@ def _positive_int(text: str) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``shevsim`` argument parser (sub-commands run, scenarios, info, cycles, study, calibrate, fmu)."""
-    from . import __version__
+    from .version import __version__
     codes = "; ".join(f"{k} {v}" for k, v in EXIT_CODES.items())
     ap = argparse.ArgumentParser(prog="shevsim", description="Series-hybrid electric vehicle co-simulation",
                                  epilog=f"exit codes: {codes}")

@@ -19,14 +19,13 @@ Precedence, lowest first: the component's parameter file, the scenario's ``overl
 """
 from __future__ import annotations
 
-import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from .atomic import write_text_atomic
 from .errors import ScenarioError
+from .tomlio import toml_key, toml_value
 
 
 @dataclass
@@ -85,36 +84,15 @@ def resolve_files(ov: Overlay) -> dict:
     return out
 
 
-def _toml_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(int(v))
-    if isinstance(v, float):
-        if math.isnan(v):
-            return "nan"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return repr(float(v))
-    if isinstance(v, str):
-        import json
-        return json.dumps(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    if hasattr(v, "item"):
-        return _toml_value(v.item())
-    raise TypeError(f"cannot write {v!r} ({type(v).__name__}) as a TOML value")
-
-
 def write_overlay(path: str | Path, tables: dict[str, dict], meta: dict | None = None) -> Path:
     """Write an overlay file atomically (``[meta]`` then one table per component)."""
     lines = []
     if meta:
         lines.append("[meta]")
-        lines += [f"{k} = {_toml_value(v)}" for k, v in meta.items()]
+        lines += [f"{toml_key(k)} = {toml_value(v)}" for k, v in meta.items()]
         lines.append("")
     for comp, vals in tables.items():
-        lines.append(f"[{comp}]")
-        lines += [f"{k} = {_toml_value(v)}" for k, v in vals.items()]
+        lines.append(f"[{toml_key(comp)}]")
+        lines += [f"{toml_key(k)} = {toml_value(v)}" for k, v in vals.items()]
         lines.append("")
     return write_text_atomic(path, "\n".join(lines))

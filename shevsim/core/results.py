@@ -143,10 +143,11 @@ class Result:
 
     @property
     def metrics(self) -> dict:
-        """Scenario metrics (:func:`shevsim.metrics.compute_metrics`; a metric that cannot be
-        computed is None and explained in ``metrics["notes"]``). Computed on first access."""
+        """Scenario metrics (:func:`shevsim.metrics.compute_metrics`, registered with
+        :mod:`shevsim.core.registry`; a metric that cannot be computed is None and explained in
+        ``metrics["notes"]``). Computed on first access."""
         if self._metrics is None:
-            from ..metrics import result_metrics
+            from .registry import result_metrics
             self._metrics = result_metrics(self)
         return self._metrics
 
@@ -311,7 +312,7 @@ def save_result(result: Result, out_dir: str | Path, *, scenario_text: str | Non
     plot_error = None
     try:
         ts = write_timeseries(result, tmp, fmt)          # the trajectory first
-        from .. import __version__
+        from ..version import __version__
         meta = dict(result.meta)
         meta.pop("scenario_text", None)
         term = Termination.coerce(result.termination)

@@ -51,6 +51,8 @@ from .errors import ScenarioError, ShevsimError
 from .master import Connection, Fault, Master, MasterSettings
 from .overlay import overlay_tables, overlay_values, resolve_files
 from .params import check_options, load_params
+from .registry import component_class, fmu_component
+from .tomlio import toml_key, toml_value
 from shevsim.core.paths import DATA_ROOT, bundled_cycle, bundled_params, bundled_scenario
 
 PROJECT_ROOT = DATA_ROOT   # the folder holding components/, cycles/, scenarios/ (checkout or wheel)
@@ -239,7 +241,51 @@ class Scenario:
 def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), text: str | None = None,
                   overlays: list[str] | tuple = ()) -> Scenario:
     """Read and validate a scenario file; ``sets`` are ``component.param=value`` overrides, ``overlays``
-    are ``COMPONENT=FILE`` or ``FILE`` parameter overlays (:mod:`shevsim.core.overlay`)."""
+    are ``COMPONENT=FILE`` or ``FILE`` parameter overlays (:mod:`shevsim.core.overlay`).
+
+    The checks run in the file's order: the TOML itself, ``[scenario]``, ``[components]``, the overlays,
+    ``[connections]``, ``[[faults]]``, ``[record]``, the times and the order, then the ``--set`` values."""
+    spath, where, text = _scenario_source(path, text)
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{where}: malformed TOML: {exc}") from exc
+    _check_keys(doc, _TOP, where)
+    sc = doc.get("scenario", {})
+    _check_keys(sc, _SCEN, f"{where}: [scenario]")
+    name = sc.get("name", spath.stem if spath else "scenario")
+    if not isinstance(name, str) or not name:
+        raise ScenarioError(f"{where}: [scenario] field 'name' must be a string, got {name!r}")
+    settings = MasterSettings(step_s=_number(sc, "step_s", 0.1, f"{where}: [scenario]"),
+                              method=str(sc.get("method", "gauss-seidel")))
+    try:
+        settings.check()
+    except ScenarioError as exc:
+        raise ScenarioError(f"{where}: [scenario] {exc}") from None
+    specs = _component_specs(doc, spath, where)
+    names = {s.name for s in specs}
+    _apply_overlays(specs, names, overlays)
+    conns = _connections(doc, names, where)
+    faults = _faults(doc, names, where)
+    signals = _record_signals(doc, where)
+    seed, stop_s, t0_s = _scenario_times(sc, where)
+    order = _scenario_order(sc, names, where)
+    scen = Scenario(spath, text, name, str(sc.get("description", "")), settings,
+                    stop_s, t0_s, seed, specs, conns, faults, signals,
+                    check_options(doc.get("metrics", {}), f"{where}: [metrics]"), order,
+                    list(sets), [str(o) for o in overlays])
+    for s in sets:
+        if "=" not in s or "." not in s.split("=", 1)[0]:
+            raise ScenarioError(f"--set '{s}': expected component.param=value (or scenario.FIELD=value)")
+        key, val = s.split("=", 1)
+        # a relative *_file path given on the command line is relative to the working directory
+        apply_override(scen, key.strip(), parse_value(val.strip()), f"--set '{s}'", base=None)
+    return scen
+
+
+def _scenario_source(path: str | Path | None, text: str | None) -> tuple[Path | None, str, str]:
+    """The scenario's path (a bundled scenario by name when no such file exists), the name errors use
+    for it, and its text (read as UTF-8 unless ``text`` is given)."""
     spath = Path(path) if path is not None else None
     if text is None and spath is not None and not spath.is_file() and bundled_scenario(str(path)) is not None:
         spath = bundled_scenario(str(path))      # a bundled scenario by name (hd_udds_rule)
@@ -253,85 +299,80 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
             text = spath.read_text(encoding="utf-8-sig")
         except (UnicodeDecodeError, OSError) as exc:
             raise ScenarioError(f"{where}: cannot read the scenario as UTF-8 text: {exc}") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{where}: malformed TOML: {exc}") from exc
-    _check_keys(doc, _TOP, where)
-    sc = doc.get("scenario", {})
-    _check_keys(sc, _SCEN, f"{where}: [scenario]")
-    name = sc.get("name", spath.stem if spath else "scenario")
-    if not isinstance(name, str) or not name:
-        raise ScenarioError(f"{where}: [scenario] field 'name' must be a string, got {name!r}")
+    return spath, where, text
 
-    def num(d, k, default, w, typ=float):
-        v = d.get(k, default)
-        if v is None:
-            return None
-        try:
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or (typ is int and not float(v).is_integer()):
-                raise ScenarioError(f"{w}: field '{k}' must be {'an integer' if typ is int else 'a number'}, got {v!r}")
-            return typ(v)
-        except OverflowError:
-            raise ScenarioError(f"{w}: field '{k}' = {v!r} is too large for a number") from None
 
-    settings = MasterSettings(step_s=num(sc, "step_s", 0.1, f"{where}: [scenario]"),
-                              method=str(sc.get("method", "gauss-seidel")))
+def _number(d: dict, k: str, default, w: str, typ=float):
+    """``d[k]`` (or ``default``) as a ``typ`` number; None stays None; an error names ``w`` and ``k``."""
+    v = d.get(k, default)
+    if v is None:
+        return None
     try:
-        settings.check()
-    except ScenarioError as exc:
-        raise ScenarioError(f"{where}: [scenario] {exc}") from None
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (typ is int and not float(v).is_integer()):
+            raise ScenarioError(f"{w}: field '{k}' must be {'an integer' if typ is int else 'a number'}, got {v!r}")
+        return typ(v)
+    except OverflowError:
+        raise ScenarioError(f"{w}: field '{k}' = {v!r} is too large for a number") from None
+
+
+def _component_specs(doc: dict, spath: Path | None, where: str) -> list[ComponentSpec]:
+    """The ``[components]`` tables as specs, in the file's order."""
     comps_doc = doc.get("components")
     if not comps_doc:
         raise ScenarioError(f"{where}: no [components] defined")
     _check_keys(comps_doc, set(comps_doc), where)
-    specs: list[ComponentSpec] = []
-    for cname, cd in comps_doc.items():
-        w = f"{where}: [components.{cname}]"
-        _check_component_name(cname, w)
-        _check_keys(cd, _COMP, w)
-        if "type" not in cd:
-            raise ScenarioError(f"{w}: missing field 'type'")
-        if not isinstance(cd["type"], str):
-            raise ScenarioError(f"{w}: field 'type' must be a string (a registry name), got {cd['type']!r}")
-        pf = None
-        if "params" in cd:
-            if not isinstance(cd["params"], str):
-                raise ScenarioError(f"{w}: field 'params' must be a file path string")
-            pf = resolve_path(cd["params"], spath)
-            if not pf.is_file():          # a bundled parameter set by name ("matv", "vehicle/matv")
-                pf = bundled_params(cd["params"], str(cd["type"]), cname)
-            if pf is None:
-                raise ScenarioError(f"{w}: field 'params': parameter file '{cd['params']}' not found (nor a "
-                                    f"bundled set of that name in components/{cd['type']}/)")
-        fmu = None
-        if cd["type"] == "fmu":
-            if "fmu" not in cd:
-                raise ScenarioError(f"{w}: type 'fmu' needs field 'fmu' (path of the .fmu file)")
-            if not isinstance(cd["fmu"], str):
-                raise ScenarioError(f"{w}: field 'fmu' must be a file path string")
-            fmu = resolve_path(cd["fmu"], spath)
-        k = cd.get("step_multiple", 1)
-        if isinstance(k, bool) or not isinstance(k, int) or k < 1:
-            raise ScenarioError(f"{w}: field 'step_multiple' must be an integer >= 1, got {k!r}")
-        for tbl in ("set", "start", "map"):
-            if tbl in cd and not isinstance(cd[tbl], dict):
-                raise ScenarioError(f"{w}: field '{tbl}' must be a table")
-        rep = cd.get("replaces")
-        if rep is not None and (cd["type"] != "fmu" or not isinstance(rep, str)):
-            raise ScenarioError(f"{w}: field 'replaces' (a native component TYPE) is only for type = \"fmu\"")
-        over = {}
-        if "overlay" in cd:
-            if not isinstance(cd["overlay"], str):
-                raise ScenarioError(f"{w}: field 'overlay' must be a file path string")
-            try:
-                over.update(resolve_files(overlay_values(resolve_path(cd["overlay"], spath), cname)))
-            except ScenarioError as exc:
-                raise ScenarioError(f"{w}: field 'overlay': {exc}") from None
-        over.update({key: _file_value(key, v, spath) for key, v in cd.get("set", {}).items()})
-        specs.append(ComponentSpec(cname, cd["type"], pf, over, dict(cd.get("start", {})),
-                                   k, fmu, dict(cd.get("map", {})), rep))
-    names = {s.name for s in specs}
+    return [_component_spec(cname, cd, spath, f"{where}: [components.{cname}]") for cname, cd in comps_doc.items()]
+
+
+def _component_spec(cname: str, cd: dict, spath: Path | None, w: str) -> ComponentSpec:
+    """One ``[components.NAME]`` table as a spec (its files resolved against the scenario's folder)."""
+    _check_component_name(cname, w)
+    _check_keys(cd, _COMP, w)
+    if "type" not in cd:
+        raise ScenarioError(f"{w}: missing field 'type'")
+    if not isinstance(cd["type"], str):
+        raise ScenarioError(f"{w}: field 'type' must be a string (a registry name), got {cd['type']!r}")
+    pf = None
+    if "params" in cd:
+        if not isinstance(cd["params"], str):
+            raise ScenarioError(f"{w}: field 'params' must be a file path string")
+        pf = resolve_path(cd["params"], spath)
+        if not pf.is_file():          # a bundled parameter set by name ("matv", "vehicle/matv")
+            pf = bundled_params(cd["params"], str(cd["type"]), cname)
+        if pf is None:
+            raise ScenarioError(f"{w}: field 'params': parameter file '{cd['params']}' not found (nor a "
+                                f"bundled set of that name in components/{cd['type']}/)")
+    fmu = None
+    if cd["type"] == "fmu":
+        if "fmu" not in cd:
+            raise ScenarioError(f"{w}: type 'fmu' needs field 'fmu' (path of the .fmu file)")
+        if not isinstance(cd["fmu"], str):
+            raise ScenarioError(f"{w}: field 'fmu' must be a file path string")
+        fmu = resolve_path(cd["fmu"], spath)
+    k = cd.get("step_multiple", 1)
+    if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+        raise ScenarioError(f"{w}: field 'step_multiple' must be an integer >= 1, got {k!r}")
+    for tbl in ("set", "start", "map"):
+        if tbl in cd and not isinstance(cd[tbl], dict):
+            raise ScenarioError(f"{w}: field '{tbl}' must be a table")
+    rep = cd.get("replaces")
+    if rep is not None and (cd["type"] != "fmu" or not isinstance(rep, str)):
+        raise ScenarioError(f"{w}: field 'replaces' (a native component TYPE) is only for type = \"fmu\"")
+    over = {}
+    if "overlay" in cd:
+        if not isinstance(cd["overlay"], str):
+            raise ScenarioError(f"{w}: field 'overlay' must be a file path string")
+        try:
+            over.update(resolve_files(overlay_values(resolve_path(cd["overlay"], spath), cname)))
+        except ScenarioError as exc:
+            raise ScenarioError(f"{w}: field 'overlay': {exc}") from None
+    over.update({key: _file_value(key, v, spath) for key, v in cd.get("set", {}).items()})
+    return ComponentSpec(cname, cd["type"], pf, over, dict(cd.get("start", {})),
+                         k, fmu, dict(cd.get("map", {})), rep)
+
+
+def _apply_overlays(specs: list[ComponentSpec], names: set, overlays) -> None:
+    """Merge ``--params`` overlays (``COMPONENT=FILE`` or a bare ``FILE``) into the specs' overrides."""
     for item in overlays:
         comp, sep, f = str(item).partition("=")
         if not sep or (comp not in names and Path(str(item)).exists()):
@@ -349,6 +390,10 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
                 next(c for c in specs if c.name == cname).overrides.update(vals)
         except ScenarioError as exc:
             raise ScenarioError(f"--params '{item}': {exc}") from None
+
+
+def _connections(doc: dict, names: set, where: str) -> list[Connection]:
+    """The ``[connections]`` table (``"dst.input" = "src.output"``), both ends checked against ``names``."""
     conns = []
     cd = doc.get("connections", {})
     if not isinstance(cd, dict):
@@ -364,6 +409,11 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
             if end not in names:
                 raise ScenarioError(f"{where}: [connections] '{dst}' = '{src}': unknown component '{end}'"
                                     f"{_hint(end, names)}")
+    return conns
+
+
+def _faults(doc: dict, names: set, where: str) -> list[Fault]:
+    """The ``[[faults]]`` array: a finite time, a ``component.port`` of this scenario and a value."""
     faults = []
     for i, fd in enumerate(doc.get("faults", [])):
         w = f"{where}: [[faults]] #{i + 1}"
@@ -371,53 +421,59 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
         for key in _FAULT:
             if key not in fd:
                 raise ScenarioError(f"{w}: missing field '{key}'")
-        at = num(fd, "at_s", None, w)
+        at = _number(fd, "at_s", None, w)
         if not math.isfinite(at):
             raise ScenarioError(f"{w}: field 'at_s' must be a finite number, got {at!r}")
-        val = num(fd, "value", None, w)
+        val = _number(fd, "value", None, w)
         if "." not in str(fd["port"]):
             raise ScenarioError(f"{w}: field 'port' must be 'component.port'")
         comp, port = str(fd["port"]).split(".", 1)
         if comp not in names:
             raise ScenarioError(f"{w}: unknown component '{comp}'{_hint(comp, names)}")
         faults.append(Fault(at, comp, port, val))
+    return faults
+
+
+def _record_signals(doc: dict, where: str) -> list[str] | None:
+    """``[record] signals``: None for "all", else the list of ``component.port`` names."""
     rec = doc.get("record", {})
     _check_keys(rec, _RECORD, f"{where}: [record]")
     signals = rec.get("signals", "all")
     if signals == "all":
-        signals = None
-    elif not (isinstance(signals, list) and all(isinstance(x, str) for x in signals)):
+        return None
+    if not (isinstance(signals, list) and all(isinstance(x, str) for x in signals)):
         raise ScenarioError(f"{where}: [record] field 'signals' must be \"all\" or a list of 'component.port'")
-    seed = num(sc, "seed", 0, f"{where}: [scenario]", int)
-    stop_s = num(sc, "stop_s", None, f"{where}: [scenario]")
-    t0_s = num(sc, "t0_s", 0.0, f"{where}: [scenario]")
+    return signals
+
+
+def _scenario_times(sc: dict, where: str) -> tuple[int, float | None, float]:
+    """``[scenario]`` seed, stop_s and t0_s, checked (finite, stop after start)."""
+    seed = _number(sc, "seed", 0, f"{where}: [scenario]", int)
+    stop_s = _number(sc, "stop_s", None, f"{where}: [scenario]")
+    t0_s = _number(sc, "t0_s", 0.0, f"{where}: [scenario]")
     for key, v in (("t0_s", t0_s), ("stop_s", stop_s)):
         if v is not None and not math.isfinite(v):
             raise ScenarioError(f"{where}: [scenario] field '{key}' must be a finite number, got {v!r}")
     if stop_s is not None and stop_s <= t0_s:
         raise ScenarioError(f"{where}: [scenario] field 'stop_s' ({stop_s} s) must be after t0_s ({t0_s} s)")
+    return seed, stop_s, t0_s
+
+
+def _scenario_order(sc: dict, names: set, where: str) -> list[str] | None:
+    """``[scenario] order``: None, or every component named exactly once."""
     order = sc.get("order")
-    if order is not None:
-        if not (isinstance(order, list) and all(isinstance(x, str) for x in order)):
-            raise ScenarioError(f"{where}: [scenario] field 'order' must be a list of component names")
-        for n in order:
-            if n not in names:
-                raise ScenarioError(f"{where}: [scenario] field 'order': unknown component '{n}'{_hint(n, names)}")
-        if sorted(order) != sorted(names):
-            rep = sorted({n for n in order if order.count(n) > 1})
-            raise ScenarioError(f"{where}: [scenario] field 'order' must list every component exactly once "
-                                + (f"(repeated: {rep})" if rep else f"(missing: {sorted(names - set(order))})"))
-    scen = Scenario(spath, text, name, str(sc.get("description", "")), settings,
-                    stop_s, t0_s, seed, specs, conns, faults, signals,
-                    check_options(doc.get("metrics", {}), f"{where}: [metrics]"), order,
-                    list(sets), [str(o) for o in overlays])
-    for s in sets:
-        if "=" not in s or "." not in s.split("=", 1)[0]:
-            raise ScenarioError(f"--set '{s}': expected component.param=value (or scenario.FIELD=value)")
-        key, val = s.split("=", 1)
-        # a relative *_file path given on the command line is relative to the working directory
-        apply_override(scen, key.strip(), parse_value(val.strip()), f"--set '{s}'", base=None)
-    return scen
+    if order is None:
+        return None
+    if not (isinstance(order, list) and all(isinstance(x, str) for x in order)):
+        raise ScenarioError(f"{where}: [scenario] field 'order' must be a list of component names")
+    for n in order:
+        if n not in names:
+            raise ScenarioError(f"{where}: [scenario] field 'order': unknown component '{n}'{_hint(n, names)}")
+    if sorted(order) != sorted(names):
+        rep = sorted({n for n in order if order.count(n) > 1})
+        raise ScenarioError(f"{where}: [scenario] field 'order' must list every component exactly once "
+                            + (f"(repeated: {rep})" if rep else f"(missing: {sorted(names - set(order))})"))
+    return order
 
 
 #: names of the tables ``--set``/overrides address besides components (so no component may take them)
@@ -519,71 +575,44 @@ def _set_scenario_field(scen: "Scenario", name: str, value: Any, origin: str) ->
         raise ScenarioError(f"{origin}: unknown scenario field '{name}'{_hint(name, _SCEN)}")
 
 
-def _toml_value(v: Any) -> str:
-    import json
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        if math.isnan(v):
-            return "nan"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return repr(v)
-    if isinstance(v, (str, Path)):
-        return json.dumps(str(v))
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + " }"
-    raise ScenarioError(f"cannot write {type(v).__name__} value {v!r} as TOML")
-
-
-def _toml_key(k: str) -> str:
-    import json
-    import re
-    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k)
-
-
 def scenario_to_toml(sc: "Scenario") -> str:
     """TOML text of a scenario as it stands (paths absolute); loads back into an equal scenario."""
-    out = ["[scenario]", f"name = {_toml_value(sc.name)}"]
+    out = ["[scenario]", f"name = {toml_value(sc.name)}"]
     if sc.description:
-        out.append(f"description = {_toml_value(sc.description)}")
-    out += [f"step_s = {_toml_value(float(sc.settings.step_s))}", f"method = {_toml_value(sc.settings.method)}",
-            f"seed = {int(sc.seed)}", f"t0_s = {_toml_value(float(sc.t0_s))}"]
+        out.append(f"description = {toml_value(sc.description)}")
+    out += [f"step_s = {toml_value(float(sc.settings.step_s))}", f"method = {toml_value(sc.settings.method)}",
+            f"seed = {int(sc.seed)}", f"t0_s = {toml_value(float(sc.t0_s))}"]
     if sc.stop_s is not None:
-        out.append(f"stop_s = {_toml_value(float(sc.stop_s))}")
+        out.append(f"stop_s = {toml_value(float(sc.stop_s))}")
     if sc.order:
-        out.append(f"order = {_toml_value(list(sc.order))}")
+        out.append(f"order = {toml_value(list(sc.order))}")
     for c in sc.components:
-        out += ["", f"[components.{_toml_key(c.name)}]", f"type = {_toml_value(c.type)}"]
+        out += ["", f"[components.{toml_key(c.name)}]", f"type = {toml_value(c.type)}"]
         if c.params_file is not None:
-            out.append(f"params = {_toml_value(str(c.params_file))}")
+            out.append(f"params = {toml_value(str(c.params_file))}")
         if c.fmu is not None:
-            out.append(f"fmu = {_toml_value(str(c.fmu))}")
+            out.append(f"fmu = {toml_value(str(c.fmu))}")
         if c.mapping:
-            out.append(f"map = {_toml_value(c.mapping)}")
+            out.append(f"map = {toml_value(c.mapping)}")
         if c.replaces:
-            out.append(f"replaces = {_toml_value(c.replaces)}")
+            out.append(f"replaces = {toml_value(c.replaces)}")
         if c.step_multiple != 1:
             out.append(f"step_multiple = {c.step_multiple}")
         if c.overrides:
-            out.append(f"set = {_toml_value(c.overrides)}")
+            out.append(f"set = {toml_value(c.overrides)}")
         if c.start:
-            out.append(f"start = {_toml_value(c.start)}")
+            out.append(f"start = {toml_value(c.start)}")
     if sc.connections:
         out += ["", "[connections]"]
-        out += [f"{_toml_value(f'{c.dst}.{c.dst_port}')} = {_toml_value(f'{c.src}.{c.src_port}')}"
+        out += [f"{toml_value(f'{c.dst}.{c.dst_port}')} = {toml_value(f'{c.src}.{c.src_port}')}"
                 for c in sc.connections]
     for f in sc.faults:
-        out += ["", "[[faults]]", f"at_s = {_toml_value(float(f.at_s))}",
-                f"port = {_toml_value(f'{f.component}.{f.port}')}", f"value = {_toml_value(float(f.value))}"]
+        out += ["", "[[faults]]", f"at_s = {toml_value(float(f.at_s))}",
+                f"port = {toml_value(f'{f.component}.{f.port}')}", f"value = {toml_value(float(f.value))}"]
     if sc.record is not None:
-        out += ["", "[record]", f"signals = {_toml_value(list(sc.record))}"]
+        out += ["", "[record]", f"signals = {toml_value(list(sc.record))}"]
     if sc.metrics:
-        out += ["", "[metrics]"] + [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in sc.metrics.items()]
+        out += ["", "[metrics]"] + [f"{toml_key(k)} = {toml_value(v)}" for k, v in sc.metrics.items()]
     return "\n".join(out) + "\n"
 
 
@@ -624,28 +653,9 @@ def instantiate(spec: ComponentSpec, scenario: Scenario):
     """Create one component from its spec."""
     where = f"{scenario.path or '<scenario>'}: [components.{spec.name}]"
     if spec.type == "fmu":
-        from ..fmu.adapter import FMUComponent, load_model_description
-        if not spec.fmu.is_file():
-            kind = spec.replaces or "TYPE"
-            raise ScenarioError(f"{where}: field 'fmu': file '{spec.fmu}' not found (an exported native component "
-                                f"is built with: shevsim fmu export {kind} --params FILE -o {spec.fmu})")
-        expected = None
-        if spec.replaces is not None:
-            from ..components import get_component_class
-            expected = get_component_class(spec.replaces, where)
-        params = dict(spec.overrides)
-        try:
-            md = load_model_description(spec.fmu)
-            names = {v.name for v in md.modelVariables if v.causality == "parameter"}
-            if "seed" in names and "seed" not in params:   # same noise seed as the native component
-                params["seed"] = component_seed(scenario.seed, spec.name)
-            comp = FMUComponent(spec.name, spec.fmu, mapping=spec.mapping, parameters=params,
-                                expected_units=expected)
-        except ShevsimError as exc:
-            raise ScenarioError(f"{where}: {exc}") from exc
+        comp = fmu_component(spec, scenario, where)
     else:
-        from ..components import get_component_class
-        cls = get_component_class(spec.type, where)
+        cls = component_class(spec.type, where)
         params = None
         if cls.Params is not None:
             over = dict(spec.overrides)

@@ -4,7 +4,7 @@
 ``runner(t_stop_s) -> Result`` that steps the whole system in one numba-compiled loop
 (:func:`shevsim.fast.loop.run_loop`): the scenario's own execution order, step multiples and
 connections (as index arrays), the components' own compiled physics (:mod:`shevsim.fast.kernels`),
-the MPC's QP solved by DAQP's C library called from compiled code (:mod:`shevsim.fast.daqp_nb`), and
+the MPC's QP solved by DAQP's C library called from compiled code (:mod:`shevsim.supervisor.daqp_nb`), and
 the outputs recorded into a preallocated array.  The result equals :meth:`Master.run
 <shevsim.core.master.Master.run>` of the same scenario bit for bit (``tests/unit/test_fast_path.py``);
 the Python master stays the reference and the path for FMUs and debugging.
@@ -217,7 +217,7 @@ def _pack_rule(c):
 
 
 def _pack_mpc(c):
-    from . import daqp_nb
+    from shevsim.supervisor import daqp_nb
     m = c.mpc
     if m.solver_name != "daqp":
         raise Declined(f"component '{c.name}': MPC solver '{m.solver_name}' (the fast path calls DAQP only)")
@@ -448,7 +448,7 @@ class FastRunner:
         import time
         from shevsim.core.errors import ScenarioError, SimulationError
         from shevsim.core.results import Result
-        from . import daqp_nb
+        from shevsim.supervisor import daqp_nb
         from .kernels import ERR_NONFINITE_OUTPUT, ERRORS
         from .loop import run_loop
         if not (isinstance(t_stop_s, (int, float)) and math.isfinite(t_stop_s)):

@@ -49,7 +49,7 @@ from shevsim.supervisor.mpc import mpc_move
 from shevsim.supervisor.rule_based import _bisect_right as bisect_right  # Python's bisect.bisect_right
 from shevsim.supervisor.rule_based import rule_command
 
-from . import daqp_nb
+from shevsim.supervisor import daqp_nb
 
 # component type codes of the loop
 (T_CYCLE, T_DRIVER, T_VEHICLE, T_MOTOR, T_BUS, T_ENGINE, T_BATTERY, T_BMS, T_RULE, T_MPC, T_LIMITS, T_VEHICLE_SPEED,

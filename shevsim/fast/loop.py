@@ -30,7 +30,7 @@ from . import kernels as K
 #: the modules whose compiled functions the loop calls (inlined into its machine code). numba's on-disk
 #: cache checks only the defining file of a function, so a change in one of these would leave a stale
 #: compiled loop: :func:`_drop_stale_cache` removes the loop's cache entries when their sources change.
-_DEPENDS = ("fast/loop.py", "fast/kernels.py", "fast/daqp_nb.py", "battery/model.py", "battery/thermal.py",
+_DEPENDS = ("fast/loop.py", "fast/kernels.py", "supervisor/daqp_nb.py", "battery/model.py", "battery/thermal.py",
             "bms/electrical.py", "bms/thermal_estimators.py", "bms/power_capability.py", "core/lookup.py",
             "powertrain/engine.py", "powertrain/motor.py", "powertrain/vehicle.py", "powertrain/driver.py",
             "supervisor/mpc.py", "supervisor/rule_based.py", "components/cycle.py")

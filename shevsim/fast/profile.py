@@ -82,7 +82,7 @@ def profile(runner, t_stop_s: float, repeat: int = 3) -> dict:
                              in_idx, vals, steps, runner.h * mult)
             dt = time.perf_counter() - t
             if typ == "mpc_supervisor":
-                from . import daqp_nb
+                from shevsim.supervisor import daqp_nb
                 if d[30][0] != 0:
                     daqp_nb.drop_model(d[24], d[30])
             if rep > 0:

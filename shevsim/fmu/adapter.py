@@ -1322,3 +1322,30 @@ class FMUComponent(Component):
     def __repr__(self) -> str:
         kind = "model exchange" if self._me else "co-simulation"
         return f"<FMUComponent {self.name!r} {self.path.name} FMI {self.fmi_version} {kind}>"
+
+
+def component_from_spec(spec, scenario, where: str) -> FMUComponent:
+    """The :class:`FMUComponent` of a scenario's ``type = "fmu"`` component spec (registered with
+    :func:`shevsim.core.registry.register_fmu_factory`; errors name ``where``).
+
+    An FMU that ``replaces`` a native type is checked against that type's port units; an FMU with a
+    ``seed`` parameter gets the same per-component seed as the native component would."""
+    from ..core.errors import ScenarioError, ShevsimError
+    from ..core.registry import component_class
+    from ..core.scenario import component_seed
+    if not spec.fmu.is_file():
+        kind = spec.replaces or "TYPE"
+        raise ScenarioError(f"{where}: field 'fmu': file '{spec.fmu}' not found (an exported native component "
+                            f"is built with: shevsim fmu export {kind} --params FILE -o {spec.fmu})")
+    expected = None
+    if spec.replaces is not None:
+        expected = component_class(spec.replaces, where)
+    params = dict(spec.overrides)
+    try:
+        md = load_model_description(spec.fmu)
+        names = {v.name for v in md.modelVariables if v.causality == "parameter"}
+        if "seed" in names and "seed" not in params:   # same noise seed as the native component
+            params["seed"] = component_seed(scenario.seed, spec.name)
+        return FMUComponent(spec.name, spec.fmu, mapping=spec.mapping, parameters=params, expected_units=expected)
+    except ShevsimError as exc:
+        raise ScenarioError(f"{where}: {exc}") from exc

@@ -33,6 +33,7 @@ from typing import Any
 from xml.etree import ElementTree as ET
 
 from ..core.errors import ScenarioError
+from ..core.tomlio import toml_key, toml_value
 from .errors import FMUError
 
 __all__ = ["export_ssp", "import_ssp", "NS"]
@@ -167,18 +168,6 @@ def export_ssp(scenario, out_path: str | Path, stop_s: float | None = None, sets
     return out_path
 
 
-def _toml_str(s: str) -> str:
-    return json.dumps(s)
-
-
-def _toml_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    return _toml_str(str(v))
-
-
 _HEADER = "# imported from an SSP package by shevsim.fmu.ssp.import_ssp"
 
 
@@ -262,22 +251,22 @@ def import_ssp(ssp_path: str | Path, out_dir: str | Path, step_s: float | None =
         raise ScenarioError(f"{ssp_path}: no communication step (no shevsim annotation and no stop time): "
                             f"give step_s")
     lines = [_HEADER, "[scenario]",
-             f"name = {_toml_str(sysname)}", f"step_s = {step!r}",
-             f"method = {_toml_str(meta.get('method', 'jacobi'))}", f"t0_s = {t0!r}"]
+             f"name = {toml_value(sysname)}", f"step_s = {step!r}",
+             f"method = {toml_value(meta.get('method', 'jacobi'))}", f"t0_s = {t0!r}"]
     if stop is not None:
         lines.append(f"stop_s = {stop!r}")
     if meta.get("order"):
-        lines.append("order = [" + ", ".join(_toml_str(n) for n in meta["order"]) + "]")
+        lines.append("order = [" + ", ".join(toml_value(n) for n in meta["order"]) + "]")
     if "seed" in meta:
         lines.append(f"seed = {int(meta['seed'])}")
     for name, _, params in comps:
-        lines += ["", f"[components.{_toml_str(name)}]", 'type = "fmu"', f"fmu = {_toml_str(name + '.fmu')}"]
+        lines += ["", f"[components.{toml_key(name)}]", 'type = "fmu"', f"fmu = {toml_value(name + '.fmu')}"]
         if params:
-            lines.append("set = { " + ", ".join(f"{_toml_str(k)} = {_toml_value(v)}" for k, v in params.items())
+            lines.append("set = { " + ", ".join(f"{toml_key(k)} = {toml_value(v)}" for k, v in params.items())
                          + " }")
     lines += ["", "[connections]"]
     for dst, dport, src, sport in conns:
-        lines.append(f"{_toml_str(dst + '.' + dport)} = {_toml_str(src + '.' + sport)}")
+        lines.append(f"{toml_value(dst + '.' + dport)} = {toml_value(src + '.' + sport)}")
     scen = out_dir / f"{sysname}.toml"
     scen.write_text("\n".join(lines) + "\n")
     return scen

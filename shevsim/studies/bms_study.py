@@ -14,7 +14,7 @@ Three studies, each writing PNG figures and CSV/JSON tables atomically (temporar
     plant's step-averaged heat generation. The replayed plant SOC is checked against the
     closed-loop run's (``replay_soc_max_diff_pct``).
 :func:`thermal_table`
-    seed Table 3.3 analogue: :func:`shevsim.bms.thermal_estimators.table_3_3` (KF, DKF, JEKF on a
+    seed Table 3.3 analogue: :func:`shevsim.studies.thermal_estimators.table_3_3` (KF, DKF, JEKF on a
     30-node plant, stages I-III, 1 s sample time), with the synthetic heat profile and with the per-cell
     heat of the UAC proxy run (current x1 and x2); :func:`table_3_3_rates`: core and surface RMSE at
     1 s and 0.1 s, stage III adaptive filters started at a wrong h (2 h* and h*/2).
@@ -352,7 +352,7 @@ def dekf_study(out_dir, seed: int = 1, stop_s: float | None = None, settle_s: fl
 
 # -- 2. Table 3.3 --------------------------------------------------------------------------------
 def _thermal_metrics(res: dict) -> dict:
-    from ..bms.thermal_estimators import H_STAR_W_M2K
+    from .thermal_estimators import H_STAR_W_M2K
     f = {s: r["filters"] for s, r in res.items()}
     rm = {s: {k: v["rmse_core_c"] for k, v in fs.items()} for s, fs in f.items()}
     h_true_final = {"I": H_STAR_W_M2K, "II": 90.0, "III": H_STAR_W_M2K, "III_h0_star": H_STAR_W_M2K}
@@ -375,7 +375,7 @@ def _thermal_metrics(res: dict) -> dict:
 
 def _table_into(out: Path, name: str, **kw) -> dict:
     """Run :func:`table_3_3` in a temporary folder of ``out``, then move its files into place."""
-    from ..bms.thermal_estimators import table_3_3
+    from .thermal_estimators import table_3_3
     tmp = Path(tempfile.mkdtemp(dir=out, prefix=f".{name}.tmp-"))
     try:
         res = table_3_3(tmp, name=name, **kw)
@@ -397,7 +397,7 @@ def table_3_3_rates(out_dir=None, seed: int = 0, duration_s: float = 3600.0, dt_
                     wrong_h0_factors=(2.0, 0.5)) -> dict:
     """Seed Table 3.3 with core *and* surface RMSE at each sample time in ``dt_values`` (issue 14).
 
-    Each stage of :func:`shevsim.bms.thermal_estimators.run_stage` (synthetic ``i^2 0.015 ohm`` heat, 30-node
+    Each stage of :func:`shevsim.studies.thermal_estimators.run_stage` (synthetic ``i^2 0.015 ohm`` heat, 30-node
     plant, sigma 0.05 degC) runs at every sample time ``dt_s`` (the filters' step and the measurement
     rate; the filter tuning is per step, Table 3.2).  Stage III: true h = h*, the KF is given 2 h*, and
     DKF/JEKF start at a *wrong* h, ``f h*`` for each ``f`` in ``wrong_h0_factors`` (rows ``III`` for
@@ -407,7 +407,7 @@ def table_3_3_rates(out_dir=None, seed: int = 0, duration_s: float = 3600.0, dt_
     "seed_table": SEED_TABLE_3_3}``; with ``out_dir`` writes ``table_3_3_rates.csv`` (one line per sample
     time and row, the seed's values beside) and ``table_3_3_rates.json``.
     """
-    from ..bms.thermal_estimators import H_STAR_W_M2K, run_stage
+    from .thermal_estimators import H_STAR_W_M2K, run_stage
     if any(not (float(f) > 0.0) or float(f) == 1.0 for f in wrong_h0_factors):
         raise ValueError(f"table_3_3_rates: wrong_h0_factors must be > 0 and != 1 (1 = the true h), "
                          f"got {list(wrong_h0_factors)}")
@@ -447,7 +447,7 @@ def table_3_3_rates(out_dir=None, seed: int = 0, duration_s: float = 3600.0, dt_
 
 def thermal_table(out_dir, seed: int = 0, duration_s: float = 3600.0, uac_proxy: bool = True,
                   current_scales=(1.0, 2.0), scenario_path=BASE_SCENARIO) -> dict:
-    """Seed Table 3.3 analogue via :func:`shevsim.bms.thermal_estimators.table_3_3`.
+    """Seed Table 3.3 analogue via :func:`shevsim.studies.thermal_estimators.table_3_3`.
 
     Writes ``table_3_3.csv``, ``table_3_3.json``, ``table_3_3.png`` (synthetic ``i^2 0.015 ohm``
     heat, |i| <= 25 A) into ``out_dir`` (generated in a temporary folder, then each moved into
@@ -455,7 +455,7 @@ def thermal_table(out_dir, seed: int = 0, duration_s: float = 3600.0, uac_proxy:
     the issue asks about.
 
     With ``uac_proxy`` it also simulates ``scenario_path`` once (UAC proxy, ~2 s, its own seed;
-    :func:`~shevsim.bms.thermal_estimators.uac_proxy_profile`) and repeats the same experiment with
+    :func:`~shevsim.studies.thermal_estimators.uac_proxy_profile`) and repeats the same experiment with
     its per-cell heat (true ``battery.heat_w``, 1-s means, repeated end to end over the three stages)
     for each current scale s in ``current_scales`` (heat x s^2): ``table_3_3_uac_proxy.*`` for s = 1,
     ``table_3_3_uac_proxy_x{s}.*`` otherwise. Their metrics are under ``"uac_proxy"``.  (The former
@@ -466,7 +466,7 @@ def thermal_table(out_dir, seed: int = 0, duration_s: float = 3600.0, uac_proxy:
     ``"rates"``) repeats the synthetic one at 1 s and 0.1 s (the BMS rate of Ch. IV-V) with core and
     surface RMSE beside the thesis's.
     """
-    from ..bms.thermal_estimators import uac_proxy_profile
+    from .thermal_estimators import uac_proxy_profile
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     res = _table_into(out, "table_3_3", seed=seed, duration_s=duration_s)

@@ -41,6 +41,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..core.tomlio import toml_value
+
 THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
               "NUMEXPR_NUM_THREADS": "1", "VECLIB_MAXIMUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
 
@@ -69,7 +71,7 @@ def code_version() -> str:
 
 
 def shevsim_version() -> str:
-    from .. import __version__
+    from ..version import __version__
     return __version__
 
 
@@ -172,29 +174,6 @@ def scenario_fingerprint(path: str | Path, text: str | None = None) -> str:
     if text is None:
         text = p.read_text()
     return _scenario_fingerprint_cached(str(p), text, _dir_mtimes(p, text))
-
-
-def toml_value(v: Any) -> str:
-    """Format a Python value as a TOML value for ``load_scenario``'s ``component.param=value`` overrides."""
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        if math.isnan(v):
-            return "nan"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return repr(v)
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{" + ", ".join(f"{k} = {toml_value(x)}" for k, x in v.items()) + "}"
-    if hasattr(v, "item"):          # numpy scalar
-        return toml_value(v.item())
-    raise TypeError(f"override value {v!r} of type {type(v).__name__} cannot be written as TOML")
 
 
 def _freeze(v):

@@ -38,10 +38,7 @@ from pathlib import Path
 from ..core.errors import ShevsimError
 from .evaluate import code_version, failure_reason, is_failed, shevsim_version
 from .ga import GAConfig, exhaustive_genomes, narrow_bounds, rank_key, run_ga, space_size
-from .problem import DEFAULT_EDGES_W, DEFAULT_LEVELS_WPS, FE_KEY, check_map
-
-#: soot on the fuel economy's Delta-SOC-corrected basis (shevsim.metrics; issue 14): the study's default
-from .tradeoff import SOOT_DSOC_KEY  # noqa: E402  (one definition, shared with the trade-off)
+from .problem import DEFAULT_EDGES_W, DEFAULT_LEVELS_WPS, FE_KEY, SOOT_DSOC_KEY, check_map
 
 
 @dataclass
@@ -214,6 +211,7 @@ def _cfg_dict(cfg: MapStudyConfig) -> dict:
 
 def _write_outputs(out: Path, summary: dict, es_scored, obj: Objective, levels, plots: bool) -> None:
     import pandas as pd
+    from ..core.atomic import write_csv_atomic
     from ..core.results import write_json_atomic
     out.mkdir(parents=True, exist_ok=True)
     n_var = len(summary["best_map"]["edges_w"]) - 1
@@ -223,21 +221,16 @@ def _write_outputs(out: Path, summary: dict, es_scored, obj: Objective, levels, 
         return pd.DataFrame([{**{c: r for c, r in zip(rcols, row["rates_wps"])},
                               **{k: v for k, v in row.items() if k not in ("rates_wps", "genome")}} for row in rows])
 
-    _csv_atomic(frame(summary["top_solutions"]), out / "top_solutions.csv")
+    write_csv_atomic(out / "top_solutions.csv", frame(summary["top_solutions"]))
     es_rows = [{"rates_wps": [levels[i] for i in g], "feasible": v <= 0, **obj.changes(o),
                 "error": failure_reason(o, obj.cfg.fe_key, obj.cfg.soot_key)} for g, _, v, o in es_scored]
-    _csv_atomic(frame(es_rows), out / "exhaustive.csv")
-    _csv_atomic(pd.DataFrame(summary["ga"]["history"]), out / "ga_history.csv")
-    _csv_atomic(pd.DataFrame(summary["constant_limits"]), out / "constant_limits.csv")
+    write_csv_atomic(out / "exhaustive.csv", frame(es_rows))
+    write_csv_atomic(out / "ga_history.csv", pd.DataFrame(summary["ga"]["history"]))
+    write_csv_atomic(out / "constant_limits.csv", pd.DataFrame(summary["constant_limits"]))
     if plots:
         plot_rate_maps(summary, out / "fig_a3_rate_maps.png")
         plot_comparison(summary, out / "fig_a4_comparison.png")
     write_json_atomic(out / "summary.json", summary)
-
-
-def _csv_atomic(df, path: Path) -> None:
-    from ..core.atomic import write_csv_atomic
-    write_csv_atomic(path, df)
 
 
 def _step(edges_w, rates_wps):

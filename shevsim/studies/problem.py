@@ -34,6 +34,8 @@ from .evaluate import Evaluation, _canonical, code_version
 FE_KEY = "fuel_economy_dsoc_corrected_kmpl"
 #: the soot metric (g/km) from shevsim.metrics
 SOOT_KEY = "soot_g_per_km"
+#: soot on the fuel economy's Delta-SOC-corrected basis (shevsim.metrics; issue 14): the studies' default
+SOOT_DSOC_KEY = "soot_dsoc_corrected_g_per_km"
 
 # 8 partitions of the 236 kW generator (seed: 8 variables, 8 levels, 8^8 cases). 25 kW bins are
 # grouped below 50 kW (ramps there produce little soot) and above 200 kW (rarely reached), so the

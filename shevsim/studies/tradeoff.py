@@ -18,10 +18,7 @@ from pathlib import Path
 
 from ..core.errors import ShevsimError
 from .evaluate import code_version, failure_reason, is_failed, shevsim_version
-from .problem import DEFAULT_EDGES_W, FE_KEY
-
-#: soot on the fuel economy's Delta-SOC-corrected basis (= powerrate_map.SOOT_DSOC_KEY)
-SOOT_DSOC_KEY = "soot_dsoc_corrected_g_per_km"
+from .problem import DEFAULT_EDGES_W, FE_KEY, SOOT_DSOC_KEY
 
 
 def run_tradeoff(problem, runner, rates_wps, out_dir: str | Path | None = None, edges_w=DEFAULT_EDGES_W,
@@ -67,10 +64,10 @@ def run_tradeoff(problem, runner, rates_wps, out_dir: str | Path | None = None, 
     if out_dir is not None:
         import pandas as pd
         from ..core.results import write_json_atomic
-        from .powerrate_map import _csv_atomic
+        from ..core.atomic import write_csv_atomic
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        _csv_atomic(pd.DataFrame(rows), out / "tradeoff.csv")
+        write_csv_atomic(out / "tradeoff.csv", pd.DataFrame(rows))
         if plots:
             plot_tradeoff(summary, out / "fig_a2_tradeoff.png")
         write_json_atomic(out / "summary.json", summary)

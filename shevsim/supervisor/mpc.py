@@ -55,7 +55,7 @@ Solve paths
 preallocated arrays, first solves the QP on the previous call's active set (one equality-constrained
 solve, accepted only when it satisfies the QP's optimality conditions: 86 % of the calls on the UAC proxy;
 ``warm_active_set``) and otherwise calls DAQP with its active set warm-started from its previous call.  The whole
-call is compiled (:func:`mpc_move`: build, DAQP's C library through :mod:`shevsim.fast.daqp_nb` - the
+call is compiled (:func:`mpc_move`: build, DAQP's C library through :mod:`shevsim.supervisor.daqp_nb` - the
 call sequence of ``daqp.Model`` -, first move, fallback); the compiled whole-vehicle loop calls the same
 function.  ``compiled=False`` (or a DAQP build the binding does not know) runs the Python form
 (``daqp.Model`` and the Python first move/fallback), the independent reference it equals bit for bit;
@@ -81,7 +81,7 @@ from shevsim.core.errors import ScenarioError
 from shevsim.core.lookup import py_max as _pmax
 from shevsim.core.lookup import py_min as _pmin
 
-from shevsim.fast import daqp_nb
+from shevsim.supervisor import daqp_nb
 
 from .fuel_curve import SqrtFuelCurve
 from .rate_map import PowerRateMap
@@ -700,7 +700,7 @@ def mpc_move(mp, rp, inner, rates, rinner, rrates, x, plan, c, fp, fs, fsl, MtM,
 
 
 def daqp_move():
-    """:func:`mpc_move`, or None when DAQP's C library cannot be bound (:mod:`shevsim.fast.daqp_nb`; it is
+    """:func:`mpc_move`, or None when DAQP's C library cannot be bound (:mod:`shevsim.supervisor.daqp_nb`; it is
     then never compiled, its external symbols never linked)."""
     return mpc_move if daqp_nb.available()[0] else None
 

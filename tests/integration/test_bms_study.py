@@ -137,7 +137,7 @@ def test_cli_study_bms_thermal_quick(tmp_path):
 def test_table_3_3_at_0p1s_adaptive_filters_beat_the_mistuned_kf_from_a_wrong_h():
     """Issue 14: stage III at the 0.1 s BMS rate, DKF/JEKF started at a wrong h (2 h* and h*/2, never the
     true h*): both beat the KF that is given 2 h*, in core and surface RMSE."""
-    from shevsim.bms.thermal_estimators import H_STAR_W_M2K
+    from shevsim.studies.thermal_estimators import H_STAR_W_M2K
     from shevsim.studies.bms_study import table_3_3_rates
     r = table_3_3_rates(None, seed=0, duration_s=1200.0, dt_values=(0.1,), wrong_h0_factors=(2.0, 0.5))
     rows = r["dt_s"][0.1]

@@ -244,7 +244,7 @@ def test_runtime_error_names_the_component_like_the_master():
 # ------------------------------------------------------------------------------ exact building blocks
 def test_compiled_daqp_calls_reproduce_daqp_model_bit_for_bit():
     daqp = pytest.importorskip("daqp")
-    from shevsim.fast import daqp_nb
+    from shevsim.supervisor import daqp_nb
     ok, why = daqp_nb.available()
     if not ok:
         pytest.skip(why)

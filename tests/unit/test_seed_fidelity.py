@@ -11,7 +11,7 @@ from shevsim.core.paths import data_path
 from shevsim.core.scenario import load_scenario
 from shevsim.metrics import DIESEL_DENSITY_KG_PER_L, compute_metrics, soot_dsoc_corrected
 from shevsim.run import compute_run_metrics, simulate
-from shevsim.studies.evaluate import toml_value
+from shevsim.core.tomlio import toml_value
 from shevsim.studies.problem import DEFAULT_EDGES_W, map_overrides
 
 SEED = data_path("scenarios", "uac_proxy_mpc_seed.toml")

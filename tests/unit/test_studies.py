@@ -18,7 +18,8 @@ import pytest
 
 from shevsim.core.scenario import PROJECT_ROOT, parse_value
 from shevsim.studies.cache import EvaluationCache
-from shevsim.studies.evaluate import Evaluation, toml_value
+from shevsim.core.tomlio import toml_value
+from shevsim.studies.evaluate import Evaluation
 from shevsim.studies.ga import (GAConfig, exhaustive_genomes, narrow_bounds, rank_key, run_ga,
                                 space_size)
 from shevsim.studies.parallel import StudyInterrupted, StudyRunner

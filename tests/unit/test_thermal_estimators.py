@@ -7,9 +7,9 @@ import pytest
 from shevsim.battery.thermal import ThermalParams, TwoStateThermal, _zoh, two_state_matrices
 from shevsim.battery.verification import drive_like_current
 from shevsim.battery.thermal import FDThermal
-from shevsim.bms.thermal_estimators import (ThermalDKF, ThermalJEKF, ThermalKF, TwoStateDiscretiser, table_3_3,
-                                            tuning)
+from shevsim.bms.thermal_estimators import ThermalDKF, ThermalJEKF, ThermalKF, TwoStateDiscretiser, tuning
 from shevsim.core.errors import SimulationError
+from shevsim.studies.thermal_estimators import table_3_3
 
 P = ThermalParams()
 
@@ -180,7 +180,7 @@ def test_bad_inputs():
 # -- Table 3.3 on the realistic heat profile (UAC proxy SHEV run) ------------------------------------
 @pytest.fixture(scope="module")
 def uac_heat():
-    from shevsim.bms.thermal_estimators import uac_proxy_profile
+    from shevsim.studies.thermal_estimators import uac_proxy_profile
     return uac_proxy_profile()          # simulates scenarios/uac_proxy_mpc.toml once (~2-3 s)
 
 
@@ -217,7 +217,7 @@ def test_table_3_3_on_uac_proxy_heat(uac_heat):
 
 
 def test_run_stage_rejects_short_heat_trace():
-    from shevsim.bms.thermal_estimators import run_stage
+    from shevsim.studies.thermal_estimators import run_stage
     with pytest.raises(SimulationError, match="heat_w"):
         run_stage("I", duration_s=100.0, heat_w=np.ones(50))
     with pytest.raises(SimulationError, match="non-finite"):

@@ -1,0 +1,65 @@
+"""registry.py - the factories ``core`` uses but does not own, registered by the layers above it.
+
+``core`` reads scenarios and runs the master; it knows no component type, no FMU and no metric. The
+layers that do register what they provide here (as FMPy's and PyBaMM's registries do), and ``core``
+asks the registry:
+
+* :func:`component_class` - the class of a scenario's component ``type`` (registered by
+  :mod:`shevsim.components`, which also finds installed plugins);
+* :func:`fmu_component` - a component for ``type = "fmu"`` (registered by :mod:`shevsim.fmu`);
+* :func:`result_metrics` - the metrics of a :class:`~shevsim.core.results.Result` (registered by
+  :mod:`shevsim.metrics`).
+
+``import shevsim`` registers the package's own providers (:mod:`shevsim.providers`); a program that
+uses ``shevsim.core`` alone registers its own with the ``register_*`` functions.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+from .errors import ScenarioError, ShevsimError
+
+_providers: dict[str, Callable[..., Any]] = {}
+
+
+def register_component_lookup(lookup: Callable[[str, str], type]) -> None:
+    """Register ``lookup(type_name, where) -> class``: the class of a scenario's component type
+    (raising :class:`~shevsim.core.errors.ScenarioError` naming ``where`` for an unknown name)."""
+    _providers["component"] = lookup
+
+
+def register_fmu_factory(factory: Callable[[Any, Any, str], Any]) -> None:
+    """Register ``factory(spec, scenario, where) -> component`` for components of type ``"fmu"``."""
+    _providers["fmu"] = factory
+
+
+def register_result_metrics(metrics: Callable[[Any], dict]) -> None:
+    """Register ``metrics(result) -> dict``: what :attr:`Result.metrics` computes on first access."""
+    _providers["metrics"] = metrics
+
+
+def _provider(kind: str, what: str) -> Callable[..., Any]:
+    try:
+        return _providers[kind]
+    except KeyError:
+        raise ShevsimError(f"no {what} is registered (import shevsim, or register one with "
+                           f"shevsim.core.registry.register_{'component_lookup' if kind == 'component' else kind})"
+                           ) from None
+
+
+def component_class(type_name: str, where: str = "scenario") -> type:
+    """The component class registered for the scenario type ``type_name``."""
+    return _provider("component", "component type lookup")(type_name, where)
+
+
+def fmu_component(spec, scenario, where: str):
+    """A component for the ``type = "fmu"`` spec ``spec`` of ``scenario``."""
+    if "fmu" not in _providers:
+        raise ScenarioError(f"{where}: FMU components are not available (the FMU layer, shevsim.fmu, is not "
+                            f"registered)")
+    return _providers["fmu"](spec, scenario, where)
+
+
+def result_metrics(result) -> dict:
+    """The metrics of ``result`` (see :func:`register_result_metrics`)."""
+    return _provider("metrics", "metrics function")(result)
