@@ -67,7 +67,7 @@ def _problem(a, name: str):
     from .evaluate import _freeze
     prob = ScenarioProblem(str(p.resolve()), a.supervisor, a.stop_s, tuple(sorted((k, _freeze(v)) for k, v in extra.items())))
     prob.item((0.0, 1.0), None).key()          # fail early on a malformed scenario
-    prob.check(_edges(a))                      # ... on an unknown --supervisor, a bad --set: before any run
+    prob.check(_edges(a, prob))                      # ... on an unknown --supervisor, a bad --set: before any run
     return prob, Path(a.out or f"results/study_{name}_{p.stem}")
 
 
@@ -88,9 +88,12 @@ def _metric_keys(a) -> dict:
     return d
 
 
-def _edges(a):
+def _edges(a, problem=None):
+    """--edges-kw, else the seed's layout over the power the scenario's generator can reach."""
     from .problem import DEFAULT_EDGES_W
-    return DEFAULT_EDGES_W if not a.edges_kw else tuple(1e3 * x for x in a.edges_kw)
+    if a.edges_kw:
+        return tuple(1e3 * x for x in a.edges_kw)
+    return problem.default_edges() if hasattr(problem, "default_edges") else DEFAULT_EDGES_W
 
 
 def cmd_tradeoff(argv) -> int:
@@ -106,7 +109,7 @@ def cmd_tradeoff(argv) -> int:
     problem, out = _problem(a, "tradeoff")
     cache, runner = _runner(a, out)
     with cache, runner:
-        summary = run_tradeoff(problem, runner, [1e3 * r for r in a.rates_kwps], out, _edges(a),
+        summary = run_tradeoff(problem, runner, [1e3 * r for r in a.rates_kwps], out, _edges(a, problem),
                                fe_loss_max_frac=a.fe_loss_pct / 100, plots=not a.no_plots, **_metric_keys(a))
     return _failed_rows_status("tradeoff", summary.get("rows", []))
 
@@ -140,13 +143,13 @@ def cmd_powerrate_map(argv) -> int:
     ap.add_argument("--seed", type=int, default=0, help="GA random seed (same seed, same maps)")
     ap.add_argument("--fe-loss-pct", type=float, default=0.4, help="fuel-economy loss allowed (%%, seed 0.4)")
     ap.add_argument("--top-k", type=int, default=10, help="best GA maps that set the narrowed bounds")
-    ap.add_argument("--max-cases", type=int, default=1000, help="cap on the exhaustive-search cases")
+    ap.add_argument("--max-cases", type=int, default=648, help="cap on the exhaustive-search cases (seed 648)")
     ap.add_argument("--unique-population", action="store_true",
                     help="GA with duplicate elimination: better optimum, ~2.5x the evaluations (see ga.py)")
     a = ap.parse_args(argv)
     problem, out = _problem(a, "powerrate_map")
     levels = DEFAULT_LEVELS_WPS if not a.levels_kwps else tuple(1e3 * x for x in a.levels_kwps)
-    cfg = MapStudyConfig(edges_w=_edges(a), levels_wps=levels, fe_loss_max_frac=a.fe_loss_pct / 100,
+    cfg = MapStudyConfig(edges_w=_edges(a, problem), levels_wps=levels, fe_loss_max_frac=a.fe_loss_pct / 100,
                          ga=GAConfig(population=a.population, generations=a.generations,
                                      crossover_prob=a.crossover, mutation_prob=a.mutation, seed=a.seed,
                                      unique_population=a.unique_population),

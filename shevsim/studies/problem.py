@@ -37,10 +37,23 @@ SOOT_KEY = "soot_g_per_km"
 #: soot on the fuel economy's Delta-SOC-corrected basis (shevsim.metrics; issue 14): the studies' default
 SOOT_DSOC_KEY = "soot_dsoc_corrected_g_per_km"
 
-# 8 partitions of the 236 kW generator (seed: 8 variables, 8 levels, 8^8 cases). 25 kW bins are
-# grouped below 50 kW (ramps there produce little soot) and above 200 kW (rarely reached), so the
-# space stays at the seed's size.
+# 8 partitions of the 236 kW generator rating (seed: 8 variables, 8 levels, 8^8 cases). 25 kW bins are
+# grouped below 50 kW (ramps there produce little soot) and above 200 kW, so the space stays at the seed's
+# size. The generator's electrical output cannot pass 200.6 kW, so the top bin of this layout is never
+# reached: a study uses :func:`reachable_edges` (this layout scaled to the power the generator can deliver,
+# ScenarioProblem.default_edges) unless edges are given.
 DEFAULT_EDGES_W = (0.0, 50e3, 75e3, 100e3, 125e3, 150e3, 175e3, 200e3, 236e3)
+
+
+def reachable_edges(p_max_w: float, layout_w=DEFAULT_EDGES_W) -> tuple:
+    """The partition layout ``layout_w`` scaled so its last edge is ``p_max_w``, the most the generator can
+    deliver (every partition then holds reachable powers). For the M-ATV (200.6 kW): 0, 42.5, 63.7, 85.0,
+    106.2, 127.5, 148.8, 170.0, 200.6 kW."""
+    p_max_w = float(p_max_w)
+    if not (math.isfinite(p_max_w) and p_max_w > 0.0):
+        raise ValueError(f"reachable_edges: the generator's maximum power must be positive and finite, got {p_max_w}")
+    top = float(layout_w[-1])
+    return tuple(float(e) * p_max_w / top for e in layout_w)
 # 8 discrete levels beta_j of the maximum power rate (W/s); the top one is Table A.1's 30 kW/s.
 DEFAULT_LEVELS_WPS = (5e3, 7.5e3, 10e3, 12.5e3, 15e3, 20e3, 25e3, 30e3)
 
@@ -86,6 +99,16 @@ class ScenarioProblem:
 
     def describe(self) -> str:
         return f"scenario {Path(self.scenario).name}" + (f" (stop_s={self.stop_s})" if self.stop_s else "")
+
+    def default_edges(self) -> tuple:
+        """The seed's 8-partition layout over the power the generator can reach: the supervisor's
+        ``power_gen_max_w`` (the generator's electrical maximum) as the last edge (:func:`reachable_edges`)."""
+        from ..core.scenario import build_master, load_scenario
+        item = self.item((0.0, 1.0), None)
+        master = build_master(load_scenario(self.scenario, item.sets(), text=getattr(item, "text", None) or None))
+        comp = master.components.get(self.supervisor)
+        p_max = getattr(getattr(comp, "params", None), "power_gen_max_w", None)
+        return DEFAULT_EDGES_W if p_max is None else reachable_edges(p_max)
 
     def check(self, edges_w=DEFAULT_EDGES_W) -> None:
         """Refuse, before any evaluation, a problem whose every run would fail: the scenario must load with

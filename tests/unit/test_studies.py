@@ -322,3 +322,23 @@ def test_results_from_workers_with_other_sources_are_not_cached(tmp_path):
         assert len(cache) == 0 and runner.stats.not_cached == 1 and res[item.key()] == {"x": 1.0}
         runner._finish(item.key(), item, {"x": 1.0}, 0.1, res, None, worker_code=code_version())
         assert cache.get(item.key()) == {"x": 1.0}
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_small_ga_never_reports_a_map_worse_than_the_best_constant(seed):
+    """Issue 27: a GA too small to beat the constants (2 x 1, no seeding) reports the best constant, labelled."""
+    cfg = MapStudyConfig(ga=GAConfig(population=2, generations=1, seed=seed, elitism=0), top_k=1, max_cases=1,
+                         seed_constants=False)
+    res = run_powerrate_map(SyntheticProblem(), StudyRunner(None, progress=False), cfg, log=lambda *_: None)
+    best, const = res["best_map"], res["best_constant"]
+    assert best["soot_g_per_km"] <= const["soot_g_per_km"]
+    assert (best["kind"] == "constant") == (len(set(best["rates_wps"])) == 1)
+
+
+def test_partitions_cover_the_power_the_generator_can_reach():
+    from shevsim.core.paths import bundled_scenario
+    from shevsim.studies.problem import ScenarioProblem, reachable_edges
+    assert reachable_edges(200.6e3)[-1] == pytest.approx(200.6e3) and len(reachable_edges(200.6e3)) == 9
+    edges = ScenarioProblem(str(bundled_scenario("uac_proxy_mpc_seed")), "supervisor").default_edges()
+    assert edges[-1] == pytest.approx(200.6e3)             # the supervisor's power_gen_max_w, not the 236 kW rating
+    assert all(b > a for a, b in zip(edges, edges[1:]))
