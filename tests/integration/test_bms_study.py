@@ -223,3 +223,35 @@ def test_full_dekf_seed_filter_still_meets_soc_and_misses_rs_and_heat(dekf_full_
     m = bs.dekf_metrics(dekf_full_seed_filter)
     assert m["soc_err_max_after_settle_pct"] < 2.0
     assert m["rs_rel_err_max_loaded"] > 0.05 and m["heat_rmse_rel_mean"] > 0.04
+
+
+def test_table_3_3_tuning_is_one_continuous_intensity_at_every_sample_time():
+    """Issue 27: Table 3.2 read at 1 s and converted: per-step random-walk variance beta^2 dt / 1 s."""
+    import math
+    from shevsim.studies.thermal_estimators import run_stage
+    for dt in (1.0, 0.1):
+        tun = run_stage("I", seed=0, duration_s=20.0, dt_s=dt, tuning_ref_dt_s=1.0)["tuning"]
+        assert tun["KF"]["beta1"] ** 2 == pytest.approx(5e-4 ** 2 * dt)
+        assert tun["DKF"]["beta2"] ** 2 == pytest.approx(7e-3 ** 2 * dt)
+        assert tun["JEKF"]["beta2"] ** 2 == pytest.approx(6e-3 ** 2 * dt)
+        assert tun["KF"]["sigma_c"] == 0.05                       # sensor noise is per sample: not scaled
+    raw = run_stage("I", seed=0, duration_s=2.0, dt_s=0.1, tuning_ref_dt_s=None)["tuning"]
+    assert raw["KF"] == {"sigma_c": 0.05}                          # the constructors' per-step defaults
+    assert math.isclose(5e-4 * math.sqrt(0.1), run_stage("I", duration_s=2.0, dt_s=0.1,
+                                                         tuning_ref_dt_s=1.0)["tuning"]["DKF"]["beta1"])
+
+
+def test_table_3_3_stage_iii_pattern_is_the_thesis_s_at_0p1s_and_reversed_at_1s():
+    """With the converted tuning the mistuned KF's error lands in the core at 0.1 s (the thesis's pattern:
+    core 1.58, surface 0.15 degC) and in the surface at 1 s; the thesis's literal theta(0) = h* start makes
+    DKF/JEKF repeat stage I, so the thesis's stage-III DKF/JEKF degradation is not from the literal start."""
+    from shevsim.studies.bms_study import table_3_3_rates
+    r = table_3_3_rates(None, seeds=(0,), duration_s=1200.0, dt_values=(1.0, 0.1), wrong_h0_factors=(2.0,))
+    fast, slow = r["dt_s"][0.1], r["dt_s"][1.0]
+    assert fast["III"]["KF"]["core_c"] > 2.0 * fast["III"]["KF"]["surface_c"]
+    assert slow["III"]["KF"]["surface_c"] > 2.0 * slow["III"]["KF"]["core_c"]
+    for f in ("DKF", "JEKF"):
+        assert fast["III"][f]["core_c"] < 0.5 * fast["III"]["KF"]["core_c"]
+        # the literal start behaves like stage I (same h; other noise draws), far better than from 2 h*
+        assert fast["III_h0_star"][f]["core_c"] < min(1.5 * fast["I"][f]["core_c"], 0.5 * fast["III"][f]["core_c"])
+    assert r["fit"][0.1] < r["fit"][1.0]
