@@ -29,7 +29,7 @@ from .core.results import Result, load_result
 from .core.scenario import Scenario, new_scenario
 from .core.scenario import load_scenario as _load_scenario
 
-__all__ = ["simulate", "load_scenario", "new_scenario", "compare", "metrics_table", "load_result",
+__all__ = ["simulate", "load_scenario", "new_scenario", "compare", "metrics_table", "run_labels", "load_result",
            "scenarios", "run_study", "run_calibration", "Scenario", "Result"]
 
 
@@ -124,7 +124,8 @@ def scenarios() -> list[str]:
 
 def compare(results: Sequence[Result], signals: Sequence[str] | str, *, labels: Sequence[str] | None = None,
             ax=None):
-    """Overlay ``signals`` of several runs, one axis per unit; returns the list of axes.
+    """Overlay ``signals`` of several runs, one axis per display unit (kW, km/h, degC...); returns the
+    matplotlib Figure (its axes: ``fig.axes``).
 
     Parameters
     ----------
@@ -132,7 +133,7 @@ def compare(results: Sequence[Result], signals: Sequence[str] | str, *, labels: 
     signals : sequence of str or str
         ``component.port`` names present in every result.
     labels : sequence of str, optional
-        One per result (default: scenario names).
+        One per result (default: :func:`run_labels`).
     ax : Axes or sequence of Axes, optional
     """
     from .plotting import plot_signals
@@ -143,11 +144,80 @@ def compare(results: Sequence[Result], signals: Sequence[str] | str, *, labels: 
     return plot_signals(list(results), list(signals), ax=ax, labels=labels)
 
 
-def metrics_table(results: Sequence[Result], keys: Sequence[str] | None = None, *,
+def _flat_params(params: Mapping[str, Any]) -> dict[str, str]:
+    import json
+    out = {}
+    for comp, p in (params or {}).items():
+        if isinstance(p, Mapping):
+            for k, v in p.items():
+                out[f"{comp}.{k}"] = json.dumps(v, sort_keys=True, default=str)
+        else:
+            out[str(comp)] = json.dumps(p, sort_keys=True, default=str)
+    return out
+
+
+def run_labels(results: Sequence[Result], fallback: Sequence[str] | None = None) -> list[str]:
+    """One distinct label per result: ``res.meta["label"]`` when set, else the scenario name; runs of the same
+    name are told apart by the parameters in which they differ (``hd_udds_mpc (vehicle.mass_kg=18000)``),
+    else by ``fallback`` (e.g. their folder names), else numbered (``#2``)."""
+    import json
+    results = list(results)
+    base = []
+    for i, r in enumerate(results):
+        lab = r.meta.get("label") or r.meta.get("scenario") or (fallback[i] if fallback else None) or f"run {i + 1}"
+        base.append(str(lab))
+    out = list(base)
+    for name in set(base):
+        group = [i for i, b in enumerate(base) if b == name]
+        if len(group) < 2:
+            continue
+        flat = [_flat_params(results[i].parameters) for i in group]
+        keys = sorted(set().union(*flat))
+        differ = [k for k in keys if len({f.get(k) for f in flat}) > 1]
+        for j, i in enumerate(group):
+            parts = []
+            for k in differ[:2]:
+                v = flat[j].get(k)
+                v = "unset" if v is None else json.loads(v)
+                parts.append(f"{k}={v:g}" if isinstance(v, (int, float)) and not isinstance(v, bool) else f"{k}={v}")
+            if parts:
+                out[i] = f"{name} ({', '.join(parts)}{', ...' if len(differ) > 2 else ''})"
+            elif fallback and len({fallback[g] for g in group}) == len(group):
+                out[i] = f"{name} ({fallback[i]})"
+            else:
+                out[i] = f"{name} #{j + 1}"
+    counts = {lab: out.count(lab) for lab in out}
+    seen: dict[str, int] = {}
+    for i, lab in enumerate(out):            # still equal (the same differences shown): number them
+        if counts[lab] > 1:
+            seen[lab] = seen.get(lab, 0) + 1
+            out[i] = f"{lab} #{seen[lab]}"
+    return out
+
+
+def metrics_table(results: Sequence[Result] | Mapping[str, Result], keys: Sequence[str] | None = None, *,
                   labels: Sequence[str] | None = None):
-    """A pandas DataFrame of scalar metrics, one row per run (index: ``labels`` or scenario names)
-    plus a ``termination`` column."""
+    """A pandas DataFrame of scalar metrics, one row per run, plus a ``termination`` column.
+
+    Rows are labelled by ``labels``, by the keys of a ``{label: result}`` mapping, or by
+    :func:`run_labels` (``res.meta["label"]`` or the scenario name; same-named runs by the parameters
+    in which they differ), so no two rows share a label. Column units are in ``df.attrs["units"]``."""
     import pandas as pd
+
+    from .report.labels import metric_label
+    if isinstance(results, Mapping):
+        if labels is not None:
+            raise ShevsimError("metrics_table: give labels either as the mapping's keys or as labels=, not both")
+        labels = [str(k) for k in results]
+        results = list(results.values())
+    results = list(results)
+    if labels is not None:
+        labels = [str(x) for x in labels]
+        if len(labels) != len(results):
+            raise ShevsimError(f"metrics_table: {len(labels)} labels for {len(results)} results")
+        if len(set(labels)) != len(labels):
+            dup = sorted({x for x in labels if labels.count(x) > 1})
+            raise ShevsimError(f"metrics_table: labels must be distinct; repeated: {dup}")
     rows = []
     for r in results:
         m = r.metrics
@@ -156,8 +226,10 @@ def metrics_table(results: Sequence[Result], keys: Sequence[str] | None = None, 
         row = {k: m.get(k) for k in ks}
         row["termination"] = str(r.termination)
         rows.append(row)
-    idx = list(labels) if labels is not None else [str(r.meta.get("scenario", i)) for i, r in enumerate(results)]
-    return pd.DataFrame(rows, index=idx)
+    idx = labels if labels is not None else run_labels(results)
+    df = pd.DataFrame(rows, index=pd.Index(idx, name="run"))
+    df.attrs["units"] = {c: metric_label(c)[1] for c in df.columns if c != "termination"}
+    return df
 
 
 # --------------------------------------------------------------------- studies and calibration

@@ -10,6 +10,7 @@ Sub-commands::
     shevsim study {thermal,bms,tradeoff,powerrate-map} ...
     shevsim calibrate MODEL DATA.csv --out DIR [...]
     shevsim fmu export TYPE --params FILE -o OUT.fmu
+    shevsim report DIR [DIR ...] [-o FILE.html]
 
 Exit codes (:data:`EXIT_CODES`): 0 ok; 1 the run stopped early or is degraded (results saved);
 2 bad input (scenario, parameters, options, output folder); 3 internal error; 130 interrupted (Ctrl-C;
@@ -47,7 +48,7 @@ cycles by their path in the data folder (params = "components/vehicle/matv.toml"
 
 Results go to --out (default results/<scenario name>/): timeseries.parquet (units in the Parquet
 schema metadata), run.json (termination, parameters, version), metrics.json, scenario.toml (as run),
-overview.png. Re-running into a result folder replaces only the files shevsim wrote there.
+overview.png and report.html (interactive, opens offline; `shevsim report DIR` rewrites it). Re-running into a result folder replaces only the files shevsim wrote there.
 
 exit codes: 0 ok; 1 stopped early or degraded (results saved); 2 bad input; 3 internal error;
 130 interrupted (results saved)."""
@@ -195,6 +196,13 @@ def _cmd_fmu(a) -> int:
     return EXIT_OK
 
 
+def _cmd_report(a) -> int:
+    from .report import write_report
+    path = write_report(a.folders, out=a.out)
+    _say(a, f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB; open it in a browser, it works offline)")
+    return EXIT_OK
+
+
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -237,7 +245,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="keep every N-th communication point (and the last); default 1")
     r.add_argument("--allow-large", action="store_true",
                    help="run even when the record/duration estimate exceeds what this machine holds")
-    r.add_argument("--no-plots", action="store_true", help="do not write overview.png")
+    r.add_argument("--no-plots", action="store_true", help="do not write overview.png and report.html")
     sub.add_parser("scenarios", parents=[q], help="list the bundled scenarios (names for `shevsim run NAME`)")
     i = sub.add_parser("info", parents=[q], help="describe a scenario (components, ports, units) or an FMU")
     i.add_argument("target", metavar="SCENARIO|FMU", help="bundled scenario name, scenario TOML or .fmu file")
@@ -264,6 +272,14 @@ def build_parser() -> argparse.ArgumentParser:
     fi.add_argument("ssp", help="the .ssp file")
     fi.add_argument("-o", "--output", required=True, help="folder to write the FMUs and the scenario TOML into")
     fi.add_argument("--step-s", type=float, help="communication step (default: from the package)")
+    rp = sub.add_parser("report", parents=[q], help="write the HTML report of a result folder (run, study, "
+                                                   "calibration) or compare run folders",
+                        description="Write a self-contained HTML report (interactive plots, metrics, termination, "
+                                    "parameters) from the saved outputs of a result folder: DIR/report.html. "
+                                    "Several run folders: one comparison page (default ./comparison.html).")
+    rp.add_argument("folders", nargs="+", metavar="DIR", help="result folder of shevsim run, study or calibrate")
+    rp.add_argument("-o", "--out", metavar="FILE", help="the HTML file to write (a file shevsim did not write is "
+                                                       "never replaced)")
     return ap
 
 
@@ -288,7 +304,7 @@ def main(argv=None) -> int:
             return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
         a.quiet = quiet or getattr(a, "quiet", False)
         return {"run": _cmd_run, "scenarios": _cmd_scenarios, "info": _cmd_info, "cycles": _cmd_cycles,
-                "fmu": _cmd_fmu}[a.cmd](a)
+                "fmu": _cmd_fmu, "report": _cmd_report}[a.cmd](a)
     except SimulationError as exc:      # a simulation that failed outside `run` (info, fmu export)
         print(f"shevsim: stopped: {exc}", file=sys.stderr)
         return EXIT_STOPPED

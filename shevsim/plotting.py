@@ -25,63 +25,98 @@ def headless_pyplot():
     return plt
 
 
-PANELS = [
-    ("speed tracking [km/h]", [("cycle.speed_ref_mps", 3.6, "reference"), ("vehicle.speed_mps", 3.6, "vehicle")]),
-    ("power split [kW]", [("bus.demand_power_w", 1e-3, "demand"), ("engine_generator.elec_power_w", 1e-3, "engine-generator"),
-                          ("bus.battery_power_w", 1e-3, "battery (+ discharge)")]),
-    ("battery limits [kW]", [("bms.power_max_w", 1e-3, "P_b,max (BMS)"), ("bms.power_min_w", 1e-3, "P_b,min (BMS)"),
-                             ("bus.battery_power_w", 1e-3, "battery power")]),
-    ("SOC [%]", [("battery.soc_pct", 1.0, "plant"), ("bms.soc_pct", 1.0, "BMS estimate")]),
-    ("engine power [kW]", [("engine_generator.engine_power_w", 1e-3, "engine"), ("supervisor.power_cmd_w", 1e-3, "command")]),
-    ("engine power rate [kW/s]", [("__rate__engine_generator.elec_power_w", 1e-3, "dP_g/dt")]),
-    ("soot rate [mg/s]", [("engine_generator.soot_rate_mgps", 1.0, "soot")]),
-    ("battery current [A] (+ discharge)", [("battery.current_a", 1.0, "pack current")]),
-    ("battery voltage [V]", [("battery.voltage_v", 1.0, "pack voltage")]),
-    ("cell temperatures [°C]", [("battery.t_core_c", 1.0, "core"), ("battery.t_surface_c", 1.0, "surface"),
-                                ("bms.t_core_c", 1.0, "core (BMS)")]),
-]
+#: key metrics printed in the header of ``overview.png`` (when the run has them)
+HEADLINE_METRICS = ("distance_km", "fuel_economy_dsoc_corrected_kmpl", "fuel_economy_raw_kmpl", "delta_soc_pct",
+                    "soot_dsoc_corrected_g_per_km", "speed_miss_rms_kmh")
+
+
+def _panels(result) -> list[tuple[str, list[tuple[str, np.ndarray, str, str | None]]]]:
+    """(y-axis title with unit, [(legend, values in display unit, signal, thesis symbol)]) of each panel."""
+    from .report.html import _series, run_figure_spec
+    from .report.labels import signal_label, to_display
+    panels = []
+    for _ftitle, rows in run_figure_spec([result]):
+        for rtitle, sigs in rows:
+            series, du_row = [], None
+            for sgn in sigs:
+                ser = _series(result, sgn)
+                if ser is None:
+                    continue
+                _, y, unit = ser
+                y, du = to_display(y, unit)
+                du_row = du_row or du
+                label, sym = signal_label(sgn)
+                series.append((label, y, sgn, sym))
+            if series:
+                panels.append((f"{rtitle} ({du_row})" if du_row and du_row != "-" else rtitle, series))
+    return panels
 
 
 def scenario_plots(result, folder: Path) -> list[Path]:
-    """Write ``overview.png`` (all applicable panels) and one PNG per panel into ``folder``."""
+    """Write ``overview.png`` (the run at a glance: title, termination and key metrics above the panels, plain
+    names with units on the axes, thesis symbols in a note under them) and ``report.html`` (the interactive
+    report, :mod:`shevsim.report`) into ``folder``."""
     # a bare Figure (no pyplot): the caller's backend and open figures are left alone
     from matplotlib.figure import Figure
+
+    from .report.labels import fmt, metric_label
+    from .report.write import write_run_html
     folder = Path(folder)
-    t = result.time_s
-    drawn = []
-    for title, sigs in PANELS:
-        series = []
-        for name, scale, label in sigs:
-            if name.startswith("__rate__"):
-                base = name[len("__rate__"):]
-                if base in result.signals and len(t) > 1:
-                    series.append((np.gradient(result.signals[base], t) * scale, label))
-            elif name in result.signals:
-                series.append((result.signals[name] * scale, label))
-        if series:
-            drawn.append((title, series))
-    if not drawn:
-        names = list(result.signals)[:8]
-        drawn = [("signals", [(result.signals[n], n) for n in names])]
-    fig = Figure(figsize=(10, 2.1 * len(drawn)))
-    axes = fig.subplots(len(drawn), 1, sharex=True, squeeze=False)
-    for ax, (title, series) in zip(axes[:, 0], drawn):
-        for y, label in series:
+    t = np.asarray(result.time_s, dtype=float)
+    panels = _panels(result)
+    ncol = 2 if len(panels) > 3 else 1
+    nrow = -(-len(panels) // ncol)
+    head_in, foot_in = 1.25, 0.45
+    height = head_in + foot_in + 2.1 * nrow
+    fig = Figure(figsize=(13 if ncol == 2 else 9, height))
+    axes = fig.subplots(nrow, ncol, sharex=True, squeeze=False)
+    fig.subplots_adjust(left=0.07 if ncol == 2 else 0.1, right=0.98, hspace=0.28, wspace=0.18,
+                        top=1 - head_in / height, bottom=foot_in / height + 0.35 / height)
+    symbols = []
+    for k, ax in enumerate(axes.T.ravel() if ncol == 2 else axes.ravel()):
+        if k >= len(panels):
+            ax.set_visible(False)
+            continue
+        ytitle, series = panels[k]
+        for label, y, _sig, sym in series:
             ax.plot(t, y, lw=0.8, label=label)
-        ax.set_ylabel(title, fontsize=7)
-        ax.legend(fontsize=6, loc="upper right")
+            if sym and f"{sym}: {label}" not in symbols:
+                symbols.append(f"{sym}: {label}")
+        ax.set_ylabel(ytitle, fontsize=8)
+        ax.tick_params(labelsize=7)
+        if len(series) > 1:
+            ax.legend(fontsize=6.5, loc="upper right", framealpha=0.8)
         ax.grid(True, alpha=0.3)
-    axes[-1, 0].set_xlabel("time [s]")
+    for ax in axes[-1, :]:
+        ax.set_xlabel("Time (s)", fontsize=8)
+        ax.xaxis.set_tick_params(labelbottom=True)
     name = result.meta.get("scenario", "")
-    fig.suptitle(f"{name}", fontsize=9)
-    fig.tight_layout()
+    term = result.termination
+    fig.text(0.01, 1 - 0.3 / height, f"{name}", fontsize=13, weight="bold", va="top")
+    dur = f"{t[-1] - t[0]:g} s simulated" if len(t) > 1 else ""
+    fig.text(0.01, 1 - 0.62 / height, f"termination: {term}   ·   {dur}   ·   engine {result.meta.get('engine', '?')}",
+             fontsize=9, va="top", color="#1b4332" if getattr(term, "ok", True) else "#7a0010")
+    heads = []
+    for key in HEADLINE_METRICS:
+        v = result.metrics.get(key)
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            lab, unit = metric_label(key)
+            heads.append(f"{lab}: {fmt(v)} {unit}".strip())
+    if heads:
+        fig.text(0.01, 1 - 0.9 / height, "   ·   ".join(heads), fontsize=8.5, va="top")
+    if symbols:
+        fig.text(0.01, 0.12 / height, "Thesis symbols (Kim 2014): " + "; ".join(symbols), fontsize=6.5,
+                 color="#555", va="bottom", wrap=True)
     path = folder / "overview.png"
     fig.savefig(path, dpi=110)
-    return [path]
+    return [path, write_run_html(result, folder)]
 
 
 def plot_signals(results, signals, ax=None, labels=None):
-    """Plot ``signals`` of one or more results against time, one axis per unit.
+    """Plot ``signals`` of one or more results against time, one axis per display unit.
+
+    Values are shown in engineering units (W as kW, m/s as km/h, J as kWh, rad/s as rpm); axes are
+    titled in plain language with the unit ("Power (kW)").
 
     Parameters
     ----------
@@ -90,44 +125,52 @@ def plot_signals(results, signals, ax=None, labels=None):
     signals : sequence of str
         ``component.port`` names.
     ax : Axes or sequence of Axes, optional
-        One per unit (in order of first appearance); a new figure (pyplot, the caller's
+        One per display unit (in order of first appearance); a new figure (pyplot, the caller's
         backend) when omitted.
     labels : sequence of str, optional
-        One per result (default: the scenario name, numbered when repeated).
+        One per result (default: :func:`shevsim.api.run_labels`).
 
     Returns
     -------
-    list of Axes
+    matplotlib.figure.Figure
+        The figure drawn on (its axes, one per unit: ``fig.axes``).
     """
+    from .report.html import QUANTITY
+    from .report.labels import display_unit, signal_label, signal_unit, to_display
     results = list(results)
     signals = list(signals)
     for r in results:
         for s in signals:
             r[s]                                   # KeyError naming close matches
     units: list[str] = []
+    by_unit: dict[str, list[str]] = {}
     for s in signals:
-        u = results[0].units.get(s, "") if results else ""
-        if u not in units:
-            units.append(u)
+        du = display_unit(signal_unit(s, results[0].units))[0] if results else ""
+        if du not in units:
+            units.append(du)
+        by_unit.setdefault(du, []).append(s)
     if ax is None:
         import matplotlib.pyplot as plt          # the caller's backend
-        _, axes = plt.subplots(len(units), 1, sharex=True, squeeze=False, figsize=(8, 2.4 * len(units)))
+        fig, axes = plt.subplots(len(units), 1, sharex=True, squeeze=False, figsize=(8, 2.4 * len(units) + 0.4))
         axes = list(axes[:, 0])
     else:
         axes = list(ax) if isinstance(ax, (list, tuple, np.ndarray)) else [ax]
         if len(axes) < len(units):
             raise ValueError(f"plot: {len(units)} units ({units}) need {len(units)} axes, got {len(axes)}")
+        fig = axes[0].figure
     if labels is None:
-        names = [str(r.meta.get("scenario", f"run {i + 1}")) for i, r in enumerate(results)]
-        labels = [f"{n} #{i + 1}" if names.count(n) > 1 else n for i, n in enumerate(names)]
-    for a, u in zip(axes, units):
+        from .api import run_labels
+        labels = run_labels(results)
+    for a, du in zip(axes, units):
+        sigs = by_unit[du]
         for r, lab in zip(results, labels):
-            for s in signals:
-                if r.units.get(s, "") == u:
-                    name = s if len(results) == 1 else f"{s} ({lab})"
-                    a.plot(r.time_s, r[s], lw=0.9, label=name)
-        a.set_ylabel(f"[{u}]" if u else "[-]")
+            for s in sigs:
+                y, _ = to_display(r[s], signal_unit(s, r.units))
+                name = signal_label(s)[0]
+                a.plot(r.time_s, y, lw=0.9, label=name if len(results) == 1 else f"{name} ({lab})")
+        title = signal_label(sigs[0])[0] if len(sigs) == 1 else QUANTITY.get(du, "Value")
+        a.set_ylabel(f"{title} ({du})" if du and du != "-" else title, fontsize=9)
         a.grid(True, alpha=0.3)
         a.legend(fontsize=7)
-    axes[len(units) - 1].set_xlabel("time [s]")
-    return axes[:len(units)]
+    axes[len(units) - 1].set_xlabel("Time (s)")
+    return fig

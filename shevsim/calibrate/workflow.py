@@ -728,8 +728,29 @@ def write_report(out: Path, rep: dict, fitter: Fitter, base: FitResult, final: F
             plt.close(fig)
             pngs.append("evidence.png")
     rep["plots"] = pngs
+    traces = _fit_traces(fitter, base, final, t, rep["split"]["holdout_intervals_s"])
+    from ..core.atomic import write_csv_atomic
+    write_csv_atomic(out / "fit_traces.csv", traces, index=False, float_format="%.7g")
     atomic_write_text(out / "report.json", json.dumps(rep, indent=2, default=float))
     atomic_write_text(out / "report.md", render_markdown(rep))
+    if plots:                                   # the interactive report: fit, residuals, evidence, parameters
+        from ..report.write import write_calibration_html
+        write_calibration_html(out, rep, traces)
+
+
+def _fit_traces(fitter: Fitter, base: FitResult, final: FitResult, t, hold_iv, max_points: int = 20000):
+    """Measured and modelled channels before and after (``fit_traces.csv``: what the HTML report plots)."""
+    import pandas as pd
+    step = max(1, t.size // max_points)
+    ts = np.asarray(t)[::step]
+    cols = {"time_s": ts, "holdout": np.zeros(ts.size, dtype=bool)}
+    for a, b in hold_iv:
+        cols["holdout"] |= (ts >= a) & (ts <= b)
+    for c in fitter.channels:
+        cols[f"{c}_measured"] = np.asarray(fitter.meas[c])[::step]
+        cols[f"{c}_before"] = np.asarray(base.pred[c])[::step]
+        cols[f"{c}_after"] = np.asarray(final.pred[c])[::step]
+    return pd.DataFrame(cols)
 
 
 def _g(x):

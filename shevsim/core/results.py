@@ -155,25 +155,42 @@ class Result:
     def metrics(self, value: dict) -> None:
         self._metrics = dict(value)
 
+    def __repr__(self) -> str:
+        t = self.time_s
+        span = f"{t[0]:g}-{t[-1]:g} s, {len(t)} points" if len(t) else "no points"
+        return (f"<Result {self.meta.get('scenario', 'run')!r}: {str(self.termination)[:80]!r}, {span}, "
+                f"{len(self.signals)} signals, engine {self.meta.get('engine', '?')!r}>")
+
+    def _repr_html_(self) -> str:
+        from ..report.html import result_summary_html
+        return result_summary_html(self)
+
+    #: what ``plot()`` shows when no signals are named (those of them the run has)
+    DEFAULT_PLOT = ("cycle.speed_ref_mps", "vehicle.speed_mps", "engine_generator.elec_power_w",
+                    "bus.battery_power_w", "battery.soc_pct", "battery.t_core_c")
+
     def plot(self, signals: list[str] | str | None = None, ax=None):
-        """Plot signals against time, one axis per unit.
+        """Plot signals against time, one axis per display unit (kW, km/h, degC: values scaled from SI).
 
         Parameters
         ----------
         signals : list of str, optional
-            ``component.port`` names (default: the first six signals).
+            ``component.port`` names (default: speed, power split, SOC and cell temperature when the
+            run has them, else its first six signals).
         ax : matplotlib Axes or sequence of Axes, optional
             Where to draw (one per unit); new figure when omitted.
 
         Returns
         -------
-        list of matplotlib Axes
-            One per unit, in order of first appearance.
+        matplotlib.figure.Figure
+            Its axes (``fig.axes``) are one per unit, in order of first appearance.
         """
         from ..plotting import plot_signals
         if isinstance(signals, str):
             signals = [signals]
-        return plot_signals([self], list(signals) if signals is not None else list(self.signals)[:6], ax=ax)
+        if signals is None:
+            signals = [s for s in self.DEFAULT_PLOT if s in self.signals] or list(self.signals)[:6]
+        return plot_signals([self], list(signals), ax=ax)
 
     def save(self, out_dir: str | Path, *, plots: bool = False, fmt: str = "parquet") -> Path:
         """Save the run (timeseries with units, ``run.json``, ``metrics.json``) to ``out_dir``.
@@ -205,7 +222,8 @@ def git_commit(path: Path | None = None) -> str:
 
 
 #: files a run writes into its folder (older results have no manifest in run.json: these are taken as ours)
-_OWN_FILES = ("timeseries.parquet", "timeseries.csv", "run.json", "metrics.json", "scenario.toml", "overview.png")
+_OWN_FILES = ("timeseries.parquet", "timeseries.csv", "run.json", "metrics.json", "scenario.toml", "overview.png",
+              "report.html")
 
 
 def check_out_dir(out_dir: str | Path) -> Path:

@@ -140,6 +140,16 @@ class Scenario:
     sets: list[str] = field(default_factory=list)     # command-line ``component.param=value`` overrides
     overlays: list[str] = field(default_factory=list)  # command-line ``--params COMPONENT=FILE`` overlays
 
+    def __repr__(self) -> str:
+        stop = f"{self.stop_s:g} s" if self.stop_s is not None else "from its cycle"
+        return (f"<Scenario {self.name!r}: {len(self.components)} components "
+                f"({', '.join(c.name for c in self.components[:8])}{', ...' if len(self.components) > 8 else ''}), "
+                f"{len(self.connections)} connections, step {self.settings.step_s:g} s, stop {stop}>")
+
+    def _repr_html_(self) -> str:
+        from ..report.html import scenario_html
+        return scenario_html(self)
+
     # ----------------------------------------------------------- inspect / change in Python
     def component(self, name: str) -> ComponentSpec:
         """The spec of component ``name`` (its ``overrides`` dict can be changed before running)."""

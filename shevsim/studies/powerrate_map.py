@@ -26,7 +26,8 @@ Every evaluation goes through a :class:`~.parallel.StudyRunner` (Dask + SQLite c
 within a generation run once, anything already cached (earlier generations, a stopped run, the
 trade-off study on the same cache) is not rerun. Outputs in ``out_dir``: ``summary.json`` (written
 atomically), ``top_solutions.csv``, ``exhaustive.csv``, ``ga_history.csv``, ``constant_limits.csv``,
-``fig_a3_rate_maps.png`` (Fig. A.3 analogue) and ``fig_a4_comparison.png`` (Fig. A.4 analogue).
+``fig_a3_rate_maps.png`` (Fig. A.3 analogue), ``fig_a4_comparison.png`` (Fig. A.4 analogue) and
+``report.html`` (interactive: trade-off, GA history, chosen map).
 """
 from __future__ import annotations
 
@@ -248,6 +249,9 @@ def _write_outputs(out: Path, summary: dict, es_scored, obj: Objective, levels, 
         plot_rate_maps(summary, out / "fig_a3_rate_maps.png")
         plot_comparison(summary, out / "fig_a4_comparison.png")
     write_json_atomic(out / "summary.json", summary)
+    if plots:                                   # the interactive report of all of the above
+        from ..report.write import write_study_html
+        write_study_html(out, summary)
 
 
 def _step(edges_w, rates_wps):

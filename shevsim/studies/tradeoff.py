@@ -8,7 +8,7 @@ reported absolute and relative to the baseline, both Delta-SOC-corrected by defa
 The seed's reading of the curve: pick the tightest rate whose fuel-economy loss stays within
 ``fe_loss_max_frac`` (0.5 %: 19.3 kW/s gave -1.9 % soot) - reported as ``best_within_loss``.
 
-Outputs in ``out_dir``: ``tradeoff.csv``, ``fig_a2_tradeoff.png``, ``summary.json`` (atomic).
+Outputs in ``out_dir``: ``tradeoff.csv``, ``fig_a2_tradeoff.png``, ``summary.json`` (atomic), ``report.html``.
 """
 from __future__ import annotations
 
@@ -71,6 +71,9 @@ def run_tradeoff(problem, runner, rates_wps, out_dir: str | Path | None = None, 
         if plots:
             plot_tradeoff(summary, out / "fig_a2_tradeoff.png")
         write_json_atomic(out / "summary.json", summary)
+        if plots:
+            from ..report.write import write_study_html
+            write_study_html(out, summary)
         log(f"outputs in {out}")
     return summary
 
