@@ -42,9 +42,8 @@ def main(out: Path) -> list:
             "delta_soc_pct", "speed_miss_rms_kmh"]
     table = shevsim.metrics_table(runs, keys, labels=list(VEHICLES))
     print(table.T.to_string(float_format=lambda x: f"{x:.4g}"))
-    axes = shevsim.compare(runs, ["vehicle.speed_mps", "motor.elec_power_w", "engine_generator.elec_power_w",
+    fig = shevsim.compare(runs, ["vehicle.speed_mps", "motor.elec_power_w", "engine_generator.elec_power_w",
                                   "battery.soc_pct"], labels=list(VEHICLES))
-    fig = axes[0].figure
     fig.set_size_inches(10, 8)
     fig.tight_layout()
     fig.savefig(out / "compare_vehicles.png", dpi=100)

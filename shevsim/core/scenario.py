@@ -179,35 +179,141 @@ class Scenario:
 
     def add_component(self, name: str, type: str, params: str | Path | None = None, *,
                       set: dict[str, Any] | None = None, start: dict[str, float] | None = None,
-                      step_multiple: int = 1) -> "Scenario":
+                      step_multiple: int = 1, fmu: str | Path | None = None, mapping: dict[str, str] | None = None,
+                      replaces: str | None = None) -> "Scenario":
         """Add a component by registry ``type`` (``params``: a parameter file, a bundled one by its
-        path relative to the data root such as ``"components/vehicle/matv.toml"``). Returns self."""
+        path relative to the data root such as ``"components/vehicle/matv.toml"``), or an FMU with
+        ``type="fmu"`` and ``fmu=PATH`` (``mapping``: FMU variable -> port name; ``replaces``: a native
+        TYPE whose port units the FMU must match; ``set``: FMU parameters), as a scenario's
+        ``[components.NAME]`` table does. Returns self."""
         _check_component_name(name, f"scenario '{self.name}'")
+        where = f"add_component('{name}', '{type}')"
         if name in self.component_names:
             raise ScenarioError(f"scenario '{self.name}': component '{name}' already exists")
         if isinstance(step_multiple, bool) or not isinstance(step_multiple, int) or step_multiple < 1:
             raise ScenarioError(f"component '{name}': step_multiple must be an integer >= 1, got {step_multiple!r}")
+        fmu_path = None
+        if type == "fmu":
+            if fmu is None:
+                raise ScenarioError(f"{where}: type 'fmu' needs fmu=PATH (the .fmu file)")
+            if params is not None:
+                raise ScenarioError(f"{where}: an FMU takes no parameter file; give its parameters as set={{...}}")
+            fmu_path = resolve_path(str(fmu), self.path)
+            if not fmu_path.is_file():
+                raise ScenarioError(f"{where}: fmu file '{fmu}' not found")
+            if mapping is not None and (not isinstance(mapping, dict) or not all(
+                    isinstance(k, str) and isinstance(v, str) for k, v in mapping.items())):
+                raise ScenarioError(f"{where}: mapping must be a dict of FMU variable name -> port name (strings)")
+            if replaces is not None:
+                from ..components import get_component_class
+                get_component_class(replaces, f"{where}: replaces")
+        elif fmu is not None or mapping is not None or replaces is not None:
+            raise ScenarioError(f"{where}: fmu=, mapping= and replaces= are only for type='fmu'")
         pf = None
         if params is not None:
             pf = resolve_path(str(params), self.path)
             if not pf.is_file():
                 raise ScenarioError(f"component '{name}': parameter file '{params}' not found")
-        self.components.append(ComponentSpec(name, str(type), pf, {}, dict(start or {}), step_multiple))
+        self.components.append(ComponentSpec(name, str(type), pf, {}, dict(start or {}), step_multiple,
+                                             fmu=fmu_path, mapping=dict(mapping or {}), replaces=replaces))
         for k, v in (set or {}).items():
             self.set(f"{name}.{k}", v, f"add_component('{name}', set={{'{k}': ...}})")
         self.text = ""
         return self
 
-    def connect(self, dst: str, src: str) -> "Scenario":
-        """Connect input ``dst`` ("component.port") to output ``src`` ("component.port"). Returns self."""
+    def ports(self, component: str) -> dict[str, str] | None:
+        """``{port: "input" | "output" | "input/output"}`` of a component as declared by its type (every
+        variant, e.g. a vehicle's force and speed modes) or its FMU's model description; None when it
+        cannot be known before the component is built (a plugin type, an FMU without fmpy)."""
+        spec = self.component(component)
+        kinds: dict[str, set] = {}
+        if spec.type == "fmu":
+            try:
+                from ..fmu.adapter import load_model_description
+                md = load_model_description(spec.fmu)
+            except Exception:  # noqa: BLE001 - unknown now; the FMU's own error comes when it is built
+                return None
+            for v in md.modelVariables:
+                if v.causality in ("input", "output"):
+                    kinds.setdefault(spec.mapping.get(v.name, v.name), set()).add(v.causality)
+        else:
+            from ..components import REGISTRY, get_component_class
+            if spec.type not in REGISTRY:
+                return None
+            cls = get_component_class(spec.type, f"component '{component}'")
+            for attr in dir(cls):
+                if attr.startswith("VARIABLES"):
+                    for v in getattr(cls, attr) or ():
+                        if getattr(v, "causality", None) in ("input", "output"):
+                            kinds.setdefault(v.name, set()).add(v.causality)
+        return {p: "/".join(sorted(k)) for p, k in kinds.items()}
+
+    def _end_kind(self, end: str, call: str) -> str:
+        """'input', 'output', 'input/output' or 'unknown' of ``component.port``; errors for a bad end."""
+        if not isinstance(end, str) or "." not in end:
+            raise ScenarioError(f"scenario '{self.name}': {call}: ends must be 'component.port', got {end!r}")
+        comp, port = end.split(".", 1)
+        if comp not in self.component_names:
+            raise ScenarioError(f"scenario '{self.name}': {call}: unknown component '{comp}'"
+                                f"{_hint(comp, self.component_names)}")
+        ports = self.ports(comp)
+        if ports is None:
+            return "unknown"
+        if port not in ports:
+            raise ScenarioError(f"scenario '{self.name}': {call}: component '{comp}' has no port '{port}'"
+                                f"{_hint(port, ports)}")
+        return ports[port]
+
+    def connect(self, *ends: str, src: str | None = None, dst: str | None = None) -> "Scenario":
+        """Connect an output to an input, source first as in SSP and Simulink::
+
+            sc.connect("vehicle.speed_mps", "driver.speed_mps")          # output, then the input it feeds
+            sc.connect(src="vehicle.speed_mps", dst="driver.speed_mps")  # the same, explicit
+
+        A connection in the wrong direction (an input as the source, an output as the destination) is an
+        error here, not at ``simulate``. The older order ``connect(input, output)`` still works when the
+        ports say which end is which, with a DeprecationWarning. Returns self.
+        """
+        import warnings
+        if ends and (src is not None or dst is not None):
+            raise ScenarioError(f"scenario '{self.name}': connect: give the ends either by position "
+                                f"(source first) or as src=, dst=, not both")
+        if not ends:
+            if src is None or dst is None:
+                raise ScenarioError(f"scenario '{self.name}': connect needs src= (an output) and dst= (an input)")
+            call = f"connect(src='{src}', dst='{dst}')"
+            ks, kd = self._end_kind(src, call), self._end_kind(dst, call)
+            wrong = ([f"the source '{src}' is an input"] if ks == "input" else []) + \
+                    ([f"the destination '{dst}' is an output"] if kd == "output" else [])
+            if wrong:
+                fix = f"; did you mean connect(src='{dst}', dst='{src}')?" if ks == "input" and kd == "output" else ""
+                raise ScenarioError(f"scenario '{self.name}': {call}: wrong direction: {' and '.join(wrong)}{fix}")
+        else:
+            if len(ends) != 2:
+                raise ScenarioError(f"scenario '{self.name}': connect takes two ends (source, destination), "
+                                    f"got {len(ends)}")
+            a, b = ends
+            call = f"connect('{a}', '{b}')"
+            ka, kb = self._end_kind(a, call), self._end_kind(b, call)
+            a_in, a_out = ka == "input", ka == "output"
+            b_in, b_out = kb == "input", kb == "output"
+            if (a_out and kb != "output") or (b_in and ka != "input"):
+                src, dst = a, b                                   # source first (SSP order)
+            elif (a_in and kb != "input") or (b_out and ka != "output"):
+                src, dst = b, a                                   # the old order: input first
+                warnings.warn(f"{call}: the input is given first; give the source first (SSP order), "
+                              f"connect('{b}', '{a}'), or connect(src='{b}', dst='{a}')",
+                              DeprecationWarning, stacklevel=2)
+            elif ka == kb and ka in ("input", "output"):
+                raise ScenarioError(f"scenario '{self.name}': {call}: both ends are {ka}s; a connection goes from "
+                                    f"an output to an input")
+            else:
+                raise ScenarioError(f"scenario '{self.name}': {call}: cannot tell which end is the output "
+                                    f"({a}: {ka}, {b}: {kb}); give connect(src=OUTPUT, dst=INPUT)")
         try:
             c = Connection.parse(dst, src)
         except ShevsimError as exc:
             raise ScenarioError(f"scenario '{self.name}': {exc}") from None
-        for end in (c.src, c.dst):
-            if end not in self.component_names:
-                raise ScenarioError(f"scenario '{self.name}': connection '{dst}' = '{src}': unknown component "
-                                    f"'{end}'{_hint(end, self.component_names)}")
         self.connections.append(c)
         self.text = ""
         return self

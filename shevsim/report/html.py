@@ -392,8 +392,14 @@ def compare_page(results: Sequence, labels: Sequence[str] | None = None, title: 
         lab, unit = _ml(k)
         rows.append([lab, unit] + [fmt(r.metrics.get(k)) for r in results])
         titles.append([f"key: {k}"])
-    page.section("Metrics", table(["Metric", "Unit"] + labels, rows, num_cols=range(2, 2 + len(results)),
-                                  titles=titles))
+    from .labels import HEADLINE
+    head = [i for k in HEADLINE for i, kk in enumerate(keys) if kk == k]
+    body = table(["Metric", "Unit"] + labels, [rows[i] for i in head], num_cols=range(2, 2 + len(results)),
+                 titles=[titles[i] for i in head]) if head else ""
+    body += (f"<details{'' if head else ' open'}><summary>All metrics ({len(rows)})</summary>"
+             + table(["Metric", "Unit"] + labels, rows, num_cols=range(2, 2 + len(results)), titles=titles)
+             + "</details>")
+    page.section("Metrics", body)
     for ftitle, frows in run_figure_spec(results):
         page.figure(time_figure(results, labels, frows), ftitle, time_axis=True,
                     note="One colour per run. Drag to zoom (all time figures follow), double-click to reset.")

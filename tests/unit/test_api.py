@@ -89,14 +89,14 @@ def test_build_in_code_equals_the_toml_scenario():
                                                   "v0_mps": 0.0})
     sc.add_component("coupling", "spring_damper", set={"mass_kg": 2.0, "stiffness_n_per_m": 5.0,
                                                        "damping_ns_per_m": 0.5, "x0_m": 0.0, "v0_mps": 0.0})
-    sc.connect("body1.force_n", "coupling.force_n")
-    sc.connect("coupling.position_m", "body1.position_m").connect("coupling.velocity_mps", "body1.velocity_mps")
+    sc.connect("coupling.force_n", "body1.force_n")                       # source first (SSP order)
+    sc.connect(src="body1.position_m", dst="coupling.position_m").connect("body1.velocity_mps", "coupling.velocity_mps")
     code = shevsim.simulate(sc)
     toml = shevsim.simulate(TWO_BODY, stop_s=3.0)
     for s in toml.signals:
         np.testing.assert_array_equal(code[s], toml[s], err_msg=s)
     with pytest.raises(ScenarioError, match="unknown component 'bodyy'"):
-        sc.connect("bodyy.force_n", "coupling.force_n")
+        sc.connect("coupling.force_n", "bodyy.force_n")
     with pytest.raises(ScenarioError, match=r"must be non-empty without '\.'"):
         sc.add_component("a.b", "gain")
 
@@ -107,10 +107,12 @@ def test_result_plot_one_axis_per_unit_and_compare():
     import matplotlib.pyplot as plt
     r1 = shevsim.simulate(TWO_BODY, stop_s=1.0)
     r2 = shevsim.simulate(TWO_BODY, {"coupling.damping_ns_per_m": 3.0}, stop_s=1.0)
-    axes = r1.plot(["body1.position_m", "coupling.position2_m", "body1.velocity_mps"])
-    assert len(axes) == 2 and axes[0].get_ylabel() == "[m]" and axes[1].get_ylabel() == "[m/s]"
+    fig = r1.plot(["body1.position_m", "coupling.position2_m", "body1.velocity_mps"])
+    axes = fig.axes
+    assert len(axes) == 2 and axes[0].get_ylabel() == "Position (m)" and axes[1].get_ylabel() == "Body1: velocity (km/h)"
     assert len(axes[0].lines) == 2
-    axes = shevsim.compare([r1, r2], signals=["coupling.position2_m"], labels=["c=0.5", "c=3"])
+    np.testing.assert_allclose(axes[1].lines[0].get_ydata(), 3.6 * r1["body1.velocity_mps"])   # m/s shown as km/h
+    axes = shevsim.compare([r1, r2], signals=["coupling.position2_m"], labels=["c=0.5", "c=3"]).axes
     assert len(axes) == 1 and len(axes[0].lines) == 2
     assert not np.array_equal(axes[0].lines[0].get_ydata(), axes[0].lines[1].get_ydata())
     plt.close("all")
