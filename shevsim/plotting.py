@@ -66,14 +66,14 @@ def scenario_plots(result, folder: Path) -> list[Path]:
     panels = _panels(result)
     ncol = 2 if len(panels) > 3 else 1
     nrow = -(-len(panels) // ncol)
-    head_in, foot_in = 1.25, 0.45
+    head_in, foot_in = 1.45, 0.65
     height = head_in + foot_in + 2.1 * nrow
     fig = Figure(figsize=(13 if ncol == 2 else 9, height))
     axes = fig.subplots(nrow, ncol, sharex=True, squeeze=False)
     fig.subplots_adjust(left=0.07 if ncol == 2 else 0.1, right=0.98, hspace=0.28, wspace=0.18,
                         top=1 - head_in / height, bottom=foot_in / height + 0.35 / height)
     symbols = []
-    for k, ax in enumerate(axes.T.ravel() if ncol == 2 else axes.ravel()):
+    for k, ax in enumerate(axes.ravel()):                 # row by row, read left to right
         if k >= len(panels):
             ax.set_visible(False)
             continue
@@ -85,11 +85,13 @@ def scenario_plots(result, folder: Path) -> list[Path]:
         ax.set_ylabel(ytitle, fontsize=8)
         ax.tick_params(labelsize=7)
         if len(series) > 1:
-            ax.legend(fontsize=6.5, loc="upper right", framealpha=0.8)
+            ax.legend(fontsize=6.5, loc="best", framealpha=0.8)
         ax.grid(True, alpha=0.3)
-    for ax in axes[-1, :]:
-        ax.set_xlabel("Time (s)", fontsize=8)
-        ax.xaxis.set_tick_params(labelbottom=True)
+    for col in range(ncol):                               # the lowest panel of each column shows the time axis
+        shown = [axes[r, col] for r in range(nrow) if axes[r, col].get_visible()]
+        if shown:
+            shown[-1].set_xlabel("Time (s)", fontsize=8)
+            shown[-1].xaxis.set_tick_params(labelbottom=True)
     name = result.meta.get("scenario", "")
     term = result.termination
     fig.text(0.01, 1 - 0.3 / height, f"{name}", fontsize=13, weight="bold", va="top")
@@ -102,8 +104,8 @@ def scenario_plots(result, folder: Path) -> list[Path]:
         if isinstance(v, (int, float)) and not isinstance(v, bool):
             lab, unit = metric_label(key)
             heads.append(f"{lab}: {fmt(v)} {unit}".strip())
-    if heads:
-        fig.text(0.01, 1 - 0.9 / height, "   ·   ".join(heads), fontsize=8.5, va="top")
+    for i in range(0, min(len(heads), 6), 3):             # three per line
+        fig.text(0.01, 1 - (0.88 + 0.2 * i / 3) / height, "   ·   ".join(heads[i:i + 3]), fontsize=8.5, va="top")
     if symbols:
         fig.text(0.01, 0.12 / height, "Thesis symbols (Kim 2014): " + "; ".join(symbols), fontsize=6.5,
                  color="#555", va="bottom", wrap=True)
