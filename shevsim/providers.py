@@ -28,11 +28,41 @@ def result_metrics(result) -> dict:
     return compute(result)
 
 
+def fmu_ports(spec) -> dict | None:
+    """The ports of a ``type = "fmu"`` spec from its model description (None when fmpy cannot read it now;
+    the FMU's own error comes when it is built)."""
+    try:
+        from .fmu.adapter import load_model_description
+        md = load_model_description(spec.fmu)
+    except Exception:  # noqa: BLE001 - unknown here; reported when the component is built
+        return None
+    kinds: dict[str, set] = {}
+    for v in md.modelVariables:
+        if v.causality in ("input", "output"):
+            kinds.setdefault(spec.mapping.get(v.name, v.name), set()).add(v.causality)
+    return {p: "/".join(sorted(k)) for p, k in kinds.items()}
+
+
+def result_html(result) -> str:
+    """A result's notebook view (:func:`shevsim.report.html.result_summary_html`)."""
+    from .report.html import result_summary_html
+    return result_summary_html(result)
+
+
+def scenario_html(scenario) -> str:
+    """A scenario's notebook view (:func:`shevsim.report.html.scenario_html`)."""
+    from .report.html import scenario_html as view
+    return view(scenario)
+
+
 def register() -> None:
     """Register the package's providers with :mod:`shevsim.core.registry` (idempotent)."""
     registry.register_component_lookup(component_class)
     registry.register_fmu_factory(fmu_component)
     registry.register_result_metrics(result_metrics)
+    registry.register_fmu_ports(fmu_ports)
+    registry.register_html_view("result", result_html)
+    registry.register_html_view("scenario", scenario_html)
 
 
 register()

@@ -8,7 +8,11 @@ asks the registry:
   :mod:`shevsim.components`, which also finds installed plugins);
 * :func:`fmu_component` - a component for ``type = "fmu"`` (registered by :mod:`shevsim.fmu`);
 * :func:`result_metrics` - the metrics of a :class:`~shevsim.core.results.Result` (registered by
-  :mod:`shevsim.metrics`).
+  :mod:`shevsim.metrics`);
+* :func:`fmu_ports` - the inputs and outputs of an FMU spec before it is built (registered by
+  :mod:`shevsim.fmu`), so a connection's direction is checked when it is made;
+* :func:`html_view` - the HTML a notebook shows for a result or a scenario (registered by
+  :mod:`shevsim.report`).
 
 ``import shevsim`` registers the package's own providers (:mod:`shevsim.providers`); a program that
 uses ``shevsim.core`` alone registers its own with the ``register_*`` functions.
@@ -63,3 +67,26 @@ def fmu_component(spec, scenario, where: str):
 def result_metrics(result) -> dict:
     """The metrics of ``result`` (see :func:`register_result_metrics`)."""
     return _provider("metrics", "metrics function")(result)
+
+
+def register_fmu_ports(ports: Callable[[Any], dict | None]) -> None:
+    """Register ``ports(spec) -> {port: "input" | "output"}`` (None when unknown) for ``type = "fmu"`` specs."""
+    _providers["fmu_ports"] = ports
+
+
+def fmu_ports(spec) -> dict | None:
+    """The ports of an FMU spec from its model description, or None when no provider can tell."""
+    fn = _providers.get("fmu_ports")
+    return fn(spec) if fn is not None else None
+
+
+def register_html_view(kind: str, view: Callable[[Any], str]) -> None:
+    """Register ``view(obj) -> HTML`` shown by a notebook for objects of ``kind`` (``"result"``,
+    ``"scenario"``)."""
+    _providers[f"html:{kind}"] = view
+
+
+def html_view(kind: str, obj) -> str | None:
+    """The registered HTML view of ``obj``, or None (a notebook then shows its ``repr``)."""
+    fn = _providers.get(f"html:{kind}")
+    return fn(obj) if fn is not None else None

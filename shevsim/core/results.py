@@ -161,9 +161,9 @@ class Result:
         return (f"<Result {self.meta.get('scenario', 'run')!r}: {str(self.termination)[:80]!r}, {span}, "
                 f"{len(self.signals)} signals, engine {self.meta.get('engine', '?')!r}>")
 
-    def _repr_html_(self) -> str:
-        from ..report.html import result_summary_html
-        return result_summary_html(self)
+    def _repr_html_(self) -> str | None:
+        from .registry import html_view
+        return html_view("result", self)
 
     #: what ``plot()`` shows when no signals are named (those of them the run has)
     DEFAULT_PLOT = ("cycle.speed_ref_mps", "vehicle.speed_mps", "engine_generator.elec_power_w",

@@ -51,7 +51,7 @@ from .errors import ScenarioError, ShevsimError
 from .master import Connection, Fault, Master, MasterSettings
 from .overlay import overlay_tables, overlay_values, resolve_files
 from .params import check_options, load_params
-from .registry import component_class, fmu_component
+from .registry import component_class, fmu_component, fmu_ports
 from .tomlio import toml_key, toml_value
 from shevsim.core.paths import DATA_ROOT, bundled_cycle, bundled_params, bundled_scenario
 
@@ -103,6 +103,22 @@ def parse_value(text: str) -> Any:
         return text
 
 
+def declared_ports(cls) -> tuple[dict[str, str], bool]:
+    """``({port: "input" | "output" | "input/output"}, complete)`` declared by a component class: its
+    ``VARIABLES`` and every variant ``VARIABLES_*`` (a vehicle's speed mode). ``complete`` is False when the
+    class builds its ports otherwise (it overrides ``variables()`` and declares no variants), so a port
+    missing here may still exist once the component is built."""
+    from .component import Component
+    kinds: dict[str, set] = {}
+    variants = [a for a in dir(cls) if a.startswith("VARIABLES")]
+    for attr in variants:
+        for v in getattr(cls, attr) or ():
+            if getattr(v, "causality", None) in ("input", "output"):
+                kinds.setdefault(v.name, set()).add(v.causality)
+    complete = getattr(cls, "variables", None) is getattr(Component, "variables") or len(variants) > 1
+    return {p: "/".join(sorted(k)) for p, k in kinds.items()}, complete
+
+
 @dataclass
 class ComponentSpec:
     name: str
@@ -146,9 +162,9 @@ class Scenario:
                 f"({', '.join(c.name for c in self.components[:8])}{', ...' if len(self.components) > 8 else ''}), "
                 f"{len(self.connections)} connections, step {self.settings.step_s:g} s, stop {stop}>")
 
-    def _repr_html_(self) -> str:
-        from ..report.html import scenario_html
-        return scenario_html(self)
+    def _repr_html_(self) -> str | None:
+        from .registry import html_view
+        return html_view("scenario", self)
 
     # ----------------------------------------------------------- inspect / change in Python
     def component(self, name: str) -> ComponentSpec:
@@ -205,8 +221,7 @@ class Scenario:
                     isinstance(k, str) and isinstance(v, str) for k, v in mapping.items())):
                 raise ScenarioError(f"{where}: mapping must be a dict of FMU variable name -> port name (strings)")
             if replaces is not None:
-                from ..components import get_component_class
-                get_component_class(replaces, f"{where}: replaces")
+                component_class(replaces, f"{where}: replaces")
         elif fmu is not None or mapping is not None or replaces is not None:
             raise ScenarioError(f"{where}: fmu=, mapping= and replaces= are only for type='fmu'")
         pf = None
@@ -224,29 +239,15 @@ class Scenario:
     def ports(self, component: str) -> dict[str, str] | None:
         """``{port: "input" | "output" | "input/output"}`` of a component as declared by its type (every
         variant, e.g. a vehicle's force and speed modes) or its FMU's model description; None when it
-        cannot be known before the component is built (a plugin type, an FMU without fmpy)."""
+        cannot be known before the component is built (an FMU without fmpy)."""
+        return self._port_table(component)[0]
+
+    def _port_table(self, component: str) -> tuple[dict[str, str] | None, bool]:
         spec = self.component(component)
-        kinds: dict[str, set] = {}
         if spec.type == "fmu":
-            try:
-                from ..fmu.adapter import load_model_description
-                md = load_model_description(spec.fmu)
-            except Exception:  # noqa: BLE001 - unknown now; the FMU's own error comes when it is built
-                return None
-            for v in md.modelVariables:
-                if v.causality in ("input", "output"):
-                    kinds.setdefault(spec.mapping.get(v.name, v.name), set()).add(v.causality)
-        else:
-            from ..components import REGISTRY, get_component_class
-            if spec.type not in REGISTRY:
-                return None
-            cls = get_component_class(spec.type, f"component '{component}'")
-            for attr in dir(cls):
-                if attr.startswith("VARIABLES"):
-                    for v in getattr(cls, attr) or ():
-                        if getattr(v, "causality", None) in ("input", "output"):
-                            kinds.setdefault(v.name, set()).add(v.causality)
-        return {p: "/".join(sorted(k)) for p, k in kinds.items()}
+            ports = fmu_ports(spec)
+            return ports, ports is not None
+        return declared_ports(component_class(spec.type, f"component '{component}'"))
 
     def _end_kind(self, end: str, call: str) -> str:
         """'input', 'output', 'input/output' or 'unknown' of ``component.port``; errors for a bad end."""
@@ -256,9 +257,9 @@ class Scenario:
         if comp not in self.component_names:
             raise ScenarioError(f"scenario '{self.name}': {call}: unknown component '{comp}'"
                                 f"{_hint(comp, self.component_names)}")
-        ports = self.ports(comp)
-        if ports is None:
-            return "unknown"
+        ports, complete = self._port_table(comp)
+        if ports is None or (port not in ports and not complete):
+            return "unknown"                     # a type whose ports are known only when it is built
         if port not in ports:
             raise ScenarioError(f"scenario '{self.name}': {call}: component '{comp}' has no port '{port}'"
                                 f"{_hint(port, ports)}")
