@@ -373,31 +373,41 @@ def _read_param_toml(path: Path) -> dict:
         raise ScenarioError(f"{path}: malformed TOML: {exc}") from exc
 
 
+def read_params_table(path: str | Path) -> dict[str, Any]:
+    """The ``[params]`` table of a parameter file, checked (a copy: the caller may change it)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(f"{path}: parameter file not found")
+    doc = _read_param_toml(path)
+    extra = set(doc) - {"meta", "params"}
+    if extra:
+        k = sorted(extra)[0]
+        raise ScenarioError(f"{path}: unknown table '{k}'{_suggest(k, ['meta', 'params'])}")
+    if "params" not in doc:
+        raise ScenarioError(f"{path}: missing table [params]")
+    if not isinstance(doc["params"], dict):
+        raise ScenarioError(f"{path}: [params] must be a table of name = value, got {doc['params']!r}")
+    return dict(doc["params"])
+
+
 def load_params(cls: type, path: str | Path | None, overrides: Mapping[str, Any] | None = None,
-                sources: Mapping[str, str] | None = None) -> Any:
+                sources: Mapping[str, str] | None = None, table: Mapping[str, Any] | None = None) -> Any:
     """Load ``cls`` from a TOML parameter file (``[params]`` table) plus overrides.
 
     ``sources`` names where each override came from (default: "override"), so an error in a value given
-    by ``--set`` blames that option, not the parameter file."""
+    by ``--set`` blames that option, not the parameter file.  ``table``: the file's ``[params]`` table
+    already read (a study's captured scenario, :mod:`shevsim.studies.bundle`, whose ``*_file`` values are
+    absolute): the file is then not opened, ``path`` only names it in messages."""
     values: dict[str, Any] = {}
     base_dir = None
     where = "<overrides>"
     if path is not None:
         path = Path(path)
-        if not path.is_file():
-            raise ScenarioError(f"{path}: parameter file not found")
-        doc = _read_param_toml(path)
-        extra = set(doc) - {"meta", "params"}
-        if extra:
-            k = sorted(extra)[0]
-            raise ScenarioError(f"{path}: unknown table '{k}'{_suggest(k, ['meta', 'params'])}")
-        if "params" not in doc:
-            raise ScenarioError(f"{path}: missing table [params]")
-        if not isinstance(doc["params"], dict):
-            raise ScenarioError(f"{path}: [params] must be a table of name = value, got {doc['params']!r}")
-        values.update(doc["params"])
+        values.update(read_params_table(path) if table is None else table)
         base_dir = path.parent
         where = str(path)
+    elif table is not None:
+        values.update(table)
     src: dict[str, str] = {}
     if overrides:
         values.update(overrides)

@@ -133,6 +133,9 @@ class ComponentSpec:
     #: where an override came from when it was not the scenario file (``--set 'x.y=1'``,
     #: ``overrides['x.y']``): errors name that instead of the parameter file
     origins: dict[str, str] = field(default_factory=dict)
+    #: the parameter file's ``[params]`` table captured with its ``*_file`` paths absolute (a study's
+    #: bundle, :mod:`shevsim.studies.bundle`): when set, ``params_file`` is named in messages but not read
+    params_table: dict[str, Any] | None = None
 
 
 @dataclass
@@ -780,7 +783,7 @@ def instantiate(spec: ComponentSpec, scenario: Scenario):
             if "seed" in fields and "seed" not in over:
                 over["seed"] = component_seed(scenario.seed, spec.name)
             try:
-                params = load_params(cls.Params, spec.params_file, over)
+                params = load_params(cls.Params, spec.params_file, over, table=spec.params_table)
             except ScenarioError as exc:
                 _blame_override(cls, spec, over, exc)
                 raise ScenarioError(f"{where}: {exc}") from None
@@ -813,7 +816,7 @@ def _blame_override(cls, spec: ComponentSpec, over: dict, exc: ScenarioError) ->
         if key not in over:
             continue
         try:
-            load_params(cls.Params, spec.params_file, {**base, key: over[key]})
+            load_params(cls.Params, spec.params_file, {**base, key: over[key]}, table=spec.params_table)
         except ScenarioError as e2:
             msg = str(e2)
             if spec.params_file is not None:

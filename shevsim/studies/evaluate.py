@@ -4,13 +4,17 @@ An *evaluation item* is a small, picklable object with three methods:
 
 ``key() -> str``
     A deterministic SHA-256 hex digest of everything that decides the result: for a scenario
-    evaluation the scenario file text, the contents of every parameter file it resolves (and of the
-    data files those name or sit beside, e.g. map CSVs and the cycle CSV), the overrides, the stop
+    evaluation the scenario as captured on the client (:mod:`.bundle`: its settings, components,
+    parameter tables, overrides and connections, with every referenced file - parameter sets, maps,
+    cycles, cell tables, FMUs, overlays - by the SHA-256 of its bytes, never by its path), the stop
     time, the shevsim version and a hash of the shevsim package sources (:func:`code_version`).
     Change any of them and the cache (``cache.py``) no longer matches, so a stale result is never
-    reused.
+    reused; move the files to another machine and the key stays the same.
 ``inputs() -> dict``
     A JSON-serialisable description stored with the cached result.
+``payload() -> (run, blobs)`` (scenario evaluations)
+    What a worker runs (:class:`ScenarioRun`: the captured scenario, files as tokens) and the files'
+    bytes by hash; the parallel runner ships the bytes once per worker (``parallel.py``).
 ``run() -> dict``
     Perform the evaluation and return a flat ``{name: float | str}`` dict of outputs. Outputs must
     depend on the inputs only (no wall time in them), so a parallel run equals a serial one.
@@ -36,7 +40,6 @@ import json
 import math
 import os
 import time
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -47,7 +50,6 @@ THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OMP_NUM_THRE
               "NUMEXPR_NUM_THREADS": "1", "VECLIB_MAXIMUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
 
 _PKG_ROOT = Path(__file__).resolve().parents[1]          # .../shevsim
-_MAX_HASH_BYTES = 64 * 1024 * 1024
 
 
 def limit_threads() -> None:
@@ -61,7 +63,8 @@ def code_version() -> str:
     """SHA-256 of the shevsim package's Python sources (sorted relative paths + contents)."""
     h = hashlib.sha256()
     for p in sorted(_PKG_ROOT.rglob("*.py")):
-        if "__pycache__" in p.parts:
+        rel = p.relative_to(_PKG_ROOT).parts
+        if "__pycache__" in rel or rel[0] == "_data":      # the wheel's data folder is not code
             continue
         h.update(str(p.relative_to(_PKG_ROOT)).encode())
         h.update(b"\0")
@@ -80,100 +83,6 @@ def _canonical(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=True, default=str)
 
 
-def _hash_file(h, p: Path) -> None:
-    h.update(str(p.name).encode())
-    h.update(b"\0")
-    try:
-        if p.stat().st_size <= _MAX_HASH_BYTES:
-            h.update(p.read_bytes())
-        else:  # huge file: size and mtime stand in for the contents
-            st = p.stat()
-            h.update(f"{st.st_size}:{st.st_mtime_ns}".encode())
-    except OSError as exc:
-        h.update(f"unreadable:{exc}".encode())
-    h.update(b"\0")
-
-
-def _strings(obj) -> list[str]:
-    if isinstance(obj, str):
-        return [obj]
-    if isinstance(obj, dict):
-        return [s for v in obj.values() for s in _strings(v)]
-    if isinstance(obj, list):
-        return [s for v in obj for s in _strings(v)]
-    return []
-
-
-def _param_file_deps(pfile: Path) -> list[Path]:
-    """A parameter file, the files beside it (maps) and the files its string values name (cycle CSV...)."""
-    deps = {pfile.resolve()}
-    for sib in pfile.parent.iterdir():
-        if sib.is_file() and not sib.name.startswith(".") and sib.suffix.lower() in {".toml", ".csv", ".json", ".txt"}:
-            deps.add(sib.resolve())
-    try:
-        doc = tomllib.loads(pfile.read_text())
-    except (OSError, tomllib.TOMLDecodeError):
-        doc = {}
-    from ..core.scenario import PROJECT_ROOT
-    for s in _strings(doc):
-        if len(s) > 300 or "\n" in s or not any(c in s for c in "./"):
-            continue
-        for base in (pfile.parent, PROJECT_ROOT):
-            cand = (base / s)
-            try:
-                if cand.is_file():
-                    deps.add(cand.resolve())
-                    break
-            except OSError:
-                pass
-    return sorted(deps)
-
-
-@functools.lru_cache(maxsize=64)
-def _scenario_fingerprint_cached(path: str, text: str, mtimes: tuple) -> str:
-    from ..core.scenario import load_scenario
-    h = hashlib.sha256()
-    h.update(text.encode())
-    sc = load_scenario(Path(path), text=text)
-    files: set[Path] = set()
-    for spec in sc.components:
-        if spec.params_file is not None:
-            files.update(_param_file_deps(Path(spec.params_file)))
-        if spec.fmu is not None and Path(spec.fmu).is_file():
-            files.add(Path(spec.fmu).resolve())
-    for f in sorted(files):
-        _hash_file(h, f)
-    return h.hexdigest()
-
-
-def _dir_mtimes(path: Path, text: str) -> tuple:
-    """Modification times of the component parameter folders (invalidate the fingerprint memo)."""
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError:
-        return ()
-    from ..core.scenario import resolve_path
-    out = []
-    for cd in (doc.get("components") or {}).values():
-        if isinstance(cd, dict) and isinstance(cd.get("params"), str):
-            d = resolve_path(cd["params"], path).parent
-            try:
-                out.append((str(d), d.stat().st_mtime_ns, max((f.stat().st_mtime_ns for f in d.iterdir()), default=0)))
-            except OSError:
-                out.append((str(d), 0, 0))
-    return tuple(out)
-
-
-def scenario_fingerprint(path: str | Path, text: str | None = None) -> str:
-    """SHA-256 of a scenario's text and of the parameter/data files it resolves.
-
-    ``text`` defaults to the file's contents. Memoised per (path, text, parameter-folder mtimes).
-    Raises :class:`~shevsim.core.errors.ScenarioError` for a malformed scenario.
-    """
-    p = Path(path).resolve()
-    if text is None:
-        text = p.read_text()
-    return _scenario_fingerprint_cached(str(p), text, _dir_mtimes(p, text))
 
 
 def _freeze(v):
@@ -188,78 +97,40 @@ def _thaw(v):
     return [_thaw(x) for x in v] if isinstance(v, tuple) else v
 
 
+_BUNDLES: dict[tuple, Any] = {}
+
+
+def _bundle_for(path: str, text: str):
+    """The scenario captured once per (path, text) while none of the files it read changed (bundle.capture)."""
+    from .bundle import capture
+    b = _BUNDLES.get((path, text))
+    if b is None or b.changed():
+        b = capture(path, text=text)
+        if len(_BUNDLES) > 64:
+            _BUNDLES.clear()
+        _BUNDLES[(path, text)] = b
+    return b
+
+
 @dataclass(frozen=True)
-class Evaluation:
-    """One scenario run with parameter overrides.
+class ScenarioRun:
+    """What a worker runs: a captured scenario (:mod:`.bundle`; files as tokens), its final signals and the
+    engine.  ``run(paths)`` takes ``{token: local file}`` (:func:`.bundle.materialize`)."""
 
-    Parameters
-    ----------
-    scenario : str
-        Path of the scenario TOML file.
-    overrides : tuple of (str, value)
-        ``("component.param", value)`` pairs, sorted (use :meth:`make` to build from a dict).
-    stop_s : float or None
-        Override of the scenario's stop time (s); None keeps the scenario's.
-    final_signals : tuple of str
-        Signals (``component.port``) whose final value is returned as ``final:component.port``.
-    text : str
-        The scenario file's text, read once by :meth:`make`: the key hashes it and the run parses
-        it, so editing the file during a study cannot make a cached result disagree with its key.
-    engine : {'auto', 'python', 'fast'}
-        Simulation engine (:func:`shevsim.run.simulate`): ``'auto'`` (default) runs the compiled
-        whole-vehicle path (:mod:`shevsim.fast`) whenever the scenario is eligible - it gives the master's
-        result bit for bit, so the engine is not part of the key.
-    """
-
-    scenario: str
-    overrides: tuple = ()
-    stop_s: float | None = None
+    scenario: Any
     final_signals: tuple = ()
-    text: str = field(default="", repr=False, compare=False)   # scenario text captured by make()
-    engine: str = field(default="auto", compare=False)
+    engine: str = "auto"
 
-    @classmethod
-    def make(cls, scenario: str | Path, overrides: dict | None = None, stop_s: float | None = None,
-             final_signals=(), engine: str = "auto") -> "Evaluation":
-        ov = tuple(sorted((str(k), _freeze(v)) for k, v in (overrides or {}).items()))
-        for k, _ in ov:
-            if "." not in k:
-                raise ValueError(f"override '{k}': expected 'component.param'")
-        path = Path(scenario).resolve()
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            from ..core.errors import ScenarioError
-            raise ScenarioError(f"{scenario}: scenario file not readable: {exc}") from exc
-        if engine not in ("auto", "python", "fast"):
-            raise ValueError(f"engine must be 'auto', 'python' or 'fast', got {engine!r}")
-        return cls(str(path), ov, None if stop_s is None else float(stop_s), tuple(final_signals), text, engine)
+    def tokens(self) -> list[str]:
+        from .bundle import tokens_of
+        return tokens_of(self.scenario)
 
-    def overrides_dict(self) -> dict:
-        return {k: _thaw(v) for k, v in self.overrides}
-
-    def sets(self) -> list[str]:
-        """The overrides as ``load_scenario`` ``component.param=value`` strings (values in TOML)."""
-        return [f"{k}={toml_value(_thaw(v))}" for k, v in self.overrides]
-
-    def inputs(self) -> dict:
-        return {"kind": "scenario", "scenario": self.scenario, "overrides": self.overrides_dict(),
-                "stop_s": self.stop_s, "final_signals": list(self.final_signals)}
-
-    def key(self) -> str:
-        payload = {"inputs": {**self.inputs(), "scenario": Path(self.scenario).name},
-                   "scenario_sha256": scenario_fingerprint(self.scenario, self.text or None),
-                   "shevsim_version": shevsim_version(), "code_sha256": code_version()}
-        return hashlib.sha256(_canonical(payload).encode()).hexdigest()
-
-    def run(self) -> dict:
+    def run(self, paths: dict) -> dict:
         limit_threads()
-        from ..core.scenario import load_scenario
         from ..run import compute_run_metrics, simulate
+        from .bundle import localize
         try:
-            sc = load_scenario(self.scenario, self.sets(), text=self.text or None)
-            if self.stop_s is not None:
-                sc.stop_s = self.stop_s
+            sc = localize(self.scenario, paths)
             res = simulate(sc, progress=False, engine=self.engine)
             out: dict[str, Any] = {"termination": str(res.termination)}
             for k, v in compute_run_metrics(res, sc).items():
@@ -272,6 +143,127 @@ class Evaluation:
             return out
         except Exception as exc:  # noqa: BLE001 - a failing point is a result (infeasible), not a crash
             return {"error": f"{type(exc).__name__}: {exc}"}
+
+
+@dataclass(frozen=True)
+class FailedRun:
+    """An evaluation whose overrides do not apply to the scenario: its result is this error."""
+
+    error: str
+
+    def tokens(self) -> list[str]:
+        return []
+
+    def run(self, paths: dict) -> dict:
+        return {"error": self.error}
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One scenario run with parameter overrides.
+
+    Parameters
+    ----------
+    scenario : str
+        Path of the scenario TOML file (on the client; a worker never opens it).
+    overrides : tuple of (str, value)
+        ``("component.param", value)`` pairs, sorted (use :meth:`make` to build from a dict).
+    stop_s : float or None
+        Override of the scenario's stop time (s); None keeps the scenario's.
+    final_signals : tuple of str
+        Signals (``component.port``) whose final value is returned as ``final:component.port``.
+    text : str
+        The scenario file's text, read once by :meth:`make`.
+    engine : {'auto', 'python', 'fast'}
+        Simulation engine (:func:`shevsim.run.simulate`): ``'auto'`` (default) runs the compiled
+        whole-vehicle path (:mod:`shevsim.fast`) whenever the scenario is eligible - it gives the master's
+        result bit for bit, so the engine is not part of the key.
+    bundle : ScenarioBundle
+        The scenario captured with every file it references (:mod:`.bundle`), once per study: the key
+        hashes it and the workers run from it, so editing or removing the user's files during a study
+        cannot make a result disagree with its key.
+    """
+
+    scenario: str
+    overrides: tuple = ()
+    stop_s: float | None = None
+    final_signals: tuple = ()
+    text: str = field(default="", repr=False, compare=False)   # scenario text captured by make()
+    engine: str = field(default="auto", compare=False)
+    bundle: Any = field(default=None, repr=False, compare=False)
+
+    @classmethod
+    def make(cls, scenario: str | Path, overrides: dict | None = None, stop_s: float | None = None,
+             final_signals=(), engine: str = "auto", bundle=None) -> "Evaluation":
+        """An evaluation of ``scenario`` (captured now, or ``bundle``: a :class:`.bundle.ScenarioBundle`
+        captured once for a whole study)."""
+        ov = tuple(sorted((str(k), _freeze(v)) for k, v in (overrides or {}).items()))
+        for k, _ in ov:
+            if "." not in k:
+                raise ValueError(f"override '{k}': expected 'component.param'")
+        if engine not in ("auto", "python", "fast"):
+            raise ValueError(f"engine must be 'auto', 'python' or 'fast', got {engine!r}")
+        if bundle is None:
+            path = Path(scenario).resolve()
+            try:
+                text = path.read_text(encoding="utf-8-sig")
+            except (OSError, UnicodeDecodeError) as exc:
+                from ..core.errors import ScenarioError
+                raise ScenarioError(f"{scenario}: scenario file not readable: {exc}") from exc
+            bundle = _bundle_for(str(path), text)
+        else:
+            path, text = Path(bundle.source), bundle.scenario.text
+        return cls(str(path), ov, None if stop_s is None else float(stop_s), tuple(final_signals), text, engine,
+                   bundle)
+
+    def overrides_dict(self) -> dict:
+        return {k: _thaw(v) for k, v in self.overrides}
+
+    def sets(self) -> list[str]:
+        """The overrides as ``load_scenario`` ``component.param=value`` strings (values in TOML)."""
+        return [f"{k}={toml_value(_thaw(v))}" for k, v in self.overrides]
+
+    def inputs(self) -> dict:
+        return {"kind": "scenario", "scenario": self.scenario, "overrides": self.overrides_dict(),
+                "stop_s": self.stop_s, "final_signals": list(self.final_signals)}
+
+    def payload(self) -> tuple[Any, dict]:
+        """``(run, blobs)``: what a worker runs (:class:`ScenarioRun`, or :class:`FailedRun` when the
+        overrides do not apply) and the files it needs, ``{sha256: bytes}``.  Computed once per item."""
+        got = self.__dict__.get("_payload")
+        if got is None:
+            from ..core.errors import ShevsimError
+            bundle = self.bundle if self.bundle is not None else _bundle_for(self.scenario, self.text)
+            try:
+                sc, blobs = bundle.with_overrides(self.overrides_dict(), self.stop_s)
+                run = ScenarioRun(sc, tuple(self.final_signals), self.engine)
+                desc = {"scenario": _describe(sc), "final_signals": list(self.final_signals)}
+            except (ShevsimError, ValueError, TypeError) as exc:
+                run, blobs = FailedRun(f"{type(exc).__name__}: {exc}"), {}
+                desc = {"scenario": _describe(bundle.scenario), "overrides": self.overrides_dict(),
+                        "stop_s": self.stop_s, "final_signals": list(self.final_signals), "failed": run.error}
+            payload = {**desc, "shevsim_version": shevsim_version(), "code_sha256": code_version()}
+            got = (run, blobs, hashlib.sha256(_canonical(payload).encode()).hexdigest())
+            object.__setattr__(self, "_payload", got)
+        return got[0], got[1]
+
+    def key(self) -> str:
+        self.payload()
+        return self.__dict__["_payload"][2]
+
+    def __getstate__(self):
+        return {k: v for k, v in self.__dict__.items() if k != "_payload"}
+
+    def run(self) -> dict:
+        """Run here (serially): the files from the captured bundle, through this process's store."""
+        from .bundle import materialize
+        run, blobs = self.payload()
+        return run.run(materialize(run.tokens(), blobs))
+
+
+def _describe(sc) -> dict:
+    from .bundle import describe
+    return describe(sc)
 
 
 def warm_up_fast_path() -> str:
@@ -294,15 +286,36 @@ def warm_up_fast_path() -> str:
         return f"{type(exc).__name__}: {exc}"
 
 
-def run_item(item) -> tuple[dict, float, str]:
+class WorkerVersionError(Exception):
+    """A worker runs another shevsim version than the client (raised in the worker, refused by the client)."""
+
+
+def worker_identity() -> dict:
+    """``{"shevsim": version, "code_sha256": sources hash, "python": version}`` of this process."""
+    import platform
+    return {"shevsim": shevsim_version(), "code_sha256": code_version(), "python": platform.python_version()}
+
+
+def run_item(item, blobs: dict | None = None, expect_version: str | None = None) -> tuple[dict, float, str]:
     """Worker entry point: run one evaluation item; return (outputs, wall time in s, worker code version).
 
-    The code version lets the client refuse to cache a result computed by a worker whose shevsim
-    sources differ from the ones the key was made with (e.g. files edited while a study runs).
+    ``item`` is a :class:`ScenarioRun`/:class:`FailedRun` (its files in ``blobs``, ``{sha256: bytes}``,
+    written once into this worker's store) or any object with ``run()`` (e.g. the synthetic problem's).
+    ``expect_version``: the client's shevsim version; a worker with another one raises
+    :class:`WorkerVersionError` naming both.  The code version returned lets the client refuse to cache a
+    result computed by a worker whose shevsim sources differ from the ones the key was made with (e.g.
+    files edited while a study runs).
     """
+    if expect_version is not None and expect_version != shevsim_version():
+        raise WorkerVersionError(f"this worker runs shevsim {shevsim_version()}, the client shevsim "
+                                 f"{expect_version}")
     limit_threads()
     t0 = time.perf_counter()
-    out = item.run()
+    if isinstance(item, (ScenarioRun, FailedRun)):
+        from .bundle import materialize
+        out = item.run(materialize(item.tokens(), blobs or {}))
+    else:
+        out = item.run()
     return out, time.perf_counter() - t0, code_version()
 
 

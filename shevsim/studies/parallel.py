@@ -25,12 +25,14 @@ cached - with a warning either way - so the cache never holds a result under a k
 """
 from __future__ import annotations
 
+import hashlib
 import logging
 import time
 from dataclasses import dataclass, field
 
 from ..core.errors import ShevsimError
-from .evaluate import THREAD_ENV, code_version, limit_threads, run_item, warm_up_fast_path
+from .evaluate import (THREAD_ENV, WorkerVersionError, code_version, limit_threads, run_item, shevsim_version,
+                       warm_up_fast_path, worker_identity)
 
 log = logging.getLogger(__name__)
 
@@ -113,6 +115,7 @@ class StudyRunner:
         self.stats = RunnerStats()
         self._client = None
         self._cluster = None
+        self._files: dict = {}          # bundle key -> future of {sha256: bytes} (the files of an evaluation)
 
     # -- lifecycle ---------------------------------------------------------------------------------
     @property
@@ -145,6 +148,11 @@ class StudyRunner:
                                              dashboard_address=":0", env=dict(THREAD_ENV),
                                              silence_logs=logging.WARNING)
             self._client = Client(self._cluster)
+        try:
+            self.check_workers()
+        except BaseException:
+            self.close()
+            raise
         nthreads = self._client.nthreads()
         self.stats.slots = max(1, sum(nthreads.values()))
         # every worker loads the compiled whole-vehicle loop now (start-up), not in its first evaluation
@@ -154,7 +162,30 @@ class StudyRunner:
             pass
         return self
 
+    def check_workers(self) -> None:
+        """Refuse, before any evaluation, a cluster whose workers run another shevsim than this client (version
+        or package sources), or none at all: :class:`~shevsim.core.errors.ShevsimError` naming both."""
+        where = f"--scheduler {self.scheduler}" if self.scheduler else "Dask cluster"
+        mine = worker_identity()
+        try:
+            theirs = self._client.run(worker_identity)
+        except (ImportError, AttributeError) as exc:     # the worker cannot even unpickle a shevsim function
+            raise ShevsimError(f"{where}: a worker cannot run shevsim ({type(exc).__name__}: {exc}); install "
+                               f"the client's version on every worker: pip install 'shevsim[studies]=="
+                               f"{mine['shevsim']}'") from None
+        for addr, info in sorted(theirs.items()):
+            if (info.get("shevsim"), info.get("code_sha256")) != (mine["shevsim"], mine["code_sha256"]):
+                same = info.get("shevsim") == mine["shevsim"]
+                raise ShevsimError(
+                    f"{where}: worker {addr} runs shevsim {info.get('shevsim')} (sources "
+                    f"{str(info.get('code_sha256'))[:12]}), this client shevsim {mine['shevsim']} (sources "
+                    f"{mine['code_sha256'][:12]}): " + ("the same version with other package sources; " if same
+                                                        else "") +
+                    f"install the client's shevsim on every worker (pip install 'shevsim[studies]=="
+                    f"{mine['shevsim']}') or run the client with the workers' version")
+
     def close(self) -> None:
+        self._files.clear()
         if self._client is not None:
             self._client.close()
             self._client = None
@@ -234,7 +265,8 @@ class StudyRunner:
                 for k, it in pending:
                     if budget is not None and self.stats.new >= self.max_new:
                         break
-                    out, wall, _ = run_item(it)
+                    payload, blobs = _payload(it)
+                    out, wall, _ = run_item(payload, blobs)
                     self._finish(k, it, out, wall, results, bar)
             else:
                 self._run_dask(pending, results, bar, n_cached)
@@ -247,18 +279,40 @@ class StudyRunner:
             raise StudyInterrupted(f"stopped after the budget of {self.max_new} new evaluations; {len(missing)} "
                                    f"left in '{desc}' - rerun to resume from the cache")
 
+    def _files_future(self, client, blobs: dict):
+        """The future of ``{sha256: bytes}`` for one evaluation's files: one task per distinct set of files,
+        keyed by their hashes and holding the bytes itself, so each worker fetches it once (Dask keeps the
+        replica for the next evaluation) and the scheduler can recompute it if every holder is lost."""
+        if not blobs:
+            return None
+        key = hashlib.sha256("".join(sorted(blobs)).encode()).hexdigest()
+        fut = self._files.get(key)
+        if fut is None:
+            fut = client.submit(_files, blobs, key=f"shevsim-files-{key}", pure=False)
+            self._files[key] = fut
+        return fut
+
     def _run_dask(self, pending, results, bar, n_cached) -> None:
         from distributed import as_completed
         self.start()
         client = self._client
         futures = {}
+        version = shevsim_version()
         for k, it in pending:
-            fut = client.submit(run_item, it, pure=False, key=f"shevsim-eval-{k[:24]}-{time.monotonic_ns()}")
+            payload, blobs = _payload(it)
+            files = self._files_future(client, blobs)
+            fut = client.submit(run_item, payload, files, version, pure=False,
+                                key=f"shevsim-eval-{k[:24]}-{time.monotonic_ns()}")
             futures[fut] = (k, it)
         try:
             for fut in as_completed(list(futures)):
                 k, it = futures[fut]
-                out, wall, wcode = fut.result()
+                try:
+                    out, wall, wcode = fut.result()
+                except WorkerVersionError as exc:
+                    raise ShevsimError(f"--scheduler {self.scheduler or ''}: a worker that joined the study was "
+                                       f"refused: {exc}; install the client's shevsim on every worker "
+                                       f"(pip install 'shevsim[studies]=={version}')") from None
                 self._finish(k, it, out, wall, results, bar, wcode)
                 if self.max_new is not None and self.stats.new >= self.max_new:
                     break
@@ -266,3 +320,15 @@ class StudyRunner:
             left = [f for f in futures if not f.done()]
             if left:
                 client.cancel(left)
+
+
+def _payload(item) -> tuple:
+    """``(what a worker runs, {sha256: bytes} of its files)``: a scenario evaluation's captured run, or the
+    item itself (items without files, e.g. the synthetic problem's)."""
+    pay = getattr(item, "payload", None)
+    return pay() if pay is not None else (item, {})
+
+
+def _files(blobs: dict) -> dict:
+    """The task holding an evaluation's files (its result is its argument)."""
+    return blobs

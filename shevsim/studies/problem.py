@@ -91,11 +91,21 @@ class ScenarioProblem:
     stop_s: float | None = None
     extra_overrides: tuple = ()          # (("comp.param", value), ...) applied to every run
 
+    def bundle(self):
+        """The scenario captured once with every file it references (:mod:`.bundle`): every item of the
+        study runs from it, on any worker, even after the user's folder is gone."""
+        b = self.__dict__.get("_bundle")
+        if b is None:
+            from .evaluate import Evaluation as _E
+            b = _E.make(self.scenario).bundle
+            object.__setattr__(self, "_bundle", b)
+        return b
+
     def item(self, edges_w, rates_wps=None) -> Evaluation:
         ov = dict(self.extra_overrides)
         if rates_wps is not None:
             ov.update(map_overrides(self.supervisor, edges_w, rates_wps))
-        return Evaluation.make(self.scenario, ov, self.stop_s)
+        return Evaluation.make(self.scenario, ov, self.stop_s, bundle=self.bundle())
 
     def describe(self) -> str:
         return f"scenario {Path(self.scenario).name}" + (f" (stop_s={self.stop_s})" if self.stop_s else "")
