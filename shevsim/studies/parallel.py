@@ -10,6 +10,15 @@
 * ``scheduler="tcp://host:8786"``: a ``distributed.Client`` on an existing cluster (the runner
   does not start or stop that cluster; it asks every worker to apply the single-thread settings).
 
+Before the first evaluation every worker is asked for its shevsim version and the hash of its package
+sources (:meth:`StudyRunner.check_workers`): a worker that differs from the client is refused with both
+named; a worker joining later with another version is refused at its first evaluation.
+
+Workers share no files with the client: a scenario evaluation is sent as its captured run
+(:mod:`.bundle`: values and file hashes) plus one Dask task per distinct set of files holding their bytes,
+keyed by their hashes - fetched once by each worker that needs it, kept there for the next evaluation, and
+recomputed by the scheduler (which holds the bytes in the task) should every worker holding it be lost.
+
 :meth:`StudyRunner.evaluate` takes a list of evaluation items (``evaluate.py``), drops duplicate
 keys, answers the cached ones from the SQLite cache, submits the rest as Dask futures, and, as each
 future completes (``distributed.as_completed``), writes its row to the cache (one committed row per
