@@ -52,3 +52,30 @@ def test_missing_fmu_file_names_the_build_command(tmp_path):
     from shevsim.core.scenario import build_master
     with pytest.raises(ScenarioError, match=r"field 'fmu': file .*nowhere.fmu' not found .*shevsim fmu export"):
         build_master(sc)
+
+
+def test_fmu_travels_with_the_study_bundle(battery_fmu, tmp_path):
+    """A study captures the user's FMU by content (issue 28): its evaluation runs, with the direct run's
+    metrics, after the user's scenario folder and FMU are gone."""
+    import shutil
+
+    from shevsim.run import compute_run_metrics
+    from shevsim.studies.evaluate import Evaluation
+    user = tmp_path / "user"
+    user.mkdir()
+    shutil.copy(battery_fmu, user / "mybattery.fmu")
+    text = (ROOT / "scenarios" / "hd_udds_fmu_battery.toml").read_text().replace('"fmus/battery.fmu"',
+                                                                                 '"mybattery.fmu"')
+    (user / "s.toml").write_text(text)
+    sc = load_scenario(user / "s.toml")
+    sc.stop_s = 30.0
+    ref = compute_run_metrics(simulate(sc), sc)
+    ev = Evaluation.make(user / "s.toml", stop_s=30.0)
+    run, blobs = ev.payload()
+    tok = [t for t in run.tokens() if t.endswith("/mybattery.fmu")]
+    assert len(tok) == 1 and blobs[tok[0].split(":", 1)[1].split("/")[0]] == battery_fmu.read_bytes()
+    shutil.rmtree(user)
+    out = ev.run()
+    assert "error" not in out, out
+    nums = {k: float(v) for k, v in ref.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    assert len(nums) > 20 and all(out[k] == v for k, v in nums.items())
