@@ -193,23 +193,30 @@ def _component_file_known(path) -> dict:
 
 
 def test_params_accepts_the_component_default_file():
-    """``--params components/engine_generator/default.toml``: the simulator's default engine is the nominal,
-    its transient soot term (10 mg/g, set in that file) included and held; the analyser effects stay
+    """``--params components/engine_generator/seed_app_a_transient.toml`` (a component file with the transient
+    soot term on; the bundled default.toml is the seed's quasi-static basis since issue 27): that engine is the
+    nominal, its transient soot term (set in that file) included and held; the analyser effects stay
     candidates; the map paths are resolved against the file's folder."""
+    import tomllib
+
     from shevsim.powertrain.engine import EG_DIR
-    m = get_model("engine", _component_file_known(EG_DIR / "default.toml"))
+    path = EG_DIR / "seed_app_a_transient.toml"
+    file_p = tomllib.loads(path.read_text())["params"]
+    t0, s0 = file_p["transient_soot_mg_per_g"], file_p["soot_scale_frac"]
+    assert t0 > 0.0
+    m = get_model("engine", _component_file_known(path))
     assert "transient_soot" not in m.effects
     assert set(m.effects) == {"analyzer_lag", "analyzer_offset"}
-    assert m.known["effects_in_nominal"]["transient_soot"]["transient_soot_mg_per_g"] == 10.0
-    assert m.params_for({}).transient_soot_mg_per_g == 10.0
-    assert m.params_for({}) == dataclasses.replace(EngineGeneratorParams(), soot_scale_frac=1.0)
-    assert m.defaults() == {"soot_scale_frac": 1.0}
-    # the calibration of a plant with the transient term on: soot_scale_frac found, nothing missing
-    df = plant_record(dict(NOMINAL, **EFFECTS["transient_soot"]), duration_s=600.0)
-    rep = run_workflow("engine", as_measured(df, "engine"), _component_file_known(EG_DIR / "default.toml"))
+    assert m.known["effects_in_nominal"]["transient_soot"]["transient_soot_mg_per_g"] == t0
+    assert m.params_for({}).transient_soot_mg_per_g == t0
+    assert m.params_for({}) == dataclasses.replace(EngineGeneratorParams(), soot_scale_frac=s0, transient_soot_mg_per_g=t0)
+    assert m.defaults() == {"soot_scale_frac": s0}
+    # the calibration of a plant with that transient term on: soot_scale_frac found, nothing missing
+    df = plant_record({"soot_scale_frac": 1.3 * s0, "transient_soot_mg_per_g": t0}, duration_s=600.0)
+    rep = run_workflow("engine", as_measured(df, "engine"), _component_file_known(path))
     assert rep["selected_effects"] == []
-    assert rep["final_parameters"]["soot_scale_frac"] == pytest.approx(1.3, rel=0.03)
-    assert rep["overlay"]["tables"]["engine_generator"]["transient_soot_mg_per_g"] == 10.0
+    assert rep["final_parameters"]["soot_scale_frac"] == pytest.approx(1.3 * s0, rel=0.03)
+    assert rep["overlay"]["tables"]["engine_generator"]["transient_soot_mg_per_g"] == t0
     assert "transient_soot" in rep["known_parameters"]["effects_in_nominal"]
     _check_report_replay(rep)
 
