@@ -31,7 +31,8 @@ from .core.errors import ShevsimError, SimulationError
 
 EXIT_OK, EXIT_STOPPED, EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 EXIT_CODES = {EXIT_OK: "ok", EXIT_STOPPED: "the run stopped early or is degraded (its results are saved)",
-              EXIT_BAD_INPUT: "bad input: scenario, parameters, options or output folder (nothing was run)",
+              EXIT_BAD_INPUT: "bad input: scenario, parameters, options or output folder (nothing was run); also "
+                              "an output the machine refuses (full disk, file-size limit, full stdout)",
               EXIT_INTERNAL: "internal error (a bug: please report it with the message)",
               EXIT_INTERRUPTED: "interrupted with Ctrl-C (what was simulated is saved)"}
 
@@ -91,6 +92,9 @@ def _cmd_run(a) -> int:
         for n in res.metrics.get("notes", []):
             print(f"  note: {n}")
     _say(a, f"results in {res.meta.get('out')}")
+    if res.meta.get("earlier_result_kept"):
+        print(f"shevsim: the earlier result in {res.meta['earlier_result_kept']} is kept as it was; this "
+              f"interrupted run's partial result is in {res.meta.get('out')}", file=sys.stderr)
     if not term.ok:
         where = ", ".join(x for x in (f"component {term.component}" if term.component else "",
                                       f"port {term.port}" if term.port else "",
@@ -184,14 +188,14 @@ def _cmd_calibrate(rest, quiet: bool) -> int:
 def _cmd_fmu(a) -> int:
     if a.fmu_cmd == "export-ssp":       # shevsim.fmu.ssp (issue 16)
         from .fmu.ssp import export_ssp
-        _say(a, f"wrote {export_ssp(a.scenario, a.output, stop_s=a.stop_s, sets=tuple(a.set or ()))}")
+        _say(a, f"wrote {export_ssp(a.scenario, a.output, stop_s=a.stop_s, sets=tuple(a.set or ()), force=a.force)}")
         return EXIT_OK
     if a.fmu_cmd == "import-ssp":
         from .fmu.ssp import import_ssp
         _say(a, f"wrote {import_ssp(a.ssp, a.output, step_s=a.step_s)}")
         return EXIT_OK
     from .fmu.export import export_component
-    out = export_component(a.type, a.params, a.output, fmi_version=a.fmi_version)
+    out = export_component(a.type, a.params, a.output, fmi_version=a.fmi_version, force=a.force)
     _say(a, f"wrote {out}")
     return EXIT_OK
 
@@ -263,11 +267,13 @@ def build_parser() -> argparse.ArgumentParser:
     fe.add_argument("--params", help="parameter file")
     fe.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     fe.add_argument("--fmi-version", default="2", choices=["2", "3"], help="FMI version (default 2)")
+    fe.add_argument("--force", action="store_true", help="replace the output file when it exists")
     fs = fsub.add_parser("export-ssp", parents=[q], help="export a scenario as an SSP package (FMUs + .ssd)")
     fs.add_argument("scenario", help="bundled scenario name or scenario TOML")
     fs.add_argument("-o", "--output", required=True, help="the .ssp file to write")
     fs.add_argument("--stop-s", type=float, help="stop time of the default experiment (default: the scenario's)")
     fs.add_argument("--set", action="append", metavar="COMP.PARAM=VALUE", help="parameter override")
+    fs.add_argument("--force", action="store_true", help="replace the output file when it exists")
     fi = fsub.add_parser("import-ssp", parents=[q], help="extract an SSP package into a folder with a scenario")
     fi.add_argument("ssp", help="the .ssp file")
     fi.add_argument("-o", "--output", required=True, help="folder to write the FMUs and the scenario TOML into")
@@ -283,9 +289,88 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _output_errors(exc: UnicodeEncodeError):
+    """Error handler of the output streams under a locale that cannot encode a character (an ASCII-only
+    locale): a surrogate-escaped byte of a path given on the command line is written back as that byte,
+    any other character as a backslash escape (``b\\xfas``) - never an error."""
+    bad = exc.object[exc.start:exc.end]
+    if all(0xDC80 <= ord(c) <= 0xDCFF for c in bad):
+        return bytes(ord(c) - 0xDC00 for c in bad), exc.end
+    return "".join(f"\\x{ord(c):02x}" if ord(c) < 0x100 else f"\\u{ord(c):04x}" if ord(c) < 0x10000
+                   else f"\\U{ord(c):08x}" for c in bad), exc.end
+
+
+def _robust_streams() -> None:
+    """Make stdout/stderr unable to fail on a character the locale cannot encode (see :func:`_output_errors`)."""
+    import codecs
+    try:
+        codecs.lookup_error("shevsim-output")
+    except LookupError:
+        codecs.register_error("shevsim-output", _output_errors)
+    for stream in (sys.stdout, sys.stderr):
+        enc = (getattr(stream, "encoding", None) or "").lower().replace("-", "").replace("_", "")
+        if stream is not None and enc not in ("utf8", "utf8sig") and hasattr(stream, "reconfigure"):
+            try:
+                stream.reconfigure(errors="shevsim-output")
+            except (ValueError, OSError):       # a closed or detached stream
+                pass
+
+
+class StdoutError(OSError):
+    """Standard output refused a write (full device, I/O error)."""
+
+
+class _GuardedStdout:
+    """sys.stdout while a command runs: an OSError from writing or flushing it becomes :class:`StdoutError`
+    (so a full stdout is told apart from a file shevsim writes)."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text):
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            raise StdoutError(exc.errno, exc.strerror) from None
+
+    def flush(self):
+        try:
+            return self._stream.flush()
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            raise StdoutError(exc.errno, exc.strerror) from None
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+def _silence_stdout() -> None:
+    """Point fd 1 at /dev/null so the interpreter's final flush does not fail again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 1)
+    except OSError:
+        pass
+
+
 def main(argv=None) -> int:
     """Entry point of ``shevsim``; returns the exit code (see :data:`EXIT_CODES`)."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    _robust_streams()
+    real = sys.stdout
+    if real is not None and not isinstance(real, _GuardedStdout):
+        sys.stdout = _GuardedStdout(real)
+    try:
+        return _main(argv)
+    finally:
+        if isinstance(sys.stdout, _GuardedStdout):
+            sys.stdout = real
+
+
+def _main(argv: list) -> int:
     ap = build_parser()
     quiet = False
     while argv and argv[0] in ("-q", "--quiet"):
@@ -293,18 +378,27 @@ def main(argv=None) -> int:
         argv = argv[1:]
     try:
         if argv and argv[0] == "calibrate":
-            return _cmd_calibrate(argv[1:], quiet)
+            rc = _cmd_calibrate(argv[1:], quiet)
+            if sys.stdout is not None:
+                sys.stdout.flush()
+            return rc
         if argv and argv[0] == "study":
             a, rest = ap.parse_known_args(argv)
             a.quiet = quiet or getattr(a, "quiet", False)
-            return _cmd_study(a, rest)
+            rc = _cmd_study(a, rest)
+            if sys.stdout is not None:
+                sys.stdout.flush()
+            return rc
         try:
             a = ap.parse_args(argv)
         except SystemExit as exc:          # argparse: --help/--version (0) or a usage error (2)
             return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
         a.quiet = quiet or getattr(a, "quiet", False)
-        return {"run": _cmd_run, "scenarios": _cmd_scenarios, "info": _cmd_info, "cycles": _cmd_cycles,
-                "fmu": _cmd_fmu, "report": _cmd_report}[a.cmd](a)
+        rc = {"run": _cmd_run, "scenarios": _cmd_scenarios, "info": _cmd_info, "cycles": _cmd_cycles,
+              "fmu": _cmd_fmu, "report": _cmd_report}[a.cmd](a)
+        if sys.stdout is not None:
+            sys.stdout.flush()          # a full or failing output stream is said here, not at exit
+        return rc
     except SimulationError as exc:      # a simulation that failed outside `run` (info, fmu export)
         print(f"shevsim: stopped: {exc}", file=sys.stderr)
         return EXIT_STOPPED
@@ -315,17 +409,34 @@ def main(argv=None) -> int:
         print("shevsim: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError:             # output piped into `head` & co.: stop quietly
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())   # the interpreter's final flush must not fail again
+        _silence_stdout()               # the interpreter's final flush must not fail again
         return EXIT_STOPPED
+    except OSError as exc:
+        import errno
+        if isinstance(exc, StdoutError):     # stdout on a full device, or failing: said on stderr
+            _silence_stdout()
+            from .core.errors import os_error_text
+            print(f"shevsim: error: cannot write to standard output: {os_error_text(exc)}; redirect the output "
+                  f"to a place that takes it (or use -q); any result folder was written before", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        if exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM):
+            from .core.errors import os_error_text
+            print(f"shevsim: error: cannot write '{exc.filename or '?'}': {os_error_text(exc)}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        return _internal(exc)
     except Exception as exc:  # noqa: BLE001 - an internal error: one clear message and its own exit code
-        import traceback
-        if os.environ.get("SHEVSIM_TRACEBACK"):
-            traceback.print_exc()
-        notes = "".join(f"\n  {n}" for n in getattr(exc, "__notes__", []))
-        print(f"shevsim: internal error: {type(exc).__name__}: {exc}{notes}\n  (set SHEVSIM_TRACEBACK=1 for the "
-              f"traceback; please report it)", file=sys.stderr)
-        return EXIT_INTERNAL
+        return _internal(exc)
+
+
+def _internal(exc: BaseException) -> int:
+    """Report an internal error (a bug) in one clear message; EXIT_INTERNAL."""
+    import traceback
+    if os.environ.get("SHEVSIM_TRACEBACK"):
+        traceback.print_exception(exc)
+    notes = "".join(f"\n  {n}" for n in getattr(exc, "__notes__", []))
+    print(f"shevsim: internal error: {type(exc).__name__}: {exc}{notes}\n  (set SHEVSIM_TRACEBACK=1 for the "
+          f"traceback; please report it)", file=sys.stderr)
+    return EXIT_INTERNAL
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -23,9 +23,8 @@ from typing import Any, Mapping
 import numpy as np
 
 from .core.errors import FastPathError, ScenarioError, ShevsimError, SimulationError
-from .core.params import check_options
-from .core.results import Result, Termination, check_out_dir, git_commit, save_result
-from .core.scenario import PROJECT_ROOT, Scenario, build_master, load_scenario, stop_time
+from .core.results import Result, Termination, beside_folder, check_out_dir, git_commit, holds_result, save_result
+from .core.scenario import PROJECT_ROOT, Scenario, build_master, check_metrics_options, load_scenario, stop_time
 
 log = logging.getLogger(__name__)
 
@@ -100,9 +99,14 @@ def check_run_size(n_steps: int, n_signals: int, record_every: int = 1, *, allow
 
 
 def check_faults_in_run(scenario: Scenario, t_stop: float) -> None:
-    """A fault that would act only at or after the end of the run is an error (it never acts)."""
+    """A fault before the start of the run, or one that would act only at or after its end (it never
+    acts), is an error."""
     h, t0 = scenario.settings.step_s, scenario.t0_s
     for i, f in enumerate(scenario.faults):
+        if f.at_s < t0 - 1e-9 * max(1.0, abs(t0)):
+            raise ScenarioError(f"{scenario.path or '<scenario>'}: [[faults]] #{i + 1} at_s = {f.at_s} s "
+                                f"({f.component}.{f.port}) is before the start of the run (t0_s = {t0:g} s); a "
+                                f"fault acts from a time within the run [{t0:g} s, {t_stop:g} s)")
         k = max(0, math.ceil((f.at_s - t0) / h - 1e-9 * max(1.0, abs(f.at_s) / h)))
         if t0 + k * h >= t_stop - 1e-9 * max(1.0, abs(t_stop)):
             raise ScenarioError(f"{scenario.path or '<scenario>'}: [[faults]] #{i + 1} at_s = {f.at_s} s "
@@ -388,7 +392,7 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
     if record is not None:
         sc.set("record.signals", list(record), "record=")
     check_trace_options(sc.metrics, str(sc.path or "<scenario>"))
-    check_options(sc.metrics, f"{sc.path or '<scenario>'}: [metrics]")   # also when changed by attribute
+    check_metrics_options(sc.metrics, f"{sc.path or '<scenario>'}: [metrics]")   # also when changed by attribute
     trace = trace_signals(sc)
     if trace and sc.record is not None and sc.metrics.get("trace_allow_miss") is not True:
         missing = [x for x in trace if x not in sc.record]
@@ -423,12 +427,24 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
     if save:
         res.meta["git_commit"] = git_commit()
         plot_fn = None
-        if plots:
+        interrupted = is_interrupted(res.termination)
+        if plots and not interrupted:          # an interrupted run is saved at once, without figures
             from .plotting import scenario_plots
             plot_fn = scenario_plots
+        if interrupted and holds_result(out_dir):
+            # a stopped run never replaces an earlier result: its partial result goes to a new folder beside
+            # it (NAME-interrupted-<UTC time>) and the earlier one stays as it was
+            res.meta["earlier_result_kept"] = str(out_dir)
+            out_dir = beside_folder(out_dir, "interrupted")
         save_result(res, out_dir, scenario_text=scenario_text, metrics=res.metrics, plots=plot_fn)
         res.meta["out"] = str(out_dir)
     return res
+
+
+def is_interrupted(term) -> bool:
+    """True for the termination of a run stopped by Ctrl-C / SIGINT / SIGTERM."""
+    term = Termination.coerce(term)
+    return term.status == "stopped" and term.reason.startswith("interrupted")
 
 
 def run_scenario(path: str | Path | None = None, out: str | Path | None = None, sets=(), progress: bool = False,

@@ -42,10 +42,12 @@ def load_params_toml(path) -> dict:
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: parameter file not found")
+    from ..core.errors import toml_loads
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8-sig"))
-    except tomllib.TOMLDecodeError as exc:
-        raise DataError(f"{path}: invalid TOML: {exc}") from exc
+        text = path.read_text(encoding="utf-8-sig")
+    except (UnicodeDecodeError, OSError) as exc:
+        raise DataError(f"{path}: cannot read as UTF-8 text: {exc}") from None
+    doc = toml_loads(text, str(path), DataError, "invalid TOML")
     out: dict = {"__base_dir__": str(path.resolve().parent)}
     tables: dict = {}
     for sec, body in doc.items():

@@ -377,7 +377,8 @@ class VehicleModel(CalibrationModel):
         doc = {}
         if overlay_file is not None:
             path = Path(overlay_file)
-            doc = tomllib.loads(path.read_text(encoding="utf-8-sig"))
+            from ..core.errors import toml_loads
+            doc = toml_loads(path.read_text(encoding="utf-8-sig"), str(path), DataError, "invalid TOML")
             doc.pop("meta", None)
             unknown = set(doc) - set(PARAM_FILES)
             if unknown:

@@ -68,3 +68,16 @@ def write_csv_atomic(path: str | Path, df, **to_csv_kwargs) -> Path:
     """Write a DataFrame as CSV to ``path`` atomically."""
     to_csv_kwargs.setdefault("index", False)
     return atomic_write(path, lambda tmp: df.to_csv(tmp, **to_csv_kwargs))
+
+
+def refuse_overwrite(path: str | Path, force: bool = False, option: str = "--force") -> Path:
+    """Check that ``path`` may be written: an existing file is refused unless ``force`` (raises
+    :class:`~shevsim.core.errors.ShevsimError` naming it); a folder is never replaced."""
+    from .errors import ShevsimError
+    path = Path(path)
+    if path.is_dir() and not path.is_symlink():
+        raise ShevsimError(f"'{path}' exists and is a folder: not replaced; choose another output file")
+    if (path.exists() or path.is_symlink()) and not force:
+        raise ShevsimError(f"'{path}' exists: not overwritten; give {option} to replace it, or choose another "
+                           f"output file")
+    return path

@@ -29,3 +29,41 @@ class FastPathError(SimulationError):
 
 class DataError(ShevsimError):
     """Input data (cycle, measurement) is malformed: message names the file and column/row."""
+
+
+class OutputError(ShevsimError):
+    """The environment refused a file shevsim writes (full disk, file-size limit, closed output stream):
+    the message names the file, the limit met and what to do; nothing half-written is left."""
+
+
+def os_error_text(exc: OSError) -> str:
+    """Plain words for an OSError met while writing (errno name, what it means, what to do)."""
+    import errno as _e
+    hints = {_e.ENOSPC: "the disk is full: free space or write elsewhere",
+             _e.EFBIG: "the file is larger than this process may write (file-size limit, `ulimit -f`, or the "
+                       "file system's maximum): raise the limit, record less (--record-every N, [record] "
+                       "signals) or write elsewhere",
+             _e.EDQUOT: "the disk quota is exhausted: free space or write elsewhere",
+             _e.EROFS: "the file system is read-only: write elsewhere",
+             _e.EACCES: "permission denied: write elsewhere",
+             _e.EPIPE: "the reader of the output went away"}
+    name = _e.errorcode.get(exc.errno or 0, "")
+    text = exc.strerror or str(exc)
+    hint = hints.get(exc.errno or 0)
+    return f"{text}{f' ({name})' if name else ''}{f'; {hint}' if hint else ''}"
+
+
+def toml_loads(text: str, where: str, error: type = ScenarioError, malformed: str = "malformed TOML") -> dict:
+    """``tomllib.loads(text)`` with every failure a plain ``error`` naming ``where``: malformed TOML, and
+    nesting deeper than the reader can follow (it recurses once per level of arrays or inline tables and
+    stops at Python's recursion limit) - what would otherwise be an internal RecursionError."""
+    import sys
+    import tomllib
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{where}: {malformed}: {exc}") from None
+    except RecursionError:
+        raise error(f"{where}: TOML nested too deeply: arrays or inline tables nested more than a few hundred "
+                    f"levels (the limit is Python's recursion limit, {sys.getrecursionlimit()}); a scenario or "
+                    f"parameter value needs at most a few levels: flatten it") from None

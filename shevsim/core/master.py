@@ -471,9 +471,13 @@ class Master:
 
     def result(self, termination: str = "completed") -> Result:
         nsig = len(self._signal_names)
-        data = np.frombuffer(self._buf, dtype=np.float64).copy().reshape(-1, nsig) if nsig else \
-            np.zeros((len(self._times), 0))
+        # whole rows only: a run interrupted (Ctrl-C, SIGTERM) in the middle of recording a row keeps the
+        # rows before it
+        rows = min(len(self._buf) // nsig, len(self._times)) if nsig else len(self._times)
+        data = np.frombuffer(self._buf, dtype=np.float64)[:rows * nsig].copy().reshape(-1, nsig) if nsig else \
+            np.zeros((rows, 0))
         signals = {name: data[:, j] for j, name in enumerate(self._signal_names)}
+        times = np.array(self._times[:rows])
         units = dict(zip(self._signal_names, self._signal_units))
         params = {}
         for n, c in self.components.items():
@@ -483,7 +487,7 @@ class Master:
                 params[n] = params_to_dict(p)
             except TypeError:
                 params[n] = {}
-        return Result(np.array(self._times), signals, units, params, termination)
+        return Result(times, signals, units, params, termination)
 
     def terminate(self) -> None:
         for comp in self.components.values():

@@ -39,10 +39,12 @@ class Overlay:
 def _read(path: Path) -> dict:
     if not path.is_file():
         raise ScenarioError(f"{path}: parameter overlay not found")
+    from .errors import toml_loads
     try:
-        return tomllib.loads(path.read_text(encoding="utf-8-sig"))
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{path}: malformed TOML: {exc}") from exc
+        text = path.read_text(encoding="utf-8-sig")
+    except (UnicodeDecodeError, OSError) as exc:
+        raise ScenarioError(f"{path}: cannot read the overlay as UTF-8 text: {exc}") from None
+    return toml_loads(text, str(path))
 
 
 def overlay_tables(path: str | Path) -> dict[str, dict]:

@@ -367,10 +367,12 @@ def make_params(cls: type, values: Mapping[str, Any], where: str = "<parameters>
 @memo_file
 def _read_param_toml(path: Path) -> dict:
     """The parsed TOML of a parameter file (parsed once per process while the file is unchanged)."""
+    from .errors import toml_loads
     try:
-        return tomllib.loads(Path(path).read_text(encoding="utf-8-sig"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        text = Path(path).read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
         raise ScenarioError(f"{path}: malformed TOML: {exc}") from exc
+    return toml_loads(text, str(path))
 
 
 def read_params_table(path: str | Path) -> dict[str, Any]:

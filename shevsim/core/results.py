@@ -6,8 +6,10 @@ beside them in ``units`` and written into the saved metadata.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -18,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from .atomic import write_json_atomic  # the one atomic JSON writer (re-exported)
-from .errors import ShevsimError
+from .errors import OutputError, ShevsimError, os_error_text
 
 
 class Termination(str):
@@ -224,24 +226,121 @@ def git_commit(path: Path | None = None) -> str:
 #: files a run writes into its folder (older results have no manifest in run.json: these are taken as ours)
 _OWN_FILES = ("timeseries.parquet", "timeseries.csv", "run.json", "metrics.json", "scenario.toml", "overview.png",
               "report.html")
+#: besides those, figures a run may write (``scenario_plots``): plain lower-case names ending in .png
+_OWN_FIGURE = re.compile(r"^[a-z0-9_]{1,64}\.png$")
+
+
+def _own_name(name: Any) -> bool:
+    """True for a plain file name shevsim writes into a result folder (no folder part, no dot file)."""
+    return isinstance(name, str) and (name in _OWN_FILES or bool(_OWN_FIGURE.match(name)))
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of a file's content."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _earlier_manifest(out_dir: Path) -> dict[str, str | None] | None:
+    """The files of an earlier result in ``out_dir`` that shevsim may replace or remove, verified.
+
+    ``{name: sha256 or None}`` from its ``run.json``; None when ``run.json`` is missing or not a shevsim
+    record (then nothing in the folder is ours). An entry is kept only when it is a plain name shevsim
+    writes (:data:`_OWN_FILES`, figures ``*.png``); a ``run.json`` written since the content hashes were
+    recorded (key ``sha256``) lists each file with its hash, and an older one (no hashes) only the
+    fixed names of :data:`_OWN_FILES` (hash None: taken as ours by name)."""
+    try:
+        meta = json.loads((out_dir / "run.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError, RecursionError):
+        return None
+    if not isinstance(meta, dict) or "termination" not in meta or "timeseries" not in meta:
+        return None
+    hashes = meta.get("sha256")
+    listed = meta.get("files")
+    if not isinstance(listed, list):
+        listed = list(_OWN_FILES)
+    out: dict[str, str | None] = {}
+    for name in listed:
+        if not _own_name(name) or name == "run.json":
+            continue
+        if isinstance(hashes, dict):
+            h = hashes.get(name)
+            if isinstance(h, str) and re.fullmatch(r"[0-9a-f]{64}", h):
+                out[name] = h
+        elif name in _OWN_FILES:
+            out[name] = None
+    return out
+
+
+#: the generator mark of a report shevsim wrote (shevsim.report.write._MARK)
+_REPORT_MARK = '<meta name="generator" content="shevsim'
+
+
+def _is_ours(out_dir: Path, name: str, manifest: dict[str, str | None] | None) -> bool:
+    """True when ``out_dir/name`` is a regular file an earlier run wrote and nobody changed since
+    (its content hash is the one recorded in run.json)."""
+    if manifest is None or name not in manifest:
+        return False
+    q = out_dir / name
+    if q.is_symlink() or not q.is_file():
+        return False
+    want = manifest[name]
+    if want is None:
+        return True
+    try:
+        if file_sha256(q) == want:
+            return True
+        # `shevsim report DIR` rewrites report.html after the run: ours when it carries the report's own
+        # generator mark (the check shevsim.report.write makes before replacing it)
+        return name == "report.html" and _REPORT_MARK in q.read_text(errors="replace")[:4000]
+    except OSError:
+        return False
+
+
+def _conflicts(out_dir: Path, names, manifest) -> list[str]:
+    """Names a new result would write over in ``out_dir`` that are not verified as an earlier run's."""
+    bad = []
+    for name in names:
+        q = out_dir / name
+        if name == "run.json":
+            if q.exists() and manifest is None:
+                bad.append(name)
+        elif (q.exists() or q.is_symlink()) and not _is_ours(out_dir, name, manifest):
+            bad.append(name)
+    return bad
 
 
 def check_out_dir(out_dir: str | Path) -> Path:
     """Check, before anything runs, that ``out_dir`` can take a result; return it.
 
     Refused with :class:`ShevsimError`: an existing file (or anything that is not a folder), a folder
-    that holds files but no ``run.json`` (not a shevsim result: nothing a user wrote is touched), a
-    place that cannot be created or written.
+    that holds files but no shevsim ``run.json`` (not a shevsim result: nothing a user wrote is touched),
+    a result folder where a file the run would write is not the one shevsim wrote there (changed since,
+    or added by the user: its content hash differs from the one in run.json), a place that cannot be
+    created or written.
     """
     out_dir = Path(out_dir)
     if out_dir.exists() or out_dir.is_symlink():
         if not out_dir.is_dir():
             raise ShevsimError(f"output folder '{out_dir}' exists and is not a folder: not replaced; "
                                f"choose another --out")
-        if not (out_dir / "run.json").is_file() and any(
-                not p.name.startswith(f".{out_dir.name}.") for p in out_dir.iterdir()):
-            raise ShevsimError(f"output folder '{out_dir}' is not empty and not a shevsim result "
-                               f"(no run.json): not replaced; choose another --out")
+        others = [p for p in out_dir.iterdir() if not p.name.startswith(f".{out_dir.name}.")]
+        manifest = _earlier_manifest(out_dir) if (out_dir / "run.json").is_file() else None
+        if others and manifest is None:
+            why = "its run.json is not a shevsim run record" if (out_dir / "run.json").exists() else "no run.json"
+            raise ShevsimError(f"output folder '{out_dir}' is not empty and not a shevsim result ({why}): "
+                               f"not replaced; choose another --out")
+        if manifest is not None:
+            bad = _conflicts(out_dir, [n for n in _OWN_FILES if n != "run.json"], manifest)
+            if bad:
+                raise ShevsimError(f"output folder '{out_dir}': {', '.join(bad)} "
+                                   f"{'is' if len(bad) == 1 else 'are'} not the file(s) shevsim wrote there "
+                                   f"(changed or added since: the content differs from the hash in run.json): "
+                                   f"not replaced; move {'it' if len(bad) == 1 else 'them'} away or choose "
+                                   f"another --out")
     parent = out_dir.absolute().parent
     probe = parent
     while not probe.exists():
@@ -256,6 +355,26 @@ def check_out_dir(out_dir: str | Path) -> Path:
     except OSError as exc:
         raise ShevsimError(f"output folder '{out_dir}' is not writable: {exc.strerror or exc}") from None
     return out_dir
+
+
+def holds_result(out_dir: str | Path) -> bool:
+    """True when ``out_dir`` holds an earlier shevsim result (a run.json shevsim wrote)."""
+    out_dir = Path(out_dir)
+    return out_dir.is_dir() and (out_dir / "run.json").is_file() and _earlier_manifest(out_dir) is not None
+
+
+def beside_folder(out_dir: str | Path, tag: str) -> Path:
+    """A new folder name beside ``out_dir`` for a result that must not replace the one in it:
+    ``NAME-TAG-YYYYmmddTHHMMSSZ`` (``-2``, ``-3``... when taken)."""
+    import time as _t
+    out_dir = Path(out_dir)
+    stamp = _t.strftime("%Y%m%dT%H%M%SZ", _t.gmtime())
+    base = out_dir.with_name(f"{out_dir.name}-{tag}-{stamp}")
+    cand, i = base, 1
+    while cand.exists() or cand.is_symlink():
+        i += 1
+        cand = base.with_name(f"{base.name}-{i}")
+    return cand
 
 
 def _pid_alive(pid: int) -> bool:
@@ -294,7 +413,6 @@ def clean_stale_temp(out_dir: str | Path) -> list[Path]:
 def write_timeseries(result: Result, folder: Path, fmt: str = "parquet") -> str:
     """Write ``timeseries.parquet`` (units as field metadata ``unit`` and schema metadata
     ``shevsim.units``) or ``timeseries.csv``; return the file name."""
-    df = result.to_pandas()
     units = {"time_s": "s", **{k: result.units.get(k, "") for k in result.signals}}
     if fmt == "parquet":
         try:
@@ -303,12 +421,18 @@ def write_timeseries(result: Result, folder: Path, fmt: str = "parquet") -> str:
         except ImportError:
             fmt = "csv"
         else:
-            table = pa.Table.from_pandas(df, preserve_index=False)
-            fields = [f.with_metadata({"unit": units.get(f.name, "")}) for f in table.schema]
+            # straight from the arrays (no DataFrame copy: a long interrupted run is saved quickly)
+            cols = {"time_s": np.asarray(result.time_s), **{k: np.asarray(v) for k, v in result.signals.items()}}
+            arrays = [pa.array(v) for v in cols.values()]
+            fields = [pa.field(k, a.type, metadata={"unit": units.get(k, "")}) for k, a in zip(cols, arrays)]
             schema = pa.schema(fields, metadata={"shevsim.units": json.dumps(units),
                                                  "shevsim.termination": str(result.termination)})
-            pq.write_table(table.cast(schema), folder / "timeseries.parquet")
+            # through a Python file object: a path with non-ASCII bytes under an ASCII locale (surrogate-
+            # escaped) is passed to the OS as it came, where pyarrow's own path handling cannot encode it
+            with open(folder / "timeseries.parquet", "wb") as f:
+                pq.write_table(pa.Table.from_arrays(arrays, schema=schema), f)
             return "timeseries.parquet"
+    df = result.to_pandas()
     df.to_csv(folder / "timeseries.csv", index=False, float_format="%.9g")
     return "timeseries.csv"
 
@@ -319,16 +443,22 @@ def save_result(result: Result, out_dir: str | Path, *, scenario_text: str | Non
 
     Everything is written into a temporary sibling folder first (the trajectory before anything
     else), then moved into place: a new folder in one rename; an earlier result folder file by file,
-    replacing only the files shevsim wrote there (listed in its ``run.json``) - files a user added
-    are kept. ``plots`` is an optional callable ``plots(result, folder)`` that writes figures; when it
-    fails, the run is saved without them and the error is raised afterwards (with a note).
+    replacing only the files shevsim wrote there - each listed in its ``run.json`` with the SHA-256 of
+    its content recorded when written, and checked again before it is replaced or removed; anything else
+    (files a user added or changed) stays. ``plots`` is an optional callable ``plots(result, folder)``
+    that writes figures; when it fails, the run is saved without them and the error is raised afterwards
+    (with a note). A write the machine refuses (full disk, file-size limit) raises :class:`OutputError`
+    naming the file and the limit; the earlier result is then untouched and nothing half-written stays.
     """
     out_dir = check_out_dir(out_dir)
     clean_stale_temp(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.tmp-p{os.getpid()}-"))
     plot_error = None
+    tmp = None
+    current = "the result folder"
     try:
+        out_dir.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.tmp-p{os.getpid()}-"))
+        current = "timeseries.parquet" if fmt == "parquet" else "timeseries.csv"
         ts = write_timeseries(result, tmp, fmt)          # the trajectory first
         from ..version import __version__
         meta = dict(result.meta)
@@ -340,13 +470,17 @@ def save_result(result: Result, out_dir: str | Path, *, scenario_text: str | Non
                      "timeseries": ts})
         files = [ts, "run.json", "metrics.json"]
         meta["files"] = files
+        current = "run.json"
         write_json_atomic(tmp / "run.json", meta)
+        current = "metrics.json"
         write_json_atomic(tmp / "metrics.json", metrics or {})
         if scenario_text is not None:
-            (tmp / "scenario.toml").write_text(scenario_text)
+            current = "scenario.toml"
+            (tmp / "scenario.toml").write_text(scenario_text, encoding="utf-8")
             files.append("scenario.toml")
         if plots is not None:
             before = set(os.listdir(tmp))
+            current = "the figures"
             try:
                 plots(result, tmp)
             except Exception as exc:    # noqa: BLE001 - the run is saved without figures, then the error raised
@@ -355,15 +489,25 @@ def save_result(result: Result, out_dir: str | Path, *, scenario_text: str | Non
                     q = tmp / name
                     shutil.rmtree(q) if q.is_dir() else q.unlink()
                 meta["plot_error"] = f"{type(exc).__name__}: {exc}"
-        files[:] = sorted(set(os.listdir(tmp)))
+        files[:] = sorted(n for n in os.listdir(tmp) if _own_name(n) and (tmp / n).is_file())
         meta["files"] = files
+        # the content hash of each file as written: checked before a later run replaces or removes it
+        meta["sha256"] = {n: file_sha256(tmp / n) for n in files if n != "run.json"}
+        current = "run.json"
         write_json_atomic(tmp / "run.json", meta)
         umask = os.umask(0)                  # mkdtemp made the folder 0700: give it the usual permissions
         os.umask(umask)
         os.chmod(tmp, 0o777 & ~umask)
+        current = "the result folder"
         _publish(tmp, out_dir, files)
+    except OSError as exc:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+        raise OutputError(f"could not save the result in '{out_dir}' ({current}): {os_error_text(exc)}. "
+                          f"Nothing was changed in '{out_dir}' (no half-written file is left)") from None
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
         raise
     if plot_error is not None:
         plot_error.add_note(f"the run was saved in {out_dir} without figures")
@@ -372,35 +516,25 @@ def save_result(result: Result, out_dir: str | Path, *, scenario_text: str | Non
 
 
 def _publish(tmp: Path, out_dir: Path, files: list[str]) -> None:
-    """Move the files of ``tmp`` into ``out_dir``; remove only files an earlier run wrote there."""
-    if not out_dir.exists():
+    """Move the files of ``tmp`` into ``out_dir``; replace or remove only files an earlier run wrote
+    there and nobody changed since (verified by name and content hash, :func:`_earlier_manifest`)."""
+    if not out_dir.exists() and not out_dir.is_symlink():
         os.replace(tmp, out_dir)
         return
-    old_run = out_dir / "run.json"
-    old_files = list(_OWN_FILES)
-    if old_run.is_file():
-        try:
-            listed = json.loads(old_run.read_text()).get("files")
-            if isinstance(listed, list):
-                old_files = [f for f in listed if isinstance(f, str)]
-        except (OSError, ValueError):
-            pass
+    manifest = _earlier_manifest(out_dir) if (out_dir / "run.json").is_file() else None
+    bad = _conflicts(out_dir, files, manifest)
+    if bad:                   # changed since check_out_dir: nothing in out_dir is touched
+        raise ShevsimError(f"output folder '{out_dir}': {', '.join(bad)} changed while the run was going "
+                           f"(not the file(s) shevsim wrote there): not replaced; the result is not saved, "
+                           f"choose another --out")
+    stale = [n for n in (manifest or {}) if n not in files and _is_ours(out_dir, n, manifest)]
     for name in [f for f in files if f != "run.json"] + ["run.json"]:   # run.json last: it lists the others
-        dst = out_dir / name
-        if (tmp / name).is_dir():
-            if dst.is_dir() and name in old_files:
-                shutil.rmtree(dst)
-            elif dst.exists():
-                continue
-        os.replace(tmp / name, dst)
-    for name in set(old_files) - set(files):
-        if "/" in name or "\\" in name or name.startswith("."):
-            continue
-        q = out_dir / name
-        if q.is_file() and not q.is_symlink():
-            q.unlink()
-        elif q.is_dir() and not q.is_symlink():
-            shutil.rmtree(q, ignore_errors=True)
+        os.replace(tmp / name, out_dir / name)
+    for name in stale:                  # an earlier run's file this run did not write (e.g. its figure)
+        try:
+            (out_dir / name).unlink()
+        except OSError:
+            pass
     shutil.rmtree(tmp, ignore_errors=True)
 
 
@@ -408,9 +542,10 @@ def load_result(out_dir: str | Path) -> Result:
     """Read a saved run back."""
     import pandas as pd
     out_dir = Path(out_dir)
-    meta = json.loads((out_dir / "run.json").read_text())
+    meta = json.loads((out_dir / "run.json").read_text(encoding="utf-8"))
     path = out_dir / meta["timeseries"]
-    df = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path)
+    with open(path, "rb") as f:          # a file object: any path the OS takes (see write_timeseries)
+        df = pd.read_parquet(f) if path.suffix == ".parquet" else pd.read_csv(f)
     t = df.pop("time_s").to_numpy()
     units = meta.pop("units")
     units.pop("time_s", None)
@@ -420,5 +555,5 @@ def load_result(out_dir: str | Path) -> Result:
     res = Result(t, {c: df[c].to_numpy() for c in df.columns}, units, meta.pop("parameters"), term, meta)
     mpath = out_dir / "metrics.json"
     if mpath.is_file():
-        res.metrics = json.loads(mpath.read_text())
+        res.metrics = json.loads(mpath.read_text(encoding="utf-8"))
     return res

@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .errors import ScenarioError, ShevsimError
+from .errors import ScenarioError, ShevsimError, toml_loads
 from .master import Connection, Fault, Master, MasterSettings
 from .overlay import overlay_tables, overlay_values, resolve_files
 from .params import check_options, load_params
@@ -62,6 +62,40 @@ _SCEN = {"name", "description", "step_s", "stop_s", "t0_s", "method", "seed", "o
 _COMP = {"type", "params", "set", "start", "step_multiple", "fmu", "map", "replaces", "overlay"}
 _FAULT = {"at_s", "port", "value"}
 _RECORD = {"signals"}
+#: the options of a scenario's ``[metrics]`` table (``--set metrics.OPTION=...``) and their types: float,
+#: int, bool, a tuple of allowed strings, or [float] (a list of numbers). Numbers are checked against the
+#: name rule of their key (:func:`shevsim.core.params.name_rule`: ``_pct`` in [0, 100], densities > 0...).
+#: Read by :func:`shevsim.metrics.compute_metrics` and the speed-trace check (:data:`shevsim.run.TRACE_DEFAULTS`).
+METRICS_OPTIONS = {"cycle_duration_s": float, "soc_tolerance_pct": float, "cells_parallel": int,
+                   "fuel_density_kg_per_l": float, "ah_weighting": ("constant", "wang2011"),
+                   "ah_severity_factor": float, "hist_edges_a": [float], "pack_capacity_ah": float,
+                   "pack_nominal_voltage_v": float, "eg_efficiency": float,
+                   "trace_distance_tolerance": float, "trace_speed_tolerance_kmh": float,
+                   "trace_speed_window_s": float, "trace_allow_miss": bool}
+
+
+def check_metrics_options(options: Any, where: str) -> dict:
+    """Check a ``[metrics]`` table like component parameters: unknown keys (with a suggestion), types
+    and ranges (:data:`METRICS_OPTIONS`). Returns it as a dict (ScenarioError otherwise)."""
+    if not isinstance(options, dict):
+        raise ScenarioError(f"{where}: expected a table of name = value, got {type(options).__name__}")
+    for k, v in options.items():
+        typ = METRICS_OPTIONS.get(k)
+        if typ is None:
+            raise ScenarioError(f"{where}: unknown option '{k}'{_hint(k, METRICS_OPTIONS)}")
+        isnum = lambda x: isinstance(x, (int, float)) and not isinstance(x, bool)  # noqa: E731
+        if typ is float and not isnum(v) or typ is int and not (isinstance(v, int) and not isinstance(v, bool)):
+            raise ScenarioError(f"{where}: option '{k}' must be {'an integer' if typ is int else 'a number'}, "
+                                f"got {v!r}")
+        if typ is bool and not isinstance(v, bool):
+            raise ScenarioError(f"{where}: option '{k}' must be true or false, got {v!r}")
+        if isinstance(typ, tuple) and v not in typ:
+            raise ScenarioError(f"{where}: option '{k}' must be one of {', '.join(map(repr, typ))}, got {v!r}")
+        if isinstance(typ, list) and not (isinstance(v, list) and v and all(isnum(x) for x in v)):
+            raise ScenarioError(f"{where}: option '{k}' must be a non-empty list of numbers, got {v!r}")
+    nums = {k: v for k, v in options.items() if METRICS_OPTIONS[k] in (float, int) or isinstance(METRICS_OPTIONS[k], list)}
+    check_options(nums, where)
+    return dict(options)
 
 
 def _hint(key: str, options) -> str:
@@ -95,12 +129,24 @@ def resolve_path(p: str, scenario_path: Path | None) -> Path:
     return cands[0]
 
 
-def parse_value(text: str) -> Any:
-    """Parse a ``--set`` value as a TOML value (number, bool, string, list); bare words are strings."""
+def parse_value(text: str, origin: str = "--set") -> Any:
+    """Parse a ``--set`` value as exactly one TOML value (number, bool, string, list, inline table); a bare
+    word is a string. Anything after the value (a new line with more TOML, a second value) is refused
+    (ScenarioError naming ``origin``), as are control characters in a bare word."""
+    if any(c in text for c in "\n\r\x00"):
+        raise ScenarioError(f"{origin}: the value must be exactly one value on one line (it holds a line break "
+                            f"or a NUL character: {text!r}); quote a string that needs them as TOML "
+                            f"(\"a\\nb\")")
     try:
-        return tomllib.loads(f"v = {text}")["v"]
+        doc = tomllib.loads(f"v = {text}")
     except tomllib.TOMLDecodeError:
         return text
+    except RecursionError:
+        raise ScenarioError(f"{origin}: the value is nested too deeply (more than Python's recursion limit "
+                            f"allows); give a flat value") from None
+    if set(doc) != {"v"}:             # cannot happen on one line, kept as the rule: exactly one value
+        raise ScenarioError(f"{origin}: the value must be exactly one value, got {text!r}")
+    return doc["v"]
 
 
 def declared_ports(cls) -> tuple[dict[str, str], bool]:
@@ -366,10 +412,7 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
     The checks run in the file's order: the TOML itself, ``[scenario]``, ``[components]``, the overlays,
     ``[connections]``, ``[[faults]]``, ``[record]``, the times and the order, then the ``--set`` values."""
     spath, where, text = _scenario_source(path, text)
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{where}: malformed TOML: {exc}") from exc
+    doc = toml_loads(text, where)
     _check_keys(doc, _TOP, where)
     sc = doc.get("scenario", {})
     _check_keys(sc, _SCEN, f"{where}: [scenario]")
@@ -392,14 +435,16 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
     order = _scenario_order(sc, names, where)
     scen = Scenario(spath, text, name, str(sc.get("description", "")), settings,
                     stop_s, t0_s, seed, specs, conns, faults, signals,
-                    check_options(doc.get("metrics", {}), f"{where}: [metrics]"), order,
+                    check_metrics_options(doc.get("metrics", {}), f"{where}: [metrics]"), order,
                     list(sets), [str(o) for o in overlays])
     for s in sets:
         if "=" not in s or "." not in s.split("=", 1)[0]:
             raise ScenarioError(f"--set '{s}': expected component.param=value (or scenario.FIELD=value)")
         key, val = s.split("=", 1)
+        key = _argv_text(key)
         # a relative *_file path given on the command line is relative to the working directory
-        apply_override(scen, key.strip(), parse_value(val.strip()), f"--set '{s}'", base=None)
+        apply_override(scen, key.strip(), parse_value(val.strip(), f"--set '{s}'"), f"--set '{s}'",
+                       base=None)
     return scen
 
 
@@ -596,6 +641,19 @@ def _scenario_order(sc: dict, names: set, where: str) -> list[str] | None:
     return order
 
 
+def _argv_text(text: str) -> str:
+    """A command-line word as the UTF-8 text it most likely is: under an ASCII-only locale Python keeps the
+    bytes of a non-ASCII argument as surrogate escapes ('b\\udcc3\\udcbas'), which would never match the
+    component 'bús' of a (UTF-8) scenario file. Paths are not passed through this (the OS takes them as
+    they came)."""
+    if any(0xDC80 <= ord(c) <= 0xDCFF for c in text):
+        try:
+            return text.encode("utf-8", "surrogateescape").decode("utf-8")
+        except UnicodeError:
+            return text
+    return text
+
+
 #: names of the tables ``--set``/overrides address besides components (so no component may take them)
 RESERVED = {"scenario": _SCEN, "record": _RECORD, "metrics": None}
 
@@ -634,7 +692,7 @@ def apply_override(scen: "Scenario", key: str, value: Any, origin: str, base: Pa
             raise ScenarioError(f"{origin}: record.signals must be \"all\" or a list of 'component.port'")
         return
     if head == "metrics":
-        scen.metrics.update(check_options({name: value}, origin))
+        scen.metrics.update(check_metrics_options({name: value}, f"{origin}: [metrics]"))
         return
     names = [c.name for c in scen.components]
     if head not in names:

@@ -465,10 +465,23 @@ class FastRunner:
         fstate = np.zeros(1, dtype=np.int64)
         wall = time.perf_counter()
         k0 = 0
+        # the loop runs in chunks of about CHUNK_WALL_S of wall time: between two chunks Python handles a
+        # pending signal (Ctrl-C, SIGTERM), so a stop request is honoured within a chunk, and the rows done so
+        # far are returned as the partial result
+        chunk = 256
+        bar = None
+        if getattr(self.master.settings, "progress", False) and n > 1000:
+            try:
+                from tqdm import tqdm
+                bar = tqdm(total=n, unit="step", desc="simulating (compiled)", mininterval=0.5)
+            except ImportError:  # pragma: no cover
+                bar = None
         try:
             while True:
+                todo = min(chunk, n - k0)
+                tc = time.perf_counter()
                 try:
-                    run_loop(n - k0, k0, self.h, self.t0, self._typ, self._mult, self._ibase, self._obase,
+                    run_loop(todo, k0, self.h, self.t0, self._typ, self._mult, self._ibase, self._obase,
                              self._lptr, self._ldst, self._lsrc, sig, rec, nsig, out, self._inst, self._f_t,
                              self._f_idx, self._f_val, forced, fstate, self._jacobi, data["cycle"], data["driver"],
                              data["vehicle"], data["motor"], data["bus"], data["engine_generator"], data["battery"],
@@ -498,8 +511,22 @@ class FastRunner:
                     err = SimulationError(f"component '{comp}' failed in do_step at t={self._time(k):.6g} s "
                                           f"(step {k}): {ERRORS.get(int(out[0]), 'error')}")
                     raise self._stopped(err, rec, k + 1, comp, None, self._time(k))
-                break
+                k0 = int(out[1])
+                if bar is not None:
+                    bar.update(k0 - bar.n)
+                if k0 >= n:
+                    break
+                dt = time.perf_counter() - tc
+                chunk = int(min(max(chunk * CHUNK_WALL_S / max(dt, 1e-6), 16), 4 * chunk, 1_000_000))
+        except KeyboardInterrupt as exc:    # Ctrl-C / SIGTERM between two chunks: the rows done so far
+            from shevsim.core.results import Termination
+            reason = getattr(exc, "reason", "interrupted (Ctrl-C)")
+            exc.time_s = self._time(k0)
+            exc.result = self._result(rec, k0 + 1, Termination("stopped", reason, None, None, exc.time_s))
+            raise
         finally:
+            if bar is not None:
+                bar.close()
             if self._data["mpc_supervisor"]:
                 for mpc in data["mpc_supervisor"]:
                     if mpc[30][0] != 0:
@@ -525,6 +552,10 @@ class FastRunner:
             times[1:] = self.t0 + np.arange(1, nrows, dtype=np.int64) * self.h
         signals = {name: rec[j, :nrows] for j, name in enumerate(self._names)}
         return Result(times, signals, dict(self._units), {k: dict(v) for k, v in self._params.items()}, termination)
+
+
+#: wall time of one chunk of the compiled loop (s): the longest wait for a stop request
+CHUNK_WALL_S = 0.2
 
 
 def runner_for(scenario, master=None) -> tuple[Callable | None, str]:

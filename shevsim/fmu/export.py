@@ -126,7 +126,7 @@ def required_packages(module: str) -> list[str]:
 def export_component(type_name_or_class: Any, params_path: str | Path | None, out_path: str | Path,
                      fmi_version: int | str = 2, model_name: str | None = None,
                      extra_requires: tuple[str, ...] = (), step_multiple: int = 1, params: Any = None,
-                     start_values: dict[str, float] | None = None) -> Path:
+                     start_values: dict[str, float] | None = None, force: bool = False) -> Path:
     """Export a native component as a co-simulation FMU.
 
     Parameters
@@ -147,6 +147,8 @@ def export_component(type_name_or_class: Any, params_path: str | Path | None, ou
         Ready parameters (instead of ``params_path``), e.g. those of a component built from a scenario.
     start_values : dict, optional
         ``{input: value}`` held by inputs until set (the FMU's input start values).
+    force : bool
+        Replace ``out_path`` when it exists (default: an existing file is refused, not overwritten).
     step_multiple : int
         The component steps every ``step_multiple``-th ``doStep`` over that many steps (holding its
         outputs between), as the master's multi-rate ``step_multiple`` (SSP export of a scenario).
@@ -155,6 +157,8 @@ def export_component(type_name_or_class: Any, params_path: str | Path | None, ou
     -------
     Path of the FMU.
     """
+    from ..core.atomic import refuse_overwrite
+    refuse_overwrite(out_path, force)
     fmi_version = int(fmi_version)
     if fmi_version not in (2, 3):
         raise FMUError(f"fmu export: fmi_version must be 2 or 3, got {fmi_version}")

@@ -80,7 +80,8 @@ def _param_xml(parent, values: dict[str, Any]) -> None:
             ET.SubElement(p, _q("ssv", "Real"), value=repr(float(v)))
 
 
-def export_ssp(scenario, out_path: str | Path, stop_s: float | None = None, sets: tuple[str, ...] = ()) -> Path:
+def export_ssp(scenario, out_path: str | Path, stop_s: float | None = None, sets: tuple[str, ...] = (),
+               force: bool = False) -> Path:
     """Export a scenario (path, bundled name or :class:`~shevsim.core.scenario.Scenario`) as an SSP package.
 
     Parameters
@@ -90,6 +91,7 @@ def export_ssp(scenario, out_path: str | Path, stop_s: float | None = None, sets
     stop_s : float, optional
         Stop time of the default experiment (default: the scenario's).
     sets : ``--set`` style overrides applied when loading a scenario file.
+    force : replace ``out_path`` when it exists (default: an existing file is refused, not overwritten).
 
     Returns the path written. Components must be native components or FMI 2.0 co-simulation FMUs
     (what fmpy's SSP runner takes); inputs given start values in the scenario are written as
@@ -98,6 +100,8 @@ def export_ssp(scenario, out_path: str | Path, stop_s: float | None = None, sets
     from ..core.scenario import Scenario, build_master, load_scenario, stop_time
     from .adapter import FMUComponent
     from .export import export_component
+    from ..core.atomic import refuse_overwrite
+    refuse_overwrite(out_path, force)
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, list(sets))
     out_path = Path(out_path).absolute()
