@@ -50,6 +50,13 @@ class Case:
     check: Callable | None = None        # (ctx, proc) -> (ok: bool, note: str) for accepted runs
     lost: Callable | None = None         # (ctx) -> True when a user's file was lost
     sigint_after: float | None = None    # send Ctrl-C after this many seconds
+    signame: str = "SIGINT"              # ... or this signal
+    want: str | None = None              # a refusal must say this (else: "misleading", the wrong thing blamed)
+    want_rc: int | None = None           # ... and exit with this code (else: "misleading")
+    env: dict | None = None              # extra environment (e.g. an ASCII-only locale)
+    stdout_to: str | None = None         # stdout to this file (e.g. /dev/full) instead of a pipe
+    fsize: int | None = None             # file-size limit (RLIMIT_FSIZE, bytes) of the process
+    cleanup: Callable | None = None      # (ctx) -> None after the case (e.g. unmount)
 
 
 @dataclass
@@ -392,17 +399,232 @@ def _cases() -> list[Case]:
         lambda c: ["run", str(c.copy_scenario(base, lambda s: s.replace(
             'type = "bus"\nparams = "components/bus/default.toml"',
             f'type = "fmu"\nfmu = "{c.write("bad.fmu", b"PK not a zip")}"'))), "--out", "o"])
-    add("F01", "fmu", "FMU whose doStep blocks for an hour (after: default bound 600 s, beyond this 30 s case limit)",
+    add("F01", "fmu", "FMU whose doStep blocks for an hour (default bound; case limit 75 s)",
         "error",
         lambda c: ["run", str(_faulty_scenario(c, "block_at_s = 0.2, block_for_s = 3600.0")), "--out", "o"],
-        timeout=30)
+        timeout=75)
     add("F02", "fmu", "FMU whose doStep blocks, scenario bound step_timeout_s = 2", "error",
         lambda c: ["run", str(_faulty_scenario(c, "block_at_s = 0.2, block_for_s = 3600.0, step_timeout_s = 2.0")),
                    "--out", "o"], timeout=60)
     add("F03", "fmu", "FMU whose doStep raises RuntimeError (its text must reach the user)", "error",
         lambda c: ["run", str(_faulty_scenario(c, "fail_at_s = 0.2")), "--out", "o"], timeout=60,
         check=None)
+    _second_pass(add, base)
     return C
+
+
+# ------------------------------------------------------------------------------ issue 22: second pass
+
+def _earlier_result(c, out="o", scenario="hd_udds_rule", engine="fast") -> Path:
+    """A complete earlier result in ``out`` (a short run of this tree), plus a user's notebook and data in it."""
+    o = c.tmp / out
+    subprocess.run([PY, "-m", "shevsim.cli", "run", scenario, "--set", "scenario.stop_s=30", "--engine", engine,
+                    "--no-plots", "-q", "--out", str(o)], cwd=c.tmp, env=_env(c.tree), check=True,
+                   capture_output=True, timeout=600)
+    (o / "notebook.ipynb").write_text('{"cells": []}')
+    (o / "data.csv").write_text("a,b\n1,2\n")
+    c.extra["earlier"] = {p.name: p.read_bytes() for p in o.iterdir() if p.is_file()}
+    return o
+
+
+def _forge_files(files):
+    def setup(c):
+        o = _earlier_result(c)
+        meta = json.loads((o / "run.json").read_text())
+        meta["files"] = files
+        (o / "run.json").write_text(json.dumps(meta))
+        c.extra["earlier"]["run.json"] = (o / "run.json").read_bytes()
+        return ["run", "hd_udds_rule", "--set", "scenario.stop_s=30", "--no-plots", "--out", "o"]
+    return setup
+
+
+def _users_files_lost(c) -> bool:
+    o = c.tmp / "o"
+    return any(not (o / n).is_file() or (o / n).read_bytes() != b for n, b in c.extra.get("earlier", {}).items()
+               if n in ("notebook.ipynb", "data.csv"))
+
+
+def _earlier_lost(c) -> bool:
+    """The earlier complete result (or a user's file in its folder) was removed or changed."""
+    o = c.tmp / "o"
+    return any(not (o / n).is_file() or (o / n).read_bytes() != b for n, b in c.extra.get("earlier", {}).items())
+
+
+def _partial_kept(c, proc):
+    """A stopped run: its partial result saved (in o or beside it) with rows, and the time to stop."""
+    import glob
+    cands = [Path(p) for p in glob.glob(str(c.tmp / "o-interrupted-*"))] + [c.tmp / "o"]
+    code = ("import sys, json; from shevsim.core.results import load_result; r = load_result(sys.argv[1]); "
+            "print(json.dumps([len(r), str(r.termination)]))")
+    for d in cands:
+        if (d / "run.json").is_file() and json.loads((d / "run.json").read_text()).get("termination", "") != "completed":
+            r = subprocess.run([PY, "-c", code, str(d)], capture_output=True, text=True, env=_env(c.tree), timeout=120)
+            if r.returncode == 0:
+                rows, term = json.loads(r.stdout.strip().splitlines()[-1])
+                where = "beside the earlier result" if d.name != "o" else "in o"
+                return rows > 1, (f"exit {proc.returncode}, stopped {c.extra.get('stop_s', float('nan')):.1f} s after "
+                                  f"the signal; partial result {where}: {rows} rows; earlier result kept")
+    return False, f"exit {proc.returncode}, stopped {c.extra.get('stop_s', float('nan')):.1f} s after the signal; no partial result"
+
+
+def _export_target(name):
+    def setup(c):
+        p = c.write(name, b"the user's own file")
+        c.extra["target"] = p
+        if name.endswith(".fmu"):
+            return ["fmu", "export", "vehicle", "--params", str(c.tree / "components/vehicle/matv.toml"), "-o", name]
+        return ["fmu", "export-ssp", "hd_udds_rule", "-o", name]
+    return setup
+
+
+def _target_lost(c) -> bool:
+    return c.extra["target"].read_bytes() != b"the user's own file"
+
+
+def _big_md_fmu() -> Path:
+    """An FMU whose modelDescription.xml unpacks to 2 GiB (2 MiB compressed), built once."""
+    import zipfile
+    out = _FMU_CACHE / "big_md.fmu"
+    if not out.is_file():
+        _FMU_CACHE.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_suffix(".part")
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
+            with zf.open("modelDescription.xml", "w", force_zip64=True) as f:
+                f.write(b'<?xml version="1.0"?><fmiModelDescription fmiVersion="2.0" modelName="big" guid="x">'
+                        b'<!--')
+                block = b" " * (1 << 20)
+                for _ in range(2048):
+                    f.write(block)
+                f.write(b"--></fmiModelDescription>")
+        tmp.replace(out)
+    return out
+
+
+def _me_only_fmu() -> Path:
+    """A model-exchange-only FMU: BouncingBall (Modelica Reference-FMUs, vendored) built for ME only."""
+    out = _FMU_CACHE / "BouncingBall_me.fmu"
+    if not out.is_file():
+        _FMU_CACHE.mkdir(parents=True, exist_ok=True)
+        own = Path(__file__).resolve().parents[1]
+        code = ("import sys, shutil; from pathlib import Path; from shevsim.fmu.build import build_reference_fmu; "
+                "build_reference_fmu('BouncingBall', Path(sys.argv[1]), 2, interfaces=('me',))")
+        subprocess.run([PY, "-c", code, str(out)], env=_env(own), check=True, capture_output=True, timeout=600)
+    return out
+
+
+def _deep(kind: str, n: int) -> str:
+    return ("x = " + "[" * n + "]" * n) if kind == "array" else ("x = " + "{a = " * n + "1" + "}" * n)
+
+
+def _kmh_city_cycle(c) -> str:
+    """HD-UDDS's first 200 s scaled to a 46.5 km/h top speed, written in km/h under a speed_mps header."""
+    rows = [ln.split(",") for ln in (c.tree / "cycles" / "hd_udds.csv").read_text().splitlines()
+            if ln and not ln.startswith("#")][1:]
+    out = ["time_s,speed_mps"]
+    for t, v in rows:
+        if float(t) > 200:
+            break
+        out.append(f"{float(t):g},{float(v) * 3.6 * 0.85:.4f}")
+    return "\n".join(out) + "\n"
+
+
+def _tmpfs(c, size="400k") -> Path:
+    d = c.tmp / "small_disk"
+    d.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(d)], capture_output=True, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(f"needs root to mount a small tmpfs: {r.stderr.strip()}")
+    return d
+
+
+def _second_pass(add, base):
+    # --- data loss ---------------------------------------------------------------------------------------
+    add("L01", "data loss", 'run.json in --out forged with "files": [""] (a user notebook and data in the folder)',
+        "accept", _forge_files([""]), lost=_users_files_lost, timeout=600,
+        check=lambda c, p: (True, "notebook and data kept"))
+    add("L02", "data loss", 'run.json in --out lists "notebook.ipynb" among its files', "accept",
+        _forge_files(["run.json", "notebook.ipynb"]), lost=_users_files_lost, timeout=600,
+        check=lambda c, p: (True, "notebook and data kept"))
+    add("L03", "data loss", "SIGTERM 6 s into hd_udds_mpc x200 (compiled path) into a folder with an earlier result",
+        "accept", lambda c: (_earlier_result(c), ["run", "hd_udds_mpc", "--set", "cycle.repeat=200", "--engine",
+                                                 "fast", "--no-plots", "--out", "o"])[1],
+        sigint_after=6.0, signame="SIGTERM", lost=_earlier_lost, check=_partial_kept, timeout=240)
+    add("L04", "data loss", "Ctrl-C 6 s into hd_udds_rule x200 (Python master) into a folder with an earlier result",
+        "accept", lambda c: (_earlier_result(c), ["run", "hd_udds_rule", "--set", "cycle.repeat=200", "--engine",
+                                                 "python", "--no-plots", "--out", "o"])[1],
+        sigint_after=6.0, signame="SIGINT", lost=_earlier_lost, check=_partial_kept, timeout=240)
+    add("L05", "data loss", "fmu export -o model.fmu over a user's existing model.fmu", "error",
+        _export_target("model.fmu"), lost=_target_lost, timeout=600)
+    add("L06", "data loss", "fmu export-ssp -o system.ssp over a user's existing system.ssp", "error",
+        _export_target("system.ssp"), lost=_target_lost, timeout=900)
+    # --- environment and input that made internal errors -------------------------------------------------
+    add("E01", "environment", "TOML value nested 100 000 arrays deep (scenario)", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s + "\n[metrics]\n" + _deep("array", 100_000) + "\n")),
+                   "--out", "o"], want="nested too deeply")
+    add("E02", "environment", "TOML value nested 3000 inline tables deep (--params overlay)", "error",
+        lambda c: ["run", base, "--params", f"vehicle={c.write('deep.toml', _deep('table', 3000) + chr(10))}",
+                   "--out", "o"], want="nested too deeply")
+    add("E03", "environment", "full disk (ENOSPC) while saving: --out on a 400 kB tmpfs", "error",
+        lambda c: ["run", base, "--no-plots", "--out", str(_tmpfs(c) / "o")], want="No space left",
+        cleanup=lambda c: subprocess.run(["umount", str(c.tmp / "small_disk")], capture_output=True))
+    add("E04", "environment", "file-size limit (EFBIG, ulimit -f 300 kB) while saving", "error",
+        lambda c: ["run", base, "--no-plots", "--out", "o"], fsize=300_000, want="File too large")
+    add("E05", "environment", "FMU whose modelDescription.xml unpacks to 2 GiB", "error",
+        lambda c: ["info", str(_big_md_fmu())], want="limit", timeout=120)
+    add("E06", "environment", "non-ASCII --out under an ASCII-only locale (LC_ALL=C, PYTHONUTF8=0)", "accept",
+        lambda c: ["run", base, "--set", "scenario.stop_s=30", "--out", "r\u00e9sultat"],
+        env={"LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"},
+        check=lambda c, p: (any(c.tmp.glob("r*sultat/run.json")), "saved"))
+    add("E07", "environment", "non-ASCII component name under an ASCII-only locale (shevsim info)", "accept",
+        lambda c: ["info", str(c.copy_scenario(base, lambda s: s.replace("[components.bus]", '[components."b\u00fas"]')
+                                               .replace('"bus.', '"b\u00fas.').replace('"bus", "battery"', '"b\u00fas", "battery"')))],
+        env={"LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"})
+    add("E08", "environment", "stdout on a full device (shevsim scenarios > /dev/full)", "error",
+        lambda c: ["scenarios"], stdout_to="/dev/full", want="standard output")
+    # --- silent acceptance ------------------------------------------------------------------------------
+    add("Q01", "silent", "[metrics] misspelt key fuel_densty_kg_per_l", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s + "\n[metrics]\nfuel_densty_kg_per_l = 0.75\n")),
+                   "--out", "o"], want="fuel_density_kg_per_l")
+    add("Q02", "silent", '[metrics] fuel_density_kg_per_l = "abc"', "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s + '\n[metrics]\nfuel_density_kg_per_l = "abc"\n')),
+                   "--out", "o"])
+    add("Q03", "silent", "300 000 unknown [metrics] keys", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s + "\n[metrics]\n" + "".join(
+            f"k{i} = 1\n" for i in range(300_000)))), "--out", "o"], timeout=120)
+    add("Q04", "silent", "fault at_s = -5.0 (before the run starts)", "error",
+        lambda c: ["run", str(c.copy_scenario(base, lambda s: s + '\n[[faults]]\nat_s = -5.0\n'
+                                              'port = "battery.h_conv_w_m2k"\nvalue = 3.0\n')), "--out", "o"])
+    add("Q05", "silent", "--set 'vehicle.mass_kg=1<newline>[components.x]<newline>type=\"os:system\"'", "error",
+        lambda c: ["run", base, "--set", 'vehicle.mass_kg=1\n[components.x]\ntype="os:system"', "--out", "o"])
+    # --- bounded work -----------------------------------------------------------------------------------
+    add("B01", "bounded", "calibrate on a 2 000 000-row cell record (no --allow-large)", "error",
+        lambda c: ["calibrate", "cell", str(c.write("rec.csv", cell_record(n=2_000_000, dt=0.1))), "-o", "cal",
+                   "--no-plots"], want="rows", timeout=120)
+    # --- errors that blame the right thing ----------------------------------------------------------------
+    add("W01", "blame", "--params overlay with an unknown key (vehicle.mass_kgg)", "error",
+        lambda c: ["run", base, "--params", str(c.write("ov.toml", "[vehicle]\nmass_kgg = 5.0\n")), "--out", "o"],
+        want="ov.toml")
+    add("W02", "blame", "--params overlay with mass_kg = nan", "error",
+        lambda c: ["run", base, "--params", str(c.write("ov.toml", "[vehicle]\nmass_kg = nan\n")), "--out", "o"],
+        want="ov.toml")
+    add("W03", "blame", "cycle_file that is a folder", "error",
+        lambda c: (c.tmp.joinpath("cyc").mkdir(), ["run", base, "--set", "cycle.cycle_file='cyc'", "--out", "o"])[1],
+        want="folder")
+    add("W04", "blame", "cycle_file = /dev/zero", "error",
+        lambda c: ["run", base, "--set", "cycle.cycle_file='/dev/zero'", "--out", "o"], want="device", timeout=60)
+    add("W05", "blame", "cycle_file = /dev/urandom", "error",
+        lambda c: ["run", base, "--set", "cycle.cycle_file='/dev/urandom'", "--out", "o"], want="device", timeout=60)
+    add("W06", "blame", "model-exchange-only FMU with interface = \"cs\" (a co-simulation slot)", "error",
+        lambda c: ["run", str(c.write("me.toml", f'[scenario]\nstep_s = 0.01\nstop_s = 1.0\n[components.ball]\n'
+                                                 f'type = "fmu"\nfmu = "{_me_only_fmu()}"\nset = {{ interface = "cs" }}\n')),
+                   "--out", "o"], want="model", timeout=600)
+    add("W07", "blame", "study tradeoff --max-evaluations 0", "error",
+        lambda c: ["study", "tradeoff", base, "--max-evaluations", "0", "--out", "st"], want_rc=2)
+    add("W08", "blame", "FMU set parameter of the wrong type (block_at_s = \"abc\")", "error",
+        lambda c: ["run", str(_faulty_scenario(c, 'block_at_s = "abc"')), "--out", "o"], want_rc=2, timeout=60)
+    add("W09", "blame", "cycle in km/h whose top speed is 46.5 km/h (under 50 km/h)", "error",
+        lambda c: ["run", base, "--set", f"cycle.cycle_file='{c.write('cyc.csv', _kmh_city_cycle(c))}'",
+                   "--out", "o"], want="km/h")
 
 
 _FMU_CACHE = Path(tempfile.gettempdir()) / "shevsim_bad_inputs_fmu"
@@ -450,6 +672,10 @@ def classify(case: Case, ctx: Ctx, proc, hung: bool) -> tuple[str, str]:
         last = [ln for ln in (proc.stderr or "").splitlines() if ln.strip()]
         return "traceback", (last[-1].strip() if last else "")[:400]
     if proc.returncode != 0 and case.sigint_after is None:
+        if case.want_rc is not None and proc.returncode != case.want_rc:
+            return "misleading", f"exit {proc.returncode} (expected {case.want_rc}): {msg[:380]}"
+        if case.want is not None and case.want.lower() not in out.lower():
+            return "misleading", f"does not say '{case.want}': {msg[:380]}"
         return "clear error", msg[:400]
     if case.check is not None:
         ok, note = case.check(ctx, proc)
@@ -468,24 +694,44 @@ def run_case(case: Case, tree: Path) -> dict:
     try:
         argv = case.setup(ctx)
         cmd = [PY, *argv] if isinstance(argv, tuple) else [PY, "-m", "shevsim.cli", *argv]
-        p = subprocess.Popen(cmd, cwd=tmp, env=_env(tree), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                             text=True, start_new_session=True)
+        env = _env(tree)
+        env.update(case.env or {})
+        stdout = open(case.stdout_to, "w") if case.stdout_to else subprocess.PIPE
+
+        def pre():
+            signal.signal(signal.SIGINT, signal.SIG_DFL)     # as a foreground process started by a user
+            if case.fsize is not None:
+                import resource
+                resource.setrlimit(resource.RLIMIT_FSIZE, (case.fsize, case.fsize))
+        p = subprocess.Popen(cmd, cwd=tmp, env=env, stdout=stdout, stderr=subprocess.PIPE,
+                             text=True, start_new_session=True, preexec_fn=pre)
         hung = False
         try:
             if case.sigint_after is not None:
                 try:
                     p.wait(timeout=case.sigint_after)
                 except subprocess.TimeoutExpired:
-                    os.kill(p.pid, signal.SIGINT)
+                    os.kill(p.pid, getattr(signal, case.signame))
+                    ctx.extra["signal_sent"] = time.perf_counter()
             out, err = p.communicate(timeout=case.timeout)
+            if "signal_sent" in ctx.extra:
+                ctx.extra["stop_s"] = time.perf_counter() - ctx.extra["signal_sent"]
         except subprocess.TimeoutExpired:
             hung = True
             os.killpg(p.pid, signal.SIGKILL)
             out, err = p.communicate()
-        proc = subprocess.CompletedProcess(cmd, p.returncode, out, err)
+        if case.stdout_to:
+            stdout.close()
+        proc = subprocess.CompletedProcess(cmd, p.returncode, out or "", err)
         outcome, note = classify(case, ctx, proc, hung)
     except Exception as exc:  # the harness's own failure is reported, not hidden
         outcome, note = "harness error", f"{type(exc).__name__}: {exc}"
+    finally:
+        if case.cleanup is not None:
+            try:
+                case.cleanup(ctx)
+            except Exception:  # noqa: BLE001
+                pass
     wall = time.perf_counter() - t0
     shutil.rmtree(tmp, ignore_errors=True)
     return {"id": case.cid, "group": case.group, "what": case.what, "expect": case.expect, "outcome": outcome,
@@ -495,7 +741,7 @@ def run_case(case: Case, tree: Path) -> dict:
 def merge_markdown(before: dict, after: dict) -> str:
     b = {r["id"]: r for r in before["results"]}
     rows = after["results"]
-    L = ["# Bad inputs and faults: before and after (issue 13)", "",
+    L = ["# Bad inputs and faults: before and after (issues 13 and 22)", "",
          f"Generated by `python benchmarks/bad_inputs.py` (see its docstring). **Before**: the session-start "
          f"commit `{before.get('commit', '?')}` in a separate worktree; **after**: `{after.get('commit', '?')}`"
          f"{' plus uncommitted work in the tree' if after.get('dirty') else ''}, run {after.get('date', '')}. "
@@ -504,6 +750,8 @@ def merge_markdown(before: dict, after: dict) -> str:
          "post-check:", "",
          "- **clear error**: refused, non-zero exit, no traceback (the message is quoted);",
          "- **handled**: accepted and right (a quirk converted, a fault reported, the user's file kept);",
+         "- **misleading**: refused, but the message blames the wrong thing (or the exit code is not the "
+         "documented one);",
          "- **silent**: accepted although wrong, or the problem not said;",
          "- **traceback**: a Python traceback / internal error reached the user;",
          "- **hang**: killed at the case's time limit; **data loss**: a user's file removed or changed.", ""]
@@ -512,7 +760,7 @@ def merge_markdown(before: dict, after: dict) -> str:
         cnt_a[r["outcome"]] = cnt_a.get(r["outcome"], 0) + 1
         ob = b.get(r["id"], {}).get("outcome", "-")
         cnt_b[ob] = cnt_b.get(ob, 0) + 1
-    keys = ["clear error", "handled", "silent", "traceback", "hang", "data loss", "harness error"]
+    keys = ["clear error", "handled", "misleading", "silent", "traceback", "hang", "data loss", "harness error"]
     L += ["| outcome | before | after |", "|---|---|---|"]
     for k in keys:
         if cnt_b.get(k) or cnt_a.get(k):

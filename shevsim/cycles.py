@@ -63,6 +63,10 @@ MAX_PLAUSIBLE_DURATION_S = 43200.0
 #: Largest plausible acceleration magnitude of a drive cycle (m/s^2, ~1 g), measured as the speed change
 #: over 1 s windows (sensor noise of a 10-100 Hz log does not count); a km/h column read as m/s is 3.6x.
 MAX_PLAUSIBLE_ACCEL_MPS2 = 10.0
+#: most power per kg of vehicle (v * dv/dt over 1 s windows, W/kg) a drive cycle asks for: the bundled
+#: cycles reach 9-21 W/kg, aggressive car cycles (US06) about 50; the same cycles in km/h read as m/s reach
+#: 117-277 (x 3.6^2)
+MAX_PLAUSIBLE_SPECIFIC_POWER_W_PER_KG = 100.0
 ACCEL_WINDOW_S = 1.0
 
 
@@ -169,7 +173,7 @@ def check_plausible(path, t: np.ndarray, v: np.ndarray, lines=None, declared=Non
     """Unit sniffing on a cycle in SI: a speed above :data:`MAX_PLAUSIBLE_SPEED_MPS` looks like km/h;
     steps of :data:`MAX_PLAUSIBLE_STEP_S` or more over more than :data:`MAX_PLAUSIBLE_DURATION_S` look like
     milliseconds; a speed change faster than :data:`MAX_PLAUSIBLE_ACCEL_MPS2` over 1 s windows is no road
-    vehicle's.  A unit declared in the header other than the default (``time_min``, ``speed_kmh`` ...)
+    vehicle's, nor one that takes more than :data:`MAX_PLAUSIBLE_SPECIFIC_POWER_W_PER_KG` (km/h below 50 km/h).  A unit declared in the header other than the default (``time_min``, ``speed_kmh`` ...)
     skips its column's check.  The error says what was detected, how to declare the unit, and how to
     turn the check off (``check_units = false`` in the cycle's parameters) for a legitimate trace."""
     declared = declared or {}
@@ -203,6 +207,21 @@ def check_plausible(path, t: np.ndarray, v: np.ndarray, lines=None, declared=Non
                             f"acceleration {a[k]:.3g} m/s^2 between {t[k]:g} s and {t[k + w]:g} s is beyond any "
                             f"road vehicle (> {MAX_PLAUSIBLE_ACCEL_MPS2:g} m/s^2): are speed (m/s) and time (s) "
                             f"in the declared units?{off}")
+            # the power per kg to accelerate, v * dv/dt: a speed column in km/h read as m/s multiplies it by
+            # 3.6^2 = 13, which gives away even a slow city cycle (top speed under 50 km/h) in km/h
+            pw = 0.5 * (v[w:] + v[:-w]) * (v[w:] - v[:-w]) / (t[w:] - t[:-w])
+            k = int(np.argmax(pw))
+            if not speed_declared and pw[k] > MAX_PLAUSIBLE_SPECIFIC_POWER_W_PER_KG:
+                raise _fail(path, line(k + w), "speed_mps",
+                            f"accelerating from {v[k]:.3g} to {v[k + w]:.3g} m/s between {t[k]:g} s and "
+                            f"{t[k + w]:g} s takes {pw[k]:.0f} W per kg of vehicle (v dv/dt), beyond any road "
+                            f"vehicle on a drive cycle (> {MAX_PLAUSIBLE_SPECIFIC_POWER_W_PER_KG:g} W/kg; km/h "
+                            f"read as m/s multiplies it by 13): the speed column looks like km/h (or mph): name it "
+                            f"'speed_kmh' (or 'speed_mph') in the header and it is converted{off}")
+
+
+#: largest cycle CSV read (bytes): a 2-million-row trace is ~40 MB
+MAX_CYCLE_BYTES = 1 * 2**30
 
 
 @memo_file
@@ -235,8 +254,10 @@ def load_cycle(path: str | Path, name: str | None = None, check_units: bool = Tr
         The message names the file, the line (1-based, as in an editor) and the column.
     """
     path = Path(path)
-    if not path.is_file():
-        raise _fail(path, None, None, "cycle file not found")
+    from .core.errors import file_problem
+    why = file_problem(path, "cycle file", MAX_CYCLE_BYTES)
+    if why is not None:
+        raise _fail(path, None, None, why)
     try:
         raw = path.read_bytes()
         text = raw.decode("utf-8-sig")

@@ -79,6 +79,49 @@ def load_params_toml(path) -> dict:
 
 
 COMPONENT_TABLES = ("battery", "vehicle", "motor", "bus", "engine_generator")
+#: a record longer than this (rows, after --decimate) is refused unless --allow-large: a calibration
+#: simulates the model over the whole record some hundreds to thousands of times
+MAX_RECORD_ROWS = 200_000
+#: simulations a calibration typically takes (baseline fit, one fit per candidate effect and round): for
+#: the time estimate printed before a long calibration starts
+TYPICAL_SIMULATIONS = (300, 3000)
+
+
+def _at_least_one(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
+    return v
+
+
+def check_record_size(data, model_name: str, known: dict, allow_large: bool, log) -> None:
+    """Time one simulation of the model over the record, say the estimate, and refuse (DataError) a record
+    of more than :data:`MAX_RECORD_ROWS` rows unless ``allow_large``."""
+    import time as _time
+    from .models import get_model
+    n = len(data.df)
+    if n <= 20_000 and not allow_large:
+        return
+    try:
+        model = get_model(model_name, known, "<params>")
+        ctx = model.prepare(data)
+        t0 = _time.perf_counter()
+        model.simulate(ctx, model.defaults())
+        one = _time.perf_counter() - t0
+    except Exception:  # noqa: BLE001 - the estimate is advisory; the calibration itself reports a failure
+        one = None
+    est = ("" if one is None else f"; one simulation of the model over it takes {one:.2g} s, so the calibration "
+           f"needs about {one * TYPICAL_SIMULATIONS[0] / 60:.2g}-{one * TYPICAL_SIMULATIONS[1] / 60:.2g} min")
+    if n > MAX_RECORD_ROWS and not allow_large:
+        dt = data.df["time_s"].diff().median()
+        k = -(-n // MAX_RECORD_ROWS)
+        raise DataError(f"{data.path}: the record has {n:,} rows, more than the {MAX_RECORD_ROWS:,} a calibration "
+                        f"takes without --allow-large{est}. Decimate it (--decimate {k}: keeps 1 row in {k}, sample "
+                        f"step {dt:g} s -> {dt * k:g} s) or give --allow-large to calibrate on all of it")
+    log(f"record: {n:,} rows{est} (progress is reported as it goes)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -105,6 +148,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "power_w=kW, t_surface_c=K, voltage_v=mV; CANONICAL=its SI unit skips the unit sniffing)")
     ap.add_argument("--effects", nargs="+", help="restrict the candidate effects to these names")
     ap.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    ap.add_argument("--decimate", type=_at_least_one, default=1, metavar="K",
+                    help="keep every K-th row of the record (a long record sampled faster than the model needs)")
+    ap.add_argument("--allow-large", action="store_true",
+                    help=f"calibrate on a record of more than {MAX_RECORD_ROWS:,} rows (after --decimate) as it is")
     ap.add_argument("-q", "--quiet", action="store_true", help="errors only (no progress or summary logging)")
     return ap
 
@@ -119,6 +166,11 @@ def main_calibrate(argv=None) -> int:
         data = load_measured(args.data, args.model, parse_mapping(args.map), current_sign=args.current_sign,
                              power_sign=args.power_sign, drop_duplicate_rows=args.drop_duplicate_rows,
                              units=parse_units(args.unit))
+        if args.decimate > 1:
+            before = len(data.df)
+            data.df = data.df.iloc[::args.decimate].reset_index(drop=True)
+            data.notes.append(f"--decimate {args.decimate}: {before:,} rows -> {len(data.df):,}")
+        check_record_size(data, args.model, known, args.allow_large, log)
         for n in data.notes:
             log(f"note: {n}")
         rep = run_workflow(args.model, data, known, holdout=args.holdout, split=args.split, out_dir=args.out,

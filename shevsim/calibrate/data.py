@@ -201,8 +201,10 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
         raise DataError(f"current sign '{current_sign}': expected one of {CURRENT_SIGNS}")
     if power_sign not in POWER_SIGNS:
         raise DataError(f"power sign '{power_sign}': expected one of {POWER_SIGNS}")
-    if not path.is_file():
-        raise DataError(f"{path}: file not found")
+    from ..core.errors import file_problem
+    why = file_problem(path, "data file")
+    if why is not None:
+        raise DataError(f"{path}: {why}")
     import warnings
     try:
         with warnings.catch_warnings():

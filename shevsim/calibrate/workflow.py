@@ -227,8 +227,20 @@ class Fitter:
             out[p.name] = math.exp(v) if p.log else v
         return out
 
+    #: called with a progress line at most every PROGRESS_EVERY_S of wall time (long records)
+    progress = None
+    PROGRESS_EVERY_S = 10.0
+
     def simulate(self, values):
         self.nsim += 1
+        if self.progress is not None:
+            now = time.perf_counter()
+            if not hasattr(self, "_t_start"):
+                self._t_start = self._t_said = now
+            elif now - self._t_said >= self.PROGRESS_EVERY_S:
+                self._t_said = now
+                self.progress(f"... {self.nsim} simulations, {now - self._t_start:.0f} s "
+                              f"({(now - self._t_start) / self.nsim:.2g} s each)")
         return self.model.simulate(self.ctx, values)
 
     def _resid(self, values):
@@ -404,6 +416,7 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
     t = data.df["time_s"].to_numpy(float)
     train, hold, split_info = make_split(t, holdout, split)
     fitter = Fitter(model, data, train, hold)
+    fitter.progress = log
     names = list(model.effects) if effects is None else list(effects)
     for e in names:
         if e not in model.effects:

@@ -67,3 +67,28 @@ def toml_loads(text: str, where: str, error: type = ScenarioError, malformed: st
         raise error(f"{where}: TOML nested too deeply: arrays or inline tables nested more than a few hundred "
                     f"levels (the limit is Python's recursion limit, {sys.getrecursionlimit()}); a scenario or "
                     f"parameter value needs at most a few levels: flatten it") from None
+
+
+def file_problem(path, what: str = "file", max_bytes: int | None = None) -> str | None:
+    """Why ``path`` cannot be read as an input file, in plain words, or None when it can: not found, a
+    folder, not a regular file (a device such as /dev/zero, a pipe, a socket), or larger than
+    ``max_bytes``. Checked before reading, so a device that never ends is never read."""
+    import os
+    import stat as _stat
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return f"{what} not found"
+    except OSError as exc:
+        return f"cannot open the {what}: {exc.strerror or exc}"
+    if _stat.S_ISDIR(st.st_mode):
+        return f"is a folder, not a {what}: give the file itself"
+    if not _stat.S_ISREG(st.st_mode):
+        kind = ("a character device" if _stat.S_ISCHR(st.st_mode) else "a block device" if _stat.S_ISBLK(st.st_mode)
+                else "a pipe" if _stat.S_ISFIFO(st.st_mode) else "a socket" if _stat.S_ISSOCK(st.st_mode)
+                else "not a regular file")
+        return f"is {kind}, not a {what}: give a regular file"
+    if max_bytes is not None and st.st_size > max_bytes:
+        return (f"is {st.st_size / 2**20:.4g} MiB, above the {max_bytes / 2**20:.4g} MiB a {what} may have: "
+                f"refused before reading it")
+    return None

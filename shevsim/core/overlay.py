@@ -37,8 +37,10 @@ class Overlay:
 
 
 def _read(path: Path) -> dict:
-    if not path.is_file():
-        raise ScenarioError(f"{path}: parameter overlay not found")
+    from .errors import file_problem
+    why = file_problem(path, "parameter overlay", 64 * 2**20)
+    if why is not None:
+        raise ScenarioError(f"{path}: {why}")
     from .errors import toml_loads
     try:
         text = path.read_text(encoding="utf-8-sig")

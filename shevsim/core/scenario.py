@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .errors import ScenarioError, ShevsimError, toml_loads
+from .errors import ScenarioError, ShevsimError, file_problem, toml_loads
 from .master import Connection, Fault, Master, MasterSettings
 from .overlay import overlay_tables, overlay_values, resolve_files
 from .params import check_options, load_params
@@ -456,10 +456,13 @@ def _scenario_source(path: str | Path | None, text: str | None) -> tuple[Path | 
         spath = bundled_scenario(str(path))      # a bundled scenario by name (hd_udds_rule)
     where = str(spath) if spath else "<scenario>"
     if text is None:
-        if spath is None or not spath.is_file():
+        why = file_problem(spath, "scenario file", 64 * 2**20) if spath is not None else "scenario file not found"
+        if why == "scenario file not found":
             from .paths import bundled_scenarios
             raise ScenarioError(f"{where}: scenario file not found (bundled scenarios by name: "
                                 f"{', '.join(bundled_scenarios())})")
+        if why is not None:
+            raise ScenarioError(f"{where}: {why}")
         try:   # utf-8-sig: an editor's byte-order mark is not TOML
             text = spath.read_text(encoding="utf-8-sig")
         except (UnicodeDecodeError, OSError) as exc:
@@ -552,7 +555,10 @@ def _apply_overlays(specs: list[ComponentSpec], names: set, overlays) -> None:
                                     f"({', '.join(sorted(names))}); give COMPONENT=FILE")
             for cname in targets:
                 vals = resolve_files(overlay_values(fpath, cname))
-                next(c for c in specs if c.name == cname).overrides.update(vals)
+                spec = next(c for c in specs if c.name == cname)
+                spec.overrides.update(vals)
+                # an error in one of these values names the overlay, not the component's parameter file
+                spec.origins.update({k: f"--params '{item}' ({fpath}, table [{cname}])" for k in vals})
         except ScenarioError as exc:
             raise ScenarioError(f"--params '{item}': {exc}") from None
 

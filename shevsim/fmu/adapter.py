@@ -99,8 +99,42 @@ _BOOL_TYPES = ("Boolean",)
 _OTHER_NUM = ("Float32",)
 _PORT_TYPES = _REAL_TYPES + _INT_TYPES + _BOOL_TYPES + _OTHER_NUM
 
-#: wall-time bound of one communication step of an FMU (s); scenario key ``step_timeout_s``
-DEFAULT_STEP_TIMEOUT_S = 600.0
+#: wall-time bound of one communication step of an FMU (s); scenario key ``step_timeout_s`` (0: none).
+#: Long enough for any step of a working FMU stepped at a co-simulation step (well under a second here),
+#: short enough to wait for when one hangs.
+DEFAULT_STEP_TIMEOUT_S = 30.0
+#: largest modelDescription.xml read (bytes, unpacked); the biggest real ones are a few MB
+MAX_MODEL_DESCRIPTION_BYTES = 64 * 2**20
+#: largest FMU unpacked (all members, bytes) and the most members; checked from the archive's directory
+#: before anything is read or extracted
+MAX_UNPACKED_BYTES = 2 * 2**30
+MAX_MEMBERS = 100_000
+
+
+def check_archive(zf: zipfile.ZipFile, path, what: str = "FMU", error: type | None = None,
+                  members: dict[str, int] | None = None) -> None:
+    """Refuse an archive whose members would unpack beyond the limits, from its directory, before any
+    member is read: more than :data:`MAX_MEMBERS` members, more than :data:`MAX_UNPACKED_BYTES` in all,
+    or a member above its own limit (``members``: name -> bytes; default modelDescription.xml ->
+    :data:`MAX_MODEL_DESCRIPTION_BYTES`). ``zipfile`` never unpacks more than a member's declared size,
+    so a lying directory cannot get past these limits either."""
+    error = error or FMULoadError
+    members = {"modelDescription.xml": MAX_MODEL_DESCRIPTION_BYTES} if members is None else members
+    infos = zf.infolist()
+    if len(infos) > MAX_MEMBERS:
+        raise error(f"{path}: the {what} archive has {len(infos)} members (limit {MAX_MEMBERS}): refused "
+                    f"before unpacking; not a usable {what}")
+    total = 0
+    for info in infos:
+        total += info.file_size
+        cap = members.get(info.filename)
+        if cap is not None and info.file_size > cap:
+            raise error(f"{path}: {info.filename} unpacks to {info.file_size / 2**20:.4g} MiB (limit "
+                        f"{cap / 2**20:.4g} MiB; it is {info.compress_size / 2**20:.3g} MiB compressed): refused "
+                        f"before reading it; a real {what} keeps it far smaller - rebuild or re-export it")
+    if total > MAX_UNPACKED_BYTES:
+        raise error(f"{path}: the {what} unpacks to {total / 2**30:.4g} GiB (limit {MAX_UNPACKED_BYTES / 2**30:.4g} "
+                    f"GiB): refused before unpacking; rebuild it smaller")
 #: model-exchange solvers: fmpy's CVODE wrapper, or a scipy.integrate.solve_ivp method
 SOLVERS = ("cvode", "BDF", "Radau", "LSODA", "RK45", "RK23", "DOP853")
 #: component options that can be given among ``parameters`` (scenario ``set``) unless the FMU has a
@@ -129,12 +163,16 @@ def read_fmi_version(path: str | Path) -> str:
         md = path / "modelDescription.xml"
         if not md.is_file():
             raise FMULoadError(f"{path}: directory has no modelDescription.xml (not an extracted FMU)")
+        if md.stat().st_size > MAX_MODEL_DESCRIPTION_BYTES:
+            raise FMULoadError(f"{md}: {md.stat().st_size / 2**20:.4g} MiB (limit "
+                               f"{MAX_MODEL_DESCRIPTION_BYTES / 2**20:.4g} MiB): refused before reading it")
         data = md.read_bytes()
     else:
         if not zipfile.is_zipfile(path):
             raise FMULoadError(f"{path}: not a ZIP archive - the FMU file is corrupt or not an FMU")
         try:
             with zipfile.ZipFile(path) as zf:
+                check_archive(zf, path)
                 data = zf.read("modelDescription.xml")
         except KeyError:
             raise FMULoadError(f"{path}: the archive has no modelDescription.xml (not an FMU)") from None
@@ -619,6 +657,9 @@ class FMUComponent(Component):
         self._build_ports(name, mapping or {}, expected_units, feedthrough or {})
         self._parameters = self._resolve_values(parameters or {}, "parameters")
         self._start_values = self._resolve_values(start_values or {}, "start_values")
+        for which, values in (("parameters", self._parameters), ("start_values", self._start_values)):
+            for vname, value in values.items():     # a wrong type is bad input: said now, before instantiating
+                self._check_value_type(vname, value, which, name)
         super().__init__(name, None)
         self.params = dict(parameters or {})
         for vname, value in self._start_values.items():
@@ -948,6 +989,30 @@ class FMUComponent(Component):
         if typ == "String":
             return str(x)
         return float(x)
+
+    def _check_value_type(self, vname: str, value: Any, which: str, name: str) -> None:
+        """Refuse (FMUMappingError) a value the variable's FMI type cannot take: a number for Real/Float,
+        an integer for Integer/Enumeration types, true/false for Boolean, a string for String."""
+        v = self._vars_by_name.get(vname)
+        if v is None:
+            return
+        typ = v.type
+        vals = value if isinstance(value, (list, tuple)) else [value]
+        for x in vals:
+            if typ in _REAL_TYPES or typ in _OTHER_NUM:
+                ok, want = isinstance(x, (int, float)) and not isinstance(x, bool), "a number"
+            elif typ in _INT_TYPES:
+                ok, want = (isinstance(x, int) and not isinstance(x, bool)) or (
+                    isinstance(x, float) and x.is_integer()), "an integer"
+            elif typ in _BOOL_TYPES:
+                ok, want = isinstance(x, bool) or (isinstance(x, int) and x in (0, 1)), "true or false"
+            elif typ == "String":
+                ok, want = isinstance(x, str), "a string"
+            else:
+                return
+            if not ok:
+                raise FMUMappingError(f"{self.path}: component '{name}': {which} '{vname}' = {value!r}: the "
+                                      f"FMU variable is of type {typ} and takes {want}")
 
     def _set_value(self, vname: str, value: Any) -> None:
         v = self._vars_by_name[vname]

@@ -194,6 +194,8 @@ def import_ssp(ssp_path: str | Path, out_dir: str | Path, step_s: float | None =
     if not zipfile.is_zipfile(ssp_path):
         raise ScenarioError(f"{ssp_path}: not an SSP package (not a ZIP archive)")
     with zipfile.ZipFile(ssp_path) as zf:
+        from .adapter import MAX_MODEL_DESCRIPTION_BYTES, check_archive
+        check_archive(zf, ssp_path, "SSP", ScenarioError, {"SystemStructure.ssd": MAX_MODEL_DESCRIPTION_BYTES})
         names = zf.namelist()
         if "SystemStructure.ssd" not in names:
             raise ScenarioError(f"{ssp_path}: no SystemStructure.ssd in the package")

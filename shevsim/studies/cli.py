@@ -22,6 +22,18 @@ from pathlib import Path
 from ..core.errors import ShevsimError
 
 
+
+def _at_least_one(text: str) -> int:
+    """argparse type: an integer >= 1 (a usage error, exit 2, otherwise)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v} (to evaluate nothing, do not run "
+                                         f"the study; a study resumes from its cache)")
+    return v
+
 def _common(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("scenario", nargs="?", help="scenario TOML or a bundled scenario's name (its MPC supervisor component: --supervisor)")
     ap.add_argument("--workers", type=int, default=2, help="Dask worker processes (0 = serial; default 2)")
@@ -33,7 +45,8 @@ def _common(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("-s", "--set", action="append", default=[], metavar="COMP.PARAM=VALUE",
                     help="override applied to every run")
     ap.add_argument("--edges-kw", type=float, nargs="+", help="power partition edges (kW), first 0, last P_max")
-    ap.add_argument("--max-evaluations", type=int, help="stop after this many new evaluations (resume later)")
+    ap.add_argument("--max-evaluations", type=_at_least_one, metavar="K",
+                    help="stop after this many new evaluations, K >= 1 (resume later)")
     ap.add_argument("--synthetic", action="store_true", help="use the analytic surrogate (no simulation)")
     ap.add_argument("--fe-metric", default=None,
                     help="fuel-economy metric key (default fuel_economy_dsoc_corrected_kmpl; the seed's A.1 "
