@@ -178,3 +178,21 @@ def test_a_run_stopped_by_an_fmu_keeps_its_trajectory(faulty, tmp_path, fault):
         assert "0.3 s of wall time" in term["reason"]
     df = pd.read_parquet(out / "timeseries.parquet")
     assert len(df) == 6 and df["time_s"].iloc[-1] == pytest.approx(0.5)     # t = 0 ... 0.5 s kept
+
+
+def test_a_set_value_of_the_wrong_type_is_bad_input_before_instantiating(faulty, tmp_path):
+    # issue 22: a string for a Real parameter used to fail at initialisation (a stopped run, exit 1)
+    from shevsim.cli import main
+    from shevsim.fmu import FMUMappingError
+    with pytest.raises(FMUMappingError, match=r"'block_at_s' = 'abc'.*type Real and takes a number"):
+        FMUComponent("pump", faulty, parameters={"block_at_s": "abc"})
+    scen = tmp_path / "f.toml"
+    scen.write_text(f'[scenario]\nstep_s = 0.1\nstop_s = 1.0\n[components.pump]\ntype = "fmu"\nfmu = "{faulty}"\n'
+                    f'set = {{ block_at_s = "abc" }}\nstart = {{ u = 2.0 }}\n')
+    assert main(["run", str(scen), "-o", str(tmp_path / "o"), "--no-plots", "-q"]) == 2
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_default_step_bound_is_one_a_user_can_wait_for():
+    from shevsim.fmu.adapter import DEFAULT_STEP_TIMEOUT_S
+    assert 10.0 <= DEFAULT_STEP_TIMEOUT_S <= 60.0
