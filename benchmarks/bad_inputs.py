@@ -110,7 +110,7 @@ def cell_record(n=600, dt=1.0, i_amp=2.0, current_scale=1.0, time_scale=1.0, res
     ts = 25.0 + 0.002 * np.cumsum(i * i) * dt / 10 + rng.normal(0, 0.03, n)
     lines = ["time_s,current_a,voltage_v,t_surface_c,t_ambient_c"]
     for k in range(n):
-        lines.append(f"{t[k] * time_scale:g},{i[k] * current_scale:.5g},{v[k]:.5f},{ts[k]:.3f},25.0")
+        lines.append(f"{t[k] * time_scale:.10g},{i[k] * current_scale:.5g},{v[k]:.5f},{ts[k]:.3f},25.0")
     return "\n".join(lines) + "\n"
 
 

@@ -34,7 +34,8 @@ EXIT_CODES = {EXIT_OK: "ok", EXIT_STOPPED: "the run stopped early or is degraded
               EXIT_BAD_INPUT: "bad input: scenario, parameters, options or output folder (nothing was run); also "
                               "an output the machine refuses (full disk, file-size limit, full stdout)",
               EXIT_INTERNAL: "internal error (a bug: please report it with the message)",
-              EXIT_INTERRUPTED: "interrupted with Ctrl-C (what was simulated is saved)"}
+              EXIT_INTERRUPTED: "interrupted with Ctrl-C or SIGTERM (what was simulated is saved; beside an "
+                                "earlier result, in DIR-interrupted-<UTC time>)"}
 
 RUN_EPILOG = """\
 SCENARIO is a bundled scenario's name (see `shevsim scenarios`, e.g. hd_udds_rule) or the path of a
@@ -49,10 +50,16 @@ cycles by their path in the data folder (params = "components/vehicle/matv.toml"
 
 Results go to --out (default results/<scenario name>/): timeseries.parquet (units in the Parquet
 schema metadata), run.json (termination, parameters, version), metrics.json, scenario.toml (as run),
-overview.png and report.html (interactive, opens offline; `shevsim report DIR` rewrites it). Re-running into a result folder replaces only the files shevsim wrote there.
+overview.png and report.html (interactive, opens offline; `shevsim report DIR` rewrites it). Re-running into a result folder replaces only the files shevsim wrote there: each is listed in run.json with
+the SHA-256 of its content, checked before it is replaced; a file changed or added since is never
+touched (the run is refused before it starts, saying which file).
 
-exit codes: 0 ok; 1 stopped early or degraded (results saved); 2 bad input; 3 internal error;
-130 interrupted (results saved)."""
+Ctrl-C or SIGTERM stops a run within a fraction of a second (either engine) and saves what was simulated
+(termination 'stopped: interrupted ...', no figures). Into a folder that holds an earlier result, the
+partial result goes to a new folder beside it, DIR-interrupted-<UTC time>; the earlier result is kept.
+
+exit codes: 0 ok; 1 stopped early or degraded (results saved); 2 bad input (or an output the machine
+refuses: full disk, file-size limit, full stdout); 3 internal error; 130 interrupted (results saved)."""
 
 
 def _say(a, *args, **kw):

@@ -85,14 +85,14 @@ def check_metrics_options(options: Any, where: str) -> dict:
             raise ScenarioError(f"{where}: unknown option '{k}'{_hint(k, METRICS_OPTIONS)}")
         isnum = lambda x: isinstance(x, (int, float)) and not isinstance(x, bool)  # noqa: E731
         if typ is float and not isnum(v) or typ is int and not (isinstance(v, int) and not isinstance(v, bool)):
-            raise ScenarioError(f"{where}: option '{k}' must be {'an integer' if typ is int else 'a number'}, "
-                                f"got {v!r}")
+            raise ScenarioError(f"{where}: option '{k}' = {v!r}: must be "
+                                f"{'an integer' if typ is int else 'a number'}")
         if typ is bool and not isinstance(v, bool):
-            raise ScenarioError(f"{where}: option '{k}' must be true or false, got {v!r}")
+            raise ScenarioError(f"{where}: option '{k}' = {v!r}: must be true or false")
         if isinstance(typ, tuple) and v not in typ:
-            raise ScenarioError(f"{where}: option '{k}' must be one of {', '.join(map(repr, typ))}, got {v!r}")
+            raise ScenarioError(f"{where}: option '{k}' = {v!r}: must be one of {', '.join(map(repr, typ))}")
         if isinstance(typ, list) and not (isinstance(v, list) and v and all(isnum(x) for x in v)):
-            raise ScenarioError(f"{where}: option '{k}' must be a non-empty list of numbers, got {v!r}")
+            raise ScenarioError(f"{where}: option '{k}' = {v!r}: must be a non-empty list of numbers")
     nums = {k: v for k, v in options.items() if METRICS_OPTIONS[k] in (float, int) or isinstance(METRICS_OPTIONS[k], list)}
     check_options(nums, where)
     return dict(options)

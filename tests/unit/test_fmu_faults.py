@@ -85,7 +85,10 @@ def test_fmu_exception_text_is_carried_into_the_error(faulty):
 
 def test_unpack_folder_removed_when_initialisation_fails(faulty):
     before = _unpack_dirs("badinit")
-    comp = FMUComponent("badinit", faulty, parameters={"block_at_s": "not a number"})
+    comp = FMUComponent("badinit", faulty)
+    # a value the FMU refuses while it initialises (a wrong type is now refused when the component is built,
+    # so it is put in after the build's check to reach the FMU's own initialisation)
+    comp._parameters = {"block_at_s": "not a number"}
     with pytest.raises(Exception):
         comp.initialize(0.0)
     comp.terminate()

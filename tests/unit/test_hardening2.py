@@ -41,11 +41,11 @@ def test_metrics_table_is_checked_like_parameters(tmp_path):
     with pytest.raises(ScenarioError, match=r"\[metrics\]: unknown option 'fuel_densty_kg_per_l' \(did you mean "
                                             r"'fuel_density_kg_per_l'\?\)"):
         load_scenario(_scenario(tmp_path, "\n[metrics]\nfuel_densty_kg_per_l = 0.75\n"))
-    with pytest.raises(ScenarioError, match=r"option 'fuel_density_kg_per_l' must be a number, got 'abc'"):
+    with pytest.raises(ScenarioError, match=r"option 'fuel_density_kg_per_l' = 'abc': must be a number"):
         load_scenario(_scenario(tmp_path, '\n[metrics]\nfuel_density_kg_per_l = "abc"\n'))
     with pytest.raises(ScenarioError, match=r"unknown option 'k0'"):
         load_scenario(_scenario(tmp_path, "\n[metrics]\n" + "".join(f"k{i} = 1\n" for i in range(300_000))))
-    with pytest.raises(ScenarioError, match=r"ah_weighting' must be one of 'constant', 'wang2011'"):
+    with pytest.raises(ScenarioError, match=r"ah_weighting' = 'linear': must be one of 'constant', 'wang2011'"):
         load_scenario(_scenario(tmp_path, '\n[metrics]\nah_weighting = "linear"\n'))
     with pytest.raises(ScenarioError, match=r"soc_tolerance_pct.*valid range"):
         load_scenario(RULE, ["metrics.soc_tolerance_pct=150"])
