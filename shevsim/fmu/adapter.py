@@ -882,8 +882,19 @@ class FMUComponent(Component):
             raise
         except Exception as exc:
             self._finalizer()
+            import re as _re
+            m = _re.search(r"undefined symbol:?\s*(\w+)", str(exc))
+            hint = ""
+            if m:   # the binary lacks a function of the interface in use (e.g. a model-exchange-only binary)
+                iface = "model-exchange" if self._me else "co-simulation"
+                other = [k for k, a in (("cs", "coSimulation"), ("me", "modelExchange"))
+                         if k != self.kind and getattr(md, a, None) is not None]
+                hint = (f" - its binary does not implement {m.group(1)}, a function of the {iface} interface "
+                        f"used here: the FMU is not a working {iface} FMU"
+                        + (f"; try its other interface (set = {{ interface = \"{other[0]}\" }})" if other
+                           else "; re-export it with that interface"))
             raise FMULoadError(f"{self.path}: cannot load/instantiate the FMU for component '{name}': "
-                               f"{exc}{self._log_tail()}") from exc
+                               f"{exc}{hint}{self._log_tail()}") from exc
         self._prepare_hot_path()
 
     def _log_tail(self) -> str:

@@ -199,3 +199,18 @@ def test_a_set_value_of_the_wrong_type_is_bad_input_before_instantiating(faulty,
 def test_the_default_step_bound_is_one_a_user_can_wait_for():
     from shevsim.fmu.adapter import DEFAULT_STEP_TIMEOUT_S
     assert 10.0 <= DEFAULT_STEP_TIMEOUT_S <= 60.0
+
+
+def test_a_binary_without_the_interfaces_functions_is_named(faulty, monkeypatch):
+    # issue 22: an FMU whose model description declares co-simulation while its binary implements only model
+    # exchange fails in fmpy's library binding with "undefined symbol: fmi2DoStep"; the error says what it means
+    import fmpy.fmi2
+    from shevsim.fmu.errors import FMULoadError
+
+    class NoDoStep(fmpy.fmi2.FMU2Slave):
+        def __init__(self, *a, **k):
+            raise AttributeError(f"{k.get('unzipDirectory')}/binaries/linux64/x.so: undefined symbol: fmi2DoStep")
+    monkeypatch.setattr(fmpy.fmi2, "FMU2Slave", NoDoStep)
+    with pytest.raises(FMULoadError, match=r"undefined symbol: fmi2DoStep - its binary does not implement "
+                                           r"fmi2DoStep, a function of the co-simulation interface"):
+        FMUComponent("cs", faulty)
