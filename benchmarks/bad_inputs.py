@@ -595,7 +595,8 @@ def _second_pass(add, base):
         lambda c: ["run", str(c.copy_scenario(base, lambda s: s + '\n[[faults]]\nat_s = -5.0\n'
                                               'port = "battery.h_conv_w_m2k"\nvalue = 3.0\n')), "--out", "o"])
     add("Q05", "silent", "--set 'vehicle.mass_kg=1<newline>[components.x]<newline>type=\"os:system\"'", "error",
-        lambda c: ["run", base, "--set", 'vehicle.mass_kg=1\n[components.x]\ntype="os:system"', "--out", "o"])
+        lambda c: ["run", base, "--set", 'vehicle.mass_kg=1\n[components.x]\ntype="os:system"', "--out", "o"],
+        want="one value")
     # --- bounded work -----------------------------------------------------------------------------------
     add("B01", "bounded", "calibrate on a 2 000 000-row cell record (no --allow-large)", "error",
         lambda c: ["calibrate", "cell", str(c.write("rec.csv", cell_record(n=2_000_000, dt=0.1))), "-o", "cal",
