@@ -785,19 +785,25 @@ def merge_markdown(before: dict, after: dict) -> str:
 
 NOTES = """## Reading the table
 
-- Rows whose class did not change can still differ in the message: e.g. P05-P18 were refused before too, but
-  the message blamed the parameter file and named no range; they now name the `--set` option, the field
-  and the valid range. F03 was refused before too, but the FMU's own exception text was dropped
-  ("fmi2DoStep failed ... FMI status 4"); it now reaches the user. F02 was refused before only because
-  `step_timeout_s` did not exist (an unknown FMU variable), not because of the hang.
-- **S12 (step_s = 1e6) is a traceback after**: the compiled fast path (issue 15) divides by zero inside its
-  loop and the error reaches the user as "internal error: ZeroDivisionError"; before (the master) it was a
-  clear error naming the BMS and the time. Owner: the fast path.
-- **F01 is a hang in this harness after**: a blocking FMU is now bounded by `step_timeout_s`, default 600 s,
-  longer than this case's 30 s limit; F02 shows the bound with `step_timeout_s = 2`.
-- K03 counts as handled when the calibration report lists the parameters the record cannot identify; the
-  run itself still exits 0 (a record with no excitation is not an input error: the report says what it
-  cannot tell)."""
+- **Before** is the session start of each pass: the S/P/M/C/K/R/F rows of issue 13 were measured against the
+  start of issue 22 too (`42827a5`), so their before column already holds issue 13's fixes; the L/E/Q/B/W rows
+  are issue 22's cases.
+- **L03/L04 (a stopped run)**: the note gives the time from the signal to the process's exit (the loop
+  stops within one chunk of ~0.2 s on the compiled path, at once on the master; the rest is writing the
+  partial record, proportional to its length) and where the partial result went: beside the earlier result,
+  in `o-interrupted-<UTC time>`, while the earlier complete result in `o` is kept byte for byte.
+- **L01/L02**: a forged `run.json` no longer decides what is removed. Each file shevsim may replace is a
+  plain name it writes, listed in run.json with the SHA-256 recorded when it was written and checked before
+  it is replaced; here the earlier files are no longer vouched for, so the run is refused before it starts
+  (clear error) and nothing in the folder is touched.
+- **F01**: a blocking `doStep` is now bounded by `step_timeout_s`, default 30 s (was 600 s): the run stops
+  with the FMU, the time and the bound named, within this case's 75 s limit; F02 shows a scenario's own bound.
+- **W06** was already clear before (`interface = "cs"` on a model-exchange-only FMU names the interfaces the
+  FMU has); the "undefined symbol" the issue reports comes from a binary that lacks the declared interface's
+  functions, now said as such (tested with the symbol lookup failing, `tests/unit/test_fmu_faults.py`).
+- **misleading** marks a refusal that blames the wrong thing (the base parameter file for an overlay's
+  value, "not found" for a folder or a device) or exits with another code than the documented one (3 for a
+  usage error, 1 for a bad FMU parameter)."""
 
 
 HOW_CHECKED = """## How inputs are checked (what the "after" column relies on)
@@ -832,6 +838,25 @@ HOW_CHECKED = """## How inputs are checked (what the "after" column relies on)
   covariance (J^T J)^-1 gives each parameter's 1-sigma uncertainty as a fraction of its range; above 0.1 the
   parameter is reported as **not identifiable** (report.json `not_identifiable`, report.md, the log), with its
   most correlated partner. Parameters on a bound are flagged as before, now with `identifiable`.
+- **Result folders** (`shevsim/core/results.py`): run.json lists the files of a result with the SHA-256 of
+  each as written; only plain names shevsim writes (`timeseries.*`, `run.json`, `metrics.json`,
+  `scenario.toml`, `report.html`, `*.png`) whose content still has that hash are replaced or removed by a
+  later run; a file changed or added since stops the run before it starts. A run stopped by Ctrl-C or
+  SIGTERM saves its partial result at once (no figures); into a folder holding an earlier result it goes to
+  `NAME-interrupted-<UTC time>` beside it. Exports (`fmu export`, `fmu export-ssp`) refuse an existing file
+  unless `--force`.
+- **Limits before reading**: FMU and SSP archives are checked from their directory (modelDescription.xml or
+  SystemStructure.ssd at most 64 MiB, 2 GiB and 100 000 members unpacked); input paths that are folders or
+  devices are named as such; a cycle CSV is at most 1 GiB; TOML nested beyond Python's recursion limit is a
+  plain error; a `--set` value is exactly one TOML value on one line; a calibration record above 200 000 rows
+  needs `--decimate K` or `--allow-large` (the refusal times one model simulation for an estimate; long
+  calibrations log progress every 10 s).
+- **The environment**: a write refused by the machine (ENOSPC, EFBIG, EDQUOT, read-only, full stdout) is a
+  plain error naming the file and the limit, exit 2, with the temporary files removed; output streams never
+  fail on a character the locale cannot encode (surrogate-escaped bytes are written back, others escaped).
+- **`[metrics]`** is checked like component parameters: unknown options with a suggestion, types, ranges;
+  `[[faults]]` must act within the run (`t0_s <= at_s < stop`); km/h read as m/s is caught also below
+  50 km/h (`v dv/dt` above 100 W/kg).
 - **Studies** (`shevsim/studies/`): `--supervisor` must name a component whose parameters hold the power-rate
   map, and a probe map must build, before any evaluation; a trade-off whose evaluations all failed exits 1.
 """
