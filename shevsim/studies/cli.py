@@ -157,6 +157,8 @@ def cmd_powerrate_map(argv) -> int:
     ap.add_argument("--fe-loss-pct", type=float, default=0.4, help="fuel-economy loss allowed (%%, seed 0.4)")
     ap.add_argument("--top-k", type=int, default=10, help="best GA maps that set the narrowed bounds")
     ap.add_argument("--max-cases", type=int, default=648, help="cap on the exhaustive-search cases (seed 648)")
+    ap.add_argument("--no-fill-cases", action="store_true",
+                    help="exhaustive search over the box of the --top-k best maps only (default: grown to --max-cases)")
     ap.add_argument("--unique-population", action="store_true",
                     help="GA with duplicate elimination: better optimum, ~2.5x the evaluations (see ga.py)")
     a = ap.parse_args(argv)
@@ -166,7 +168,7 @@ def cmd_powerrate_map(argv) -> int:
                          ga=GAConfig(population=a.population, generations=a.generations,
                                      crossover_prob=a.crossover, mutation_prob=a.mutation, seed=a.seed,
                                      unique_population=a.unique_population),
-                         top_k=a.top_k, max_cases=a.max_cases, **_metric_keys(a))
+                         top_k=a.top_k, max_cases=a.max_cases, fill_cases=not a.no_fill_cases, **_metric_keys(a))
     cache, runner = _runner(a, out)
     with cache, runner:
         run_powerrate_map(problem, runner, cfg, out, plots=not a.no_plots)

@@ -220,11 +220,14 @@ def _mutate(child: list, j: int, n_levels, rng) -> None:
 
 # -- steps 2 and 3 of the three-step optimisation (seed A.3) ----------------------------------------
 def narrow_bounds(ranked: Sequence[Genome], n_levels: Sequence[int], top_k: int = 10,
-                  max_cases: int | None = 1000) -> tuple[list[tuple[int, int]], int]:
+                  max_cases: int | None = 1000, grow: bool = False) -> tuple[list[tuple[int, int]], int]:
     """Step 2: per-gene [lo, hi] level bounds = min/max over the ``k`` best genomes.
 
     ``k`` starts at ``top_k`` and is reduced until the narrowed space has at most ``max_cases``
-    combinations (never below 1: the best genome alone gives a single case).
+    combinations (never below 1: the best genome alone gives a single case). With ``grow`` (and a
+    ``max_cases``), ``k`` then grows past ``top_k`` while the space stays within ``max_cases``: the
+    exhaustive search gets as many cases as the cap allows (the seed's 648), not only the box of the
+    ``top_k`` best, which a converged GA makes small.
 
     Returns
     -------
@@ -234,13 +237,21 @@ def narrow_bounds(ranked: Sequence[Genome], n_levels: Sequence[int], top_k: int 
     ranked = [tuple(g) for g in ranked]
     if not ranked:
         raise ValueError("narrow_bounds: no candidate solutions (no feasible GA solution?)")
+    def box(k):
+        top = np.array(ranked[:k])
+        return [(int(top[:, j].min()), int(top[:, j].max())) for j in range(len(n_levels))]
+
     k = min(top_k, len(ranked))
     while True:
-        top = np.array(ranked[:k])
-        bounds = [(int(top[:, j].min()), int(top[:, j].max())) for j in range(len(n_levels))]
+        bounds = box(k)
         if max_cases is None or k == 1 or space_size(bounds) <= max_cases:
-            return bounds, k
+            break
         k -= 1
+    if grow and max_cases is not None:
+        while k < len(ranked) and space_size(box(k + 1)) <= max_cases:
+            k += 1
+        bounds = box(k)
+    return bounds, k
 
 
 def space_size(bounds: Sequence[tuple[int, int]]) -> int:

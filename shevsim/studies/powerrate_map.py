@@ -19,7 +19,8 @@ the raw figure). Three steps:
    Deb's feasibility rules for the constraint; the first population also holds the feasible
    constant maps, which are evaluated anyway for the comparison);
 2. narrowed bounds: per variable, min/max level over the k best feasible GA solutions
-   (k = ``top_k``, reduced until the space has <= ``max_cases`` combinations; seed: 648 cases);
+   (k = ``top_k``, reduced until the space has <= ``max_cases`` combinations, then, with ``fill_cases``, grown
+   while it stays within them: seed 648 cases);
 3. exhaustive search of the narrowed space.
 
 Every evaluation goes through a :class:`~.parallel.StudyRunner` (Dask + SQLite cache): duplicates
@@ -52,6 +53,7 @@ class MapStudyConfig:
     ga: GAConfig = field(default_factory=GAConfig)
     top_k: int = 10                          # step 2: best feasible GA solutions that set the bounds
     max_cases: int = 648                     # step 2: cap on the exhaustive space (seed: 648 cases)
+    fill_cases: bool = True                  # step 2: more than top_k best maps while the space stays <= max_cases
     n_top: int = 8                           # solutions in the top table (seed Fig. A.3: best + 7)
     seed_constants: bool = True              # put feasible constant maps in the first GA population
     fe_key: str = FE_KEY
@@ -156,7 +158,7 @@ def run_powerrate_map(problem, runner, cfg: MapStudyConfig | None = None, out_di
         f"({100 * (ga.best_objective / obj.soot0 - 1):+.2f} %), map {_rates(levels, ga.best)} W/s")
 
     # step 2: narrowed bounds
-    bounds, k_used = narrow_bounds(ranked, [n_lev] * n_var, cfg.top_k, cfg.max_cases)
+    bounds, k_used = narrow_bounds(ranked, [n_lev] * n_var, cfg.top_k, cfg.max_cases, grow=cfg.fill_cases)
     n_cases = space_size(bounds)
     log(f"step 2: bounds from the {k_used} best feasible GA maps -> {n_cases} cases "
         f"(of {n_lev ** n_var} in the full space, {100 * n_cases / n_lev ** n_var:.4f} %)")

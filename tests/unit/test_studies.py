@@ -342,3 +342,19 @@ def test_partitions_cover_the_power_the_generator_can_reach():
     edges = ScenarioProblem(str(bundled_scenario("uac_proxy_mpc_seed")), "supervisor").default_edges()
     assert edges[-1] == pytest.approx(200.6e3)             # the supervisor's power_gen_max_w, not the 236 kW rating
     assert all(b > a for a, b in zip(edges, edges[1:]))
+
+
+def test_narrowed_space_grows_to_the_case_cap_and_never_past_it():
+    from shevsim.studies.ga import narrow_bounds, space_size
+    rng = np.random.default_rng(0)
+    ranked = [tuple(int(x) for x in rng.integers(0, 8, size=6)) for _ in range(200)]
+    ranked = [(3, 3, 3, 3, 3, 3)] * 10 + ranked            # a converged GA: the top 10 are one map
+    b0, k0 = narrow_bounds(ranked, [8] * 6, top_k=10, max_cases=648)
+    assert space_size(b0) == 1 and k0 == 10
+    b1, k1 = narrow_bounds(ranked, [8] * 6, top_k=10, max_cases=648, grow=True)
+    assert k1 > 10 and 1 < space_size(b1) <= 648
+    assert space_size(narrow_bounds(ranked, [8] * 6, top_k=10, max_cases=648, grow=True)[0]) == space_size(b1)
+    # one more map would pass the cap (or there is none left)
+    if k1 < len(ranked):
+        nxt = np.array(ranked[:k1 + 1])
+        assert space_size([(int(nxt[:, j].min()), int(nxt[:, j].max())) for j in range(6)]) > 648
