@@ -82,10 +82,14 @@ class ThermalParams:
     kt_w_mk: float = 0.610
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
+        for f in dataclasses.fields(ThermalParams):      # its own fields (a subclass may add others)
             v = getattr(self, f.name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
                 raise ScenarioError(f"ThermalParams: field '{f.name}' must be a finite positive number, got {v!r}")
+
+    def thermal_params(self) -> "ThermalParams":
+        """The cell's thermal parameters as a plain :class:`ThermalParams` (of a subclass's instance too)."""
+        return ThermalParams(**{f.name: getattr(self, f.name) for f in dataclasses.fields(ThermalParams)})
 
     @classmethod
     def table_2_1(cls) -> "ThermalParams":

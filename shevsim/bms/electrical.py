@@ -95,6 +95,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
+from shevsim.core.compiled import field_index
 from shevsim.core.lookup import HAVE_NUMBA, _njit, _t1_slope, _t1_value, ecm_lookup
 from shevsim.core.errors import SimulationError
 
@@ -102,7 +103,45 @@ __all__ = ["DEKFParams", "DEKF", "dekf_step", "cell_heat"]
 
 
 @dataclass(frozen=True)
-class DEKFParams:
+class DEKFTuning:
+    """The DEKF's tuning and model choices, declared once: :class:`DEKFParams` and the BMS component's
+    parameters (:class:`shevsim.components.bms.BMSParams`) both derive from it (fields: see
+    :class:`DEKFParams`)."""
+
+    capacity_ah: float = 2.3
+    rs0_ohm: float = 0.010
+    r1_0_ohm: float = 0.014
+    c1_0_f: float = 2000.0
+    q_soc: float = 6e-3
+    q_v1: float = 2e-2
+    q_rs: float = 8e-6
+    r_v: float = 1.0
+    q_r1: float = 2.5e-8
+    q_c1: float = 4e-1
+    p0_soc: float = 1.0
+    p0_v1: float = 1.0
+    p0_rs: float = 1.0
+    s0_r1: float = 1e-1
+    s0_c1: float = 1e-1
+    rs_model: str = "free"
+    rc_model: str = "free"
+    factor_p0: float = 1e-2
+    factor_q: float = 1e-4
+    v2_model: str = "none"
+
+    def __post_init__(self) -> None:
+        for name in ("rs_model", "rc_model"):
+            if getattr(self, name) not in ("free", "table_scaled"):
+                raise ValueError(f"DEKFParams: {name} must be 'free' or 'table_scaled', got {getattr(self, name)!r}")
+        if self.v2_model not in ("none", "nominal_maps"):
+            raise ValueError(f"DEKFParams: v2_model must be 'none' or 'nominal_maps', got {self.v2_model!r}")
+        if not (self.factor_p0 >= 0.0 and self.factor_q >= 0.0):
+            raise ValueError(f"DEKFParams: factor_p0 and factor_q must be >= 0, got {self.factor_p0!r}, "
+                             f"{self.factor_q!r}")
+
+
+@dataclass(frozen=True)
+class DEKFParams(DEKFTuning):
     """Tuning and initial values of the electrical DEKF (seed Table 5.4 defaults).
 
     Attributes
@@ -142,43 +181,13 @@ class DEKFParams:
         module docstring, "Slow second branch").
     """
 
-    capacity_ah: float = 2.3
     soc0_frac: float = 0.5
     v1_0_v: float = 0.0
-    rs0_ohm: float = 0.010
-    r1_0_ohm: float = 0.014
-    c1_0_f: float = 2000.0
-    q_soc: float = 6e-3
-    q_v1: float = 2e-2
-    q_rs: float = 8e-6
-    r_v: float = 1.0
-    q_r1: float = 2.5e-8
-    q_c1: float = 4e-1
-    p0_soc: float = 1.0
-    p0_v1: float = 1.0
-    p0_rs: float = 1.0
-    s0_r1: float = 1e-1
-    s0_c1: float = 1e-1
     r1_min_ohm: float = 1e-4
     r1_max_ohm: float = 1.0
     c1_min_f: float = 10.0
     c1_max_f: float = 1e6
     rs_min_ohm: float = 1e-5
-    rs_model: str = "free"
-    rc_model: str = "free"
-    factor_p0: float = 1e-2
-    factor_q: float = 1e-4
-    v2_model: str = "none"
-
-    def __post_init__(self) -> None:
-        for name in ("rs_model", "rc_model"):
-            if getattr(self, name) not in ("free", "table_scaled"):
-                raise ValueError(f"DEKFParams: {name} must be 'free' or 'table_scaled', got {getattr(self, name)!r}")
-        if self.v2_model not in ("none", "nominal_maps"):
-            raise ValueError(f"DEKFParams: v2_model must be 'none' or 'nominal_maps', got {self.v2_model!r}")
-        if not (self.factor_p0 >= 0.0 and self.factor_q >= 0.0):
-            raise ValueError(f"DEKFParams: factor_p0 and factor_q must be >= 0, got {self.factor_p0!r}, "
-                             f"{self.factor_q!r}")
 
 
 @_njit(cache=True)
@@ -195,21 +204,31 @@ def cell_heat(i_a, rs, v1, r1, t_c, ds):
     return i_a * i_a * rs + v1 * v1 / r1 - i_a * (t_c + 273.15) * ds / FARADAY_C_MOL
 
 
+#: the filter's state array ``xe`` (:attr:`DEKF.xe`): estimates, the covariances ``P_x`` (p00 .. p22) and
+#: ``P_theta`` (s00 .. s11), the effective R_s, R1, C1, the slow branch (v2, r2), the last innovation [V]
+E = field_index(("soc", "v1", "x2", "th1", "th2", "p00", "p01", "p02", "p11", "p12", "p22", "s00", "s01", "s11",
+                 "rs", "r1", "c1", "v2", "r2", "innovation", "variance"), "E")
+
+
 @_njit(cache=True)
-def dekf_step(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12, p22, s00, s01, s11,
-              i_a, v_meas_v, dt_s, t_mean_c, v2_prev):
+def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     """One DEKF step (5.21-5.24, module docstring) and the heat (5.16) at the new estimates.
 
     ``d, ix`` = ``CellTables.packed()``; ``k = [capacity_ah, q_soc, q_v1, q_x2, r_v, q_th1, q_th2, r1_min,
-    r1_max, c1_min, c1_max, rs_min, F, rs_scaled, rc_scaled, v2_nominal]``; the covariances are the unrolled
-    symmetric ``P_x`` (p00 .. p22) and ``P_theta`` (s00 .. s11); ``v2_prev`` [V] the slow branch's voltage
-    (propagated, not estimated, when ``k[15] > 0.5``; otherwise ignored and returned as 0).  Returns
+    r1_max, c1_min, c1_max, rs_min, F, rs_scaled, rc_scaled, v2_nominal]``; ``xe`` the filter's state array
+    (:data:`E`, read only): the estimates, the unrolled symmetric covariances ``P_x`` (p00 .. p22) and
+    ``P_theta`` (s00 .. s11), the slow branch's voltage ``v2`` (propagated, not estimated, when
+    ``k[15] > 0.5``; otherwise ignored and returned as 0).  Returns
     ``(ok, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, var, heat, v2, r2)``
     (``x2``, ``th1``, ``th2`` the filter's states/parameters: R_s, R1, C1 or their factors; ``rs``, ``r1``,
     ``c1`` the effective values; ``e`` the innovation [V] and ``var`` its variance; ``v2`` the slow branch's
     voltage after the step and ``r2`` [Ohm] the nominal R2 it used, ``inf`` without it); ``ok = 0`` when the innovation variance is unusable (the rest is then not an
     update).
     """
+    soc0, v1_prev, x2, th1, th2 = xe[E.soc], xe[E.v1], xe[E.x2], xe[E.th1], xe[E.th2]
+    p00, p01, p02, p11, p12, p22 = xe[E.p00], xe[E.p01], xe[E.p02], xe[E.p11], xe[E.p12], xe[E.p22]
+    s00, s01, s11 = xe[E.s00], xe[E.s01], xe[E.s11]
+    v2_prev = xe[E.v2]
     # 1. parameter time update (5.21); theta = [R1, C1] (free) or their factors (table_scaled)
     s00 += k[5]
     s11 += k[6]
@@ -306,6 +325,39 @@ def dekf_step(d, ix, k, soc0, v1_prev, x2, th1, th2, p00, p01, p02, p11, p12, p2
     return (1, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, sden, heat, v2, r2n)
 
 
+@_njit(cache=True)
+def store_update(xe, r):
+    """Write a :func:`dekf_step` result ``r`` into the state array ``xe`` (:data:`E`); returns ``(ok, heat [W])``.
+    When the innovation variance is unusable (``ok = 0``) only the innovation and its variance are written."""
+    xe[E.innovation] = r[18]
+    xe[E.variance] = r[19]
+    if not r[0]:
+        return 0, 0.0
+    (xe[E.soc], xe[E.v1], xe[E.x2], xe[E.rs], xe[E.th1], xe[E.th2], xe[E.r1], xe[E.c1], xe[E.p00], xe[E.p01],
+     xe[E.p02], xe[E.p11], xe[E.p12], xe[E.p22], xe[E.s00], xe[E.s01], xe[E.s11]) = r[1:18]
+    xe[E.v2] = r[21]
+    xe[E.r2] = r[22]
+    return 1, r[20]
+
+
+@_njit(cache=True)
+def dekf_update(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
+    """:func:`dekf_step` on the state array ``xe`` (:data:`E`), in place (:func:`store_update`); returns
+    ``(ok, heat [W])``."""
+    return store_update(xe, dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c))
+
+
+def _xe_property(name: str, doc: str):
+    i = getattr(E, name)
+
+    def get(self):
+        return float(self.xe[i])
+
+    def set_(self, v):
+        self.xe[i] = v
+    return property(get, set_, doc=doc)
+
+
 class DEKF:
     """Dual EKF over ``x = [SOC, V1, R_s]``, ``theta = [R1, C1]`` (see module docstring).
 
@@ -330,7 +382,42 @@ class DEKF:
         last step (``v2_model = "nominal_maps"``; 0 and ``inf`` otherwise).
     """
 
+    soc = _xe_property("soc", "SOC estimate [1]")
+    v1 = _xe_property("v1", "polarisation voltage V1 [V]")
+    x2 = _xe_property("x2", "third state: R_s [Ohm] or its factor [1]")
+    th1 = _xe_property("th1", "parameter: R1 [Ohm] or its factor [1]")
+    th2 = _xe_property("th2", "parameter: C1 [F] or its factor [1]")
+    rs = _xe_property("rs", "effective R_s of the last step [Ohm]")
+    r1 = _xe_property("r1", "effective R1 [Ohm]")
+    c1 = _xe_property("c1", "effective C1 [F]")
+    v2 = _xe_property("v2", "slow branch voltage [V]")
+    r2 = _xe_property("r2", "nominal R2 of the last step [Ohm]")
+    innovation = _xe_property("innovation", "last innovation [V]")
+
+    @property
+    def px(self) -> list:
+        """P_x, symmetric 3x3: p00 p01 p02 / p11 p12 / p22."""
+        return self.xe[E.p00:E.p22 + 1].tolist()
+
+    @px.setter
+    def px(self, v) -> None:
+        self.xe[E.p00:E.p22 + 1] = v
+
+    @property
+    def pth(self) -> list:
+        """P_theta, symmetric 2x2: s00 s01 / s11."""
+        return self.xe[E.s00:E.s11 + 1].tolist()
+
+    @pth.setter
+    def pth(self, v) -> None:
+        self.xe[E.s00:E.s11 + 1] = v
+
+    def arrays(self) -> tuple:
+        """``(d, ix, k, xe)``: what :func:`dekf_update` takes (tables, constants, the state array itself)."""
+        return self._tabs[0], self._tabs[1], self._k, self.xe
+
     def __init__(self, params: DEKFParams | None = None, tables: CellTables | None = None, compiled: bool = True):
+        self.xe = np.zeros(len(E))
         self.params = params if params is not None else DEKFParams()
         self.tables = tables if tables is not None else default_tables()
         p = self.params
@@ -399,19 +486,14 @@ class DEKF:
         ``t_mean_c`` [degC] (the previous step's mean-temperature estimate) is used by the heat's
         entropic term and, for ``table_scaled``, by the R_s,nom lookup.
         """
-        px, pth = self.px, self.pth
         d, ix = self._tabs
-        r = self._step(d, ix, self._k, self.soc, self.v1, self.x2, self.th1, self.th2, px[0], px[1], px[2], px[3],
-                       px[4], px[5], pth[0], pth[1], pth[2], float(i_a), float(v_meas_v), float(dt_s),
-                       float(t_mean_c), self.v2)
-        if not r[0]:
+        xe = self.xe
+        ok, q = store_update(xe, self._step(d, ix, self._k, xe, float(i_a), float(v_meas_v), float(dt_s),
+                                            float(t_mean_c)))
+        if not ok:
             raise SimulationError(f"DEKF: non-finite or non-positive innovation variance "
-                                  f"(innovation {r[18]!r} V, variance {r[19]!r}; inputs i={i_a!r} A, "
-                                  f"v={v_meas_v!r} V)")
-        (_, self.soc, self.v1, self.x2, self.rs, self.th1, self.th2, self.r1, self.c1, p00, p01, p02, p11, p12, p22,
-         s00, s01, s11, self.innovation, _, q, self.v2, self.r2) = r
-        self.px = [p00, p01, p02, p11, p12, p22]
-        self.pth = [s00, s01, s11]
+                                  f"(innovation {self.xe[E.innovation]!r} V, variance {self.xe[E.variance]!r}; "
+                                  f"inputs i={i_a!r} A, v={v_meas_v!r} V)")
         return q
 
     def step(self, i_a: float, v_meas_v: float, dt_s: float, t_c: float = 25.0) -> float:

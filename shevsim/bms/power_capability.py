@@ -49,20 +49,43 @@ pack's ``n_s n_p``; reported as ``p_max_w = max(P_dch, 0)`` and ``p_min_w = min(
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
-from shevsim.battery.thermal import ThermalParams
+from shevsim.battery.thermal import ThermalParams, two_state_ad_bd, two_state_out
 from shevsim.core.lookup import HAVE_NUMBA, _njit, _t1_slope, _t1_value
 from shevsim.bms.thermal_estimators import TwoStateDiscretiser, _py
 from shevsim.core.errors import ScenarioError
+from shevsim.core.params import rng
 
 __all__ = ["PowerCapabilityParams", "PowerLimits", "PowerCapability", "electrical_current_limits"]
 
 
 @dataclass(frozen=True)
-class PowerCapabilityParams:
+class CellLimits:
+    """The pack and the cell limits the power capability keeps, declared once: :class:`PowerCapabilityParams`
+    and the BMS component's parameters (:class:`shevsim.components.bms.BMSParams`) derive from it (fields: see
+    :class:`PowerCapabilityParams`)."""
+
+    v_min_v: float = 2.0
+    v_max_v: float = 3.6
+    t_core_max_c: float = 45.0
+    i_cell_max_a: float = field(default=math.inf, metadata=rng(gt=0.0, allow_inf=True))
+    n_series: int = 130
+    n_parallel: int = 10
+    polarisation_heat: str = "exact"
+
+    def __post_init__(self) -> None:
+        if self.polarisation_heat not in ("seed", "exact"):
+            raise ScenarioError(f"power capability: polarisation_heat must be 'seed' or 'exact', "
+                                f"got {self.polarisation_heat!r}")
+        if not self.v_min_v < self.v_max_v:
+            raise ScenarioError("power capability: need v_min < v_max")
+
+
+@dataclass(frozen=True)
+class PowerCapabilityParams(CellLimits):
     """Constraints and horizon (seed Table A.1 limits, Sec. 4.4/5.4).
 
     Attributes
@@ -91,23 +114,14 @@ class PowerCapabilityParams:
     dt_s: float = 0.1
     soc_min_frac: float = 0.3
     soc_max_frac: float = 0.7
-    v_min_v: float = 2.0
-    v_max_v: float = 3.6
-    t_core_max_c: float = 45.0
-    i_cell_max_a: float = math.inf
     capacity_ah: float = 2.3
-    n_series: int = 130
-    n_parallel: int = 10
-    polarisation_heat: str = "exact"
 
     def __post_init__(self) -> None:
-        if self.polarisation_heat not in ("seed", "exact"):
-            raise ScenarioError(f"power capability: polarisation_heat must be 'seed' or 'exact', "
-                                f"got {self.polarisation_heat!r}")
+        super().__post_init__()
         if self.horizon_steps < 1 or not self.dt_s > 0.0:
             raise ScenarioError("power capability: horizon_steps must be >= 1 and dt_s > 0")
-        if not (self.soc_min_frac < self.soc_max_frac and self.v_min_v < self.v_max_v):
-            raise ScenarioError("power capability: need soc_min < soc_max and v_min < v_max")
+        if not self.soc_min_frac < self.soc_max_frac:
+            raise ScenarioError("power capability: need soc_min < soc_max")
 
 
 class PowerLimits(NamedTuple):
@@ -127,31 +141,14 @@ class PowerLimits(NamedTuple):
     v_chg_v: float          # predicted cell voltage after N steps at i_min
 
 
-_CACHE_MAX = 16384
+#: the memos of the thermal coefficients, one per (thermal parameters, horizon, step)
 _CACHES: dict = {}
-
-
-class _SharedCache(dict):
-    """A memo of a pure function: shared, never copied with the owner's state."""
-
-    def __deepcopy__(self, memo):
-        return self
-
-    def __copy__(self):
-        return self
-
-
-def _coeff_cache(key) -> _SharedCache:
-    c = _CACHES.get(key)
-    if c is None:
-        c = _CACHES[key] = _SharedCache()
-    return c
 
 
 # ---------------------------------------------------------------------------------------------
 # the power capability written ONCE as numba-compatible pure functions (compiled from their source;
 # ``f.py_func`` runs the same source in Python, the reference of ``compiled=False``).
-# ``d, ix`` = ``CellTables.packed()``; ``k`` = :func:`_constants`; ``th`` = :meth:`PowerCapability._thermal_coeffs`.
+# ``d, ix`` = ``CellTables.packed()``; ``k`` = :func:`_constants`; ``th`` = :func:`thermal_coeffs`.
 # ---------------------------------------------------------------------------------------------
 def _constants(p: PowerCapabilityParams):
     """``k = [N, dt, soc_min, soc_max, v_min, v_max, t_core_max, i_cell_max, capacity_ah, n_pack, exact, F,
@@ -253,6 +250,81 @@ def power_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, la
             i_smin, i_smax, i_vmin, i_vmax, i_td, i_tc, v_d, v_c)
 
 
+@_njit(cache=True)
+def round3(x):
+    """Python's ``round(x, 3)`` (correctly rounded: the decimal ``x`` rounded half-even to 3 places, then
+    the nearest double), the thermal coefficients' key."""
+    if not math.isfinite(x):
+        return x
+    p = x * 1000.0
+    if abs(p) >= 4503599627370496.0:       # 2**52: already an integer number of thousandths
+        return x
+    # exact error of the product x * 1000 (Dekker's two-product; 1000 splits exactly)
+    c = 134217729.0 * x
+    xh = c - (c - x)
+    xl = x - xh
+    e = (xh * 1000.0 - p) + xl * 1000.0
+    fl = math.floor(p)
+    d = (p - fl) - 0.5
+    s = d + e
+    if s > 0.0:
+        q = fl + 1.0
+    elif s < 0.0:
+        q = fl
+    else:
+        q = fl if (fl % 2.0) == 0.0 else fl + 1.0
+    r = q / 1000.0
+    if r == 0.0:
+        r = math.copysign(0.0, x)
+    return r
+
+
+@_njit(cache=True)
+def thermal_coeffs(tp, h_w_m2k, keys, vals):
+    """The thermal coefficients :func:`power_limits` reads (``ZOH(N dt)`` (8), ``C_core/D_core`` (3), ``ZOH(dt)``
+    A and B_q (6)) at ``h_w_m2k`` rounded to 1e-3 W/m^2/K (the estimated h changes a little every step; the
+    effect on T_core is ~1e-5 K): a pure function of the rounded h and ``tp = [R, k, alpha, bq, N dt, dt]``,
+    memoised in the direct-mapped table ``keys`` / ``vals``; returns the row of ``vals`` holding them."""
+    hh = round3(h_w_m2k)
+    n = keys.shape[0]
+    q = hh * 1000.0
+    slot = int(abs(q)) % n if math.isfinite(q) else 0
+    if keys[slot] == hh:
+        return slot
+    a = two_state_ad_bd(hh, tp[0], tp[1], tp[2], tp[3], tp[4], False)
+    o = two_state_out(hh, tp[0], tp[1])
+    b = two_state_ad_bd(hh, tp[0], tp[1], tp[2], tp[3], tp[5], False)
+    out = vals[slot]
+    for j in range(8):
+        out[j] = a[j]
+    out[8] = o[3]
+    out[9] = o[4]
+    out[10] = o[5]
+    out[11] = b[0]
+    out[12] = b[1]
+    out[13] = b[2]
+    out[14] = b[3]
+    out[15] = b[4]
+    out[16] = b[6]
+    keys[slot] = hh
+    return slot
+
+
+class _Memo:
+    """The memo of :func:`thermal_coeffs` (a pure function): shared, never copied with the owner's state."""
+
+    def __init__(self, n: int = 4096):
+        import numpy as np
+        self.keys = np.full(n, np.nan)
+        self.vals = np.zeros((n, 17))
+
+    def __deepcopy__(self, memo):
+        return self
+
+    def __copy__(self):
+        return self
+
+
 def electrical_current_limits(soc: float, v1: float, rs: float, r1: float, c1: float, p: PowerCapabilityParams,
                               tables: CellTables):
     """``(i_soc_min, i_soc_max, i_v_min, i_v_max)`` [A], seed 5.28 (cell, + discharge)."""
@@ -289,7 +361,16 @@ class PowerCapability:
         self._disc1 = TwoStateDiscretiser(self.thermal_params, p.dt_s, "zoh")
         # thermal coefficients per (rounded) h: a pure function of h and the constants, shared by
         # every instance with the same constants and not part of the state (not deep-copied)
-        self._hcache = _coeff_cache(("array", self.thermal_params, p.horizon_steps, p.dt_s))
+        key = ("memo", self.thermal_params, p.horizon_steps, p.dt_s)
+        self._memo = _CACHES.get(key)
+        if self._memo is None:
+            self._memo = _CACHES[key] = _Memo()
+        import numpy as np
+        a_n, a_1 = self._discN._args, self._disc1._args
+        if a_n[5] or a_1[5] or a_n[:4] != a_1[:4]:
+            raise ScenarioError("power capability: the discretisations must be the ZOH of one cell")
+        #: ``[R, k, alpha, bq, N dt, dt]`` of :func:`thermal_coeffs`
+        self.thermal_args = np.array(a_n[:5] + (a_1[4],), dtype=np.float64)
         self.compiled = bool(compiled and HAVE_NUMBA)
         self._limits = power_limits if self.compiled else _py(power_limits)
         self._tabs = self.tables.packed()
@@ -298,20 +379,14 @@ class PowerCapability:
         self.last_i_min_a = 0.0
 
     def _thermal_coeffs(self, h_w_m2k: float):
-        """``ZOH(N dt) (8), C_core/D_core (3), ZOH(dt) A and B_q (6)`` at ``h_w_m2k`` rounded to 1e-3
-        W/m^2/K (the estimated h changes a little every step; closed-form ZOH cached per rounded h; the
-        effect on T_core is ~1e-5 K), as a float array."""
-        h_w_m2k = round(h_w_m2k, 3)
-        c = self._hcache.get(h_w_m2k)
-        if c is None:
-            import numpy as np
-            _, _, _, cc0, cc1, dc = self._discN.out(h_w_m2k)
-            e00, e01, e10, e11, bq0, _, bq1, _ = self._disc1.ad_bd(h_w_m2k)
-            c = np.array(self._discN.ad_bd(h_w_m2k) + (cc0, cc1, dc, e00, e01, e10, e11, bq0, bq1))
-            if len(self._hcache) >= _CACHE_MAX:
-                self._hcache.clear()
-            self._hcache[h_w_m2k] = c
-        return c
+        """:func:`thermal_coeffs` at ``h_w_m2k`` (a row of the shared memo)."""
+        m = self._memo
+        return m.vals[thermal_coeffs(self.thermal_args, float(h_w_m2k), m.keys, m.vals)]
+
+    def arrays(self) -> tuple:
+        """``(d, ix, k, thermal_args, memo keys, memo values)``: what :func:`power_limits` and
+        :func:`thermal_coeffs` take."""
+        return self._tabs[0], self._tabs[1], self._k, self.thermal_args, self._memo.keys, self._memo.vals
 
     def thermal_current_limits(self, soc: float, v1: float, rs: float, r1: float, c1: float,
                                t_mean_c: float, gamma: float, h_w_m2k: float, t_amb_c: float):

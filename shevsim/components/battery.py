@@ -45,10 +45,16 @@ Outputs (at t + h; none is direct feedthrough)
     ``t_mean_c`` [degC] volume-averaged cell temperature.
 
 Physics: written once in :mod:`shevsim.battery.model` (electrical step with its effects, two-state thermal
-step) and compiled there; this class only packs the parameters, holds the state and publishes outputs.
-``BatteryPack(name, params, compiled=False)`` runs the same functions uncompiled (``.py_func``).  The
+step) and compiled there.  The component's one step, :func:`battery_step` (input check, the cell step, the
+SOC check, publishing with the measurement noise), is what both the Python master (``do_step``) and the
+compiled whole-vehicle loop call, on the component's arrays ``data`` (:data:`D`).
+``BatteryPack(name, params, compiled=False)`` runs that step's Python form (``.py_func``).  The
 ``fd30`` thermal model steps the same electrical function and the 30-node model of
-:mod:`shevsim.battery.thermal`.
+:mod:`shevsim.battery.thermal` in Python (it has no compiled step).
+
+Measurement noise: a seeded ``numpy`` Generator draws standard normals in blocks of 4096; ``data`` holds
+the draws not used yet (``noise`` from ``kn[0]`` on), four per step (current, voltage, surface and
+ambient temperature, in that order).
 
 Effects (model terms switched by parameters; the defaults reproduce the plain model): see the table in
 :mod:`shevsim.battery.model` - ``dudt_soc_frac``/``dudt_v_k`` (entropic heat dU/dT(SOC)),
@@ -62,8 +68,10 @@ state at t + h): the pair a BMS sampling at t + h sees.
 """
 from __future__ import annotations
 
-import math
+import copy
 import dataclasses
+import math
+import pickle
 from dataclasses import dataclass
 
 import numpy as np
@@ -71,12 +79,16 @@ import numpy as np
 from shevsim.battery import cell as _cell
 from shevsim.battery import model as _m
 from shevsim.battery.thermal import FDThermal, ThermalParams, TwoStateThermal, fd_matrices
+from numba import njit
+
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
 from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError, SimulationError
 from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
 
 _NOISE_BLOCK = 4096
+ERR_SOC_RANGE = 16
 
 
 def _py(f):
@@ -211,7 +223,16 @@ class BatteryPackParams:
                 raise ScenarioError(f"{where}: {f} must be >= 0")
 
 
-class BatteryPack(Component):
+
+#: the step's data (:attr:`BatteryPack.data`): cell tables, packed cell parameters, state, thermal-coefficient
+#: workspace, cell outputs, noise draws and the index of the next one, publishing parameters, state before the step
+D = field_index(("d", "ix", "c", "st", "th", "yv", "noise", "kn", "p", "st_prev"), "D")
+#: publishing parameters ``data[D.p]``
+P = field_index(("n_parallel", "n_series", "n_pack", "current_offset_a", "sigma_current_a", "sigma_voltage_v",
+                 "sigma_temperature_c", "current_mode"), "P")
+
+
+class BatteryPack(CompiledStep, Component):
     """Battery pack plant: OCV-R-RC-RC cells with a radial thermal model (see module docstring)."""
 
     TYPE = "battery"
@@ -238,8 +259,10 @@ class BatteryPack(Component):
         out("ah_throughput_ah", "A.h", 0.0, "cumulative int |i| dt, pack"),
         out("clamp_count", "1", 0.0, "steps whose power demand exceeded the pack's capability"),
     )
+    STEP_ERRORS = {ERR_NAN_INPUT: "bad input (non-finite, or h_conv_w_m2k < 0)", ERR_SOC_RANGE: "SOC left [0, 100] %"}
+    DATA_MUTABLE = (D.st, D.th, D.yv, D.kn, D.st_prev)
     _static = ("name", "params", "tables", "thermal", "_fd_w", "_ns", "_np", "_npack", "_d", "_ix", "_c",
-               "_step", "_elec", "_touts")
+               "_step", "_elec", "_touts", "_fn", "_u_names", "_y_names", "_compiled")
 
     def __init__(self, name: str = "battery", params: BatteryPackParams | None = None, compiled: bool = True):
         super().__init__(name, params)
@@ -261,12 +284,24 @@ class BatteryPack(Component):
         self._npack = self._ns * self._np
         self._d, self._ix = self.tables.packed()
         self._c = _m.pack_params(p)
+        self._compiled = compiled
         # the one source, compiled (or its uncompiled reference)
         pick = (lambda f: f) if compiled else (lambda f: getattr(f, "py_func", f))
-        self._step = pick(_m.cell_step)
         self._elec = pick(_m.cell_electrical)
         self._touts = pick(_m.thermal_outputs)
         self.initialize(0.0)
+
+    def step_function(self):
+        if self._fd_w is not None:
+            return None
+        return battery_step if self._compiled else _py(battery_step)
+
+    def fast_reason(self) -> str:
+        if self._fd_w is not None:
+            return f"component '{self.name}': battery thermal_model 'fd30' has no compiled step"
+        if not self._compiled:
+            return f"component '{self.name}': battery built with compiled=False"
+        return ""
 
     # -- helpers -------------------------------------------------------------------------
     @property
@@ -289,47 +324,41 @@ class BatteryPack(Component):
         """Thermal state (two-state ``(T_mean, gamma)`` or the 30 node temperatures)."""
         return (float(self.st[_m.S_X0]), float(self.st[_m.S_X1])) if self._fd_w is None else self._x_fd
 
-    def _noise(self) -> float:
-        k = self._k
-        if k >= _NOISE_BLOCK:
-            self._buf = self.rng.standard_normal(_NOISE_BLOCK).tolist()
-            k = 0
-        self._k = k + 1
-        return self._buf[k]
+    @property
+    def i_cell(self) -> float:
+        """Cell current of the last step [A], + discharge."""
+        return float(self.yv[_m.Y_I])
 
-    def _noise4(self):
-        """The next four draws of :meth:`_noise` (the same sequence, one slice when possible)."""
-        k = self._k
-        if k + 4 <= _NOISE_BLOCK:
-            self._k = k + 4
-            return self._buf[k:k + 4]
-        return [self._noise(), self._noise(), self._noise(), self._noise()]
+    def _refill(self, need: int) -> None:
+        """Keep at least ``need`` unused draws in ``data`` (the generator's next blocks appended)."""
+        noise, kn = self.data[D.noise], self.data[D.kn]
+        left = noise.size - int(kn[0])
+        if left >= need:
+            return
+        nb = -(-(need - left) // _NOISE_BLOCK)
+        fresh = np.concatenate([noise[int(kn[0]):]] + [self.rng.standard_normal(_NOISE_BLOCK) for _ in range(nb)])
+        kn[0] = 0
+        self.data = self.data[:D.noise] + (fresh,) + self.data[D.noise + 1:]
 
-    def _publish(self, t_amb: float) -> None:
-        yv = self.yv
-        st = self.st
-        y = self.y
-        p = self.params
-        i = float(yv[_m.Y_I])
-        v = float(yv[_m.Y_V])
-        ts = float(yv[_m.Y_TSURF])
-        n0, n1, n2, n3 = self._noise4()
-        y["current_a"] = i * self._np
-        y["voltage_v"] = v * self._ns
-        y["soc_pct"] = 100.0 * float(st[_m.S_SOC])
-        y["ocv_v"] = float(yv[_m.Y_VOC]) * self._ns
-        y["t_core_c"] = float(yv[_m.Y_TCORE])
-        y["t_surface_c"] = ts
-        y["t_mean_c"] = float(yv[_m.Y_TMEAN])
-        y["heat_w"] = float(yv[_m.Y_Q])
-        y["cell_current_meas_a"] = i + p.current_offset_a + p.sigma_current_a * n0
-        y["cell_voltage_meas_v"] = v + p.sigma_voltage_v * n1
-        y["t_surface_meas_c"] = ts + p.sigma_temperature_c * n2
-        y["t_ambient_meas_c"] = t_amb + p.sigma_temperature_c * n3
-        y["loss_energy_j"] = float(st[_m.S_ELOSS]) * self._npack
-        y["chem_energy_j"] = float(st[_m.S_ECHEM]) * self._npack
-        y["ah_throughput_ah"] = float(st[_m.S_AH]) * self._np
-        y["clamp_count"] = float(st[_m.S_CLAMPS])
+    def fast_data(self, data: tuple, n_calls: int) -> tuple:
+        """The data of a run of ``n_calls`` steps: the draws of the next ``4 n_calls`` noise values (a pure
+        function of the generator's state, shared by the runs of one process)."""
+        need = 4 * n_calls
+        noise, kn = data[D.noise], data[D.kn]
+        if noise.size - int(kn[0]) >= need:
+            return data
+        key = (pickle.dumps(self.rng.bit_generator.state), noise[int(kn[0]):].tobytes())
+        hit = _NOISE_CACHE.get(key)
+        if hit is None or hit.size < need:
+            rng_ = copy.deepcopy(self.rng)
+            left = noise[int(kn[0]):]
+            nb = -(-(need - left.size) // _NOISE_BLOCK)
+            hit = np.concatenate([left] + [rng_.standard_normal(_NOISE_BLOCK) for _ in range(nb)])
+            if len(_NOISE_CACHE) >= 16:
+                _NOISE_CACHE.clear()
+            _NOISE_CACHE[key] = hit
+        kn[0] = 0
+        return data[:D.noise] + (hit,) + data[D.noise + 1:]
 
     # -- contract --------------------------------------------------------------------------
     def initialize(self, t0: float) -> None:
@@ -340,8 +369,6 @@ class BatteryPack(Component):
         self.st = st
         self._x_fd = self.thermal.initial_state(p.t_init_c) if self._fd_w is not None else None
         self.rng = np.random.default_rng(p.seed)
-        self._buf = self.rng.standard_normal(_NOISE_BLOCK).tolist()
-        self._k = 0
         yv = np.zeros(_m.N_OUT)
         t_amb, h_conv = self.u["t_ambient_c"], self.u["h_conv_w_m2k"]
         h_eff = _py(_m.effective_h)(self._c, t0, h_conv)     # factor and a convection change already due
@@ -355,42 +382,101 @@ class BatteryPack(Component):
         yv[_m.Y_VOC] = self.tables.ocv(float(st[_m.S_SOC]))
         yv[_m.Y_V] = yv[_m.Y_VOC]
         self.yv = yv
-        self._th = np.full(16, np.nan)     # thermal-coefficient cache of the compiled step
-        self._publish(t_amb)
-
-    @property
-    def i_cell(self) -> float:
-        """Cell current of the last step [A], + discharge."""
-        return float(self.yv[_m.Y_I])
+        pub = np.array([self._np, self._ns, self._npack, p.current_offset_a, p.sigma_current_a, p.sigma_voltage_v,
+                        p.sigma_temperature_c, 1.0 if p.input_mode == "current" else 0.0])
+        self.data = (self._d, self._ix, self._c, st, np.full(16, np.nan), yv,
+                     self.rng.standard_normal(_NOISE_BLOCK), np.zeros(1, dtype=np.int64), pub, st.copy())
+        self._io()
+        battery_publish(self.data, t_amb, self._y_arr)
+        self.y.update(zip(self._y_names, self._y_arr.tolist()))
 
     def do_step(self, t: float, h: float) -> None:
+        self._refill(4)
+        if self._fd_w is None:
+            return super().do_step(t, h)
+        self._do_step_fd30(t, h)
+
+    def _do_step_fd30(self, t: float, h: float) -> None:
+        """The step with the 30-node thermal model (Python; no compiled step)."""
         u = self.u
-        current_mode = self.params.input_mode == "current"
-        p_pack = u["current_cmd_a"] if current_mode else u["power_w"]
+        p_pack = u["current_cmd_a"] if self.params.input_mode == "current" else u["power_w"]
         h_conv = u["h_conv_w_m2k"]
         t_amb = u["t_ambient_c"]
         if not (math.isfinite(p_pack) and math.isfinite(h_conv) and math.isfinite(t_amb)) or h_conv < 0.0:
-            raise SimulationError(f"{self.name}: bad input at t={t:.6g} s "
-                                  f"({'current_cmd_a' if current_mode else 'power_w'}={p_pack!r}, "
-                                  f"h_conv_w_m2k={h_conv!r} (finite, >= 0), t_ambient_c={t_amb!r})")
+            raise SimulationError(self.step_error(ERR_NAN_INPUT, t, h))
         st = self.st
         saved = st.copy()
-        if self._fd_w is None:
-            self._step(self._d, self._ix, self._c, st, float(p_pack), float(t), float(h), float(t_amb),
-                       float(h_conv), self._th, self.yv)
-        else:
-            x = self._x_fd
-            t_mean = float(np.dot(self._fd_w, x))
-            q = self._elec(self._d, self._ix, self._c, st, float(p_pack), float(h), t_mean, self.yv)
-            h_eff = _py(_m.effective_h)(self._c, t + 0.5 * h, h_conv)
-            self._x_fd = self.thermal.step(x, q, t_amb, h_eff, h)
-            h_out = _py(_m.effective_h)(self._c, t + h, h_conv)
-            self.yv[_m.Y_TCORE], self.yv[_m.Y_TSURF] = self.thermal.outputs(self._x_fd, q, t_amb, h_out)
-            self.yv[_m.Y_TMEAN] = float(np.dot(self._fd_w, self._x_fd))
-        soc_new = float(st[_m.S_SOC])
-        if not (0.0 <= soc_new <= 1.0):
+        x = self._x_fd
+        t_mean = float(np.dot(self._fd_w, x))
+        q = self._elec(self._d, self._ix, self._c, st, float(p_pack), float(h), t_mean, self.yv)
+        h_eff = _py(_m.effective_h)(self._c, t + 0.5 * h, h_conv)
+        self._x_fd = self.thermal.step(x, q, t_amb, h_eff, h)
+        h_out = _py(_m.effective_h)(self._c, t + h, h_conv)
+        self.yv[_m.Y_TCORE], self.yv[_m.Y_TSURF] = self.thermal.outputs(self._x_fd, q, t_amb, h_out)
+        self.yv[_m.Y_TMEAN] = float(np.dot(self._fd_w, self._x_fd))
+        if not (0.0 <= float(st[_m.S_SOC]) <= 1.0):
+            st[:] = saved
+            raise SimulationError(self.step_error(ERR_SOC_RANGE, t, h))
+        battery_publish(self.data, t_amb, self._y_arr)
+        self.y.update(zip(self._y_names, self._y_arr.tolist()))
+
+    def step_error(self, status: int, t: float, h: float) -> str:
+        if status == ERR_SOC_RANGE:
             i = float(self.yv[_m.Y_I])
-            self.st = saved
-            raise SimulationError(f"{self.name}: SOC left [0, 100] % at t={t + h:.6g} s "
-                                  f"(soc_pct={100.0 * soc_new:.4g}, pack current {i * self._np:.6g} A)")
-        self._publish(t_amb)
+            return (f"{self.name}: SOC left [0, 100] % at t={t + h:.6g} s (soc_pct {100.0 * float(self.st[_m.S_SOC]):.4g} before "
+                    f"the step, pack current {i * self._np:.6g} A)")
+        return super().step_error(status, t, h)
+
+U = port_index(BatteryPack.VARIABLES, "input")
+Y = port_index(BatteryPack.VARIABLES, "output")
+
+
+# ------------------------------------------------------------------------------------ the one step
+@njit(cache=True)
+def battery_publish(data, t_amb, y):
+    """The outputs at the state in ``data`` (pack scaling, the next four noise draws)."""
+    _d, _ix, _c, st, _th, yv, noise, kn, p, _prev = data      # the fields of D
+    i = yv[_m.Y_I]
+    v = yv[_m.Y_V]
+    ts = yv[_m.Y_TSURF]
+    k = kn[0]
+    kn[0] = k + 4
+    y[Y.current_a] = i * p[P.n_parallel]
+    y[Y.voltage_v] = v * p[P.n_series]
+    y[Y.soc_pct] = 100.0 * st[_m.S_SOC]
+    y[Y.ocv_v] = yv[_m.Y_VOC] * p[P.n_series]
+    y[Y.t_core_c] = yv[_m.Y_TCORE]
+    y[Y.t_surface_c] = ts
+    y[Y.t_mean_c] = yv[_m.Y_TMEAN]
+    y[Y.heat_w] = yv[_m.Y_Q]
+    y[Y.cell_current_meas_a] = i + p[P.current_offset_a] + p[P.sigma_current_a] * noise[k]
+    y[Y.cell_voltage_meas_v] = v + p[P.sigma_voltage_v] * noise[k + 1]
+    y[Y.t_surface_meas_c] = ts + p[P.sigma_temperature_c] * noise[k + 2]
+    y[Y.t_ambient_meas_c] = t_amb + p[P.sigma_temperature_c] * noise[k + 3]
+    y[Y.loss_energy_j] = st[_m.S_ELOSS] * p[P.n_pack]
+    y[Y.chem_energy_j] = st[_m.S_ECHEM] * p[P.n_pack]
+    y[Y.ah_throughput_ah] = st[_m.S_AH] * p[P.n_parallel]
+    y[Y.clamp_count] = st[_m.S_CLAMPS]
+
+
+@njit(cache=True)
+def battery_step(data, u, y, t, h):
+    """:class:`BatteryPack`'s step (two-state thermal model): input check, :func:`shevsim.battery.model.cell_step`,
+    the SOC check (the state is left as it was on failure), the outputs at ``t + h``."""
+    d, ix, c, st, th, yv, _noise, _kn, p, prev = data      # the fields of D
+    p_pack = u[U.current_cmd_a] if p[P.current_mode] > 0.5 else u[U.power_w]
+    h_conv = u[U.h_conv_w_m2k]
+    t_amb = u[U.t_ambient_c]
+    if not (math.isfinite(p_pack) and math.isfinite(h_conv) and math.isfinite(t_amb)) or h_conv < 0.0:
+        return ERR_NAN_INPUT
+    prev[:] = st
+    _m.cell_step(d, ix, c, st, p_pack, t, h, t_amb, h_conv, th, yv)
+    if not (0.0 <= st[_m.S_SOC] <= 1.0):
+        st[:] = prev
+        return ERR_SOC_RANGE
+    battery_publish(data, t_amb, y)
+    return 0
+
+
+#: measurement-noise draws per (generator state, unused draws): shared by the runs of one process
+_NOISE_CACHE: dict = {}

@@ -36,25 +36,36 @@ Outputs (estimates after processing the measurement held over the step; declared
 """
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from shevsim.battery.cell import CellTables
 from shevsim.battery.thermal import ThermalParams
-from shevsim.bms.electrical import DEKF, DEKFParams
-from shevsim.bms.power_capability import PowerCapability, PowerCapabilityParams
-from shevsim.bms.thermal_estimators import ThermalDKF, ThermalJEKF, ThermalKF
+import numpy as np
+from numba import njit
+
+from shevsim.bms.electrical import DEKF, E, DEKFParams, DEKFTuning, dekf_update
+from shevsim.bms.power_capability import (CellLimits, PowerCapability, PowerCapabilityParams, power_limits,
+                                          thermal_coeffs)
+from shevsim.bms.thermal_estimators import ThermalDKF, ThermalJEKF, ThermalKF, dkf_step, jekf_step, kf_step
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
 from shevsim.core.component import Component
-from shevsim.core.errors import ScenarioError, SimulationError
-from shevsim.core.params import rng
+from shevsim.core.errors import ScenarioError
+from shevsim.core.lookup import _t1_value
 from shevsim.core.variables import inp, out
 
 _IN = ("cell_current_meas_a", "cell_voltage_meas_v", "t_surface_meas_c", "t_ambient_meas_c")
 
 
 @dataclass(frozen=True)
-class BMSParams:
+class BMSParams(DEKFTuning, CellLimits, ThermalParams):
     """BMS parameters; estimator tunings default to seed Table 5.4.
+
+    The DEKF's tuning (:class:`~shevsim.bms.electrical.DEKFTuning`), the limits of the power capability
+    (:class:`~shevsim.bms.power_capability.CellLimits`) and the cell's thermal parameters
+    (:class:`~shevsim.battery.thermal.ThermalParams`) are declared once, there; this class adds the BMS's own
+    fields and its defaults of the DEKF's model choices.
 
     Attributes
     ----------
@@ -98,25 +109,8 @@ class BMSParams:
         :mod:`shevsim.bms.electrical`.
     """
 
-    n_series: int = 130
-    n_parallel: int = 10
-    capacity_ah: float = 2.3
     soc0_pct: float = 50.0
     t0_c: float = 25.0
-    rs0_ohm: float = 0.010
-    r1_0_ohm: float = 0.014
-    c1_0_f: float = 2000.0
-    q_soc: float = 6e-3
-    q_v1: float = 2e-2
-    q_rs: float = 8e-6
-    r_v: float = 1.0
-    q_r1: float = 2.5e-8
-    q_c1: float = 4e-1
-    p0_soc: float = 1.0
-    p0_v1: float = 1.0
-    p0_rs: float = 1.0
-    s0_r1: float = 1e-1
-    s0_c1: float = 1e-1
     thermal_estimator: str = "dkf"
     h0_w_m2k: float = 20.0
     thermal_beta1: float = 5e-4
@@ -127,34 +121,16 @@ class BMSParams:
     horizon_s: float = 10.0
     soc_min_pct: float = 30.0
     soc_max_pct: float = 70.0
-    v_min_v: float = 2.0
-    v_max_v: float = 3.6
-    t_core_max_c: float = 45.0
-    i_cell_max_a: float = field(default=math.inf, metadata=rng(gt=0.0, allow_inf=True))
-    polarisation_heat: str = "exact"
-    radius_m: float = 12.93e-3
-    length_m: float = 65.15e-3
-    density_kg_m3: float = 2047.0
-    cp_j_kgk: float = 1109.2
-    kt_w_mk: float = 0.610
     ocv_file: str = ""
     entropy_file: str = ""
     rs_model: str = "table_scaled"
     rc_model: str = "table_scaled"
-    factor_p0: float = 1e-2
-    factor_q: float = 1e-4
     v2_model: str = "nominal_maps"
 
     def __post_init__(self) -> None:
-        if self.v2_model not in ("none", "nominal_maps"):
-            raise ScenarioError(f"bms parameters: v2_model must be 'nominal_maps' or 'none', got {self.v2_model!r}")
-        for name in ("rs_model", "rc_model"):
-            if getattr(self, name) not in ("free", "table_scaled"):
-                raise ScenarioError(f"bms parameters: {name} must be 'table_scaled' or 'free', "
-                                    f"got {getattr(self, name)!r}")
-        if not (self.factor_p0 >= 0.0 and self.factor_q >= 0.0):
-            raise ScenarioError(f"bms parameters: factor_p0 and factor_q must be >= 0, got {self.factor_p0!r}, "
-                                f"{self.factor_q!r}")
+        DEKFTuning.__post_init__(self)
+        CellLimits.__post_init__(self)
+        ThermalParams.__post_init__(self)
         if self.thermal_estimator not in ("dkf", "jekf", "kf"):
             raise ScenarioError(f"bms parameters: thermal_estimator must be 'dkf', 'jekf' or 'kf', "
                                 f"got {self.thermal_estimator!r}")
@@ -178,7 +154,12 @@ class BMSParams:
         return cls(**vals)
 
 
-class BMS(Component):
+def _fields_of(obj, base) -> dict:
+    """The values of ``base``'s fields in ``obj`` (an instance of a subclass of ``base``)."""
+    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(base)}
+
+
+class BMS(CompiledStep, Component):
     """Battery management system: DEKF -> thermal DKF -> power capability (see module docstring)."""
 
     TYPE = "bms"
@@ -205,19 +186,24 @@ class BMS(Component):
         out("i_min_a", "A", 0.0, "cell charge current limit"),
         out("cell_rs_ohm", "Ohm", 0.0, "estimated cell series resistance"),
     )
-    _static = ("name", "params", "tables", "thermal_params", "_ns", "_np")
+    _static = ("name", "params", "tables", "thermal_params", "_ns", "_np", "_fn", "_u_names", "_y_names")
 
     def __init__(self, name: str = "bms", params: BMSParams | None = None):
         super().__init__(name, params)
         p = self.params
         self.tables = CellTables(ocv_file=p.ocv_file or None, entropy_file=p.entropy_file or None)
-        self.thermal_params = ThermalParams(radius_m=p.radius_m, length_m=p.length_m,
-                                            density_kg_m3=p.density_kg_m3, cp_j_kgk=p.cp_j_kgk,
-                                            kt_w_mk=p.kt_w_mk)
+        self.thermal_params = p.thermal_params()
         self._ns = float(p.n_series)
         self._np = float(p.n_parallel)
         self.dt = None
         self.initialize(0.0)
+
+    # the estimates beside the DEKF's (``data[D.xb]``, indices XB)
+    t_mean = property(lambda self: float(self.xb[XB.t_mean]), doc="estimated mean temperature [degC]")
+    gamma = property(lambda self: float(self.xb[XB.gamma]), doc="estimated radial gradient [K/m]")
+    t_core = property(lambda self: float(self.xb[XB.t_core]), doc="estimated core temperature [degC]")
+    h_est = property(lambda self: float(self.xb[XB.h]), doc="estimated convection coefficient [W/(m2.K)]")
+    q_est = property(lambda self: float(self.xb[XB.q]), doc="estimated heat generation per cell [W]")
 
     def _build(self, dt: float) -> None:
         """(Re)build the sample-time dependent estimators for sample time ``dt`` [s]."""
@@ -238,32 +224,43 @@ class BMS(Component):
                                      p0=(p.thermal_p0, p.thermal_p0))
         self.pc = PowerCapability(PowerCapabilityParams(
             horizon_steps=max(1, int(round(p.horizon_s / dt))), dt_s=dt, soc_min_frac=p.soc_min_pct / 100.0,
-            soc_max_frac=p.soc_max_pct / 100.0, v_min_v=p.v_min_v, v_max_v=p.v_max_v,
-            t_core_max_c=p.t_core_max_c, i_cell_max_a=p.i_cell_max_a, capacity_ah=p.capacity_ah,
-            polarisation_heat=p.polarisation_heat,
-            n_series=p.n_series, n_parallel=p.n_parallel), self.thermal_params, self.tables)
+            soc_max_frac=p.soc_max_pct / 100.0, capacity_ah=p.capacity_ah, **_fields_of(p, CellLimits)),
+            self.thermal_params, self.tables)
+        self.xb[XB.i_max] = self.pc.last_i_max_a
+        self.xb[XB.i_min] = self.pc.last_i_min_a
+        self._pack()
+
+    def _pack(self) -> None:
+        """``data`` (:data:`D`): the DEKF's, the thermal filter's and the power capability's arrays (the
+        estimators' own state arrays, shared), the estimates ``xb`` and ``p = [n_s, n_p, filter code]``."""
+        dd, dix, dk, xe = self.dekf.arrays()
+        pd_, pix, pk, tp, keys, vals = self.pc.arrays()
+        code = {ThermalKF: 0.0, ThermalDKF: 1.0, ThermalJEKF: 2.0}[type(self.thermal)]
+        self.data = (dd, dix, dk, xe, self.thermal._st, self.thermal._c, pd_, pix, pk, tp, keys, vals, self.xb,
+                     np.array([self._ns, self._np, code]))
+        if hasattr(self, "_y_names"):
+            self._fn = self.step_function()
+
+    def fast_prepare(self, step_s: float) -> None:
+        if step_s != self.dt:                 # what do_step does first when its step differs from the built one
+            self._build(step_s)
 
     def initialize(self, t0: float) -> None:
         p = self.params
-        self.dekf = DEKF(DEKFParams(
-            capacity_ah=p.capacity_ah, soc0_frac=p.soc0_pct / 100.0, rs0_ohm=p.rs0_ohm, r1_0_ohm=p.r1_0_ohm,
-            c1_0_f=p.c1_0_f, q_soc=p.q_soc, q_v1=p.q_v1, q_rs=p.q_rs, r_v=p.r_v, q_r1=p.q_r1, q_c1=p.q_c1,
-            p0_soc=p.p0_soc, p0_v1=p.p0_v1, p0_rs=p.p0_rs, s0_r1=p.s0_r1, s0_c1=p.s0_c1,
-            rs_model=p.rs_model, rc_model=p.rc_model, factor_p0=p.factor_p0, factor_q=p.factor_q,
-            v2_model=p.v2_model), self.tables)
-        self.t_mean = p.t0_c
-        self.gamma = 0.0
-        self.t_core = p.t0_c
-        self.h_est = p.h0_w_m2k
-        self.q_est = 0.0
+        self.dekf = DEKF(DEKFParams(soc0_frac=p.soc0_pct / 100.0, **_fields_of(p, DEKFTuning)), self.tables)
+        self.xb = np.array([p.t0_c, 0.0, p.t0_c, p.h0_w_m2k, 0.0, 0.0, 0.0])
         self._build(self.dt if self.dt is not None else 0.1)
         self._publish()
+        self._io()
 
     def _publish(self) -> None:
+        """The outputs at t0 (the power capability evaluated in Python; the step publishes the same)."""
         d = self.dekf
         ns, np_ = self._ns, self._np
         lim = self.pc.compute(d.soc, d.v1, d.rs, d.r1, d.c1, self.t_mean, self.gamma, self.h_est,
                               self.u["t_ambient_meas_c"])
+        self.xb[XB.i_max] = self.pc.last_i_max_a
+        self.xb[XB.i_min] = self.pc.last_i_min_a
         y = self.y
         y["soc_pct"] = 100.0 * d.soc
         y["v1_v"] = d.v1 * ns
@@ -283,21 +280,94 @@ class BMS(Component):
         y["i_min_a"] = lim.i_min_a
 
     def do_step(self, t: float, h: float) -> None:
-        u = self.u
-        i = u["cell_current_meas_a"]
-        v = u["cell_voltage_meas_v"]
-        ts = u["t_surface_meas_c"]
-        ta = u["t_ambient_meas_c"]
-        if not (math.isfinite(i) and math.isfinite(v) and math.isfinite(ts) and math.isfinite(ta)):
-            raise SimulationError(f"{self.name}: non-finite measurement at t={t + h:.6g} s "
-                                  f"(current {i!r} A, voltage {v!r} V, surface {ts!r} degC, ambient {ta!r} degC)")
         if h != self.dt:
             self._build(h)
-        d = self.dekf
-        self.q_est = d.step_heat(i, v, h, self.t_mean)   # 1. electrical DEKF, 2. heat with the previous T_mean
-        est = self.thermal.update(ts, ta, self.q_est)    # 3. thermal filter
-        self.t_mean = est.t_mean_c
-        self.gamma = est.gamma_c_per_m
-        self.t_core = est.t_core_c
-        self.h_est = est.h_w_m2k
-        self._publish()                                  # 4. power capability
+        super().do_step(t, h)
+
+    def step_error(self, status: int, t: float, h: float) -> str:
+        if status == ERR_NAN_INPUT:
+            u = self.u
+            return (f"{self.name}: non-finite measurement at t={t + h:.6g} s (current "
+                    f"{u['cell_current_meas_a']!r} A, voltage {u['cell_voltage_meas_v']!r} V, surface "
+                    f"{u['t_surface_meas_c']!r} degC, ambient {u['t_ambient_meas_c']!r} degC)")
+        return super().step_error(status, t, h)
+
+
+ERR_DEKF = 16
+ERR_THERMAL_INPUT = 17
+BMS.STEP_ERRORS = {ERR_NAN_INPUT: "non-finite measurement",
+                   ERR_DEKF: "DEKF: non-finite or non-positive innovation variance",
+                   ERR_THERMAL_INPUT: "thermal estimator: non-finite input"}
+U = port_index(BMS.VARIABLES, "input")
+Y = port_index(BMS.VARIABLES, "output")
+#: the estimates beside the DEKF's state: thermal filter outputs, heat, the power capability's last limits
+XB = field_index(("t_mean", "gamma", "t_core", "h", "q", "i_max", "i_min"), "XB")
+#: the step's data (:attr:`BMS.data`)
+D = field_index(("dd", "dix", "dk", "xe", "tst", "tc", "pd", "pix", "pk", "tp", "keys", "vals", "xb", "p"), "D")
+BMS.DATA_MUTABLE = (D.xe, D.tst, D.xb)
+
+
+@njit(cache=True)
+def _thermal_filter(code, tst, tc, ts, ta, q):
+    if code == 1:
+        return dkf_step(tst, tc, ts, ta, q)
+    if code == 2:
+        return jekf_step(tst, tc, ts, ta, q)
+    return kf_step(tst, tc, ts, ta, q)
+
+
+@njit(cache=True)
+def bms_step(data, u, y, t, h):
+    """:class:`BMS`'s step: 1. electrical DEKF and 2. heat with the previous T_mean
+    (:func:`~shevsim.bms.electrical.dekf_update`), 3. thermal filter, 4. power capability
+    (:func:`~shevsim.bms.power_capability.power_limits`), the outputs."""
+    dd, dix, dk, xe, tst, tc, pd_, pix, pk, tp, keys, vals, xb, p = data
+    i = u[U.cell_current_meas_a]
+    v = u[U.cell_voltage_meas_v]
+    ts = u[U.t_surface_meas_c]
+    ta = u[U.t_ambient_meas_c]
+    if not (math.isfinite(i) and math.isfinite(v) and math.isfinite(ts) and math.isfinite(ta)):
+        return ERR_NAN_INPUT
+    ok, q = dekf_update(dd, dix, dk, xe, i, v, h, xb[XB.t_mean])
+    if not ok:
+        return ERR_DEKF
+    xb[XB.q] = q
+    if not math.isfinite(q):
+        return ERR_THERMAL_INPUT
+    est = _thermal_filter(int(p[2]), tst, tc, ts, ta, q)
+    xb[XB.t_mean] = est[0]
+    xb[XB.gamma] = est[1]
+    xb[XB.t_core] = est[2]
+    xb[XB.h] = est[4]
+    soc = xe[E.soc]
+    v1 = xe[E.v1]
+    rs = xe[E.rs]
+    r1 = xe[E.r1]
+    c1 = xe[E.c1]
+    slot = thermal_coeffs(tp, xb[XB.h], keys, vals)
+    lim = power_limits(pd_, pix, pk, vals[slot], soc, v1, rs, r1, c1, xb[XB.t_mean], xb[XB.gamma], ta, xb[XB.i_max],
+                       xb[XB.i_min])
+    xb[XB.i_max] = lim[0]
+    xb[XB.i_min] = lim[1]
+    ns = p[0]
+    np_ = p[1]
+    y[Y.soc_pct] = 100.0 * soc
+    y[Y.v1_v] = v1 * ns
+    y[Y.rs_ohm] = rs * ns / np_
+    y[Y.r1_ohm] = r1 * ns / np_
+    y[Y.c1_f] = c1 * np_ / ns
+    y[Y.cell_rs_ohm] = rs
+    y[Y.t_avg_c] = xb[XB.t_mean]
+    y[Y.gamma_c] = xb[XB.gamma]
+    y[Y.t_core_c] = xb[XB.t_core]
+    y[Y.h_w_m2k] = xb[XB.h]
+    y[Y.heat_w] = q
+    y[Y.ocv_v] = _t1_value(dd, dix[0], dix[1], soc) * ns
+    y[Y.power_max_w] = lim[2]
+    y[Y.power_min_w] = lim[3]
+    y[Y.i_max_a] = lim[0]
+    y[Y.i_min_a] = lim[1]
+    return 0
+
+
+BMS.STEP = bms_step

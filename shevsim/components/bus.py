@@ -53,8 +53,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+from numba import njit
+
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, port_index
 from shevsim.core.component import Component
-from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
 from shevsim.powertrain.motor import bus_aux_w, bus_balance, bus_limits
 
@@ -86,7 +89,7 @@ _LIM = ("gen_power_w", "aux_power_w", "battery_power_max_w", "battery_power_min_
 _GLIM = ("motor_power_w", "aux_power_w", "battery_power_min_w")
 
 
-class PowerBus(Component):
+class PowerBus(CompiledStep, Component):
     """Lossless power balance (see module docstring for ports)."""
 
     TYPE = "bus"
@@ -108,51 +111,37 @@ class PowerBus(Component):
         out("battery_energy_j", "J", 0.0, "cumulative battery energy, + discharged", _ALL),
     )
 
+    DATA_MUTABLE = (1,)
+    _static = ("name", "params", "_aux_w", "_fn", "_u_names", "_y_names")
+
     def _aux(self) -> float:
         return bus_aux_w(self.u["aux_power_w"], self._aux_w)
-
-    def _limits(self) -> None:
-        u, y = self.u, self.y
-        (y["motor_power_max_w"], y["motor_power_min_w"], y["gen_power_max_w"], _floor) = bus_limits(
-            u["motor_power_w"], u["gen_power_w"], u["aux_power_w"], u["battery_power_max_w"],
-            u["battery_power_min_w"], self._aux_w, self.params.enforce_battery_limits)
 
     def __init__(self, name: str = "bus", params: BusParams | None = None):
         super().__init__(name, params)
         self._aux_w = float(self.params.aux_power_w)
 
-    _static = ("name", "params", "_aux_w")
-
     def initialize(self, t0: float) -> None:
-        self.e = [0.0, 0.0, 0.0, 0.0]
-        self._limits()
+        """Outputs at t0: the limits and the balance of the start inputs, no energy yet.  ``data`` =
+        ``(p = [aux_power_w, enforce_battery_limits], e = [aux, motor, gen, battery energies])``."""
+        self.data = (np.array([self._aux_w, 1.0 if self.params.enforce_battery_limits else 0.0]), np.zeros(4))
         u, y = self.u, self.y
+        (y["motor_power_max_w"], y["motor_power_min_w"], y["gen_power_max_w"], _floor) = bus_limits(
+            u["motor_power_w"], u["gen_power_w"], u["aux_power_w"], u["battery_power_max_w"],
+            u["battery_power_min_w"], self._aux_w, self.params.enforce_battery_limits)
         _pa, y["demand_power_w"], y["battery_power_w"] = bus_balance(u["motor_power_w"], u["gen_power_w"],
                                                                      u["aux_power_w"], self._aux_w)
         for k in ("aux_energy_j", "motor_energy_j", "gen_energy_j", "battery_energy_j"):
             y[k] = 0.0
+        self._io()
 
-    def do_step(self, t: float, h: float) -> None:
-        u, y, e = self.u, self.y, self.e
-        pm, pg = u["motor_power_w"], u["gen_power_w"]
-        pa, d, b = bus_balance(pm, pg, u["aux_power_w"], self._aux_w)
-        if pm != pm or pg != pg or pa != pa:
-            raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
-                                  f"(motor_power_w={pm}, gen_power_w={pg}, aux_power_w={pa})")
-        e[0] += pa * h
-        e[1] += pm * h
-        e[2] += pg * h
-        e[3] += b * h
-        y["demand_power_w"] = d
-        y["battery_power_w"] = b
-        y["aux_energy_j"] = e[0]
-        y["motor_energy_j"] = e[1]
-        y["gen_energy_j"] = e[2]
-        y["battery_energy_j"] = e[3]
-        self._limits()
+    @property
+    def e(self) -> list:
+        """Cumulative auxiliary, motor, generator and battery energies [J]."""
+        return self.data[1].tolist()
 
 
-class PowerLimits(Component):
+class PowerLimits(CompiledStep, Component):
     """The bus's limit algebra as a component of its own (TYPE ``power_limits``), evaluated in the step
     the limits act in (module docstring, "Limits held within the step").
 
@@ -179,7 +168,7 @@ class PowerLimits(Component):
         out("gen_power_min_w", "W", -1e12, "least generator power the bus needs (<= 0: none)",
             ("motor_power_w", "aux_power_w", "battery_power_max_w")),
     )
-    _static = ("name", "params", "_aux_w")
+    _static = ("name", "params", "_aux_w", "_fn", "_u_names", "_y_names")
 
     def __init__(self, name: str = "power_limits", params: BusParams | None = None):
         super().__init__(name, params)
@@ -187,18 +176,58 @@ class PowerLimits(Component):
 
     _aux = PowerBus._aux
 
-    def _limits(self) -> None:
-        u, y = self.u, self.y
-        (y["motor_power_max_w"], y["motor_power_min_w"], y["gen_power_max_w"], y["gen_power_min_w"]) = bus_limits(
-            u["motor_power_w"], u["gen_power_w"], u["aux_power_w"], u["battery_power_max_w"],
-            u["battery_power_min_w"], self._aux_w, self.params.enforce_battery_limits)
-
     def initialize(self, t0: float) -> None:
-        self._limits()
+        """``data`` = ``(p = [aux_power_w, enforce_battery_limits],)``; the outputs are those of the start inputs."""
+        self.data = (np.array([self._aux_w, 1.0 if self.params.enforce_battery_limits else 0.0]),)
+        self._io()
+        power_limits_step(self.data, self._u_arr, self._y_arr, t0, 0.0)
+        self.y.update(zip(self._y_names, self._y_arr.tolist()))
 
-    def do_step(self, t: float, h: float) -> None:
-        u = self.u
-        for k in _LIM + ("motor_power_w",):
-            if u[k] != u[k]:
-                raise SimulationError(f"{self.name}: NaN input '{k}' at t={t:g} s")
-        self._limits()
+
+UB = port_index(PowerBus.VARIABLES, "input")
+YB = port_index(PowerBus.VARIABLES, "output")
+UL = port_index(PowerLimits.VARIABLES, "input")
+YL = port_index(PowerLimits.VARIABLES, "output")
+
+
+@njit(cache=True)
+def power_bus_step(data, u, y, t, h):
+    """:class:`PowerBus`'s step: the balance (:func:`~shevsim.powertrain.motor.bus_balance`), the energies
+    over ``h``, then the limits (:func:`~shevsim.powertrain.motor.bus_limits`) at the held inputs."""
+    p, e = data
+    pm = u[UB.motor_power_w]
+    pg = u[UB.gen_power_w]
+    u_aux = u[UB.aux_power_w]
+    pa, d, b = bus_balance(pm, pg, u_aux, p[0])
+    if pm != pm or pg != pg or pa != pa:
+        return ERR_NAN_INPUT
+    e[0] += pa * h
+    e[1] += pm * h
+    e[2] += pg * h
+    e[3] += b * h
+    y[YB.demand_power_w] = d
+    y[YB.battery_power_w] = b
+    y[YB.aux_energy_j] = e[0]
+    y[YB.motor_energy_j] = e[1]
+    y[YB.gen_energy_j] = e[2]
+    y[YB.battery_energy_j] = e[3]
+    y[YB.motor_power_max_w], y[YB.motor_power_min_w], y[YB.gen_power_max_w], _floor = bus_limits(
+        pm, pg, u_aux, u[UB.battery_power_max_w], u[UB.battery_power_min_w], p[0], p[1] > 0.5)
+    return 0
+
+
+@njit(cache=True)
+def power_limits_step(data, u, y, t, h):
+    """:class:`PowerLimits`'s step: the bus's limit law at the held inputs (NaN inputs refused)."""
+    p = data[0]
+    for j in range(5):
+        if u[j] != u[j]:
+            return ERR_NAN_INPUT
+    y[YL.motor_power_max_w], y[YL.motor_power_min_w], y[YL.gen_power_max_w], y[YL.gen_power_min_w] = bus_limits(
+        u[UL.motor_power_w], u[UL.gen_power_w], u[UL.aux_power_w], u[UL.battery_power_max_w],
+        u[UL.battery_power_min_w], p[0], p[1] > 0.5)
+    return 0
+
+
+PowerBus.STEP = power_bus_step
+PowerLimits.STEP = power_limits_step

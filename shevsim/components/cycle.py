@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from shevsim.core.compiled import CompiledStep, port_index
 from shevsim.core.component import Component
 from shevsim.core.lookup import _njit
 from shevsim.core.variables import out
@@ -74,7 +75,7 @@ def cycle_sample(v, slope, dt: float, dur: float, repeat: int, t0: float, t: flo
     return v[i] + (v[i + 1] - v[i]) * frac, slope[i], tc
 
 
-class CycleSource(Component):
+class CycleSource(CompiledStep, Component):
     """Drive-cycle speed reference.
 
     Outputs
@@ -104,7 +105,8 @@ class CycleSource(Component):
         out("accel_ref_mps2", "m/s2", 0.0, "reference acceleration: slope of the segment driven next (+ speeding up)"),
         out("time_in_cycle_s", "s", 0.0, "time since the start of the current repetition"),
     )
-    _static = ("name", "params", "cycle", "_v", "_slope", "_dt", "_n", "_dur", "_repeat", "_va", "_sa")
+    _static = ("name", "params", "cycle", "_v", "_slope", "_dt", "_n", "_dur", "_repeat", "_va", "_sa", "_fn",
+               "_u_names", "_y_names")
 
     def __init__(self, name: str, params: CycleParams | None = None):
         super().__init__(name, params)
@@ -123,14 +125,27 @@ class CycleSource(Component):
         """Cycle duration x repeat (s), counted from the start time."""
         return self.t0 + self._dur * self._repeat
 
-    def _evaluate(self, t: float) -> None:
+    def initialize(self, t0: float) -> None:
+        """``data`` = ``(speeds, slopes, [dt, n, duration, repeat, t0])``; the outputs at ``t0``."""
+        self.t0 = float(t0)
+        self.data = (self._va, self._sa, np.array([self._dt, self._n, self._dur, self._repeat, self.t0],
+                                                  dtype=np.float64))
+        self._io()
         y = self.y
         y["speed_ref_mps"], y["accel_ref_mps2"], y["time_in_cycle_s"] = cycle_sample(
-            self._va, self._sa, self._dt, self._dur, self._repeat, self.t0, float(t))
+            self._va, self._sa, self._dt, self._dur, self._repeat, self.t0, self.t0)
 
-    def initialize(self, t0: float) -> None:
-        self.t0 = float(t0)
-        self._evaluate(self.t0)
 
-    def do_step(self, t: float, h: float) -> None:
-        self._evaluate(t + h)
+Y = port_index(CycleSource.VARIABLES, "output")
+
+
+@_njit(cache=True)
+def cycle_step(data, u, y, t, h):
+    """:class:`CycleSource`'s step: the trace sampled at ``t + h`` (:func:`cycle_sample`)."""
+    v, slope, p = data
+    y[Y.speed_ref_mps], y[Y.accel_ref_mps2], y[Y.time_in_cycle_s] = cycle_sample(v, slope, p[0], p[2], int(p[3]),
+                                                                               p[4], t + h)
+    return 0
+
+
+CycleSource.STEP = cycle_step

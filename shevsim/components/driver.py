@@ -16,8 +16,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+from numba import njit
+
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
 from shevsim.core.component import Component
-from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
 from shevsim.powertrain.driver import driver_step
 from shevsim.powertrain.vehicle import G_MPS2
@@ -55,7 +58,7 @@ class DriverParams:
                 raise ValueError(f"parameter '{k}' must be >= 0, got {getattr(self, k)!r}")
 
 
-class Driver(Component):
+class Driver(CompiledStep, Component):
     """PI + feed-forward speed-following driver (see module docstring for ports)."""
 
     TYPE = "driver"
@@ -69,7 +72,8 @@ class Driver(Component):
         out("speed_error_mps", "m/s", 0.0, "v_ref - v", _FT),
         out("feedforward_n", "N", 0.0, "feed-forward part of the demand", _FT),
     )
-    _static = ("name", "params", "_c")
+    DATA_MUTABLE = (1,)
+    _static = ("name", "params", "_c", "_fn", "_u_names", "_y_names")
 
     def __init__(self, name: str = "driver", params: DriverParams | None = None):
         super().__init__(name, params)
@@ -77,19 +81,44 @@ class Driver(Component):
         self._c = 0.5 * p.air_density_kg_m3 * p.drag_coefficient * p.frontal_area_m2
 
     def initialize(self, t0: float) -> None:
-        self.integ = 0.0
+        """``data`` = ``(p, x = [integrator])`` (``p`` in the order of :data:`P`)."""
+        p = self.params
+        self.data = (np.array([p.kp_n_per_mps, p.ki_n_per_m, p.mass_kg, self._c, p.rolling_coefficient, G_MPS2,
+                               p.force_brake_max_n, p.force_prop_max_n], dtype=np.float64), np.zeros(1))
         for k in ("force_req_n", "speed_error_mps", "feedforward_n"):
             self.y[k] = 0.0
+        self._io()
 
-    def do_step(self, t: float, h: float) -> None:
-        u, p = self.u, self.params
-        vr, ar, v = u["speed_ref_mps"], u["accel_ref_mps2"], u["speed_mps"]
-        if vr != vr or ar != ar or v != v:
-            raise SimulationError(f"{self.name}: NaN input at t={t:g} s")
-        f, e, ff, self.integ = driver_step(float(vr), float(ar), float(v), self.integ, float(h), p.kp_n_per_mps,
-                                           p.ki_n_per_m, p.mass_kg, self._c, p.rolling_coefficient, G_MPS2,
-                                           p.force_brake_max_n, p.force_prop_max_n)
-        y = self.y
-        y["force_req_n"] = f
-        y["speed_error_mps"] = e
-        y["feedforward_n"] = ff
+    @property
+    def integ(self) -> float:
+        """The PI integrator [N]."""
+        return float(self.data[1][0])
+
+
+U = port_index(Driver.VARIABLES, "input")
+Y = port_index(Driver.VARIABLES, "output")
+#: the step's parameters ``data[0]``: the gains, the feed-forward's vehicle (mass, 0.5 rho cd A, rolling
+#: coefficient, g) and the saturation
+P = field_index(("kp_n_per_mps", "ki_n_per_m", "mass_kg", "drag_n_per_mps2", "rolling_coefficient", "g_mps2",
+                 "force_brake_max_n", "force_prop_max_n"), "P")
+
+
+@njit(cache=True)
+def driver_component_step(data, u, y, t, h):
+    """:class:`Driver`'s step: :func:`~shevsim.powertrain.driver.driver_step` at the held inputs."""
+    p, x = data
+    vr = u[U.speed_ref_mps]
+    ar = u[U.accel_ref_mps2]
+    v = u[U.speed_mps]
+    if vr != vr or ar != ar or v != v:
+        return ERR_NAN_INPUT
+    f, e, ff, x[0] = driver_step(vr, ar, v, x[0], h, p[P.kp_n_per_mps], p[P.ki_n_per_m], p[P.mass_kg],
+                                 p[P.drag_n_per_mps2], p[P.rolling_coefficient], p[P.g_mps2], p[P.force_brake_max_n],
+                                 p[P.force_prop_max_n])
+    y[Y.force_req_n] = f
+    y[Y.speed_error_mps] = e
+    y[Y.feedforward_n] = ff
+    return 0
+
+
+Driver.STEP = driver_component_step

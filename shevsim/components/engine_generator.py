@@ -42,19 +42,31 @@ Outputs (at t + h, no direct feedthrough: every output comes from the state or t
 Energy balance (exact): ``fuel_energy_j = elec_energy_j + engine_loss_energy_j +
 gen_loss_energy_j + shaft_kinetic_energy_j``.
 Initial state: steady operation on the optimal line at the start value of ``power_cmd_w``.
-Physics written once: the component wraps :func:`shevsim.powertrain.engine.step` (through
-:class:`~shevsim.powertrain.engine.EngineGenStep`), numba-compiled; ``compiled=False`` runs the same
-source in the Python interpreter (``step.py_func``).  Every extrapolation rule of the maps is supported
-by both.
+Physics written once, in :func:`shevsim.powertrain.engine.step`; the component's one step,
+:func:`engine_generator_step` (input check, the physics, the finiteness check, publishing), runs on the
+component's arrays ``data`` (:data:`D`) under the Python master and in the compiled whole-vehicle loop
+alike; ``compiled=False`` runs its Python form (``.py_func``).  Every extrapolation rule of the maps is
+supported.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numpy as np
+from numba import njit
+
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
 from shevsim.core.component import Component
-from shevsim.core.errors import SimulationError
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.engine import EG_DIR, EngineGenMaps, EngineGenStep, measured_soot_rate, steady_state
+from shevsim.powertrain import engine as _eng
+from shevsim.powertrain.engine import (EG_DIR, EngineGenMaps, EngineGenState, S, T, measured_soot_rate, pack_maps,
+                                       pack_params, steady_state)
+
+ERR_NONFINITE = 16
+#: the step's data (:attr:`EngineGenerator.data`): packed maps, parameters, rated power, state, the step's
+#: totals, state before the step
+D = field_index(("md", "mi", "c", "p_max", "x", "tot", "x_prev"), "D")
 
 
 @dataclass(frozen=True)
@@ -124,7 +136,7 @@ class EngineGeneratorParams:
                 raise ValueError(f"parameter '{k}' must be >= 0, got {getattr(self, k)!r}")
 
 
-class EngineGenerator(Component):
+class EngineGenerator(CompiledStep, Component):
     """Diesel engine-generator with PI rack, turbo lag, soot and power-rate limit (see module docstring)."""
 
     TYPE = "engine_generator"
@@ -155,7 +167,11 @@ class EngineGenerator(Component):
         out("shaft_kinetic_energy_j", "J", 0.0, "change of the shaft kinetic energy since t0"),
         out("soot_rate_meas_mgps", "mg/s", 0.0, "soot analyser reading: lagged soot rate + offset (mean over the last step)"),
     )
-    _static = ("name", "params", "maps", "_step")
+    STEP_ERRORS = {ERR_NAN_INPUT: "NaN input",
+                   ERR_NONFINITE: "engine-generator step gave a non-finite result (a NaN lookup, or a lookup "
+                                  "outside a map with extrapolation 'error')"}
+    DATA_MUTABLE = (D.x, D.tot, D.x_prev)
+    _static = ("name", "params", "maps", "_compiled", "_fn", "_u_names", "_y_names")
 
     def __init__(self, name: str = "engine_generator", params: EngineGeneratorParams | None = None,
                  compiled: bool = True):
@@ -163,43 +179,96 @@ class EngineGenerator(Component):
         p = self.params
         self.maps = EngineGenMaps(p.fuel_map_file, p.torque_map_file, p.max_torque_file, p.soot_map_file,
                                   p.generator_eff_file, p.generator_max_torque_file, p.ool_file)
-        # the one-source step: numba-compiled, or its Python form (step.py_func) when compiled=False
-        self._step = EngineGenStep(self.maps, p, compiled=compiled)
+        self._compiled = compiled
+        self._md, self._mi = pack_maps(self.maps)
+        self._c = pack_params(p)
+
+    _static = _static + ("_md", "_mi", "_c")
+
+    def set_maps(self, maps: EngineGenMaps) -> None:
+        """Use ``maps`` from now on (packed again; the state is kept)."""
+        self.maps = maps
+        self._md, self._mi = pack_maps(maps)
+        if hasattr(self, "data"):
+            p_max = np.array([float(maps.p_max_w)])
+            self.data = (self._md, self._mi, self._c, p_max) + self.data[D.x:]
+
+    def step_function(self):
+        return engine_generator_step if self._compiled else engine_generator_step.py_func
+
+    def fast_reason(self) -> str:
+        return "" if self._compiled else f"component '{self.name}': engine-generator built with compiled=False"
+
+    @property
+    def st(self) -> EngineGenState:
+        """The state as an :class:`~shevsim.powertrain.engine.EngineGenState` (a copy, for reading)."""
+        st = EngineGenState()
+        st.set_values(self.data[D.x].tolist())
+        return st
 
     def initialize(self, t0: float) -> None:
-        self.st = steady_state(self.maps, self.u["power_cmd_w"], soot_scale_frac=self.params.soot_scale_frac)
-        p0 = self.st.p_lim
-        self._write(p0, self.maps.fuel_quasi_static(p0), self.maps.soot(self.st.w, self.st.tau_e),
-                    measured_soot_rate(self.st, self.params))
+        st = steady_state(self.maps, self.u["power_cmd_w"], soot_scale_frac=self.params.soot_scale_frac)
+        x = np.array(st.values(), dtype=np.float64)
+        self.data = (self._md, self._mi, self._c, np.array([float(self.maps.p_max_w)]), x, np.zeros(4), x.copy())
+        self._io()
+        p0 = st.p_lim
+        engine_generator_publish(self.data, p0, self.maps.fuel_quasi_static(p0), self.maps.soot(st.w, st.tau_e),
+                                 measured_soot_rate(st, self.params), self._y_arr)
+        self.y.update(zip(self._y_names, self._y_arr.tolist()))
 
-    def _write(self, p_el: float, fuel_gps: float, soot_mgps: float, soot_meas_mgps: float) -> None:
-        st, y = self.st, self.y
-        y["elec_power_w"] = p_el
-        y["engine_power_w"] = st.tau_e * st.w
-        y["engine_speed_radps"] = st.w
-        y["engine_torque_nm"] = st.tau_e
-        y["rack_frac"] = st.rack
-        y["fuel_rate_gps"] = fuel_gps
-        y["soot_rate_mgps"] = soot_mgps
-        y["power_limited_w"] = st.p_lim
-        y["elec_power_rated_w"] = self.maps.p_max_w
-        y["shed_count"] = st.shed_n
-        y["shed_time_s"] = st.shed_s
-        y["fuel_mass_g"] = st.fuel_g
-        y["fuel_energy_j"] = st.fuel_j
-        y["soot_mass_mg"] = st.soot_mg
-        y["soot_transient_mg"] = st.soot_tr_mg
-        y["engine_loss_energy_j"] = st.eng_loss_j
-        y["gen_loss_energy_j"] = st.gen_loss_j
-        y["elec_energy_j"] = st.elec_j
-        y["shaft_kinetic_energy_j"] = st.ke_j
-        y["soot_rate_meas_mgps"] = soot_meas_mgps
+    def step_error(self, status: int, t: float, h: float) -> str:
+        if status == ERR_NONFINITE:
+            x, u = self.data[D.x], self.u
+            return f"{self.name}: " + _eng.nonfinite_message(self.maps, float(x[S.p_lim]), float(x[S.w]),
+                                                              u["power_cmd_w"], h)
+        return super().step_error(status, t, h)
 
-    def do_step(self, t: float, h: float) -> None:
-        pc, rate, lim = self.u["power_cmd_w"], self.u["power_rate_max_wps"], self.u["elec_power_max_w"]
-        floor = self.u["elec_power_min_w"]
-        if pc != pc or rate != rate or lim != lim or floor != floor:
-            raise SimulationError(f"{self.name}: NaN input at t={t:g} s (power_cmd_w={pc}, power_rate_max_wps={rate}, "
-                                  f"elec_power_max_w={lim}, elec_power_min_w={floor})")
-        e_el, fuel, soot, soot_meas = self._step(self.st, pc, rate, h, lim, floor)
-        self._write(e_el / h, fuel / h, soot / h, soot_meas)
+
+U = port_index(EngineGenerator.VARIABLES, "input")
+Y = port_index(EngineGenerator.VARIABLES, "output")
+
+
+@njit(cache=True)
+def engine_generator_publish(data, p_el, fuel_gps, soot_mgps, soot_meas_mgps, y):
+    """The outputs at the state in ``data`` with the step's mean electrical power, fuel, soot and analyser rates."""
+    x = data[4]
+    y[Y.elec_power_w] = p_el
+    y[Y.engine_power_w] = x[S.tau_e] * x[S.w]
+    y[Y.engine_speed_radps] = x[S.w]
+    y[Y.engine_torque_nm] = x[S.tau_e]
+    y[Y.rack_frac] = x[S.rack]
+    y[Y.fuel_rate_gps] = fuel_gps
+    y[Y.soot_rate_mgps] = soot_mgps
+    y[Y.power_limited_w] = x[S.p_lim]
+    y[Y.elec_power_rated_w] = data[3][0]
+    y[Y.shed_count] = x[S.shed_n]
+    y[Y.shed_time_s] = x[S.shed_s]
+    y[Y.fuel_mass_g] = x[S.fuel_g]
+    y[Y.fuel_energy_j] = x[S.fuel_j]
+    y[Y.soot_mass_mg] = x[S.soot_mg]
+    y[Y.soot_transient_mg] = x[S.soot_tr_mg]
+    y[Y.engine_loss_energy_j] = x[S.eng_loss_j]
+    y[Y.gen_loss_energy_j] = x[S.gen_loss_j]
+    y[Y.elec_energy_j] = x[S.elec_j]
+    y[Y.shaft_kinetic_energy_j] = x[S.ke_j]
+    y[Y.soot_rate_meas_mgps] = soot_meas_mgps
+
+
+@njit(cache=True)
+def engine_generator_step(data, u, y, t, h):
+    """:class:`EngineGenerator`'s step: input check, :func:`shevsim.powertrain.engine.step`, the finiteness
+    check (the state is left as it was on failure), the outputs at ``t + h``."""
+    md, mi, c, p_max, x, tot, prev = data          # the fields of D
+    pc = u[U.power_cmd_w]
+    rate = u[U.power_rate_max_wps]
+    lim = u[U.elec_power_max_w]
+    floor = u[U.elec_power_min_w]
+    if pc != pc or rate != rate or lim != lim or floor != floor:
+        return ERR_NAN_INPUT
+    prev[:] = x
+    _eng.step(md, mi, c, p_max[0], x, pc, rate, h, lim, floor, tot)
+    if not math.isfinite(tot[T.e_el] + tot[T.fuel] + tot[T.soot_meas] + x[S.w] + x[S.tau_e]):
+        x[:] = prev
+        return ERR_NONFINITE
+    engine_generator_publish(data, tot[T.e_el] / h, tot[T.fuel] / h, tot[T.soot] / h, tot[T.soot_meas], y)
+    return 0

@@ -46,8 +46,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+from numba import njit
+
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
 from shevsim.core.component import Component
-from shevsim.core.errors import SimulationError
 from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
 from shevsim.powertrain.maps import load_curve_csv, load_grid_csv
@@ -111,7 +114,7 @@ class MotorParams:
             raise ValueError(f"parameter 'efficiency_scale_frac' must be in (0, 2], got {self.efficiency_scale_frac!r}")
 
 
-class Motor(Component):
+class Motor(CompiledStep, Component):
     """Equivalent traction motor with heat-index derating (see module docstring for ports)."""
 
     TYPE = "motor"
@@ -134,7 +137,8 @@ class Motor(Component):
         out("mech_energy_j", "J", 0.0, "cumulative shaft energy delivered (signed)", _FT),
     )
     _static = ("name", "params", "maps", "_k_tau", "_k_w", "extrapolate", "_md", "_mi", "_v_regen", "_p_regen",
-               "_eff_scale", "_heat_rate")
+               "_eff_scale", "_heat_rate", "_fn", "_u_names", "_y_names")
+    DATA_MUTABLE = (3,)
 
     def __init__(self, name: str = "motor", params: MotorParams | None = None):
         super().__init__(name, params)
@@ -153,38 +157,54 @@ class Motor(Component):
         self._heat_rate = float(p.heat_rate_per_s)
 
     def initialize(self, t0: float) -> None:
-        self.gamma = self.params.heat_index_init_frac
-        self.e_loss = self.e_elec = self.e_mech = 0.0
-        self.v_prev = max(self.u["speed_mps"], 0.0)
-        self.h_prev = 1.0
-        w = self.v_prev * self._k_w
-        self.y["heat_index_frac"] = self.gamma
-        self.y["torque_max_nm"] = self.maps.limit(w, self.gamma)
+        """``data`` = ``(md, mi, p, x)``: the packed maps, ``p`` (:data:`P`) and the state ``x`` (:data:`X`)."""
+        gamma = self.params.heat_index_init_frac
+        v_prev = max(self.u["speed_mps"], 0.0)
+        self.data = (self._md, self._mi,
+                     np.array([self._k_w, self._k_tau, 1.0 if self.extrapolate else 0.0, self._v_regen, self._p_regen,
+                               self._eff_scale, self._heat_rate], dtype=np.float64),
+                     np.array([gamma, 0.0, 0.0, 0.0, v_prev, 1.0], dtype=np.float64))
+        w = v_prev * self._k_w
+        self.y["heat_index_frac"] = gamma
+        self.y["torque_max_nm"] = self.maps.limit(w, gamma)
         self.y["speed_radps"] = w
         for k in ("traction_force_n", "brake_force_n", "elec_power_w", "torque_nm",
                   "loss_energy_j", "elec_energy_j", "mech_energy_j"):
             self.y[k] = 0.0
+        self._io()
 
-    def do_step(self, t: float, h: float) -> None:
-        u = self.u
-        f_req = u["force_req_n"]
-        v = u["speed_mps"]
-        if f_req != f_req or v != v:
-            raise SimulationError(f"{self.name}: NaN input at t={t:g} s (force_req_n={f_req}, speed_mps={v})")
-        (f_trac, brake, p_el, tau, w, t_lim, self.gamma, self.e_loss, self.e_elec, self.e_mech,
-         self.v_prev) = motor_component_step(
-            self._md, self._mi, f_req, v, u["elec_power_max_w"], u["elec_power_min_w"], h, self.v_prev, self.h_prev,
-            self.gamma, self.e_loss, self.e_elec, self.e_mech, self._k_w, self._k_tau, self.extrapolate,
-            self._v_regen, self._p_regen, self._eff_scale, self._heat_rate)
-        self.h_prev = h
-        y = self.y
-        y["traction_force_n"] = f_trac
-        y["brake_force_n"] = brake
-        y["elec_power_w"] = p_el
-        y["torque_nm"] = tau
-        y["speed_radps"] = w
-        y["torque_max_nm"] = t_lim
-        y["heat_index_frac"] = self.gamma
-        y["loss_energy_j"] = self.e_loss
-        y["elec_energy_j"] = self.e_elec
-        y["mech_energy_j"] = self.e_mech
+    @property
+    def gamma(self) -> float:
+        """Heat index [1]."""
+        return float(self.data[3][X.gamma])
+
+
+U = port_index(Motor.VARIABLES, "input")
+Y = port_index(Motor.VARIABLES, "output")
+#: parameters ``data[2]`` and state ``data[3]`` of the step
+P = field_index(("k_w", "k_tau", "extrapolate", "v_regen", "p_regen", "eff_scale", "heat_rate"), "P")
+X = field_index(("gamma", "e_loss", "e_elec", "e_mech", "v_prev", "h_prev"), "X")
+
+
+@njit(cache=True)
+def motor_step(data, u, y, t, h):
+    """:class:`Motor`'s step (:func:`~shevsim.powertrain.motor.motor_component_step`)."""
+    md, mi, p, x = data
+    f_req = u[U.force_req_n]
+    v = u[U.speed_mps]
+    if f_req != f_req or v != v:
+        return ERR_NAN_INPUT
+    (y[Y.traction_force_n], y[Y.brake_force_n], y[Y.elec_power_w], y[Y.torque_nm], y[Y.speed_radps],
+     y[Y.torque_max_nm], x[X.gamma], x[X.e_loss], x[X.e_elec], x[X.e_mech], x[X.v_prev]) = motor_component_step(
+        md, mi, f_req, v, u[U.elec_power_max_w], u[U.elec_power_min_w], h, x[X.v_prev], x[X.h_prev], x[X.gamma],
+        x[X.e_loss], x[X.e_elec], x[X.e_mech], p[P.k_w], p[P.k_tau], p[P.extrapolate] > 0.5, p[P.v_regen],
+        p[P.p_regen], p[P.eff_scale], p[P.heat_rate])
+    x[X.h_prev] = h
+    y[Y.heat_index_frac] = x[X.gamma]
+    y[Y.loss_energy_j] = x[X.e_loss]
+    y[Y.elec_energy_j] = x[X.e_elec]
+    y[Y.mech_energy_j] = x[X.e_mech]
+    return 0
+
+
+Motor.STEP = motor_step

@@ -19,9 +19,15 @@ import bisect
 import math
 from dataclasses import dataclass
 
+import numpy as np
+from numba import njit
+
+from shevsim.core.compiled import CompiledStep
 from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError
+from shevsim.core.lookup import py_max
 from shevsim.core.variables import out
+from shevsim.supervisor.rule_based import _bisect_right
 
 _PORTS = ("current_a", "power_w", "speed_mps", "t_ambient_c", "h_conv_w_m2k")
 
@@ -53,7 +59,7 @@ class ProfileParams:
                 raise ScenarioError(f"profile parameters: column '{p}' holds a non-finite value")
 
 
-class ProfileSource(Component):
+class ProfileSource(CompiledStep, Component):
     """Sample-and-hold source of measured / prescribed signals (see the module docstring)."""
 
     TYPE = "profile"
@@ -65,7 +71,7 @@ class ProfileSource(Component):
         out("t_ambient_c", "degC", 25.0, "ambient temperature"),
         out("h_conv_w_m2k", "W/(m2.K)", 20.0, "convection coefficient"),
     )
-    _static = ("name", "params", "_t", "_cols")
+    _static = ("name", "params", "_t", "_cols", "_fn", "_u_names", "_y_names")
 
     def __init__(self, name: str = "profile", params: ProfileParams | None = None):
         super().__init__(name, params)
@@ -81,10 +87,36 @@ class ProfileSource(Component):
             self.y[p] = col[k]
 
     def initialize(self, t0: float) -> None:
+        """``data`` = ``(time_s, columns (ports x samples), has (1 for a port with a column))``."""
+        ts = np.array(self._t, dtype=np.float64)
+        cols = np.zeros((len(_PORTS), ts.size))
+        has = np.zeros(len(_PORTS))
+        for q, name in enumerate(_PORTS):
+            if name in self._cols:
+                cols[q] = self._cols[name]
+                has[q] = 1.0
+        self.data = (ts, cols, has)
         self._evaluate(t0)
-
-    def do_step(self, t: float, h: float) -> None:
-        self._evaluate(t + h)
+        self._io()
 
     def natural_stop_time(self) -> float | None:
         return self._t[-1]
+
+
+@njit(cache=True)
+def profile_step(data, u, y, t, h):
+    """:class:`ProfileSource`'s step: the last sample at or before ``t + h`` (tolerance 1e-9 of the time) for
+    every port with a column; the others hold."""
+    ts, cols, has = data
+    te = t + h
+    tol = 1e-9 * py_max(1.0, abs(te))
+    k = _bisect_right(ts, te + tol) - 1
+    if k < 0:
+        k = 0
+    for q in range(has.shape[0]):
+        if has[q] > 0.5:
+            y[q] = cols[q, k]
+    return 0
+
+
+ProfileSource.STEP = profile_step

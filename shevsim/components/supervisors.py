@@ -32,13 +32,20 @@ import math
 import time
 from dataclasses import dataclass
 
+import numpy as np
+from numba import njit
+
+from shevsim.core.compiled import ERR_NAN_INPUT, ERR_SAMPLE_TIME, CompiledStep, port_index
 from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError, SimulationError
+from shevsim.core.lookup import py_max
 from shevsim.core.variables import inp, out
 from shevsim.supervisor.fuel_curve import SqrtFuelCurve
-from shevsim.supervisor.mpc import MPCSettings, MPCSupervisor as _MPC
+from shevsim.supervisor import daqp_nb
+from shevsim.supervisor.mpc import MPCSettings, MPCSupervisor as _MPC, mpc_move
 from shevsim.supervisor.rate_map import PowerRateMap
-from shevsim.supervisor.rule_based import RuleBasedSupervisor, RuleSettings
+from shevsim.supervisor.rule_based import RuleBasedSupervisor, RuleSettings, rule_command
+from shevsim.supervisor.rule_based import _bisect_right
 from shevsim.core.paths import data_path
 
 DEFAULT_FUEL_CURVE = data_path("components", "engine_generator", "fuel_vs_power.csv")
@@ -67,8 +74,12 @@ def _check_h(name, h, ts, t):
 
 # ------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class MPCSupervisorParams:
+class MPCSupervisorParams(MPCSettings):
     """Parameters of ``mpc_supervisor`` (defaults: seed Table 5.2 / A.1; see components/supervisor/mpc_default.toml).
+
+    The MPC's own settings are :class:`~shevsim.supervisor.mpc.MPCSettings` (declared there once, checked there);
+    this class adds what the component needs besides: the power-rate map and the fuel curve, and its own
+    default engine limit.
 
     Attributes
     ----------
@@ -107,48 +118,16 @@ class MPCSupervisorParams:
         (default True, ~1.6x faster per call); False calls DAQP on every call.
     """
 
-    n_p: int = 40
-    n_c: int = 15
-    sample_time_s: float = 0.2
-    eta1_1: float = 4.17
-    eta2_1: float = 1.0
-    eta3_1: float = 2.5e-5
-    eta4_1: float = 1.25e-6
-    soc_ref_pct: float = 50.0
-    soc_min_pct: float = 30.0
-    soc_max_pct: float = 70.0
-    power_gen_min_w: float = 0.0
     power_gen_max_w: float = 200.6e3
-    power_rate_min_wps: float = -60e3
     rate_map_power_edges_w: tuple[float, ...] = (0.0, 236e3)
     rate_map_max_rate_wps: tuple[float, ...] = (30e3,)
-    capacity_ah: float = 23.0
-    soc_slack_weight_1: float = 5.0
-    soc_slack_weight_quad_1: float = 1.0
-    battery_slack_weight_1: float = 5.0
-    battery_slack_weight_quad_1: float = 0.1
-    battery_limits_soft: bool = True
     fuel_curve_file: str = ""
     fuel_curve_w: tuple[float, ...] = ()
     fuel_rate_gps: tuple[float, ...] = ()
-    solver: str = "daqp"
-    cvxpy_solver: str = "CLARABEL"
-    fallback: str = "shift"
-    warm_active_set: bool = True
 
     def settings(self) -> MPCSettings:
-        return MPCSettings(n_p=self.n_p, n_c=self.n_c, dt_s=self.sample_time_s, eta1_1=self.eta1_1,
-                           eta2_1=self.eta2_1, eta3_1=self.eta3_1, eta4_1=self.eta4_1, soc_ref_pct=self.soc_ref_pct,
-                           soc_min_pct=self.soc_min_pct, soc_max_pct=self.soc_max_pct,
-                           power_gen_min_w=self.power_gen_min_w, power_gen_max_w=self.power_gen_max_w,
-                           power_rate_min_wps=self.power_rate_min_wps, capacity_ah=self.capacity_ah,
-                           soc_slack_weight_1=self.soc_slack_weight_1,
-                           soc_slack_weight_quad_1=self.soc_slack_weight_quad_1,
-                           battery_slack_weight_1=self.battery_slack_weight_1,
-                           battery_slack_weight_quad_1=self.battery_slack_weight_quad_1,
-                           battery_limits_soft=self.battery_limits_soft, solver=self.solver,
-                           cvxpy_solver=self.cvxpy_solver, fallback=self.fallback,
-                           warm_active_set=self.warm_active_set)
+        """The MPC's settings (these parameters are them)."""
+        return self
 
     def fuel_curve(self, where: str) -> SqrtFuelCurve:
         if self.fuel_curve_w or self.fuel_rate_gps:
@@ -156,7 +135,7 @@ class MPCSupervisorParams:
         return SqrtFuelCurve.from_csv(self.fuel_curve_file or DEFAULT_FUEL_CURVE)
 
 
-class MPCSupervisor(Component):
+class MPCSupervisor(CompiledStep, Component):
     """Linear MPC power split (seed Sec. 5.2.2): TYPE ``mpc_supervisor``; ports in the module docstring."""
 
     TYPE = "mpc_supervisor"
@@ -171,7 +150,9 @@ class MPCSupervisor(Component):
         out("battery_slack_w", "W", 0.0, "battery-limit slack of the last solution", _IN),
         out("soc_slack_pct", "%", 0.0, "SOC-window slack of the last solution", _IN),
     )
-    _static = ("name", "params", "mpc", "_rule", "last_call_us", "call_times_us")
+    _static = ("name", "params", "mpc", "_rule", "last_call_us", "call_times_us", "_fn", "_u_names", "_y_names")
+    #: the move's state and plan, DAQP's model flags and the active set (a run's own copies)
+    DATA_MUTABLE = (6, 7, 30, 31)
 
     def __init__(self, name: str = "mpc_supervisor", params: MPCSupervisorParams | None = None):
         super().__init__(name, params)
@@ -190,17 +171,49 @@ class MPCSupervisor(Component):
             raise ScenarioError(f"{where}: {exc}") from exc
         self._rule = RuleBasedSupervisor(rule_settings, rate_map, p.sample_time_s)
         self.mpc = _MPC(settings, p.fuel_curve(where), rate_map, rule=self._rule)
-        self.fallback_count = 0
         self.last_call_us = 0.0      # wall time of the last call (state -> QP -> first move) [us]
         self.call_times_us = None    # set to a list to collect every call's wall time [us]
+
+    def step_function(self):
+        """:func:`mpc_supervisor_step` when the MPC's call is the compiled :func:`~shevsim.supervisor.mpc.mpc_move`
+        (solver 'daqp', compiled); None otherwise (the Python solve path, :meth:`do_step`)."""
+        return mpc_supervisor_step if self.mpc.compiled_call else None
+
+    def fast_reason(self) -> str:
+        m = self.mpc
+        if m.settings.solver != "daqp":
+            return f"component '{self.name}': MPC solver '{m.settings.solver}' (the compiled step calls DAQP only)"
+        if not m.compiled_call:
+            ok, why = daqp_nb.available()
+            return f"component '{self.name}': " + (why if not ok else "MPC built with compiled=False")
+        return ""
+
+    def fast_release(self, data: tuple) -> None:
+        if data[30][0] != 0:
+            daqp_nb.drop_model(data[24], data[30])  # free DAQP's workspace (daqp.Model.__dealloc__)
+
+    @property
+    def data(self) -> tuple:
+        """:attr:`MPC.arrays <shevsim.supervisor.mpc.MPCSupervisor.arrays>`: ``x[prev_cmd_w]`` holds the
+        previous command, ``mp[0]`` the sample time."""
+        return self.mpc.arrays
 
     def initialize(self, t0: float) -> None:
         self.mpc.reset()
         self.mpc.fallback_count = 0
-        self.fallback_count = 0
         g = self.u["gen_power_w"]
-        self.prev_cmd = float(g) if math.isfinite(g) else 0.0
+        self.mpc.arrays[6][0] = float(g) if math.isfinite(g) else 0.0
         self._write(self.prev_cmd)
+        self._io()
+
+    @property
+    def prev_cmd(self) -> float:
+        """The previous command u(k-1) [W]."""
+        return float(self.mpc.arrays[6][0])
+
+    @property
+    def fallback_count(self) -> int:
+        return self.mpc.fallback_count
 
     def _write(self, cmd: float) -> None:
         y, u, last = self.y, self.u, self.mpc.last
@@ -215,20 +228,33 @@ class MPCSupervisor(Component):
         y["soc_slack_pct"] = float(last.soc_slack_pct)
 
     def do_step(self, t: float, h: float) -> None:
-        _check_h(self.name, h, self.params.sample_time_s, t)
-        u = self.u
         t0 = time.perf_counter()
-        # the previous point of the linearisation and of the rate constraint is the previous
-        # command u(k-1) (seed 5.5-5.8), not the measured output, which lags it by the turbo lag
-        cmd = self.mpc.step(u["soc_pct"], u["demand_power_w"], self.prev_cmd, u["power_max_w"],
-                            u["power_min_w"], u["ocv_v"], u["rs_ohm"])
+        if self._fn is not None:
+            super().do_step(t, h)                  # the compiled step: the move and the outputs
+        else:
+            self._do_step_python(t, h)
         dt_us = (time.perf_counter() - t0) * 1e6
         self.last_call_us = dt_us
         if self.call_times_us is not None:
             self.call_times_us.append(dt_us)
-        self.fallback_count = self.mpc.fallback_count
+
+    def _do_step_python(self, t: float, h: float) -> None:
+        """The step with another solver: the MPC's Python solve path, the same :func:`first_move`."""
+        _check_h(self.name, h, self.params.sample_time_s, t)
+        u = self.u
+        # the previous point of the linearisation and of the rate constraint is the previous
+        # command u(k-1) (seed 5.5-5.8), not the measured output, which lags it by the turbo lag
+        cmd = self.mpc.step(u["soc_pct"], u["demand_power_w"], self.prev_cmd, u["power_max_w"],
+                            u["power_min_w"], u["ocv_v"], u["rs_ohm"])
         self._write(cmd)
-        self.prev_cmd = float(cmd)
+        self.mpc.arrays[6][0] = float(cmd)
+
+    def step_error(self, status: int, t: float, h: float) -> str:
+        if status == ERR_SAMPLE_TIME:
+            ts = self.params.sample_time_s
+            return (f"{self.name}: supervisor called with step h={h:g} s at t={t:g} s but its sample_time_s is "
+                    f"{ts:g} s: set the component's step multiple so that it runs every {ts:g} s")
+        return super().step_error(status, t, h)
 
     @property
     def plan(self):
@@ -239,7 +265,7 @@ class MPCSupervisor(Component):
     def get_state(self):
         st = super().get_state()
         st["_mpc_plan"] = (None if self.mpc._plan_kw is None else self.mpc._plan_kw.copy(), self.mpc._plan_age,
-                           self.mpc.fallback_count, self.mpc.active_set)
+                           self.mpc.fallback_count, self.mpc.active_set, self.prev_cmd)
         return st
 
     def set_state(self, state) -> None:
@@ -252,12 +278,17 @@ class MPCSupervisor(Component):
         self.mpc.fallback_count = fb
         # the active set tried first is: it decides which of two equal optima (to rounding) a call returns
         self.mpc.active_set = rest[0] if rest else None
+        if len(rest) > 1:
+            self.mpc.arrays[6][0] = rest[1]
 
 
 # ------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class RuleSupervisorParams:
+class RuleSupervisorParams(RuleSettings):
     """Parameters of ``rule_supervisor`` (see :class:`shevsim.supervisor.rule_based.RuleSettings`).
+
+    The rules' settings are :class:`~shevsim.supervisor.rule_based.RuleSettings` (declared and checked there
+    once); this class adds the sample time, the power-rate map and its own default engine limit.
 
     Attributes
     ----------
@@ -276,22 +307,12 @@ class RuleSupervisorParams:
     """
 
     sample_time_s: float = 0.2
-    soc_min_pct: float = 30.0
-    soc_max_pct: float = 70.0
-    soc_ref_pct: float = 50.0
-    soc_on_pct: float = 45.0
-    soc_off_pct: float = 55.0
-    charge_power_w: float = 30e3
-    engine_on_min_power_w: float = 25e3
-    engine_on_demand_w: float = 60e3
-    power_gen_min_w: float = 0.0
     power_gen_max_w: float = 200.6e3
-    power_rate_min_wps: float = -60e3
     rate_map_power_edges_w: tuple[float, ...] = (0.0, 236e3)
     rate_map_max_rate_wps: tuple[float, ...] = (30e3,)
 
 
-class RuleSupervisor(Component):
+class RuleSupervisor(CompiledStep, Component):
     """Thermostat / power-follower baseline: TYPE ``rule_supervisor``; ports in the module docstring."""
 
     TYPE = "rule_supervisor"
@@ -304,24 +325,52 @@ class RuleSupervisor(Component):
         out("battery_power_plan_w", "W", 0.0, "demand - command (battery share), + discharge", _IN[:5]),
         out("engine_on_1", "1", 0.0, "thermostat state (1 = engine on)", _IN[:5]),
     )
-    _static = ("name", "params", "rule")
+
+    _static = ("name", "params", "rule", "_fn", "_u_names", "_y_names")
+    DATA_MUTABLE = (3,)
 
     def __init__(self, name: str = "rule_supervisor", params: RuleSupervisorParams | None = None):
         super().__init__(name, params)
         p = self.params
         where = f"rule_supervisor '{name}'"
         try:
-            settings = RuleSettings(**{k: getattr(p, k) for k in RuleSettings.__dataclass_fields__})
+            settings = p                  # the parameters are the rules' settings
         except ScenarioError as exc:
             raise ScenarioError(f"{where}: {exc}") from exc
         self.rule = RuleBasedSupervisor(settings, _check_rate_map(p, where), p.sample_time_s)
-        self.engine_on = False
 
     def initialize(self, t0: float) -> None:
-        self.rule.engine_on = self.engine_on = False
+        """``data`` = ``(rp, inner edges, rates, x = [engine on, previous command])``: ``rp`` the rules' settings
+        (:func:`~shevsim.supervisor.rule_based.rule_command`) and the sample time."""
+        s, p = self.rule.settings, self.params
+        rp = np.array([s.soc_min_pct, s.soc_max_pct, s.soc_ref_pct, s.soc_on_pct, s.soc_off_pct, s.charge_power_w,
+                       s.engine_on_min_power_w, s.engine_on_demand_w, s.power_gen_min_w, s.power_gen_max_w,
+                       s.power_rate_min_wps, self.rule.dt_s, p.sample_time_s], dtype=np.float64)
+        rm = self.rule.rate_map
         g = self.u["gen_power_w"]
-        self.prev_cmd = float(g) if math.isfinite(g) else 0.0
-        self._write(self.prev_cmd)
+        prev = float(g) if math.isfinite(g) else 0.0
+        self.data = (rp, np.array(rm._inner, dtype=np.float64), np.array(rm.rates_wps, dtype=np.float64),
+                     np.array([0.0, prev]))
+        self.rule.engine_on = False
+        self._write(prev)
+        self._io()
+
+    @property
+    def engine_on(self) -> bool:
+        """Thermostat state."""
+        return bool(self.data[3][0] > 0.5)
+
+    @property
+    def prev_cmd(self) -> float:
+        """The last command [W]."""
+        return float(self.data[3][1])
+
+    def step_error(self, status: int, t: float, h: float) -> str:
+        if status == ERR_SAMPLE_TIME:
+            ts = self.params.sample_time_s
+            return (f"{self.name}: supervisor called with step h={h:g} s at t={t:g} s but its sample_time_s is "
+                    f"{ts:g} s: set the component's step multiple so that it runs every {ts:g} s")
+        return super().step_error(status, t, h)
 
     def _write(self, cmd: float) -> None:
         y, u = self.y, self.u
@@ -331,15 +380,66 @@ class RuleSupervisor(Component):
         y["battery_power_plan_w"] = u["demand_power_w"] - cmd
         y["engine_on_1"] = 1.0 if self.engine_on else 0.0
 
-    def do_step(self, t: float, h: float) -> None:
-        _check_h(self.name, h, self.params.sample_time_s, t)
-        u = self.u
-        bad = [k for k in _IN[:5] if not math.isfinite(u[k])]
-        if bad:
-            raise SimulationError(f"{self.name}: non-finite input {bad[0]}={u[bad[0]]} at t={t:g} s")
-        self.rule.engine_on = self.engine_on
-        cmd = self.rule.step(u["soc_pct"], u["demand_power_w"], self.prev_cmd, u["power_max_w"],
-                             u["power_min_w"])
-        self.engine_on = self.rule.engine_on
-        self._write(cmd)
-        self.prev_cmd = float(cmd)
+UR = port_index(RuleSupervisor.VARIABLES, "input")
+YR = port_index(RuleSupervisor.VARIABLES, "output")
+
+
+@njit(cache=True)
+def _wrong_step(h, ts):
+    return abs(h - ts) > 1e-9 * py_max(1.0, ts)
+
+
+@njit(cache=True)
+def rule_supervisor_step(data, u, y, t, h):
+    """:class:`RuleSupervisor`'s step: the sample-time and input checks,
+    :func:`~shevsim.supervisor.rule_based.rule_command`, the outputs."""
+    rp, inner, rates, x = data
+    if _wrong_step(h, rp[12]):
+        return ERR_SAMPLE_TIME
+    for j in range(5):
+        if not math.isfinite(u[j]):
+            return ERR_NAN_INPUT
+    demand = u[UR.demand_power_w]
+    prev = x[1]
+    on, cmd = rule_command(rp, inner, rates, x[0] > 0.5, u[UR.soc_pct], demand, prev, u[UR.power_max_w],
+                           u[UR.power_min_w])
+    x[0] = 1.0 if on else 0.0
+    y[YR.power_cmd_w] = cmd
+    y[YR.power_rate_max_wps] = rates[_bisect_right(inner, prev)]
+    y[YR.battery_power_plan_w] = demand - cmd
+    y[YR.engine_on_1] = 1.0 if on else 0.0
+    x[1] = cmd
+    return 0
+
+
+RuleSupervisor.STEP = rule_supervisor_step
+
+
+UM = port_index(MPCSupervisor.VARIABLES, "input")
+YM = port_index(MPCSupervisor.VARIABLES, "output")
+
+
+@njit(cache=True)
+def _mpc_supervisor_step(data, u, y, t, h):
+    """:class:`MPCSupervisor`'s step (solver 'daqp'): the sample-time check,
+    :func:`~shevsim.supervisor.mpc.mpc_move` (QP build, DAQP's C library, first move or fallback) from the
+    previous command ``x[prev_cmd_w]``, the outputs."""
+    mp = data[0]
+    x = data[6]
+    if _wrong_step(h, mp[0]):
+        return ERR_SAMPLE_TIME
+    demand = u[UM.demand_power_w]
+    cmd, rate = mpc_move(data, u[UM.soc_pct], demand, x[0], u[UM.power_max_w], u[UM.power_min_w], u[UM.ocv_v],
+                         u[UM.rs_ohm])
+    y[YM.power_cmd_w] = cmd
+    y[YM.power_rate_max_wps] = rate
+    y[YM.battery_power_plan_w] = demand - cmd
+    y[YM.fallback_count] = x[1]
+    y[YM.battery_slack_w] = x[4]
+    y[YM.soc_slack_pct] = x[5]
+    x[0] = cmd
+    return 0
+
+
+# the step must not reference the DAQP binding when it is unavailable (its symbols would not link)
+mpc_supervisor_step = _mpc_supervisor_step if daqp_nb.available()[0] else None

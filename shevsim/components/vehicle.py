@@ -39,8 +39,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from numba import njit
+
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
 from shevsim.core.component import Component
-from shevsim.core.errors import SimulationError
 from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
 from shevsim.powertrain.vehicle import G_MPS2, grade_total_rad, vehicle_force_step, vehicle_speed_mode_step
@@ -111,7 +113,7 @@ class VehicleParams:
         return 0.5 * self.air_density_kg_m3 * self.drag_coefficient * self.frontal_area_m2
 
 
-class Vehicle(Component):
+class Vehicle(CompiledStep, Component):
     """Point-mass longitudinal vehicle (see module docstring for ports)."""
 
     TYPE = "vehicle"
@@ -149,71 +151,128 @@ class Vehicle(Component):
         self._knots = self._kd.size > 0
         self._speed = p.input_mode == "speed"
 
-    _static = ("name", "params", "_m", "_c", "_fr", "_g", "_kd", "_kg", "_knots", "_speed")
+    DATA_MUTABLE = (3,)
+    _static = ("name", "params", "_m", "_c", "_fr", "_g", "_kd", "_kg", "_knots", "_speed", "_fn", "_u_names",
+               "_y_names")
 
     def variables(self):
         """Force mode: :attr:`VARIABLES`; speed mode: :attr:`VARIABLES_SPEED`."""
         p = getattr(self, "params", None)
         return self.VARIABLES_SPEED if p is not None and p.input_mode == "speed" else self.VARIABLES
 
+    def step_function(self):
+        return vehicle_speed_step if self._speed else vehicle_step
+
+    @classmethod
+    def fast_examples(cls) -> dict:
+        out_ = {}
+        for mode in ("force", "speed"):
+            c = cls(cls.TYPE, VehicleParams(input_mode=mode))
+            c.initialize(0.0)
+            out_[c.step_function()] = c
+        return out_
+
     def _grade(self, th_in: float) -> float:
-        return grade_total_rad(th_in, self.dist, self._kd, self._kg) if self._knots else th_in
+        return grade_total_rad(th_in, 0.0, self._kd, self._kg) if self._knots else th_in
 
     def initialize(self, t0: float) -> None:
-        self.e = [0.0, 0.0, 0.0, 0.0, 0.0]
-        self.dist = 0.0
+        """``data`` = ``(p, grade_distance_m, grade_frac, x)``: ``p = [mass, 0.5 rho cd A, rolling, g(, knots)]``,
+        ``x`` = :data:`XF` (force mode) or :data:`XS` (speed mode)."""
         y = self.y
+        p = [self._m, self._c, self._fr, self._g]
         if self._speed:
-            self.v = max(self.u["speed_ref_mps"], 0.0)
-            self.th = self._grade(self.u["grade_rad"])
+            v = max(self.u["speed_ref_mps"], 0.0)
+            x = [v, 0.0, self._grade(self.u["grade_rad"]), 0.0, 0.0, 0.0, 0.0, 0.0]
             y["force_req_n"] = 0.0
         else:
-            self.v = self.params.speed_init_mps
-        y["speed_mps"] = self.v
+            v = self.params.speed_init_mps
+            x = [v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+            p.append(1.0 if self._knots else 0.0)
+        self.data = (np.array(p, dtype=np.float64), np.ascontiguousarray(self._kd, dtype=np.float64),
+                     np.ascontiguousarray(self._kg, dtype=np.float64), np.array(x, dtype=np.float64))
+        y["speed_mps"] = v
         y["accel_mps2"] = 0.0
         y["distance_m"] = 0.0
         for k in ("traction_energy_j", "brake_energy_j", "rolling_energy_j", "aero_energy_j", "grade_energy_j"):
             y[k] = 0.0
-        y["kinetic_energy_j"] = 0.5 * self._m * self.v * self.v
+        y["kinetic_energy_j"] = 0.5 * self._m * v * v
+        self._io()
 
-    def do_step(self, t: float, h: float) -> None:
-        v0 = self.v
-        y = self.y
-        e = self.e
-        if not self._speed:
-            u = self.u
-            f_t, f_b, th = u["traction_force_n"], u["brake_force_n"], u["grade_rad"]
-            if f_t != f_t or f_b != f_b or th != th:
-                raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
-                                      f"(traction_force_n={f_t}, brake_force_n={f_b}, grade_rad={th})")
-            (v1, y["accel_mps2"], self.dist, e[0], e[1], e[2], e[3], e[4], y["kinetic_energy_j"]) = vehicle_force_step(
-                v0, self.dist, e[0], e[1], e[2], e[3], e[4], f_t, f_b, th, h, self._m, self._c, self._fr, self._g,
-                self._knots, self._kd, self._kg)
-            self.v = v1
-            y["speed_mps"] = v1
-            y["distance_m"] = self.dist
-            y["traction_energy_j"] = e[0]
-            y["brake_energy_j"] = e[1]
-            y["rolling_energy_j"] = e[2]
-            y["aero_energy_j"] = e[3]
-            y["grade_energy_j"] = e[4]
-            return
-        # speed mode: follow speed_ref_mps (speed_follow_step, the calibration's step too), book the works,
-        # output the force for the next step
-        u = self.u
-        vr, ar, th_in = u["speed_ref_mps"], u["accel_ref_mps2"], u["grade_rad"]
-        if vr != vr or ar != ar or th_in != th_in:
-            raise SimulationError(f"{self.name}: NaN input at t={t:g} s "
-                                  f"(speed_ref_mps={vr}, accel_ref_mps2={ar}, grade_rad={th_in})")
-        (v1, y["accel_mps2"], self.dist, self.th, y["force_req_n"], e[0], e[1], e[2], e[3], e[4],
-         y["kinetic_energy_j"]) = vehicle_speed_mode_step(
-            v0, self.th, self.dist, e[0], e[1], e[2], e[3], e[4], vr, ar, th_in, h, self._kd, self._kg, self._m,
-            self._c, self._fr, self._g)
-        self.v = v1
-        y["speed_mps"] = v1
-        y["distance_m"] = self.dist
-        y["traction_energy_j"] = e[0]
-        y["brake_energy_j"] = e[1]
-        y["rolling_energy_j"] = e[2]
-        y["aero_energy_j"] = e[3]
-        y["grade_energy_j"] = e[4]
+    @property
+    def v(self) -> float:
+        """Speed [m/s] (settable: a coast-down from a given speed)."""
+        return float(self.data[3][0])
+
+    @v.setter
+    def v(self, value: float) -> None:
+        self.data[3][0] = float(value)
+
+    @property
+    def dist(self) -> float:
+        """Distance travelled [m]."""
+        return float(self.data[3][1])
+
+    @property
+    def e(self) -> list:
+        """Cumulative traction, brake, rolling, aero and grade works [J]."""
+        x = self.data[3]
+        return x[2:7].tolist() if not self._speed else x[3:8].tolist()
+
+
+U = port_index(Vehicle.VARIABLES, "input")
+Y = port_index(Vehicle.VARIABLES, "output")
+US = port_index(Vehicle.VARIABLES_SPEED, "input")
+YS = port_index(Vehicle.VARIABLES_SPEED, "output")
+#: the state ``data[3]`` in force mode and in speed mode (``th``: the grade acting over the next step)
+XF = field_index(("v", "dist", "e_traction", "e_brake", "e_rolling", "e_aero", "e_grade"), "XF")
+XS = field_index(("v", "dist", "th", "e_traction", "e_brake", "e_rolling", "e_aero", "e_grade"), "XS")
+
+
+@njit(cache=True)
+def vehicle_step(data, u, y, t, h):
+    """:class:`Vehicle`'s step in force mode (:func:`~shevsim.powertrain.vehicle.vehicle_force_step`)."""
+    p, kd, kg, x = data
+    f_t = u[U.traction_force_n]
+    f_b = u[U.brake_force_n]
+    th = u[U.grade_rad]
+    if f_t != f_t or f_b != f_b or th != th:
+        return ERR_NAN_INPUT
+    (x[XF.v], y[Y.accel_mps2], x[XF.dist], x[XF.e_traction], x[XF.e_brake], x[XF.e_rolling], x[XF.e_aero],
+     x[XF.e_grade], y[Y.kinetic_energy_j]) = vehicle_force_step(
+        x[XF.v], x[XF.dist], x[XF.e_traction], x[XF.e_brake], x[XF.e_rolling], x[XF.e_aero], x[XF.e_grade], f_t, f_b,
+        th, h, p[0], p[1], p[2], p[3], p[4] > 0.5, kd, kg)
+    y[Y.speed_mps] = x[XF.v]
+    y[Y.distance_m] = x[XF.dist]
+    y[Y.traction_energy_j] = x[XF.e_traction]
+    y[Y.aero_energy_j] = x[XF.e_aero]
+    y[Y.rolling_energy_j] = x[XF.e_rolling]
+    y[Y.brake_energy_j] = x[XF.e_brake]
+    y[Y.grade_energy_j] = x[XF.e_grade]
+    return 0
+
+
+@njit(cache=True)
+def vehicle_speed_step(data, u, y, t, h):
+    """:class:`Vehicle`'s step in speed mode (:func:`~shevsim.powertrain.vehicle.vehicle_speed_mode_step`: follow
+    ``speed_ref_mps``, book the works, output the force for the next step)."""
+    p, kd, kg, x = data
+    vr = u[US.speed_ref_mps]
+    ar = u[US.accel_ref_mps2]
+    th = u[US.grade_rad]
+    if vr != vr or ar != ar or th != th:
+        return ERR_NAN_INPUT
+    (x[XS.v], y[YS.accel_mps2], x[XS.dist], x[XS.th], y[YS.force_req_n], x[XS.e_traction], x[XS.e_brake],
+     x[XS.e_rolling], x[XS.e_aero], x[XS.e_grade], y[YS.kinetic_energy_j]) = vehicle_speed_mode_step(
+        x[XS.v], x[XS.th], x[XS.dist], x[XS.e_traction], x[XS.e_brake], x[XS.e_rolling], x[XS.e_aero],
+        x[XS.e_grade], vr, ar, th, h, kd, kg, p[0], p[1], p[2], p[3])
+    y[YS.speed_mps] = x[XS.v]
+    y[YS.distance_m] = x[XS.dist]
+    y[YS.traction_energy_j] = x[XS.e_traction]
+    y[YS.aero_energy_j] = x[XS.e_aero]
+    y[YS.rolling_energy_j] = x[XS.e_rolling]
+    y[YS.brake_energy_j] = x[XS.e_brake]
+    y[YS.grade_energy_j] = x[XS.e_grade]
+    return 0
+
+
+Vehicle.STEP = vehicle_step

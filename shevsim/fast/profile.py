@@ -5,7 +5,7 @@
 Runs the scenario once on the fast path, reconstructs every component's input sequence from the
 recorded outputs (a Gauss-Seidel input is its source's output of this step when the source runs earlier
 in the order, of the previous step otherwise; step multiples respected), then replays each component's
-kernel alone over its own inputs from the initial state and times it.  So each figure is that
+compiled step alone over its own inputs from the initial state and times it.  So each figure is that
 component's compiled step with realistic inputs (the MPC's DAQP warm starts included); the remainder of
 the full run is the loop itself (connections, recording).
 """
@@ -17,24 +17,18 @@ import time
 import numpy as np
 from numba import njit
 
-from . import kernels as K
 
 
 @njit
-def _replay(kern, data, sig, ib, ob, in_idx, vals, steps, h):
-    nin = in_idx.shape[0]
+def _replay(step, data, sig, io, in_idx, vals, steps, h):
+    ib, nin, ob, nout = io[0], io[1], io[2], io[3]
     for s in range(steps.shape[0]):
-        for q in range(nin):
+        for q in range(in_idx.shape[0]):
             sig[in_idx[q]] = vals[s, q]
-        st = kern(data, sig, ib, ob, steps[s] * h, h)
+        st = step(data, sig[ib:ib + nin], sig[ob:ob + nout], steps[s] * h, h)
         if st != 0:
             return st
     return 0
-
-
-_KERN = {K.T_CYCLE: K.cycle_step, K.T_DRIVER: K.driver_kernel, K.T_VEHICLE: K.vehicle_kernel,
-         K.T_MOTOR: K.motor_kernel, K.T_BUS: K.bus_kernel, K.T_ENGINE: K.engine_kernel,
-         K.T_BATTERY: K.battery_kernel, K.T_BMS: K.bms_kernel, K.T_RULE: K.rule_kernel, K.T_MPC: K.mpc_kernel}
 
 
 def profile(runner, t_stop_s: float, repeat: int = 3) -> dict:
@@ -48,52 +42,36 @@ def profile(runner, t_stop_s: float, repeat: int = 3) -> dict:
         total = min(total, time.perf_counter() - t)
     rec = np.column_stack([res.signals[n] for n in runner._names])
     n = rec.shape[0] - 1
-    m = runner.master
-    pos = {name: j for j, name in enumerate(runner._comp_names)}
+    typ, mult_a, ibase, nin, obase, nout, lptr, ldst, lsrc, inst, _flags = runner._plan
+    owner = np.full(runner.nsig, -1)
+    for j in range(len(runner._comp_names)):
+        owner[obase[j]:obase[j] + nout[j]] = j
     out = {}
-    types = {runner._comp_names[j]: m.components[runner._comp_names[j]].TYPE for j in range(len(pos))}
     for j, name in enumerate(runner._comp_names):
-        mult = int(runner._mult[j])
+        mult = int(mult_a[j])
         steps = np.arange(0, n, mult, dtype=np.int64)
-        lo, hi = runner._lptr[j], runner._lptr[j + 1]
-        in_idx = runner._ldst[lo:hi].copy()
+        lo, hi = lptr[j], lptr[j + 1]
+        in_idx = ldst[lo:hi].copy()
         vals = np.empty((steps.size, hi - lo))
         for q in range(lo, hi):
-            src = int(runner._lsrc[q])
-            src_comp = next(c for c in runner._comp_names
-                            if runner._obase[pos[c]] <= src < runner._obase[pos[c]] + len(_out_ports(types[c])))
-            row = steps + (1 if pos[src_comp] < j else 0)
+            src = int(lsrc[q])
+            row = steps + (1 if owner[src] < j else 0)
             vals[:, q - lo] = rec[row, src]
+        fn = runner._fns[int(typ[j])]
+        c, data, mut = runner._by_fn[fn][int(inst[j])]
+        io = np.array([ibase[j], nin[j], obase[j], nout[j]], dtype=np.int64)
         best = None
         for rep in range(repeat + 1):             # the first pass compiles the replay: not timed
-            typ = types[name]
-            i = int(runner._inst[j])
-            d = runner._fresh(typ, i)
-            if typ == "battery":
-                b = next(b for b in runner._batteries if b[0] == i)
-                d = d[:6] + (runner._noise_for(b, 4 * steps.size),) + d[7:]
+            d = c.fast_data(tuple(a.copy() if k in mut else a for k, a in enumerate(data)), steps.size)
             sig = runner._sig0.copy()
             t = time.perf_counter()
-            if int(runner._typ[j]) == K.T_LIMITS:
-                st = _replay(K.power_limits_kernel, d, sig, runner._ibase[j], runner._obase[j], in_idx, vals, steps,
-                             runner.h * mult)
-            else:
-                st = _replay(_KERN[int(runner._typ[j])], d, sig, runner._ibase[j], runner._obase[j],
-                             in_idx, vals, steps, runner.h * mult)
+            st = _replay(fn, d, sig, io, in_idx, vals, steps, runner.h * mult)
             dt = time.perf_counter() - t
-            if typ == "mpc_supervisor":
-                from shevsim.supervisor import daqp_nb
-                if d[30][0] != 0:
-                    daqp_nb.drop_model(d[24], d[30])
+            c.fast_release(d)
             if rep > 0:
                 best = dt if best is None else min(best, dt)
         out[name] = (best, int(steps.size), int(st))
     return {"total_s": total, "steps": n, "per_component": out}
-
-
-def _out_ports(typ):
-    from . import _PORTS
-    return _PORTS[typ][1]
 
 
 def main(argv=None) -> int:

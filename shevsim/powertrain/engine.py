@@ -200,14 +200,179 @@ def measured_soot_rate(st: EngineGenState, prm) -> float:
 # component's hot path and the calibration's record loop; ``step_py`` (= ``step.py_func``) is the same
 # source run by the Python interpreter (the reference of the tests; ``compiled=False``).
 # ---------------------------------------------------------------------------------------------
+import numpy as np  # noqa: E402
+
+from shevsim.core.compiled import field_index  # noqa: E402
 from shevsim.core.errors import DataError  # noqa: E402
 from shevsim.core.lookup import EXTRAPOLATION_CODES, HAVE_NUMBA, _curve_ex, _grid_ex, _njit  # noqa: E402
 
 
+#: index constants of the state array ``x`` (:data:`STATE`) and the parameter array ``c`` (:data:`PRM_FIELDS`)
+S = field_index(STATE, "S")
+C = field_index(PRM_FIELDS, "C")
+#: the step's totals ``tot``: electrical energy [J], fuel [g], soot [mg], the analyser's mean reading [mg/s]
+T = field_index(("e_el", "fuel", "soot", "soot_meas"), "T")
+
+
 @_njit(cache=True)
-def step(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g, fuel_j, eng_loss_j,
-         shaft_j, ke_j, gen_loss_j, elec_j, soot_mg, soot_tr_mg, gen_sat, shed, shed_n, shed_s, soot_lag,
-         p_cmd_w, rate_up_wps, h, elec_max_w, elec_min_w=0.0):
+def _coefficients(md, mi, c, p_max, dt, p_cmd_w, rate_up_wps, elec_max_w, elec_min_w):
+    """The sub-steps' constants ``k = (dt, target, r_up, r_dn, a_w, dw_max, a_up, a_dn, a_a, p_shed, e_shed,
+    e_floor, w_idle)``."""
+    target = min(max(p_cmd_w, 0.0), p_max)
+    r_up = max(rate_up_wps, 0.0) * dt
+    r_dn = c[C.power_rate_down_max_wps] * dt
+    a_w = math.exp(-dt / c[C.speed_time_constant_s])
+    dw_max = c[C.speed_accel_max_radps2] * dt
+    a_up = math.exp(-dt / c[C.turbo_lag_s])
+    a_dn = math.exp(-dt / c[C.fuel_fall_s])
+    tau_a = c[C.soot_analyzer_tau_s]
+    a_a = math.exp(-dt / tau_a) if tau_a > 0.0 else 0.0
+    p_shed = max(elec_max_w, 0.0)
+    e_shed = p_shed * dt
+    e_floor = min(elec_min_w, p_max) * dt          # 10d: <= 0 = no floor
+    w_idle = _curve_ex(md, mi[0], mi[1], mi[2], 0.0)
+    return (dt, target, r_up, r_dn, a_w, dw_max, a_up, a_dn, a_a, p_shed, e_shed, e_floor, w_idle)
+
+
+@_njit(cache=True)
+def _rack_and_fuel(md, mi, c, k, x):
+    """Items 1-6 of a sub-step: rate limit and cut (``x[p_lim]``), speed response, torque demand, PI rack
+    (``x[integ]``, ``x[rack]``), fuel command and turbo lag.  Returns ``(cut, w0, w1, m_c, m1, dm, fl)``."""
+    dt, target, r_up, r_dn, a_w, dw_max, a_up, a_dn, _a_a, p_shed, _e_shed, _e_floor, _w_idle = k
+    # 1. rate limit, 10a. command cut to the bus limit (bypasses the downward rate limit)
+    p_lim = x[S.p_lim]
+    dp = target - p_lim
+    p_lim += r_up if dp > r_up else (-r_dn if dp < -r_dn else dp)
+    cut = 0.0
+    if p_lim > p_shed:
+        p_lim = p_shed
+        cut = 1.0
+    x[S.p_lim] = p_lim
+    # 2-3. speed set point and speed response
+    w0 = x[S.w]
+    w_set = _curve_ex(md, mi[0], mi[1], mi[2], p_lim)
+    w1 = w_set + (w0 - w_set) * a_w
+    if w1 - w0 > dw_max:
+        w1 = w0 + dw_max
+    elif w0 - w1 > dw_max:
+        w1 = w0 - dw_max
+    # 4. torque demand (10c. + the speed loop's torque while the generator torque is cut)
+    tau_ref = _curve_ex(md, mi[3], mi[4], mi[5], p_lim) / w0
+    if x[S.gen_sat] > 0.0:
+        tau_ref += c[C.shaft_inertia_kg_m2] * (w_set - w0) / c[C.speed_time_constant_s]
+    tl = _curve_ex(md, mi[6], mi[7], mi[8], w0)
+    if tau_ref > tl:
+        tau_ref = tl
+    # 5. PI rack with conditional integration
+    integ0 = x[S.integ]
+    e = tau_ref - x[S.tau_e]
+    integ = integ0 + c[C.rack_ki_per_nm_s] * e * dt
+    rack = c[C.rack_kp_per_nm] * e + integ
+    if rack > 1.0:
+        rack = 1.0
+        if e > 0.0:
+            integ = integ0
+    elif rack < 0.0:
+        rack = 0.0
+        if e < 0.0:
+            integ = integ0
+    x[S.integ] = integ
+    x[S.rack] = rack
+    # 6. fuel command and turbo lag (exact)
+    fl = _curve_ex(md, mi[9], mi[10], mi[11], w1)
+    m_c = rack * fl
+    m0 = x[S.m_f]
+    if m_c > m0:
+        a = a_up
+        tf = c[C.turbo_lag_s]
+    else:
+        a = a_dn
+        tf = c[C.fuel_fall_s]
+    m1 = m_c + (m0 - m_c) * a
+    dm = m_c * dt + (m0 - m_c) * tf * (1.0 - a)          # fuel mass over the sub-step [g]
+    return cut, w0, w1, m_c, m1, dm, fl
+
+
+@_njit(cache=True)
+def _shaft_and_generator(md, mi, c, k, x, cut, w0, w1, m1):
+    """Items 7, 10b, 10d of a sub-step: engine torque, shaft energy, generator work and its cut to the bus limit
+    or raise to the floor (``x[gen_sat]``, the shedding counters).  Returns ``(w1, tau1, w_avg, tau_avg,
+    w_e, dke, w_g, el)``."""
+    dt, _target, _r_up, _r_dn, _a_w, _dw_max, _a_up, _a_dn, _a_a, _p_shed, e_shed, e_floor, w_idle = k
+    J = c[C.shaft_inertia_kg_m2]
+    # 7. engine torque
+    tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
+    w_avg = 0.5 * (w0 + w1)
+    tau_avg = 0.5 * (x[S.tau_e] + tau1)
+    w_e = tau_avg * w_avg * dt
+    dke = 0.5 * J * (w1 * w1 - w0 * w0)
+    w_g = w_e - dke
+    tau_g = w_g / (w_avg * dt)
+    eta = _grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg, abs(tau_g))
+    el = w_g * eta if w_g >= 0.0 else w_g / eta
+    # 10b. generator torque cut to the bus limit; the surplus engine work accelerates the shaft
+    gen_sat = 0.0
+    if el > e_shed:
+        if e_shed > 0.0:
+            eta = _grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg, e_shed / (eta * w_avg * dt))
+            w_gc = e_shed / eta
+        else:
+            w_gc = 0.0
+        if w_gc < w_g:
+            w_g = w_gc
+        el = e_shed
+        dke = w_e - w_g
+        w1 = math.sqrt(w0 * w0 + 2.0 * dke / J)
+        tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
+        gen_sat = 1.0
+    elif e_floor > 0.0 and el < e_floor and w1 > w_idle:
+        # 10d. generator torque raised to the floor; the deficit comes out of the shaft's kinetic energy
+        eta_f = _grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg,
+                         e_floor / (max(eta, 1e-3) * w_avg * dt))
+        w1sq = w0 * w0 + 2.0 * (w_e - e_floor / eta_f) / J
+        if w1sq < w_idle * w_idle:
+            w1sq = w_idle * w_idle
+        w1f = math.sqrt(w1sq)
+        if w1f < w1:
+            dke = 0.5 * J * (w1f * w1f - w0 * w0)
+            w_g = w_e - dke
+            el = w_g * eta_f
+            w1 = w1f
+            tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
+    x[S.gen_sat] = gen_sat
+    if cut > 0.0 or gen_sat > 0.0:
+        if x[S.shed] == 0.0:
+            x[S.shed_n] += 1.0
+        x[S.shed] = 1.0
+        x[S.shed_s] += dt
+    else:
+        x[S.shed] = 0.0
+    return w1, tau1, w_avg, tau_avg, w_e, dke, w_g, el
+
+
+@_njit(cache=True)
+def _soot(md, mi, c, k, x, w_avg, tau_avg, m_c, dm, fl):
+    """Items 8 and 11 of a sub-step: quasi-static and transient soot, the analyser's lag (``x[soot_lag]``).
+    Returns ``(s_sub, s_tr, analyser reading integral)``."""
+    dt = k[0]
+    a_a = k[8]
+    if tau_avg > 0.0:
+        s = c[C.soot_scale_frac] * _grid_ex(md, mi[22], mi[23], mi[24], mi[25], mi[26], w_avg, tau_avg) * dt
+    else:
+        s = 0.0
+    deficit = m_c * dt - dm                              # int (m_c - m_f) dt over the sub-step [g]
+    s_tr = c[C.transient_soot_mg_per_g] * deficit * deficit / (dt * fl) if deficit > 0.0 else 0.0
+    # 11. analyser: first-order lag of the soot rate (held over the sub-step), exact integral
+    s_sub = s + s_tr
+    r = s_sub / dt
+    soot_lag = x[S.soot_lag]
+    meas = s_sub + (soot_lag - r) * c[C.soot_analyzer_tau_s] * (1.0 - a_a)
+    x[S.soot_lag] = r + (soot_lag - r) * a_a
+    return s_sub, s_tr, meas
+
+
+@_njit(cache=True)
+def step(md, mi, c, p_max, x, p_cmd_w, rate_up_wps, h, elec_max_w, elec_min_w, tot):
     """Advance the engine-generator by ``h`` with the inputs held (items 1-11 of the module docstring).
 
     Parameters
@@ -215,194 +380,65 @@ def step(md, mi, c, p_max, p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g,
     md, mi : ndarray
         Maps packed by :func:`pack_maps` (values; offsets, sizes and extrapolation codes).
     c : ndarray
-        Parameters in the order of :data:`PRM_FIELDS`.
+        Parameters in the order of :data:`PRM_FIELDS` (indices :data:`C`).
     p_max : float
         Rated electrical power [W] (end of the optimal operating line).
-    p_lim ... soot_lag : float
-        The state, in the order of :data:`STATE`.
-    p_cmd_w, rate_up_wps, h, elec_max_w : float
-        Power command [W], its max rate of increase [W/s], step [s], bus limit [W].
-    elec_min_w : float
-        Generator floor [W] (item 10d; default 0 = none).
-
-    Returns
-    -------
-    tuple
-        The new state (order of :data:`STATE`), then the step's electrical energy [J], fuel [g], soot
-        [mg] and the analyser's mean reading over the step [mg/s] (lagged soot rate + offset).
+    x : ndarray
+        The state in the order of :data:`STATE` (indices :data:`S`), advanced in place.
+    p_cmd_w, rate_up_wps, h, elec_max_w, elec_min_w : float
+        Power command [W], its max rate of increase [W/s], step [s], bus limit [W], generator floor [W]
+        (item 10d; <= 0 = none).
+    tot : ndarray
+        Receives the step's electrical energy [J], fuel [g], soot [mg] and the analyser's mean reading over
+        the step [mg/s] (lagged soot rate + offset), indices :data:`T`.
     """
-    n = max(1, math.ceil(h / c[0] - 1e-9))
-    dt = h / n
-    target = min(max(p_cmd_w, 0.0), p_max)
-    r_up = max(rate_up_wps, 0.0) * dt
-    r_dn = c[1] * dt
-    J = c[2]
-    kp = c[3]
-    ki = c[4]
-    t_w = c[5]
-    a_w = math.exp(-dt / t_w)
-    dw_max = c[6] * dt
-    tf_up = c[7]
-    tf_dn = c[8]
-    a_up = math.exp(-dt / tf_up)
-    a_dn = math.exp(-dt / tf_dn)
-    lhv = c[9]
-    c_tr = c[10]
-    s_qs = c[11]
-    tau_a = c[12]
-    a_a = math.exp(-dt / tau_a) if tau_a > 0.0 else 0.0
-    p_shed = max(elec_max_w, 0.0)
-    e_shed = p_shed * dt
-    e_floor = min(elec_min_w, p_max) * dt          # 10d: <= 0 = no floor
-    w_idle = _curve_ex(md, mi[0], mi[1], mi[2], 0.0)
+    n = max(1, math.ceil(h / c[C.max_substep_s] - 1e-9))
+    k = _coefficients(md, mi, c, p_max, h / n, p_cmd_w, rate_up_wps, elec_max_w, elec_min_w)
+    lhv = c[C.fuel_lhv_j_per_g]
     e_el = 0.0
     fuel = 0.0
     soot = 0.0
     soot_meas = 0.0
     for _ in range(n):
-        # 1. rate limit, 10a. command cut to the bus limit (bypasses the downward rate limit)
-        dp = target - p_lim
-        p_lim += r_up if dp > r_up else (-r_dn if dp < -r_dn else dp)
-        cut = 0.0
-        if p_lim > p_shed:
-            p_lim = p_shed
-            cut = 1.0
-        # 2-3. speed set point and speed response
-        w0 = w
-        w_set = _curve_ex(md, mi[0], mi[1], mi[2], p_lim)
-        w1 = w_set + (w0 - w_set) * a_w
-        if w1 - w0 > dw_max:
-            w1 = w0 + dw_max
-        elif w0 - w1 > dw_max:
-            w1 = w0 - dw_max
-        # 4. torque demand (10c. + the speed loop's torque while the generator torque is cut)
-        tau_ref = _curve_ex(md, mi[3], mi[4], mi[5], p_lim) / w0
-        if gen_sat > 0.0:
-            tau_ref += J * (w_set - w0) / t_w
-        tl = _curve_ex(md, mi[6], mi[7], mi[8], w0)
-        if tau_ref > tl:
-            tau_ref = tl
-        # 5. PI rack with conditional integration
-        e = tau_ref - tau_e
-        integ = integ0 + ki * e * dt
-        rack = kp * e + integ
-        if rack > 1.0:
-            rack = 1.0
-            if e > 0.0:
-                integ = integ0
-        elif rack < 0.0:
-            rack = 0.0
-            if e < 0.0:
-                integ = integ0
-        integ0 = integ
-        # 6. fuel command and turbo lag (exact)
-        fl = _curve_ex(md, mi[9], mi[10], mi[11], w1)
-        m_c = rack * fl
-        m0 = m_f
-        if m_c > m0:
-            a = a_up
-            tf = tf_up
-        else:
-            a = a_dn
-            tf = tf_dn
-        m1 = m_c + (m0 - m_c) * a
-        dm = m_c * dt + (m0 - m_c) * tf * (1.0 - a)          # fuel mass over the sub-step [g]
-        # 7. engine torque
-        tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
-        w_avg = 0.5 * (w0 + w1)
-        tau_avg = 0.5 * (tau_e + tau1)
-        w_e = tau_avg * w_avg * dt
-        dke = 0.5 * J * (w1 * w1 - w0 * w0)
-        w_g = w_e - dke
-        tau_g = w_g / (w_avg * dt)
-        eta = _grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg, abs(tau_g))
-        el = w_g * eta if w_g >= 0.0 else w_g / eta
-        # 10b. generator torque cut to the bus limit; the surplus engine work accelerates the shaft
-        gen_sat = 0.0
-        if el > e_shed:
-            if e_shed > 0.0:
-                eta = _grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg, e_shed / (eta * w_avg * dt))
-                w_gc = e_shed / eta
-            else:
-                w_gc = 0.0
-            if w_gc < w_g:
-                w_g = w_gc
-            el = e_shed
-            dke = w_e - w_g
-            w1 = math.sqrt(w0 * w0 + 2.0 * dke / J)
-            tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
-            gen_sat = 1.0
-        elif e_floor > 0.0 and el < e_floor and w1 > w_idle:
-            # 10d. generator torque raised to the floor; the deficit comes out of the shaft's kinetic energy
-            eta_f = _grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg,
-                             e_floor / (max(eta, 1e-3) * w_avg * dt))
-            w1sq = w0 * w0 + 2.0 * (w_e - e_floor / eta_f) / J
-            if w1sq < w_idle * w_idle:
-                w1sq = w_idle * w_idle
-            w1f = math.sqrt(w1sq)
-            if w1f < w1:
-                dke = 0.5 * J * (w1f * w1f - w0 * w0)
-                w_g = w_e - dke
-                el = w_g * eta_f
-                w1 = w1f
-                tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
-        if cut > 0.0 or gen_sat > 0.0:
-            if shed == 0.0:
-                shed_n += 1.0
-            shed = 1.0
-            shed_s += dt
-        else:
-            shed = 0.0
-        # 8. soot: quasi-static + transient (deficit of burnt fuel against the rack's command)
-        if tau_avg > 0.0:
-            s = s_qs * _grid_ex(md, mi[22], mi[23], mi[24], mi[25], mi[26], w_avg, tau_avg) * dt
-        else:
-            s = 0.0
-        deficit = m_c * dt - dm                              # int (m_c - m_f) dt over the sub-step [g]
-        s_tr = c_tr * deficit * deficit / (dt * fl) if deficit > 0.0 else 0.0
-        # 11. analyser: first-order lag of the soot rate (held over the sub-step), exact integral
-        s_sub = s + s_tr
-        r = s_sub / dt
-        soot_meas += s_sub + (soot_lag - r) * tau_a * (1.0 - a_a)
-        soot_lag = r + (soot_lag - r) * a_a
+        cut, w0, w1, m_c, m1, dm, fl = _rack_and_fuel(md, mi, c, k, x)
+        w1, tau1, w_avg, tau_avg, w_e, dke, w_g, el = _shaft_and_generator(md, mi, c, k, x, cut, w0, w1, m1)
+        s_sub, s_tr, meas = _soot(md, mi, c, k, x, w_avg, tau_avg, m_c, dm, fl)
+        soot_meas += meas
         # bookkeeping
-        w = w1
-        m_f = m1
-        tau_e = tau1
-        fuel_cmd = m_c
-        fuel_g += dm
-        fuel_j += dm * lhv
-        eng_loss_j += dm * lhv - w_e
-        shaft_j += w_g
-        ke_j += dke
-        gen_loss_j += w_g - el
-        elec_j += el
-        soot_mg += s_sub
-        soot_tr_mg += s_tr
+        x[S.w] = w1
+        x[S.m_f] = m1
+        x[S.tau_e] = tau1
+        x[S.fuel_cmd] = m_c
+        x[S.fuel_g] += dm
+        x[S.fuel_j] += dm * lhv
+        x[S.eng_loss_j] += dm * lhv - w_e
+        x[S.shaft_j] += w_g
+        x[S.ke_j] += dke
+        x[S.gen_loss_j] += w_g - el
+        x[S.elec_j] += el
+        x[S.soot_mg] += s_sub
+        x[S.soot_tr_mg] += s_tr
         e_el += el
         fuel += dm
         soot += s_sub
-    return (p_lim, w, integ0, rack, m_f, tau_e, fuel_cmd, fuel_g, fuel_j, eng_loss_j, shaft_j, ke_j, gen_loss_j,
-            elec_j, soot_mg, soot_tr_mg, gen_sat, shed, shed_n, shed_s, soot_lag,
-            e_el, fuel, soot, soot_meas / h + c[13])
+    tot[T.e_el] = e_el
+    tot[T.fuel] = fuel
+    tot[T.soot] = soot
+    tot[T.soot_meas] = soot_meas / h + c[C.soot_analyzer_offset_mgps]
 
 
 @_njit(cache=True)
 def run_record(md, mi, c, p_max, x, t, p_cmd, rate_up_wps, elec_max_w, out):  # pragma: no cover - compiled
     """:func:`step` through a record (the calibration's loop, :mod:`shevsim.calibrate.engine`): state ``x``
-    (order of :data:`STATE`) at ``t[0]``; step ``k`` runs from ``t[k-1]`` to ``t[k]`` with ``p_cmd[k]`` held
-    (the ``profile`` source's convention under the Gauss-Seidel master) and writes its mean analyser reading
-    [mg/s] to ``out[k]`` (``out[0]`` is left as given).  Kept in this file so that numba's cache of it is
-    renewed whenever :func:`step` changes."""
-    s = (x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[10], x[11], x[12], x[13], x[14], x[15],
-         x[16], x[17], x[18], x[19], x[20])
+    (order of :data:`STATE`; not changed) at ``t[0]``; step ``k`` runs from ``t[k-1]`` to ``t[k]`` with
+    ``p_cmd[k]`` held (the ``profile`` source's convention under the Gauss-Seidel master) and writes its mean
+    analyser reading [mg/s] to ``out[k]`` (``out[0]`` is left as given).  Kept in this file so that numba's
+    cache of it is renewed whenever :func:`step` changes."""
+    tot = np.zeros(4)
+    x = x.copy()
     for k in range(1, t.shape[0]):
-        r = step(md, mi, c, p_max, s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8], s[9], s[10], s[11],
-                 s[12], s[13], s[14], s[15], s[16], s[17], s[18], s[19], s[20],
-                 p_cmd[k], rate_up_wps, t[k] - t[k - 1], elec_max_w)
-        s = (r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11], r[12], r[13], r[14], r[15],
-             r[16], r[17], r[18], r[19], r[20])
-        out[k] = r[24]
+        step(md, mi, c, p_max, x, p_cmd[k], rate_up_wps, t[k] - t[k - 1], elec_max_w, 0.0, tot)
+        out[k] = tot[T.soot_meas]
     return 0
 
 
@@ -454,23 +490,23 @@ class EngineGenStep:
 
     def __call__(self, st: EngineGenState, p_cmd_w: float, rate_up_wps: float, h: float,
                  elec_max_w: float = 1e12, elec_min_w: float = 0.0):
-        r = self.fn(self.md, self.mi, self.c, self.p_max, st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e,
-                    st.fuel_cmd, st.fuel_g, st.fuel_j, st.eng_loss_j, st.shaft_j, st.ke_j, st.gen_loss_j,
-                    st.elec_j, st.soot_mg, st.soot_tr_mg, st.gen_sat, st.shed, st.shed_n, st.shed_s, st.soot_lag,
-                    float(p_cmd_w), float(rate_up_wps), float(h), float(elec_max_w), float(elec_min_w))
-        if not math.isfinite(r[21] + r[22] + r[24] + r[1] + r[5]):     # one test for all (NaN/inf propagate)
-            modes = [m.name for m in (self.maps.ool_speed, self.maps.ool_shaft, self.maps.tmax, self.maps.fmax)
-                     if m.mode == "error"]
-            modes += [g.name for g in (self.maps.torque, self.maps.geff, self.maps.soot)
-                      if "error" in (g.mode_x, g.mode_y)]
-            raise DataError(f"engine-generator step from p_lim={st.p_lim!r} W, w={st.w!r} rad/s with command "
-                            f"{p_cmd_w!r} W, h={h!r} s gave a non-finite result (a NaN lookup"
-                            + (f", or a lookup outside a map with extrapolation 'error': {', '.join(modes)}"
-                               if modes else "") + ")")
-        (st.p_lim, st.w, st.integ, st.rack, st.m_f, st.tau_e, st.fuel_cmd, st.fuel_g, st.fuel_j, st.eng_loss_j,
-         st.shaft_j, st.ke_j, st.gen_loss_j, st.elec_j, st.soot_mg, st.soot_tr_mg, st.gen_sat, st.shed, st.shed_n,
-         st.shed_s, st.soot_lag) = r[:21]
-        return r[21], r[22], r[23], r[24]
+        x = np.array(st.values(), dtype=np.float64)
+        tot = np.zeros(4)
+        self.fn(self.md, self.mi, self.c, self.p_max, x, float(p_cmd_w), float(rate_up_wps), float(h),
+                float(elec_max_w), float(elec_min_w), tot)
+        if not math.isfinite(tot[T.e_el] + tot[T.fuel] + tot[T.soot_meas] + x[S.w] + x[S.tau_e]):
+            raise DataError(nonfinite_message(self.maps, st.p_lim, st.w, p_cmd_w, h))
+        st.set_values(x.tolist())
+        return tuple(tot.tolist())
+
+
+def nonfinite_message(maps: EngineGenMaps, p_lim: float, w: float, p_cmd_w: float, h: float) -> str:
+    """Why a step gave a non-finite result (NaN met inside, or a map with extrapolation ``"error"``)."""
+    modes = [m.name for m in (maps.ool_speed, maps.ool_shaft, maps.tmax, maps.fmax) if m.mode == "error"]
+    modes += [g.name for g in (maps.torque, maps.geff, maps.soot) if "error" in (g.mode_x, g.mode_y)]
+    return (f"engine-generator step from p_lim={p_lim!r} W, w={w!r} rad/s with command {p_cmd_w!r} W, h={h!r} s "
+            f"gave a non-finite result (a NaN lookup"
+            + (f", or a lookup outside a map with extrapolation 'error': {', '.join(modes)}" if modes else "") + ")")
 
 
 def advance(maps: EngineGenMaps, prm, st: EngineGenState, p_cmd_w: float, rate_up_wps: float,

@@ -81,6 +81,7 @@ from shevsim.core.errors import ScenarioError
 from shevsim.core.lookup import py_max as _pmax
 from shevsim.core.lookup import py_min as _pmin
 
+from shevsim.core.compiled import field_index
 from shevsim.supervisor import daqp_nb
 
 from .fuel_curve import SqrtFuelCurve
@@ -106,8 +107,8 @@ class MPCSettings:
     ----------
     n_p, n_c : int
         Prediction and control horizons (Table 5.2: 40, 15).
-    dt_s : float
-        Sampling period [s] (Sec. 5.2.2: 0.2 s).
+    sample_time_s : float
+        Sampling period [s] (Sec. 5.2.2: 0.2 s) = the supervisor component's step; also ``dt_s``.
     eta1_1, eta2_1, eta3_1, eta4_1 : float
         Weights of (SOC fraction - ref)^2, (sqrt(kg/s))^2, (Delta v per step in kW)^2, (u in kW)^2
         (Table 5.2: 4.17, 1, 2.5e-5, 1.25e-6; units: see the module docstring).
@@ -136,7 +137,7 @@ class MPCSettings:
 
     n_p: int = 40
     n_c: int = 15
-    dt_s: float = 0.2
+    sample_time_s: float = 0.2
     eta1_1: float = 4.17
     eta2_1: float = 1.0
     eta3_1: float = 2.5e-5
@@ -158,11 +159,16 @@ class MPCSettings:
     fallback: str = "shift"
     warm_active_set: bool = True
 
+    @property
+    def dt_s(self) -> float:
+        """The sampling period [s] (``sample_time_s``)."""
+        return self.sample_time_s
+
     def __post_init__(self) -> None:
         w = "MPC settings"
         if not (isinstance(self.n_c, int) and isinstance(self.n_p, int) and 1 <= self.n_c <= self.n_p):
             raise ScenarioError(f"{w}: need integers 1 <= n_c <= n_p, got n_c={self.n_c}, n_p={self.n_p}")
-        for name in ("dt_s", "capacity_ah"):
+        for name in ("sample_time_s", "capacity_ah"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ScenarioError(f"{w}: {name} must be positive, got {v}")
@@ -199,17 +205,17 @@ _C = {n: i for i, n in enumerate(_C_NAMES)}
 AUX_NAMES = ("beta", "d0", "u_lin", "hf", "s_o", "rate_up_dt", "phi_o", "b")
 
 
-_SIG = ("i8(f8, f8, f8, f8, f8, f8, f8, f8, f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], "
-        "f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1])")
-
-
-@_njit(_SIG, cache=True)
-def _build(soc, pd, vo, voc, rs, pbmax, pbmin, rate_up, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx,
-           H, f, bu, bl, aux):  # pragma: no cover - compiled; the same code runs uncompiled in tests
+@_njit(cache=True)
+def _build(x, qc, qw):  # pragma: no cover - compiled; the same code runs uncompiled in tests
     """Fill ``H, f, bu, bl`` of the scaled QP; return 0, or -1 for unusable inputs.
 
-    Units: soc [%], pd, vo, pbmax, pbmin [kW], voc [V], rs [Ohm], rate_up [kW/s].
+    ``x = (soc [%], pd [kW], vo [kW], voc [V], rs [Ohm], pbmax [kW], pbmin [kW], rate_up [kW/s])``: the
+    operating point; ``qc`` = :attr:`MPCProblem.constants` (``c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1,
+    soc_idx``); ``qw`` = :attr:`MPCProblem.work` (``H, f, bu, bl, aux``, written).
     """
+    soc, pd, vo, voc, rs, pbmax, pbmin, rate_up = x
+    c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx = qc
+    H, f, bu, bl, aux = qw
     if not (math.isfinite(soc) and math.isfinite(pd) and math.isfinite(vo) and math.isfinite(voc)
             and math.isfinite(rs) and math.isfinite(pbmax) and math.isfinite(pbmin) and math.isfinite(rate_up)):
         return -1
@@ -654,31 +660,20 @@ def _fallback(mp, rp, rinner, rrates, plan, x, soc, demand, gen, pmax_w, pmin_w,
     return _pmin(_pmax(cand, vo + mp[7] * mp[8]), vo + up * mp[8])
 
 
+#: index constants of the move's state ``x`` (:data:`X_FIELDS`)
+X = field_index(X_FIELDS, "X")
+
+
 @_njit(cache=True)
-def mpc_move(mp, rp, inner, rates, rinner, rrates, x, plan, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx,
-             H, f, A, bu, bl, aux, ws, qp, res, sense, z, lam, flags, wset, wsgn, kL, kY, kS, kv, kLU, kfac,
-             soc, demand, gen, pmax_w, pmin_w, ocv, rs):
-    """One supervisor call (:meth:`MPCSupervisor.step` with solver 'daqp'): ``(command_w, rate_max_wps)``;
-    the plan, fallback count, slacks and status are left in ``x`` / ``plan``.  The QP is first solved on the
-    previous call's active set (:func:`solve_on_active_set`), then by DAQP when that is not optimal."""
-    rate = _rate(inner, rates, gen)
+def first_move(mv, z, soc_scale, ok, soc, demand, gen, pmax_w, pmin_w, rate):
+    """The command [W] of one call from a QP solution ``z`` (``ok``) or, without one, the fallback
+    (:func:`_fallback`); every solver's path ends here.  ``mv = (mp, rp, rinner, rrates, x, plan)``: settings,
+    the rule-based split's settings and rate map, the state (:data:`X`) and the plan (absolute engine powers
+    [kW] of the last optimal solution), updated in place; ``soc_scale`` = ``aux[0]`` (slack to %)."""
+    mp, rp, rinner, rrates, x, plan = mv
     vo = gen * 1e-3
     nc = int(mp[1])
-    st = _build(soc, demand * 1e-3, vo, ocv, rs, pmax_w * 1e-3, pmin_w * 1e-3, rate * 1e-3, c, fp, fs, fsl,
-                MtM, LtL, Mt1, Mtr, Lt1, soc_idx, H, f, bu, bl, aux)
-    if st == 0:
-        if mp[11] > 0.5 and solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kL, kY, kS, kv, kLU, kfac, z) == 1:
-            x[6] = 0.0
-        else:
-            flag = daqp_nb.solve(ws, qp, res, sense, z, lam, flags, H, f, A, bu, bl)
-            x[6] = 0.0 if flag >= 1 else float(flag)
-            if flag >= 1:
-                set_active_from_lam(lam, bu.shape[0], wset, wsgn)
-            else:
-                wset[0] = -1
-    else:
-        x[6] = 1.0
-    if x[6] == 0.0:
+    if ok:
         # solver tolerance (~1e-9 kW) may put the move a hair outside the engine limits
         v_cmd = _pmin(_pmax(vo + z[0], mp[2]), mp[3])
         acc = 0.0
@@ -687,16 +682,44 @@ def mpc_move(mp, rp, inner, rates, rinner, rrates, x, plan, c, fp, fs, fsl, MtM,
             plan[j] = acc
         for j in range(nc):
             plan[j] += vo
-        x[2] = 1.0
-        x[3] = 0.0
-        x[4] = z[nc] * 1e3
-        x[5] = z[nc + 1] * aux[0]
+        x[X.plan_valid] = 1.0
+        x[X.plan_age] = 0.0
+        x[X.battery_slack_w] = z[nc] * 1e3
+        x[X.soc_slack_pct] = z[nc + 1] * soc_scale
     else:
         v_cmd = _fallback(mp, rp, rinner, rrates, plan, x, soc, demand, gen, pmax_w, pmin_w, rate) * 1e-3
-        x[1] += 1.0
-        x[4] = 0.0
-        x[5] = 0.0
-    return v_cmd * 1e3, rate
+        x[X.fallback_count] += 1.0
+        x[X.battery_slack_w] = 0.0
+        x[X.soc_slack_pct] = 0.0
+    return v_cmd * 1e3
+
+
+@_njit(cache=True)
+def mpc_move(a, soc, demand, gen, pmax_w, pmin_w, ocv, rs):
+    """One supervisor call with solver 'daqp' (:meth:`MPCSupervisor.step`): ``(command_w, rate_max_wps)``; ``a``
+    = :attr:`MPCSupervisor.arrays`.  The QP is first solved on the previous call's active set
+    (:func:`solve_on_active_set`), then by DAQP's C library when that is not optimal; :func:`first_move`
+    turns the solution (or its absence) into the command."""
+    (mp, rp, inner, rates, rinner, rrates, x, plan, c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx, H, f, A, bu,
+     bl, aux, ws, qp, res, sense, z, lam, flags, wset, wsgn, kL, kY, kS, kv, kLU, kfac) = a
+    rate = _rate(inner, rates, gen)
+    st = _build((soc, demand * 1e-3, gen * 1e-3, ocv, rs, pmax_w * 1e-3, pmin_w * 1e-3, rate * 1e-3),
+                (c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx), (H, f, bu, bl, aux))
+    if st == 0:
+        if mp[11] > 0.5 and solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kL, kY, kS, kv, kLU, kfac, z) == 1:
+            x[X.status] = 0.0
+        else:
+            flag = daqp_nb.solve(ws, qp, res, sense, z, lam, flags, H, f, A, bu, bl)
+            x[X.status] = 0.0 if flag >= 1 else float(flag)
+            if flag >= 1:
+                set_active_from_lam(lam, bu.shape[0], wset, wsgn)
+            else:
+                wset[0] = -1
+    else:
+        x[X.status] = 1.0
+    cmd = first_move((mp, rp, rinner, rrates, x, plan), z, aux[0], x[X.status] == 0.0, soc, demand, gen, pmax_w,
+                     pmin_w, rate)
+    return cmd, rate
 
 
 def daqp_move():
@@ -775,9 +798,9 @@ class MPCProblem:
 
     def build(self, soc_pct, demand_kw, gen_kw, pbmax_kw, pbmin_kw, ocv_v, rs_ohm, rate_up_kwps) -> int:
         """Fill ``self.H, self.f, self.bl, self.bu, self.aux``; 0 on success, -1 for unusable inputs."""
-        return self._build(soc_pct, demand_kw, gen_kw, ocv_v, rs_ohm, pbmax_kw, pbmin_kw, rate_up_kwps, self.c,
-                           self.fp, self.fs, self.fsl, self.MtM, self.LtL, self.Mt1, self.Mtr, self.Lt1,
-                           self.soc_idx, self.H, self.f, self.bu, self.bl, self.aux)
+        x = tuple(float(v) for v in (soc_pct, demand_kw, gen_kw, ocv_v, rs_ohm, pbmax_kw, pbmin_kw, rate_up_kwps))
+        return self._build(x, (self.c, self.fp, self.fs, self.fsl, self.MtM, self.LtL, self.Mt1, self.Mtr, self.Lt1,
+                               self.soc_idx), (self.H, self.f, self.bu, self.bl, self.aux))
 
     def aux_dict(self) -> dict[str, float]:
         return {k: float(v) for k, v in zip(AUX_NAMES, self.aux)}
@@ -998,19 +1021,17 @@ class MPCSupervisor:
         self._dv_min_kw = settings.power_rate_min_wps / 1e3 * settings.dt_s
         self._pg_min_kw = settings.power_gen_min_w / 1e3
         self._pg_max_kw = settings.power_gen_max_w / 1e3
-        # solver 'daqp', compiled: the whole call is :func:`mpc_move` (the fast path's kernel calls it too);
-        # its state lives in the arrays of ``self.arrays`` (X_FIELDS); otherwise the Python solve path
+        # solver 'daqp', compiled: the whole call is :func:`mpc_move` (the component's compiled step calls it too);
+        # otherwise the solver object solves and :func:`first_move` makes the move.  Either way the state lives
+        # in the arrays of ``self.arrays`` (X_FIELDS, the plan)
         self._move = daqp_move() if (compiled and settings.solver == "daqp") else None
+        self._pack()
         if self._move is not None:
             self.solver_name = "daqp"
             self.solver = None
-            self._pack()
         else:
             self._make_solver(settings.solver)
-        self.fallback_count = 0
         self.last = MPCResult()
-        self._plan_kw = None          # absolute engine powers of the last optimal plan (N_c)
-        self._plan_age = 0
 
     # -- the compiled call's state ------------------------------------------------------------------
     def _pack(self) -> None:
@@ -1036,6 +1057,8 @@ class MPCSupervisor:
         self._guess = new_guess_state(p.n, p.n + p.m)
         self.arrays = (mp, rp, inner, rates, rinner, rrates, self._x, self._plan_arr, p.c, p.fp, p.fs, p.fsl, p.MtM,
                        p.LtL, p.Mt1, p.Mtr, p.Lt1, p.soc_idx, p.H, p.f, p.A, p.bu, p.bl, p.aux) + self._daqp + self._guess
+        #: what :func:`first_move` takes
+        self.move_state = (mp, rp, rinner, rrates, self._x, self._plan_arr)
 
     def __del__(self):
         d = getattr(self, "_daqp", None)
@@ -1052,53 +1075,32 @@ class MPCSupervisor:
 
     @property
     def fallback_count(self) -> int:
-        return int(self._x[1]) if self._move is not None else self._fallback_count
+        return int(self._x[X.fallback_count])
 
     @fallback_count.setter
     def fallback_count(self, v) -> None:
-        if self._move is not None:
-            self._x[1] = float(v)
-        else:
-            self._fallback_count = v
+        self._x[X.fallback_count] = float(v)
 
     @property
     def _plan_age(self) -> int:
-        return int(self._x[3]) if self._move is not None else self._plan_age_py
+        return int(self._x[X.plan_age])
 
     @_plan_age.setter
     def _plan_age(self, v) -> None:
-        if self._move is not None:
-            self._x[3] = float(v)
-        else:
-            self._plan_age_py = v
+        self._x[X.plan_age] = float(v)
 
-    # the plan (absolute engine powers [kW] of the last optimal solution) is formed from the solution
-    # only when read (fallback 'shift', state snapshots, tests): the solvers return a fresh array per
-    # solve (DAQP, cvxpy) or a copy is kept (OSQP), so the values are those of the eager computation
     @property
     def _plan_kw(self):
-        if self._move is not None:
-            return self._plan_arr.copy() if self._x[2] > 0.5 else None
-        pend = self._plan_pending
-        if pend is not None:
-            z, vo = pend
-            plan = np.cumsum(z[:self._nc])
-            plan += vo
-            self._plan_val = plan
-            self._plan_pending = None
-        return self._plan_val
+        """Absolute engine powers [kW] of the last optimal plan (a copy), None before the first solution."""
+        return self._plan_arr.copy() if self._x[X.plan_valid] > 0.5 else None
 
     @_plan_kw.setter
     def _plan_kw(self, value) -> None:
-        if self._move is not None:
-            if value is None:
-                self._x[2] = 0.0
-            else:
-                self._plan_arr[:] = value
-                self._x[2] = 1.0
-            return
-        self._plan_val = value
-        self._plan_pending = None
+        if value is None:
+            self._x[X.plan_valid] = 0.0
+        else:
+            self._plan_arr[:] = value
+            self._x[X.plan_valid] = 1.0
 
     def _make_solver(self, name: str) -> None:
         self.solver_name = name
@@ -1160,17 +1162,14 @@ class MPCSupervisor:
     def step(self, soc_pct: float, demand_w: float, gen_power_w: float, power_max_w: float,
              power_min_w: float, ocv_v: float, rs_ohm: float) -> float:
         """One supervisor call: state -> QP -> first move.  Returns the engine power command [W]."""
+        self.arrays[0][10] = 1.0 if (self.rule is not None and self.rule.engine_on) else 0.0
         if self._move is not None:
             return self._step_compiled(soc_pct, demand_w, gen_power_w, power_max_w, power_min_w, ocv_v, rs_ohm)
-        try:
-            rate = self.rate_map(gen_power_w)
-        except TypeError:
-            rate = float("nan")
+        a = self.arrays
+        rate = float(_rate(a[2], a[3], float(gen_power_w)))
         vo = gen_power_w * 1e-3
         st = self.prob.build(soc_pct, demand_w * 1e-3, vo, power_max_w * 1e-3, power_min_w * 1e-3, ocv_v,
                              rs_ohm, rate * 1e-3)
-        res = self.last
-        res.rate_max_wps = rate
         if st == 0:
             if self.solver_name == "cvxpy":
                 self.solver.set_from_build(soc_pct, demand_w * 1e-3, vo, power_max_w * 1e-3, power_min_w * 1e-3)
@@ -1180,69 +1179,34 @@ class MPCSupervisor:
                 z, status = None, f"solver exception: {exc!r}"
         else:
             z, status = None, "unusable inputs (non-finite, V_oc <= 0, R_s <= 0 or P_b,max < P_b,min)"
+        zz = self._daqp[4]                # the solution buffer of the compiled call, idle on this path
         if z is not None:
-            nc = self._nc
-            # solver tolerance (~1e-9 kW) may put the move a hair outside the engine limits
-            v_cmd = min(max(vo + float(z[0]), self._pg_min_kw), self._pg_max_kw)
-            self._plan_pending = (z if self.solver_name != "osqp" else z.copy(), vo)
-            self._plan_age = 0
-            res.ok = True
-            res.battery_slack_w = float(z[nc]) * 1e3
-            res.soc_slack_pct = float(z[nc + 1] * self.prob.aux[0])
-        else:
-            v_cmd = self._fallback(soc_pct, demand_w, gen_power_w, power_max_w, power_min_w, rate) * 1e-3
-            self.fallback_count += 1
-            res.ok = False
-            res.battery_slack_w = 0.0
-            res.soc_slack_pct = 0.0
-        res.status = status
-        res.power_cmd_w = v_cmd * 1e3
-        return res.power_cmd_w
+            zz[:] = z
+        cmd = first_move(self.move_state, zz, float(self.prob.aux[0]), z is not None, float(soc_pct),
+                         float(demand_w), float(gen_power_w), float(power_max_w), float(power_min_w), rate)
+        self._x[X.status] = 0.0 if z is not None else 1.0
+        return self._result(cmd, rate, status)
 
     _STATUS = {1.0: "unusable inputs (non-finite, V_oc <= 0, R_s <= 0 or P_b,max < P_b,min)",
                -1000.0: "daqp setup failed"}
 
     def _step_compiled(self, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w, ocv_v, rs_ohm) -> float:
-        a = self.arrays
-        a[0][10] = 1.0 if (self.rule is not None and self.rule.engine_on) else 0.0
-        cmd, rate = self._move(*a, float(soc_pct), float(demand_w), float(gen_power_w), float(power_max_w),
+        cmd, rate = self._move(self.arrays, float(soc_pct), float(demand_w), float(gen_power_w), float(power_max_w),
                                float(power_min_w), float(ocv_v), float(rs_ohm))
+        st = float(self._x[X.status])
+        return self._result(cmd, rate, "optimal" if st == 0.0 else self._STATUS.get(st, f"daqp exitflag {int(st)}"))
+
+    def _result(self, cmd: float, rate: float, status: str) -> float:
+        """Fill :attr:`last` from the state the call left (every solver's path)."""
         x = self._x
         res = self.last
         res.rate_max_wps = rate
-        res.ok = x[6] == 0.0
-        res.status = "optimal" if res.ok else self._STATUS.get(float(x[6]), f"daqp exitflag {int(x[6])}")
-        res.battery_slack_w = float(x[4])
-        res.soc_slack_pct = float(x[5])
+        res.ok = x[X.status] == 0.0
+        res.status = status
+        res.battery_slack_w = float(x[X.battery_slack_w])
+        res.soc_slack_pct = float(x[X.soc_slack_pct])
         res.power_cmd_w = cmd
         return cmd
-
-    # ----------------------------------------------------------------------------------------
-    def _fallback(self, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w, rate_wps) -> float:
-        """Engine power [W] when no QP solution is available (never raises)."""
-        s = self.settings
-        vo = gen_power_w if math.isfinite(gen_power_w) else 0.0
-        cand = None
-        if s.fallback == "shift" and self._plan_kw is not None and self._plan_age + 1 < s.n_c:
-            self._plan_age += 1
-            cand = float(self._plan_kw[self._plan_age]) * 1e3
-        elif self.rule is not None:
-            try:
-                cand = self.rule.split(soc_pct, demand_w, gen_power_w, power_max_w, power_min_w)
-            except Exception:
-                cand = None
-        if cand is None or not math.isfinite(cand):
-            cand = vo
-        # as far as possible inside the battery limits
-        if math.isfinite(demand_w) and math.isfinite(power_max_w) and math.isfinite(power_min_w) \
-                and power_min_w <= power_max_w:
-            cand = min(max(cand, demand_w - power_max_w), demand_w - power_min_w)
-        # engine limits, then the rate limits around the present power (hard)
-        cand = min(max(cand, s.power_gen_min_w), s.power_gen_max_w)
-        up = rate_wps if (math.isfinite(rate_wps) and rate_wps > 0) else 0.0
-        cand = min(max(cand, vo + s.power_rate_min_wps * s.dt_s), vo + up * s.dt_s)
-        return cand
-
 
 __all__ = ["MPCSettings", "MPCProblem", "MPCSupervisor", "CvxpyReference", "PowerRateMap", "SqrtFuelCurve",
            "AUX_NAMES", "INF"]

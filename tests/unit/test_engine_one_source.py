@@ -1,7 +1,7 @@
 """The engine-generator physics is written once (shevsim.powertrain.engine.step).
 
-* The numba-compiled step and its Python form (``step.py_func``, the component with ``compiled=False``)
-  agree to 1e-12 relative on every output over a varied power-command profile (steps, ramps, commands out
+* The numba-compiled component step and its Python form (``engine_generator_step.py_func``, the component
+  with ``compiled=False``) agree to 1e-12 relative on every output over a varied power-command profile (steps, ramps, commands out
   of range, rate limits on and off, load shedding down to below zero), with the analyser lag and offset on.
 * The physics closes its energy balance: fuel energy = electrical + engine loss + generator loss + change
   of shaft kinetic energy, with and without load shedding.
@@ -60,8 +60,9 @@ def _run(eg, rows, h=0.1):
 def test_compiled_step_agrees_with_its_python_form():
     prm = EngineGeneratorParams(soot_analyzer_tau_s=2.5, soot_analyzer_offset_mgps=0.7)
     fast, ref = EngineGenerator("eg", prm), EngineGenerator("eg", prm, compiled=False)
-    assert fast._step.compiled and not ref._step.compiled
-    assert fast._step.fn is eng.step and ref._step.fn is eng.step.py_func
+    from shevsim.components.engine_generator import engine_generator_step
+    assert fast.step_function() is engine_generator_step
+    assert ref.step_function() is engine_generator_step.py_func
     rows = _profile(3000)
     a, b = _run(fast, rows), _run(ref, rows)
     worst = 0.0
@@ -146,9 +147,9 @@ def test_non_clamp_maps_run_through_the_one_step(compiled):
     cv = eg.maps.ool_speed
     eg.maps.ool_speed = Curve(cv.x, cv.y, "linear", name=cv.name)
     eg.maps.p_max_w = float(cv.x[-1]) * 1.2          # commands beyond the table's end now reach the map
-    eg._step = eng.EngineGenStep(eg.maps, eg.params, compiled=compiled)
-    assert list(eg._step.mi[:3]) == [0, cv.x.size, 1]
+    eg.set_maps(eg.maps)
     eg.initialize(0.0)
+    assert list(eg.data[1][:3]) == [0, cv.x.size, 1]
     for k in range(600):
         eg.u["power_cmd_w"] = 1e9
         eg.do_step(0.1 * k, 0.1)
@@ -157,7 +158,7 @@ def test_non_clamp_maps_run_through_the_one_step(compiled):
     assert eg.st.w == pytest.approx(w_lin, rel=1e-6)
     # error mode: a lookup outside the map raises, naming the map
     eg.maps.ool_speed = Curve(cv.x, cv.y, "error", name="ool_speed_test")
-    eg._step = eng.EngineGenStep(eg.maps, eg.params, compiled=compiled)
+    eg.set_maps(eg.maps)
     with pytest.raises((DataError, SimulationError), match="ool_speed_test"):
         eg.do_step(60.0, 0.1)
 
