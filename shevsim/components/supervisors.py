@@ -66,10 +66,14 @@ def _check_rate_map(p, where):
     return PowerRateMap(p.rate_map_power_edges_w, p.rate_map_max_rate_wps, where=where)
 
 
+def _wrong_h_message(name, h, ts, t) -> str:
+    return (f"{name}: supervisor called with step h={h:g} s at t={t:g} s but its sample_time_s is {ts:g} s: "
+            f"set the component's step multiple so that it runs every {ts:g} s")
+
+
 def _check_h(name, h, ts, t):
     if abs(h - ts) > 1e-9 * max(1.0, ts):
-        raise SimulationError(f"{name}: supervisor called with step h={h:g} s at t={t:g} s but its sample_time_s "
-                              f"is {ts:g} s: set the component's step multiple so that it runs every {ts:g} s")
+        raise SimulationError(_wrong_h_message(name, h, ts, t))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -125,8 +129,12 @@ class MPCSupervisorParams(MPCSettings):
     fuel_curve_w: tuple[float, ...] = ()
     fuel_rate_gps: tuple[float, ...] = ()
 
+    def __post_init__(self) -> None:
+        """Checked by :meth:`settings` when the component is built (errors named after the component)."""
+
     def settings(self) -> MPCSettings:
-        """The MPC's settings (these parameters are them)."""
+        """The MPC's settings (these parameters are them), checked."""
+        MPCSettings.__post_init__(self)
         return self
 
     def fuel_curve(self, where: str) -> SqrtFuelCurve:
@@ -251,9 +259,7 @@ class MPCSupervisor(CompiledStep, Component):
 
     def step_error(self, status: int, t: float, h: float) -> str:
         if status == ERR_SAMPLE_TIME:
-            ts = self.params.sample_time_s
-            return (f"{self.name}: supervisor called with step h={h:g} s at t={t:g} s but its sample_time_s is "
-                    f"{ts:g} s: set the component's step multiple so that it runs every {ts:g} s")
+            return _wrong_h_message(self.name, h, self.params.sample_time_s, t)
         return super().step_error(status, t, h)
 
     @property
@@ -311,6 +317,9 @@ class RuleSupervisorParams(RuleSettings):
     rate_map_power_edges_w: tuple[float, ...] = (0.0, 236e3)
     rate_map_max_rate_wps: tuple[float, ...] = (30e3,)
 
+    def __post_init__(self) -> None:
+        """Checked when the component is built (:class:`RuleSettings`' checks, errors named after the component)."""
+
 
 class RuleSupervisor(CompiledStep, Component):
     """Thermostat / power-follower baseline: TYPE ``rule_supervisor``; ports in the module docstring."""
@@ -334,6 +343,7 @@ class RuleSupervisor(CompiledStep, Component):
         p = self.params
         where = f"rule_supervisor '{name}'"
         try:
+            RuleSettings.__post_init__(p)
             settings = p                  # the parameters are the rules' settings
         except ScenarioError as exc:
             raise ScenarioError(f"{where}: {exc}") from exc
@@ -367,9 +377,7 @@ class RuleSupervisor(CompiledStep, Component):
 
     def step_error(self, status: int, t: float, h: float) -> str:
         if status == ERR_SAMPLE_TIME:
-            ts = self.params.sample_time_s
-            return (f"{self.name}: supervisor called with step h={h:g} s at t={t:g} s but its sample_time_s is "
-                    f"{ts:g} s: set the component's step multiple so that it runs every {ts:g} s")
+            return _wrong_h_message(self.name, h, self.params.sample_time_s, t)
         return super().step_error(status, t, h)
 
     def _write(self, cmd: float) -> None:

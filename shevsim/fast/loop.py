@@ -182,7 +182,11 @@ def compiled_loop(functions):
     digest = hashlib.sha256(src.encode() + _inlined_sources(functions)).hexdigest()[:20]
     folder = _cache_dir()
     path = folder / f"shevsim_loop_{digest}.py"
-    if not path.exists():
+    try:
+        same = path.read_text() == src      # import only the text generated here (never a planted file)
+    except OSError:
+        same = False
+    if not same:
         tmp = folder / f".{path.name}.{os.getpid()}.tmp"
         tmp.write_text(src)
         os.replace(tmp, path)               # atomic: concurrent workers write the same text

@@ -393,3 +393,82 @@ def test_a_unit_converting_connection_is_declined():
     m._vars["motor"]["elec_power_max_w"] = dataclasses.replace(v, unit="kW")
     run, why = runner_for(sc, m)
     assert run is None and "converts" in why and "motor.elec_power_max_w" in why
+
+
+# ------------------------------------------- a new component type: one compiled step, both engines, no fast-path code
+from dataclasses import dataclass as _dataclass  # noqa: E402
+
+from numba import njit as _njit  # noqa: E402
+
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, port_index  # noqa: E402
+from shevsim.core.component import Component  # noqa: E402
+from shevsim.core.variables import inp, out  # noqa: E402
+
+
+@_dataclass(frozen=True)
+class LagParams:
+    tau_s: float = 2.0
+
+
+class Lag(CompiledStep, Component):
+    """First-order lag ``tau dy/dt = u - y`` (exact over a step with ``u`` held): a component type that exists
+    only in this test."""
+
+    TYPE = "test_lag"
+    Params = LagParams
+    VARIABLES = (inp("u_mps", "m/s", 0.0, "input"), out("y_mps", "m/s", 0.0, "lagged input"))
+    DATA_MUTABLE = (1,)
+    _static = ("name", "params", "_fn", "_u_names", "_y_names")
+
+    def initialize(self, t0):
+        self.data = (np.array([self.params.tau_s]), np.zeros(1))
+        self.y["y_mps"] = 0.0
+        self._io()
+
+
+_LU = port_index(Lag.VARIABLES, "input")
+_LY = port_index(Lag.VARIABLES, "output")
+
+
+@_njit(cache=True)
+def lag_step(data, u, y, t, h):
+    p, x = data
+    v = u[_LU.u_mps]
+    if v != v:
+        return ERR_NAN_INPUT
+    x[0] = v + (x[0] - v) * math.exp(-h / p[0])
+    y[_LY.y_mps] = x[0]
+    return 0
+
+
+Lag.STEP = lag_step
+
+LAG = """
+[scenario]
+name = "lag"
+step_s = 0.1
+[components.src]
+type = "profile"
+set = { time_s = [0.0, 0.05, 30.0], speed_mps = [0.0, 1.0, 1.0] }
+[components.lag]
+type = "test_lag"
+set = { tau_s = 2.0 }
+[connections]
+"lag.u_mps" = "src.speed_mps"
+"""
+
+
+def test_a_new_component_type_runs_on_both_engines_with_no_fast_path_code(monkeypatch):
+    """A component type defined here, with its one compiled step, runs on the compiled loop as it is (no line in
+    shevsim.fast names it) and equals the master bit for bit; both follow the exact step response
+    1 - exp(-t/tau) of the lag."""
+    from shevsim.components import REGISTRY
+    monkeypatch.setitem(REGISTRY, "test_lag", f"{__name__}:Lag")
+    sc = load_scenario(None, text=LAG)
+    run, why = runner_for(sc)
+    assert run is not None, why
+    fast = run(20.0)
+    ref = build_master(load_scenario(None, text=LAG)).run(20.0)
+    assert np.array_equal(fast["lag.y_mps"], ref["lag.y_mps"])
+    t = ref.time_s
+    np.testing.assert_allclose(ref["lag.y_mps"][1:], 1.0 - np.exp(-t[1:] / 2.0), rtol=1e-12, atol=1e-12)
