@@ -80,8 +80,6 @@ class CellLimits:
         if self.polarisation_heat not in ("seed", "exact"):
             raise ScenarioError(f"power capability: polarisation_heat must be 'seed' or 'exact', "
                                 f"got {self.polarisation_heat!r}")
-        if not self.v_min_v < self.v_max_v:
-            raise ScenarioError("power capability: need v_min < v_max")
 
 
 @dataclass(frozen=True)
@@ -120,8 +118,8 @@ class PowerCapabilityParams(CellLimits):
         super().__post_init__()
         if self.horizon_steps < 1 or not self.dt_s > 0.0:
             raise ScenarioError("power capability: horizon_steps must be >= 1 and dt_s > 0")
-        if not self.soc_min_frac < self.soc_max_frac:
-            raise ScenarioError("power capability: need soc_min < soc_max")
+        if not (self.soc_min_frac < self.soc_max_frac and self.v_min_v < self.v_max_v):
+            raise ScenarioError("power capability: need soc_min < soc_max and v_min < v_max")
 
 
 class PowerLimits(NamedTuple):
