@@ -415,6 +415,7 @@ class BatteryPack(CompiledStep, Component):
         self.yv[_m.Y_TCORE], self.yv[_m.Y_TSURF] = self.thermal.outputs(self._x_fd, q, t_amb, h_out)
         self.yv[_m.Y_TMEAN] = float(np.dot(self._fd_w, self._x_fd))
         if not (0.0 <= float(st[_m.S_SOC]) <= 1.0):
+            self.data[D.st_prev][:] = st     # the rejected state (the message), the state as it was
             st[:] = saved
             raise SimulationError(self.step_error(ERR_SOC_RANGE, t, h))
         battery_publish(self.data, t_amb, self._y_arr)
@@ -423,8 +424,8 @@ class BatteryPack(CompiledStep, Component):
     def step_error(self, status: int, t: float, h: float) -> str:
         if status == ERR_SOC_RANGE:
             i = float(self.yv[_m.Y_I])
-            return (f"{self.name}: SOC left [0, 100] % at t={t + h:.6g} s (soc_pct {100.0 * float(self.st[_m.S_SOC]):.4g} before "
-                    f"the step, pack current {i * self._np:.6g} A)")
+            return (f"{self.name}: SOC left [0, 100] % at t={t + h:.6g} s "
+                    f"(soc_pct={100.0 * float(self.data[D.st_prev][_m.S_SOC]):.4g}, pack current {i * self._np:.6g} A)")
         return super().step_error(status, t, h)
 
 U = port_index(BatteryPack.VARIABLES, "input")
@@ -462,7 +463,8 @@ def battery_publish(data, t_amb, y):
 @njit(cache=True)
 def battery_step(data, u, y, t, h):
     """:class:`BatteryPack`'s step (two-state thermal model): input check, :func:`shevsim.battery.model.cell_step`,
-    the SOC check (the state is left as it was on failure), the outputs at ``t + h``."""
+    the SOC check (the state is left as it was on failure, the rejected one in ``st_prev``), the outputs at
+    ``t + h``."""
     d, ix, c, st, th, yv, _noise, _kn, p, prev = data      # the fields of D
     p_pack = u[U.current_cmd_a] if p[P.current_mode] > 0.5 else u[U.power_w]
     h_conv = u[U.h_conv_w_m2k]
@@ -472,7 +474,8 @@ def battery_step(data, u, y, t, h):
     prev[:] = st
     _m.cell_step(d, ix, c, st, p_pack, t, h, t_amb, h_conv, th, yv)
     if not (0.0 <= st[_m.S_SOC] <= 1.0):
-        st[:] = prev
+        for j in range(st.shape[0]):      # the state as it was; the rejected one kept in st_prev (the message)
+            st[j], prev[j] = prev[j], st[j]
         return ERR_SOC_RANGE
     battery_publish(data, t_amb, y)
     return 0
