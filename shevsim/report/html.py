@@ -141,7 +141,8 @@ def table(header: Sequence[str], rows: Iterable[Sequence[Any]], num_cols: Iterab
           titles: Sequence[Sequence[str]] | None = None) -> str:
     """An HTML table; cells are escaped; ``num_cols`` are right-aligned; ``titles`` are hover texts per cell."""
     nums = set(num_cols)
-    out = ["<table><thead><tr>" + "".join(f"<th>{esc(h)}</th>" for h in header) + "</tr></thead><tbody>"]
+    out = ["<table>" + ("<thead><tr>" + "".join(f"<th>{esc(h)}</th>" for h in header) + "</tr></thead>"
+                        if any(header) else "") + "<tbody>"]
     for i, row in enumerate(rows):
         cells = []
         for j, c in enumerate(row):

@@ -152,6 +152,22 @@ def write_report(target: str | Path | Sequence[str | Path], out: str | Path | No
     return _write(Path(out) if out is not None else Path("comparison.html"), compare_report(results, labels))
 
 
+def write_html(results, path: str | Path, *, labels: Sequence[str] | None = None, title: str | None = None) -> Path:
+    """Write the report of one :class:`~shevsim.core.results.Result` (a run page) or of several (a
+    comparison) to ``path``, from a notebook or a script; returns the path. A file there that shevsim did
+    not write is never replaced."""
+    from ..core.results import Result
+    from .html import compare_report, run_report
+    if isinstance(results, Result):
+        return _write(Path(path), run_report(results, title))
+    results = list(results)
+    if not results or not all(isinstance(r, Result) for r in results):
+        raise ShevsimError("write_html: give a Result or a sequence of Results")
+    if len(results) == 1 and labels is None:
+        return _write(Path(path), run_report(results[0], title))
+    return _write(Path(path), compare_report(results, labels, title))
+
+
 def _load_run(folder: Path, load_result):
     try:
         return load_result(folder)

@@ -84,3 +84,15 @@ def test_run_report_of_a_stopped_run_shows_why(tmp_path):
     res.termination = Termination("stopped", "non-finite value", "body1", "position_m", 0.25)
     html = run_report(res)
     assert 'class="badge stopped"' in html and "non-finite value" in html and "at t = 0.25 s" in html
+
+
+def test_write_html_from_results_in_memory(tmp_path):
+    from shevsim.report import write_html
+    a = shevsim.simulate(TWO_BODY, stop_s=0.5)
+    b = shevsim.simulate(TWO_BODY, {"coupling.damping_ns_per_m": 3.0}, stop_s=0.5)
+    one = write_html(a, tmp_path / "a.html").read_text()
+    assert "Run report: two_body" in one
+    two = write_html([a, b], tmp_path / "ab.html", labels=["soft", "stiff"]).read_text()
+    assert "Comparison of runs: soft, stiff" in two
+    with pytest.raises(shevsim.ShevsimError, match="give a Result"):
+        write_html([], tmp_path / "x.html")
