@@ -1,6 +1,6 @@
 """api.py - the Python API of shevsim (exported from ``shevsim``).
 
-Run a bundled scenario, change parameters with typed values, read the results::
+Run a bundled scenario, change parameters with typed values, read the results:
 
     import shevsim
     res = shevsim.simulate("hd_udds_rule", overrides={"vehicle.mass_kg": 18000.0, "cycle.repeat": 1})
@@ -9,7 +9,7 @@ Run a bundled scenario, change parameters with typed values, read the results::
     res.termination                      # 'completed', or 'stopped: ...' / 'degraded: ...' with details
     res.plot(["vehicle.speed_mps", "cycle.speed_ref_mps", "battery.soc_pct"])   # one axis per unit
 
-Inspect and change a scenario before running, or build one in code::
+Inspect and change a scenario before running, or build one in code:
 
     sc = shevsim.load_scenario("hd_udds_rule")
     sc.component("vehicle").overrides["mass_kg"] = 20000.0
@@ -17,7 +17,7 @@ Inspect and change a scenario before running, or build one in code::
     res = shevsim.simulate(sc, stop_s=120.0)
 
 Studies and calibration take the command line's options as keyword arguments
-(:func:`run_study`, :func:`run_calibration`).
+([`run_study()`][shevsim.api.run_study], [`run_calibration()`][shevsim.api.run_calibration]).
 """
 from __future__ import annotations
 
@@ -37,13 +37,13 @@ def simulate(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | Non
              stop_s: float | None = None, out: str | Path | None = None, engine: str = "auto",
              record: Sequence[str] | None = None, record_every: int = 1, plots: bool = False,
              progress: bool = False, allow_large: bool = False) -> Result:
-    """Simulate a scenario and return its :class:`~shevsim.core.results.Result`.
+    """Simulate a scenario and return its [`Result`][shevsim.core.results.Result].
 
     Parameters
     ----------
     scenario : str, Path or Scenario
-        A bundled scenario's name (``"hd_udds_rule"``, see :func:`scenarios`), a scenario file, or a
-        :class:`~shevsim.core.scenario.Scenario` (from :func:`load_scenario` or :func:`new_scenario`;
+        A bundled scenario's name (``"hd_udds_rule"``, see [`scenarios()`][shevsim.api.scenarios]), a scenario file, or a
+        [`Scenario`][shevsim.core.scenario.Scenario] (from [`load_scenario()`][shevsim.api.load_scenario] or [`new_scenario()`][shevsim.api.new_scenario];
         it is copied, not changed).
     overrides : mapping, optional
         Typed values by ``"component.param"`` (``{"vehicle.mass_kg": 18000.0, "cycle.repeat": 1}``),
@@ -96,7 +96,7 @@ def load_scenario(scenario: str | Path, overrides: Mapping[str, Any] | None = No
     scenario : str or Path
         Bundled name or path.
     overrides : mapping, optional
-        Typed overrides as in :func:`simulate`.
+        Typed overrides as in [`simulate()`][shevsim.api.simulate].
     params : iterable of str
         Parameter overlays ``[COMPONENT=]FILE`` (the CLI's ``--params``, e.g. a calibration's params.toml).
 
@@ -133,7 +133,7 @@ def compare(results: Sequence[Result], signals: Sequence[str] | str, *, labels: 
     signals : sequence of str or str
         ``component.port`` names present in every result.
     labels : sequence of str, optional
-        One per result (default: :func:`run_labels`).
+        One per result (default: `run_labels()`).
     ax : Axes or sequence of Axes, optional
     """
     from .plotting import plot_signals
@@ -200,7 +200,7 @@ def metrics_table(results: Sequence[Result] | Mapping[str, Result], keys: Sequen
     """A pandas DataFrame of scalar metrics, one row per run, plus a ``termination`` column.
 
     Rows are labelled by ``labels``, by the keys of a ``{label: result}`` mapping, or by
-    :func:`run_labels` (``res.meta["label"]`` or the scenario name; same-named runs by the parameters
+    `run_labels()` (``res.meta["label"]`` or the scenario name; same-named runs by the parameters
     in which they differ), so no two rows share a label. Column units are in ``df.attrs["units"]``."""
     import pandas as pd
 

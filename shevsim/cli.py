@@ -1,10 +1,13 @@
 """cli.py - the ``shevsim`` command.
 
-Sub-commands::
+Sub-commands:
 
     shevsim run [SCENARIO] [--out DIR] [--set comp.param=value ...] [--params [COMP=]FILE ...] [--engine E]
-                [--record SIG ...] [--record-every N] [--allow-large] [--no-plots] [-q]
+                [--record SIG ...] [--record-every N] [--allow-large] [--no-plots] [--format parquet|csv|mat] [-q]
+
+Every command also takes ``-v``/``-vv`` and ``--log-level LEVEL`` (log lines on stderr).
     shevsim scenarios
+    shevsim components [TYPE] [--sets]
     shevsim info SCENARIO|FMU
     shevsim cycles [FOLDER]
     shevsim study {thermal,bms,tradeoff,powerrate-map} ...
@@ -12,7 +15,7 @@ Sub-commands::
     shevsim fmu export TYPE --params FILE -o OUT.fmu
     shevsim report DIR [DIR ...] [-o FILE.html]
 
-Exit codes (:data:`EXIT_CODES`): 0 ok; 1 the run stopped early or is degraded (results saved);
+Exit codes ([`EXIT_CODES`][shevsim.cli.EXIT_CODES]): 0 ok; 1 the run stopped early or is degraded (results saved);
 2 bad input (scenario, parameters, options, output folder); 3 internal error; 130 interrupted (Ctrl-C;
 what was simulated is saved).
 """
@@ -81,10 +84,12 @@ def _cmd_run(a) -> int:
         old = signal.signal(signal.SIGTERM, _on_sigterm)
     except (ValueError, AttributeError):      # not the main thread, or no SIGTERM on this platform
         old = None
+    from .warmup import CompileNotice
     try:
-        res = run(a.scenario or DEFAULT_SCENARIO, out=a.out, sets=a.set or (), overlays=a.params or (),
-                  engine=a.engine, record=a.record, record_every=a.record_every, plots=not a.no_plots,
-                  progress=not a.quiet, allow_large=a.allow_large, save=True)
+        with CompileNotice(enabled=not a.quiet):
+            res = run(a.scenario or DEFAULT_SCENARIO, out=a.out, sets=a.set or (), overlays=a.params or (),
+                      engine=a.engine, record=a.record, record_every=a.record_every, plots=not a.no_plots,
+                      progress=not a.quiet, allow_large=a.allow_large, save=True, fmt=a.format)
     finally:
         if old is not None:
             signal.signal(signal.SIGTERM, old)
@@ -102,6 +107,10 @@ def _cmd_run(a) -> int:
     if res.meta.get("earlier_result_kept"):
         print(f"shevsim: the earlier result in {res.meta['earlier_result_kept']} is kept as it was; this "
               f"interrupted run's partial result is in {res.meta.get('out')}", file=sys.stderr)
+    if res.meta.get("warmup_pid") and not a.quiet:
+        print(f"engine: the Python master ran (no compiled loop for this component layout yet); the loop is "
+              f"being compiled in the background (pid {res.meta['warmup_pid']}, niced) and later runs of this "
+              f"layout use it (SHEVSIM_BACKGROUND_COMPILE=0 turns this off)", file=sys.stderr)
     if not term.ok:
         where = ", ".join(x for x in (f"component {term.component}" if term.component else "",
                                       f"port {term.port}" if term.port else "",
@@ -161,6 +170,24 @@ def _cmd_info(a) -> int:
     return EXIT_OK
 
 
+def _cmd_components(a) -> int:
+    from . import catalog
+    if a.sets:
+        rows = catalog.parameter_sets(a.type)
+        if a.json:
+            print(json.dumps(rows, indent=1))
+        else:
+            print(catalog.format_sets(rows))
+        return EXIT_OK
+    if a.type:
+        d = catalog.describe_type(a.type)
+        print(json.dumps(d, indent=1, default=str) if a.json else catalog.format_type(d))
+        return EXIT_OK
+    rows = catalog.component_types(include_test_types=a.all)
+    print(json.dumps(rows, indent=1) if a.json else catalog.format_types(rows))
+    return EXIT_OK
+
+
 def _cmd_cycles(a) -> int:
     from .cycles import cycles_command
     from .core.scenario import PROJECT_ROOT
@@ -202,7 +229,19 @@ def _cmd_fmu(a) -> int:
         _say(a, f"wrote {import_ssp(a.ssp, a.output, step_s=a.step_s)}")
         return EXIT_OK
     from .fmu.export import export_component
-    out = export_component(a.type, a.params, a.output, fmi_version=a.fmi_version, force=a.force)
+    params = a.params
+    if params and not Path(params).is_file():       # a bundled parameter set by name, as scenarios accept
+        from .components import get_component_class
+        from .core.paths import bundled_params
+        typ = getattr(get_component_class(a.type, "fmu export"), "TYPE", a.type)
+        found = bundled_params(params, str(typ), a.type)
+        if found is None:
+            from .catalog import parameter_sets
+            names = [r["name"] for r in parameter_sets(str(typ))]
+            raise ShevsimError(f"fmu export --params {params}: no such file and no bundled parameter set of that "
+                               f"name{' (bundled for ' + str(typ) + ': ' + ', '.join(names) + ')' if names else ''}")
+        params = found
+    out = export_component(a.type, params, a.output, fmi_version=a.fmi_version, force=a.force)
     _say(a, f"wrote {out}")
     return EXIT_OK
 
@@ -232,6 +271,10 @@ def build_parser() -> argparse.ArgumentParser:
                                  epilog=f"exit codes: {codes}")
     ap.add_argument("--version", action="version", version=f"shevsim {__version__}")
     ap.add_argument("-q", "--quiet", action="store_true", help="print only results and errors (every command)")
+    ap.add_argument("-v", "--verbose", action="count", default=0,
+                    help="more log messages: -v info, -vv debug (every command; log lines go to stderr)")
+    ap.add_argument("--log-level", choices=LOG_LEVELS, type=str.upper, metavar="LEVEL",
+                    help=f"log level ({', '.join(LOG_LEVELS)}; default WARNING, ERROR with -q)")
     q = argparse.ArgumentParser(add_help=False)
     q.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
                    help="no progress bar or summary; errors only")
@@ -257,9 +300,18 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--allow-large", action="store_true",
                    help="run even when the record/duration estimate exceeds what this machine holds")
     r.add_argument("--no-plots", action="store_true", help="do not write overview.png and report.html")
+    r.add_argument("--format", choices=("parquet", "csv", "mat"), default="parquet",
+                   help="format of the trajectory file timeseries.* (default parquet; mat: one struct per "
+                        "component, MATLAB/Octave/scipy.io.loadmat)")
     sub.add_parser("scenarios", parents=[q], help="list the bundled scenarios (names for `shevsim run NAME`)")
     i = sub.add_parser("info", parents=[q], help="describe a scenario (components, ports, units) or an FMU")
     i.add_argument("target", metavar="SCENARIO|FMU", help="bundled scenario name, scenario TOML or .fmu file")
+    co = sub.add_parser("components", parents=[q], help="component types (ports with units, parameters with "
+                                                         "ranges) and the bundled parameter sets")
+    co.add_argument("type", nargs="?", metavar="TYPE", help="one type in detail (e.g. battery)")
+    co.add_argument("--sets", action="store_true", help="list the bundled parameter sets (of TYPE, or all)")
+    co.add_argument("--all", action="store_true", help="include the verification-test types")
+    co.add_argument("--json", action="store_true", help="machine-readable output")
     c = sub.add_parser("cycles", parents=[q], help="list drive cycles with statistics")
     c.add_argument("folder", nargs="?", help="folder of cycle CSVs (default: the bundled cycles)")
     s = sub.add_parser("study", help="studies: thermal, bms, tradeoff, powerrate-map (shevsim study NAME --help)",
@@ -271,7 +323,8 @@ def build_parser() -> argparse.ArgumentParser:
     fsub = f.add_subparsers(dest="fmu_cmd", required=True)
     fe = fsub.add_parser("export", parents=[q], help="export a native component as a co-simulation FMU")
     fe.add_argument("type", help="registered component type name (e.g. vehicle)")
-    fe.add_argument("--params", help="parameter file")
+    fe.add_argument("--params", help="parameter file, or a bundled set by name (shevsim components --sets), "
+                                     "e.g. battery/default")
     fe.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     fe.add_argument("--fmi-version", default="2", choices=["2", "3"], help="FMI version (default 2)")
     fe.add_argument("--force", action="store_true", help="replace the output file when it exists")
@@ -363,8 +416,61 @@ def _silence_stdout() -> None:
         pass
 
 
+LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
+
+
+def _log_options(argv: list[str]) -> tuple[list[str], int, str | None]:
+    """Take ``-v``/``-vv``/``--verbose`` and ``--log-level LEVEL`` out of ``argv`` wherever they are (every
+    sub-command accepts them); return the rest, the verbosity and the level."""
+    rest, verbose, level = [], 0, None
+    i = 0
+    while i < len(argv):
+        x = argv[i]
+        if x == "--":
+            rest.extend(argv[i:])
+            break
+        if x in ("-v", "--verbose") or (x.startswith("-v") and set(x[1:]) == {"v"}):
+            verbose += 1 if x == "--verbose" else len(x) - 1
+        elif x == "--log-level" and i + 1 < len(argv):
+            level = argv[i + 1].upper()
+            i += 1
+        elif x.startswith("--log-level="):
+            level = x.split("=", 1)[1].upper()
+        else:
+            rest.append(x)
+        i += 1
+    return rest, verbose, level
+
+
+def _setup_logging(verbose: int, level: str | None, quiet: bool):
+    """Send shevsim's log records at the chosen level to stderr for this command; returns a function that
+    restores the logger as it was (``main`` is also called in-process, by the API and by tests)."""
+    import logging
+    root = logging.getLogger("shevsim")
+    saved = (root.level, list(root.handlers))
+
+    def restore():
+        root.setLevel(saved[0])
+        root.handlers[:] = saved[1]
+
+    if level is None:
+        level = "DEBUG" if verbose >= 2 else "INFO" if verbose == 1 else "ERROR" if quiet else "WARNING"
+    if level not in LOG_LEVELS:
+        raise ShevsimError(f"--log-level {level}: expected one of {', '.join(LOG_LEVELS)}")
+    for h in list(root.handlers):
+        if getattr(h, "_shevsim_cli", False):
+            root.removeHandler(h)
+    h = logging.StreamHandler(sys.stderr)
+    h.setFormatter(logging.Formatter("shevsim: %(levelname)s: %(message)s (%(name)s)"))
+    h.setLevel(getattr(logging, level))
+    h._shevsim_cli = True
+    root.addHandler(h)
+    root.setLevel(getattr(logging, level))
+    return restore
+
+
 def main(argv=None) -> int:
-    """Entry point of ``shevsim``; returns the exit code (see :data:`EXIT_CODES`)."""
+    """Entry point of ``shevsim``; returns the exit code (see [`EXIT_CODES`][shevsim.cli.EXIT_CODES])."""
     argv = list(sys.argv[1:] if argv is None else argv)
     _robust_streams()
     real = sys.stdout
@@ -379,10 +485,23 @@ def main(argv=None) -> int:
 
 def _main(argv: list) -> int:
     ap = build_parser()
+    argv, verbose, level = _log_options(argv)
     quiet = False
     while argv and argv[0] in ("-q", "--quiet"):
         quiet = True
         argv = argv[1:]
+    try:
+        restore = _setup_logging(verbose, level, quiet or "-q" in argv or "--quiet" in argv)
+    except ShevsimError as exc:
+        print(f"shevsim: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        return _dispatch(ap, argv, quiet)
+    finally:
+        restore()
+
+
+def _dispatch(ap, argv, quiet) -> int:
     try:
         if argv and argv[0] == "calibrate":
             rc = _cmd_calibrate(argv[1:], quiet)
@@ -402,7 +521,7 @@ def _main(argv: list) -> int:
             return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
         a.quiet = quiet or getattr(a, "quiet", False)
         rc = {"run": _cmd_run, "scenarios": _cmd_scenarios, "info": _cmd_info, "cycles": _cmd_cycles,
-              "fmu": _cmd_fmu, "report": _cmd_report}[a.cmd](a)
+              "components": _cmd_components, "fmu": _cmd_fmu, "report": _cmd_report}[a.cmd](a)
         if sys.stdout is not None:
             sys.stdout.flush()          # a full or failing output stream is said here, not at exit
         return rc

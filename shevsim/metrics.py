@@ -9,7 +9,7 @@ differences last - first, so a run need not start them at zero.
 
 Metrics
 -------
-* **Fuel economy, SOC-sustained (seed A.1)**::
+* **Fuel economy, SOC-sustained (seed A.1)**:
 
       FE = 1/N_s sum_k  int_{t_k}^{t_k+T} v dt  /  int_{t_k}^{t_k+T} mdot_f dt
 
@@ -18,7 +18,7 @@ Metrics
   ``d(xi) = SOC(xi + T) - SOC(xi)`` on the sample grid (sign changes, located by
   linear interpolation, plus exact zeros), and, when ``soc_tolerance_pct > 0``,
   also every sample with ``|d| <= soc_tolerance_pct``. Fuel mass is converted to
-  volume with :data:`DIESEL_DENSITY_KG_PER_L`; L/100 km is ``100 / FE``.
+  volume with `DIESEL_DENSITY_KG_PER_L`; L/100 km is ``100 / FE``.
 * **Fuel economy, delta-SOC corrected** (whole run): the net battery energy
   drawn from the cells' OCV, ``E_b = delta(battery.chem_energy_j)`` (> 0 when the
   battery ends lower), is converted to the fuel the engine-generator would need
@@ -58,7 +58,7 @@ Metrics
   throughput = fuel energy + gross battery energy (sum of |increments| of
   ``chem_energy_j``). Per-node residuals (engine-generator, bus, battery, motor,
   driveline, vehicle) are reported too when the bus/motor cumulative energies are
-  recorded (:func:`node_balances`), to locate a closure error.
+  recorded (`node_balances()`), to locate a closure error.
 """
 from __future__ import annotations
 
@@ -95,7 +95,7 @@ def _col(df, name: str) -> np.ndarray:
 
 
 class ResultColumns:
-    """A result's columns as :func:`compute_metrics` reads them (``columns``, ``[name]``), without building a
+    """A result's columns as [`compute_metrics()`][shevsim.metrics.compute_metrics] reads them (``columns``, ``[name]``), without building a
     DataFrame: ``time_s`` then the signals, each a read-only view of the result's own array."""
 
     def __init__(self, time_s, signals: Mapping[str, np.ndarray]):
@@ -211,7 +211,7 @@ def per_cycle_summary(df, cycle_duration_s: float, density_kg_per_l: float = DIE
 
     The simpler reading of SOC sustainability (use the cycle whose end SOC returns to its
     start SOC) can be taken from here; the seed's A.1 figure is
-    :func:`fuel_economy_soc_sustained`.
+    `fuel_economy_soc_sustained()`.
     """
     t = _col(df, "time_s")
     T = float(cycle_duration_s)
@@ -293,7 +293,7 @@ def soot_dsoc_corrected(soot_mg: float, fuel_g: float, fuel_equivalent_g: float 
     """Soot on the fuel economy's Delta-SOC-corrected basis [g/km] (issue 14).
 
     The battery's net energy is booked as ``fuel_equivalent_g - fuel_g`` grams of fuel (the same
-    equivalent as :func:`fuel_economy_dsoc_corrected`); that fuel is charged with the run's mean soot per
+    equivalent as `fuel_economy_dsoc_corrected()`); that fuel is charged with the run's mean soot per
     gram of fuel: ``soot_corr = soot x fuel_equivalent / fuel``.  A run that ends with a lower SOC thus
     no longer shows the soot it borrowed from the battery as a cut.  None when an input is missing or
     no fuel was burnt."""
@@ -373,7 +373,7 @@ def energy_balance(df, vehicle: str = "vehicle") -> dict:
         ``sources_j``, ``sinks_j`` (term -> J), ``residual_j``, ``throughput_j``,
         ``closure_error_frac`` (residual / throughput), ``missing`` (expected columns
         not found; the closure is None when any is missing) and ``nodes_j`` (per-node
-        residuals, :func:`node_balances`).
+        residuals, `node_balances()`).
     """
     cols = list(df.columns)
     fuel = [c for c in cols if c.endswith(".fuel_energy_j")]
@@ -424,7 +424,7 @@ NODE_BALANCES = {
 
 
 def node_balances(df, vehicle: str = "vehicle") -> dict:
-    """Residual (J) of each node of :data:`NODE_BALANCES` whose columns are all present.
+    """Residual (J) of each node of `NODE_BALANCES` whose columns are all present.
 
     Locates where a whole-chain closure error comes from: e.g. ``motor`` =
     delta(elec_energy) - delta(loss_energy) - delta(mech_energy). Nodes with missing
@@ -487,7 +487,7 @@ def compute_metrics(df, params: Mapping | None = None) -> dict:
         None and listed in ``notes``.
     params : mapping, optional
         Either flat options or ``{"scenario": options, "parameters": {component: params}}``
-        (what :mod:`shevsim.run` passes). Options: ``cycle_duration_s`` (else from the
+        (what [`shevsim.run`][shevsim.run] passes). Options: ``cycle_duration_s`` (else from the
         cycle component's ``cycle_file`` or from ``cycle.time_in_cycle_s``),
         ``soc_tolerance_pct`` (0), ``cells_parallel`` (battery parameter with
         'parallel' in its name, else 10), ``fuel_density_kg_per_l``, ``ah_weighting``
@@ -601,10 +601,10 @@ COUNTER_SUFFIXES = (".fallback_count", ".clamp_count", ".shed_count", ".shed_tim
 
 
 def result_metrics(res, options: Mapping | None = None) -> dict:
-    """Metrics of a :class:`~shevsim.core.results.Result`; never raises.
+    """Metrics of a [`Result`][shevsim.core.results.Result]; never raises.
 
     The final value of every robustness counter (``*.fallback_count``, ``*.clamp_count``,
-    ``*.shed_count``, ``*.shed_time_s``), plus :func:`compute_metrics` when the vehicle's speed was
+    ``*.shed_count``, ``*.shed_time_s``), plus [`compute_metrics()`][shevsim.metrics.compute_metrics] when the vehicle's speed was
     recorded. A metric that cannot be computed (an idle cycle, no distance, a run stopped after one
     sample) is None and ``notes`` says why. ``options`` default to the scenario's ``[metrics]``
     table saved in ``res.meta["metrics_options"]``.

@@ -1,13 +1,13 @@
 """run.py - run a scenario end to end: load -> check -> simulate -> judge -> metrics -> save.
 
-:func:`run` is what ``shevsim.simulate`` and ``shevsim run`` call. A run never loses what it
+[`run()`][shevsim.run.run] is what ``shevsim.simulate`` and ``shevsim run`` call. A run never loses what it
 simulated: a run stopped by a non-finite value, a plant limit, a component or FMU failure, or Ctrl-C
-returns (and saves) the trajectory up to the stop with :attr:`Result.termination` saying why, where
+returns (and saves) the trajectory up to the stop with `Result.termination` saying why, where
 and when; a metric that cannot be computed is None with a note; the output folder is checked before
 the simulation starts.
 
-Engines: ``engine="python"`` steps the components with :class:`~shevsim.core.master.Master`;
-``"fast"`` uses the compiled fast path (:mod:`shevsim.fast`, when installed and when the scenario is
+Engines: ``engine="python"`` steps the components with `Master`;
+``"fast"`` uses the compiled fast path (`shevsim.fast`, when installed and when the scenario is
 eligible, else an error); ``"auto"`` uses the fast path when it can and the master otherwise.
 ``res.meta["engine"]`` records which one ran.
 """
@@ -114,18 +114,36 @@ def check_faults_in_run(scenario: Scenario, t_stop: float) -> None:
                                 f"it would never act")
 
 
-def _fast_runner(scenario: Scenario, engine: str, master=None):
-    """(runner, why): the fast path's runner for ``scenario`` or None with the reason."""
+#: the reason given when ``engine="auto"`` runs the master because the layout's loop is not built yet
+#: (`shevsim.warmup`); such a run starts the background build when it has finished
+NOT_BUILT = "the compiled loop for this component layout is not built yet"
+
+
+def _fast_runner(scenario: Scenario, engine: str, master=None, n_steps: int = 0):
+    """(runner, why): the fast path's runner for ``scenario`` or None with the reason.
+
+    ``engine="auto"`` takes the fast path only when its loop is built for this layout or the run is long
+    enough to pay for building it (`shevsim.warmup.choose()`)."""
     if engine not in ENGINES:
         raise ScenarioError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     if engine == "python":
         return None, "engine 'python' requested"
     try:
+        from . import fast
         from .fast import runner_for
     except ImportError as exc:
         if engine == "fast":
             raise ScenarioError(f"engine 'fast': the fast path is not available ({exc})") from None
         return None, f"no fast path ({exc})"
+    if engine == "auto":
+        static = getattr(fast, "_static_reason", None)
+        why = static(scenario) if static is not None else ""
+        if why:
+            return None, why
+        from .warmup import choose
+        use, why = choose(scenario, n_steps, len(scenario.components))
+        if not use:
+            return None, why
     runner, why = runner_for(scenario, master)      # reuses the master built by simulate (one build)
     if runner is None and engine == "fast":
         raise ScenarioError(f"engine 'fast': scenario '{scenario.name}' is not eligible for the fast path: {why}")
@@ -186,7 +204,7 @@ def simulate(scenario: Scenario, progress: bool = False, *, engine: str = "auto"
     engine : {'auto', 'python', 'fast'}
         See the module docstring; ``res.meta["engine"]`` says which ran.
     partial : bool
-        False (default): a run stopped by a :class:`SimulationError` (or Ctrl-C) raises it, with the
+        False (default): a run stopped by a `SimulationError` (or Ctrl-C) raises it, with the
         trajectory up to the stop attached as ``exc.result``. True: return that trajectory with
         ``termination`` set (status 'stopped', reason, component, port, time).
     record_every : int
@@ -210,7 +228,7 @@ def simulate(scenario: Scenario, progress: bool = False, *, engine: str = "auto"
                                 f"not one communication step fits; use a step of at most the run's length")
         check_run_size(int(math.ceil(x)), len(master._signal_names), record_every,
                        allow_large=allow_large, where=where)
-        runner, why = _fast_runner(scenario, engine, master)
+        runner, why = _fast_runner(scenario, engine, master, int(math.ceil(x)))
     except BaseException:
         master.terminate()
         raise
@@ -264,7 +282,25 @@ def simulate(scenario: Scenario, progress: bool = False, *, engine: str = "auto"
         finally:
             master.terminate()
     _finish(res, scenario, master, time.perf_counter() - wall, used, why)
+    _after_engine(res, scenario, used, why)
     return res
+
+
+def _after_engine(res: Result, scenario: Scenario, used: str, why: str) -> None:
+    """Record a layout whose loop a completed fast run built; after a master run that waited for no loop
+    (`NOT_BUILT`), start the background build for the next runs (``res.meta["warmup_pid"]``)."""
+    from . import warmup
+    try:
+        if used == "fast" and res.termination.ok and not warmup.is_compiled(scenario):
+            warmup.mark_compiled(scenario)
+        elif used == "python" and why.startswith(NOT_BUILT):
+            pid = warmup.start_background(scenario)
+            if pid is not None:
+                res.meta["warmup_pid"] = pid
+                log.info("%s: building the compiled loop for this layout in the background (pid %d)",
+                         scenario.name, pid)
+    except Exception as exc:  # noqa: BLE001 - bookkeeping of the compile cache never fails a run
+        log.debug("compile bookkeeping: %s", exc)
 
 
 def _finish(res: Result, scenario: Scenario, master, wall: float, engine: str, why: str) -> None:
@@ -314,7 +350,7 @@ def trace_check(res: Result, options: Mapping[str, Any] | None = None, speed: st
                 ref_speed: str = "cycle.speed_ref_mps") -> Termination | None:
     """A 'degraded' termination when a completed run missed its speed trace beyond tolerance
     (distance shortfall or a sustained speed error), else None. ``speed`` and ``ref_speed`` name the
-    vehicle's and the cycle's speed signals (:func:`trace_signals`); see :data:`TRACE_DEFAULTS` for the
+    vehicle's and the cycle's speed signals (`trace_signals()`); see [`TRACE_DEFAULTS`][shevsim.run.TRACE_DEFAULTS] for the
     options."""
     opts = {**TRACE_DEFAULTS, **{k: v for k, v in dict(options or {}).items() if k in TRACE_DEFAULTS}}
     if opts["trace_allow_miss"] is True or speed not in res.signals \
@@ -378,12 +414,16 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
         stop_s: float | None = None, out: str | Path | None = None, engine: str = "auto",
         sets=(), overlays=(), record: list[str] | None = None, record_every: int = 1,
         plots: bool = False, progress: bool = False, allow_large: bool = False, save: bool | None = None,
-        scenario_text: str | None = None) -> Result:
+        scenario_text: str | None = None, fmt: str = "parquet") -> Result:
     """Load, check, simulate, judge, compute metrics and (when ``out``) save one run.
 
     Stopped runs are returned (and saved) with their termination; they do not raise.
-    ``res.meta["out"]`` is the folder written (when saved).
+    ``res.meta["out"]`` is the folder written (when saved); ``fmt`` is the trajectory's format there
+    (``"parquet"``, ``"csv"`` or ``"mat"``).
     """
+    from .core.results import TIMESERIES_FORMATS
+    if fmt not in TIMESERIES_FORMATS:
+        raise ScenarioError(f"format must be one of {', '.join(TIMESERIES_FORMATS)}, got {fmt!r}")
     sc = _as_scenario(scenario, sets, overlays)
     for k, v in dict(overrides or {}).items():
         sc.set(k, v, f"overrides['{k}']")
@@ -436,7 +476,7 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
             # it (NAME-interrupted-<UTC time>) and the earlier one stays as it was
             res.meta["earlier_result_kept"] = str(out_dir)
             out_dir = beside_folder(out_dir, "interrupted")
-        save_result(res, out_dir, scenario_text=scenario_text, metrics=res.metrics, plots=plot_fn)
+        save_result(res, out_dir, scenario_text=scenario_text, metrics=res.metrics, plots=plot_fn, fmt=fmt)
         res.meta["out"] = str(out_dir)
     return res
 
@@ -451,7 +491,7 @@ def run_scenario(path: str | Path | None = None, out: str | Path | None = None, 
                  plots: bool = True, save: bool = True, overlays=(), **kw) -> tuple[Result, dict, Path | None]:
     """Run a scenario file; save under ``out`` (default ``results/<name>/``); ``overlays`` are
     ``COMPONENT=FILE`` parameter overlays (``--params``). Returns ``(result, metrics, folder)``;
-    keyword arguments go to :func:`run` (``engine``, ``record_every``, ``allow_large``...)."""
+    keyword arguments go to [`run()`][shevsim.run.run] (``engine``, ``record_every``, ``allow_large``...)."""
     res = run(path, out=out, sets=sets, overlays=overlays, progress=progress, plots=plots, save=save, **kw)
     out_dir = Path(res.meta["out"]) if "out" in res.meta else None
     return res, res.metrics, out_dir

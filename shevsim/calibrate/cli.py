@@ -41,7 +41,12 @@ def load_params_toml(path) -> dict:
     """
     path = Path(path)
     if not path.is_file():
-        raise DataError(f"{path}: parameter file not found")
+        from ..core.paths import bundled_params
+        found = bundled_params(str(path))          # a bundled set by name (battery/default)
+        if found is None:
+            raise DataError(f"{path}: parameter file not found (a file, or a bundled parameter set such as "
+                            f"battery/default: shevsim components --sets)")
+        path = found
     from ..core.errors import toml_loads
     try:
         text = path.read_text(encoding="utf-8-sig")
@@ -127,9 +132,12 @@ def check_record_size(data, model_name: str, known: dict, allow_large: bool, log
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="shevsim calibrate",
                                  description="Fit a model to measured data, trace the residual to a missing "
-                                             "effect, add it and report the error before and after.")
+                                             "effect, add it and report the error before and after.",
+                                 epilog="shevsim calibrate --records lists the shipped measured records, each with "
+                                        "the command that calibrates it (DATA may be a record's name).")
     ap.add_argument("model", choices=sorted(MODELS), help="calibration model")
-    ap.add_argument("data", help="measured CSV (or .csv.gz); '#' lines are comments")
+    ap.add_argument("data", help="measured CSV (or .csv.gz; '#' lines are comments), or a shipped record's name "
+                                 "(shevsim calibrate --records)")
     ap.add_argument("-o", "--out", required=True, help="output directory (report.json, report.md, plots)")
     ap.add_argument("-p", "--params", help="TOML with known parameters / starting values / OCV curve")
     ap.add_argument("--map", action="append", default=[], metavar="CANONICAL=COLUMN",
@@ -137,8 +145,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--holdout", type=float, default=0.3, help="held-out fraction (default 0.3)")
     ap.add_argument("--split", choices=("blocks", "tail"), default="blocks",
                     help="held-out blocks spread over the record (default) or the final part")
-    ap.add_argument("--current-sign", choices=CURRENT_SIGNS, default="discharge-positive",
-                    help="sign convention of the current column in the file")
+    ap.add_argument("--current-sign", choices=CURRENT_SIGNS + ("auto",), default=None,
+                    help="sign convention of the current column in the file (default: guessed from the data - "
+                         "voltage falls as discharge current rises - and stated; a shipped record's own)")
     ap.add_argument("--power-sign", choices=POWER_SIGNS, default="drawn-positive",
                     help="sign convention of the power column in the file")
     ap.add_argument("--drop-duplicate-rows", action="store_true",
@@ -156,15 +165,88 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def list_records() -> str:
+    """The shipped measured records, each with the command that calibrates it."""
+    from .data import measured_records, record_command
+    recs = measured_records()
+    if not recs:
+        return "no measured records are shipped with this installation"
+    lines = []
+    for r in recs:
+        lines.append(f"{r['name']}  ({r['model']}) {r['description']}")
+        lines.append(f"    {record_command(r)}")
+    lines.append("(a record's declared columns, current sign, repeated rows and parameters are applied; any "
+                 "option given on the command line overrides them)")
+    return "\n".join(lines)
+
+
+class _Ticker:
+    """Progress while the fit runs: a line every ``every_s`` seconds with the time elapsed and the last step
+    reported (the workflow's own messages arrive between them)."""
+
+    def __init__(self, log, every_s: float = 15.0):
+        import threading
+        self.log, self.every_s = log, every_s
+        self.last = "fitting the nominal model"
+        self._stop = threading.Event()
+        self._t = threading.Thread(target=self._run, daemon=True)
+
+    def say(self, msg: str) -> None:
+        self.last = msg if len(msg) <= 70 else msg[:67] + "..."
+        self.log(msg)
+
+    def _run(self):
+        import time
+        t0 = time.perf_counter()
+        while not self._stop.wait(self.every_s):
+            self.log(f"... {time.perf_counter() - t0:.0f} s elapsed (last: {self.last})")
+
+    def __enter__(self):
+        self._t.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        return False
+
+
 def main_calibrate(argv=None) -> int:
     """Entry point of ``shevsim calibrate``; returns the exit status."""
+    from .data import resolve_record
     from .workflow import run_workflow
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--records" in argv or argv[:1] == ["records"]:
+        print(list_records())
+        return 0
     args = build_parser().parse_args(argv)
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
     try:
-        known = load_params_toml(args.params) if args.params else {}
-        data = load_measured(args.data, args.model, parse_mapping(args.map), current_sign=args.current_sign,
-                             power_sign=args.power_sign, drop_duplicate_rows=args.drop_duplicate_rows,
+        mapping = parse_mapping(args.map)
+        current_sign, drop_dups, params = args.current_sign, args.drop_duplicate_rows, args.params
+        data_path = args.data
+        rec = None if Path(args.data).is_file() else resolve_record(args.data)
+        if rec is not None:         # a shipped record: its declared options, under what the user gave
+            o = rec["options"]
+            if rec["model"] != args.model:
+                raise DataError(f"record '{rec['name']}' is a {rec['model']} record, not {args.model}")
+            data_path = rec["path"]
+            mapping = {**dict(o.get("map", {})), **mapping}
+            current_sign = current_sign or o.get("current_sign")
+            drop_dups = drop_dups or bool(o.get("drop_duplicate_rows", False))
+            if params is None and o.get("params"):
+                params = str(Path(rec["folder"]) / o["params"])
+            log(f"record {rec['name']}: {rec['description']}")
+            log(f"  as declared by its records.toml: columns {', '.join(f'{k}={v}' for k, v in mapping.items())}; "
+                f"current sign {current_sign}; repeated rows {'dropped' if drop_dups else 'refused'}; "
+                f"parameters {params}")
+        elif not Path(args.data).is_file():
+            from .data import measured_records
+            names = [r["name"] for r in measured_records()]
+            raise DataError(f"{args.data}: file not found" + (f" (shipped records: {', '.join(names)}; "
+                                                              f"shevsim calibrate --records)" if names else ""))
+        known = load_params_toml(params) if params else {}
+        data = load_measured(data_path, args.model, mapping, current_sign=current_sign or "auto",
+                             power_sign=args.power_sign, drop_duplicate_rows=drop_dups,
                              units=parse_units(args.unit))
         if args.decimate > 1:
             before = len(data.df)
@@ -173,11 +255,21 @@ def main_calibrate(argv=None) -> int:
         check_record_size(data, args.model, known, args.allow_large, log)
         for n in data.notes:
             log(f"note: {n}")
-        rep = run_workflow(args.model, data, known, holdout=args.holdout, split=args.split, out_dir=args.out,
-                           effects=args.effects, plots=not args.no_plots,
-                           params_where=args.params or "<params>", log=log)
+        log(f"calibrating {args.model} on {len(data.df)} samples: nominal fit, then the candidate effects one "
+            f"round at a time (minutes for an hour of 10 Hz data; a line every 15 s)")
+        with _Ticker(log) as tick:
+            rep = run_workflow(args.model, data, known, holdout=args.holdout, split=args.split, out_dir=args.out,
+                               effects=args.effects, plots=not args.no_plots,
+                               params_where=params or "<params>", log=tick.say)
     except ShevsimError as exc:
-        print(f"shevsim calibrate: error: {exc}", file=sys.stderr)
+        hint = ""
+        if isinstance(exc, DataError) and Path(args.data).is_file():
+            from .data import measured_records
+            same = [r for r in measured_records() if Path(r["path"]).resolve() == Path(args.data).resolve()]
+            if same:
+                hint = (f"\n  this is the shipped record '{same[0]['name']}': `shevsim calibrate {same[0]['model']} "
+                        f"{same[0]['name']} --out DIR` applies its declared columns, sign and parameters")
+        print(f"shevsim calibrate: error: {exc}{hint}", file=sys.stderr)
         return 2
     sel = ", ".join(rep["selected_effects"]) or "nothing found"
     print(f"selected effects: {sel}")

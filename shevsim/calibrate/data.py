@@ -39,6 +39,33 @@ REQUIRED = {
 }
 OPTIONAL = {"cell": ("t_core_c",), "vehicle": (), "engine": ()}
 CURRENT_SIGNS = ("discharge-positive", "charge-positive")
+#: ``current_sign="auto"``: the sign is guessed from the data (voltage falls as discharge current rises) and
+#: stated in the notes; a record whose voltage response does not tell (|corr(dI, dV)| below this) is refused
+SIGN_GUESS_MIN_CORR = 0.3
+
+#: what each canonical column holds, and words that name it in file headers (for the candidates offered
+#: when a required column is missing)
+COLUMN_INFO = {
+    "time_s": ("time [s]", ("time", "t", "timestamp", "test_time", "seconds", "sec", "elapsed")),
+    "current_a": ("current [A]", ("current", "i", "amps", "amp", "ampere", "curr", "ibat")),
+    "voltage_v": ("cell voltage [V]", ("voltage", "v", "volt", "volts", "u", "vcell", "vbat")),
+    "t_surface_c": ("cell surface temperature [degC]", ("surface", "battery", "cell", "case", "skin", "can",
+                                                         "thermocouple", "tc", "bat")),
+    "t_ambient_c": ("ambient temperature [degC]", ("ambient", "chamber", "room", "environment", "env", "air",
+                                                    "amb", "oven")),
+    "t_core_c": ("core temperature [degC]", ("core", "internal", "centre", "center")),
+    "speed_mps": ("vehicle speed [m/s]", ("speed", "velocity", "vel", "v", "vspd")),
+    "power_w": ("power [W]", ("power", "p", "pwr", "load")),
+    "soot_rate_mgps": ("soot mass rate [mg/s]", ("soot", "pm", "particulate", "particulates")),
+}
+#: unit words per canonical suffix (a header ``Battery_Temp_degC`` names a temperature in degC)
+UNIT_WORDS = {"_s": ("s", "sec", "secs", "seconds", "ms", "min", "h"), "_a": ("a", "amp", "amps", "ma"),
+              "_v": ("v", "volt", "volts", "mv"),
+              "_c": ("c", "degc", "k", "celsius", "temp", "temperature", "degf"),
+              "_mps": ("mps", "kmh", "kph", "mph"), "_w": ("w", "kw", "watt", "watts"),
+              "_mgps": ("mgps", "gps", "mgs")}
+#: plausible value ranges of a candidate column (a column outside it is not offered)
+PLAUSIBLE = {"_v": (0.5, 6.0), "_c": (-60.0, 150.0), "_mps": (-1.0, 120.0)}
 POWER_SIGNS = ("drawn-positive", "delivered-positive")
 
 #: Units a column may be declared in (a header suffix ``time_ms`` or ``--unit time_s=ms``), converted to the
@@ -102,6 +129,10 @@ class MeasuredData:
     path: str
     model: str
     notes: list = field(default_factory=list)
+    #: what the loader verified: ``current_sign`` ({"file": convention of the file, "how": "stated" | "guessed",
+    #: "corr_dI_dV": correlation of the canonical current's and the voltage's steps}), ``mapped`` (the columns
+    #: renamed), ``units`` (columns converted)
+    checks: dict = field(default_factory=dict)
 
     @property
     def extra_columns(self) -> list[str]:
@@ -129,6 +160,166 @@ def parse_units(items) -> dict:
         k, v = it.split("=", 1)
         out[k.strip()] = v.strip()
     return out
+
+
+def _tokens(name: str) -> list[str]:
+    import re
+    s = re.sub(r"([a-z])([A-Z])", r"\1_\2", str(name))
+    return [t for t in re.split(r"[^0-9a-zA-Z]+", s.lower()) if t]
+
+
+def _candidate_score(canon: str, col: str, values: np.ndarray) -> tuple[int, str]:
+    """How well file column ``col`` fits canonical column ``canon`` by its name, its unit and its values:
+    ``(score, why)``; a score of 2 or more is a candidate."""
+    toks = _tokens(col)
+    words = COLUMN_INFO.get(canon, ("", ()))[1]
+    u = _unit_of(canon)
+    score, why = 0, []
+    hit = [w for w in words if w in toks]
+    if hit:
+        score += 3 if hit[0] == words[0] else 2
+        why.append(f"name '{hit[0]}'")
+    if u is not None and any(t in UNIT_WORDS.get(u[1], ()) for t in toks[1:] if len(toks) > 1):
+        score += 1
+        why.append("unit")
+    v = values[np.isfinite(values)]
+    if v.size == 0:
+        return -10, "no numbers"
+    if u is not None and u[1] in PLAUSIBLE:
+        lo, hi = PLAUSIBLE[u[1]]
+        if v.min() < lo or v.max() > hi:
+            return -10, "values out of range"
+    if canon == "time_s":
+        if v.size > 2 and np.all(np.diff(v) >= 0):
+            score += 1
+        else:
+            return -10, "not increasing"
+    why.append(f"values {v.min():.4g}..{v.max():.4g}")
+    return score, ", ".join(why)
+
+
+def _candidates(raw: pd.DataFrame, missing: list[str], taken: set[str]) -> dict[str, tuple[str, str]]:
+    """``{canonical: (file column, why)}``: the best unused file column for each missing canonical column,
+    chosen by name, unit and plausible values (greedy, best fits first; each column offered once)."""
+    num = {c: pd.to_numeric(raw[c], errors="coerce").to_numpy(float) for c in raw.columns if c not in taken}
+    scored = []
+    for canon in missing:
+        for col, vals in num.items():
+            sc, why = _candidate_score(canon, col, vals)
+            if sc >= 2:
+                scored.append((sc, canon, col, why))
+    out: dict = {}
+    used: set = set()
+    for sc, canon, col, why in sorted(scored, key=lambda x: -x[0]):
+        if canon not in out and col not in used:
+            out[canon] = (col, why)
+            used.add(col)
+    return out
+
+
+def _sign_corr(current: np.ndarray, voltage: np.ndarray) -> float | None:
+    """corr(dI, dV) over the large current steps (None when there are fewer than 5)."""
+    di, dv = np.diff(current), np.diff(voltage)
+    ok = np.isfinite(di) & np.isfinite(dv)
+    di, dv = di[ok], dv[ok]
+    if di.size < 5:
+        return None
+    big = np.abs(di) > 0.05 * max(np.abs(current[np.isfinite(current)]).max(initial=0.0), 1e-9)
+    if big.sum() < 5 or np.std(di[big]) == 0 or np.std(dv[big]) == 0:
+        return None
+    return float(np.corrcoef(di[big], dv[big])[0, 1])
+
+
+def guess_current_sign(current: np.ndarray, voltage: np.ndarray) -> tuple[str | None, float | None]:
+    """The file's current sign convention from its voltage response: a cell's voltage falls when discharge
+    current rises, so corr(dI, dV) < 0 means discharge-positive and > 0 charge-positive.  ``(sign, corr)``;
+    sign None when the correlation is weaker than :data:`SIGN_GUESS_MIN_CORR`."""
+    c = _sign_corr(np.asarray(current, float), np.asarray(voltage, float))
+    if c is None or abs(c) < SIGN_GUESS_MIN_CORR:
+        return None, c
+    return ("charge-positive" if c > 0 else "discharge-positive"), c
+
+
+def _precheck(path: Path, raw: pd.DataFrame, model: str, mapping: dict, canon_all, current_sign: str,
+              drop_duplicate_rows: bool, line_of: np.ndarray) -> str | None:
+    """Every problem the column layout shows at once (bad --map items, missing columns with candidates, repeated
+    rows, a current sign that contradicts the data); raises one DataError listing them all with the options
+    that fix them.  Returns the current sign guessed from the data (``current_sign="auto"``), else None."""
+    problems: list[str] = []
+    fixes: dict[str, str] = {}
+    for canon, col in mapping.items():
+        if canon not in canon_all:
+            problems.append(f"--map {canon}={col}: '{canon}' is not a canonical column of model '{model}' "
+                            f"({', '.join(canon_all)})")
+        elif col not in raw.columns:
+            best = difflib.get_close_matches(col, list(raw.columns), n=1)
+            hint = f" (did you mean '{best[0]}'?)" if best else ""
+            problems.append(f"column '{col}' (mapped to {canon}) not found{hint}; columns: {', '.join(raw.columns)}")
+    have = {canon: (mapping[canon] if canon in mapping else canon) for canon in canon_all
+            if (canon in mapping and mapping[canon] in raw.columns) or (canon not in mapping and canon in raw.columns)}
+    missing = [c for c in REQUIRED[model] if c not in have and c not in mapping]
+    cands = _candidates(raw, missing, set(have.values()) | set(mapping.values()))
+    for c in missing:
+        what = COLUMN_INFO.get(c, (c, ()))[0]
+        if c in cands:
+            col, why = cands[c]
+            problems.append(f"missing required column '{c}' ({what}) for model '{model}'; candidate '{col}' "
+                            f"({why}): use --map {c}={col} if that is it")
+            fixes[c] = f"--map {c}={col}"
+        else:
+            problems.append(f"missing required column '{c}' ({what}) for model '{model}'; no column looks like it "
+                            f"by name, unit and values; columns: {', '.join(raw.columns)}")
+    cols = {c: have.get(c) or (cands[c][0] if c in cands else None) for c in REQUIRED[model]}
+    # repeated rows (identical to the previous row in every column): a logger repeat
+    if cols.get("time_s"):
+        t = pd.to_numeric(raw[cols["time_s"]], errors="coerce").to_numpy(float)
+        same_t = np.flatnonzero(np.diff(t) == 0)
+        if same_t.size:
+            arr = raw.to_numpy()
+            ident = np.array([all((a == b) or (a != a and b != b) for a, b in zip(arr[k], arr[k + 1]))
+                              for k in same_t[:1000]])
+            lines = ", ".join(f"{_row_of(k, line_of)}/{_row_of(k + 1, line_of)}" for k in same_t[:3])
+            more = " ..." if same_t.size > 3 else ""
+            if ident.all() and same_t.size <= 1000:
+                if not drop_duplicate_rows:
+                    problems.append(f"identical rows: {same_t.size} row(s) repeat the previous row in every column (a "
+                                    f"logger repeat; lines {lines}{more}): pass --drop-duplicate-rows to drop them")
+                    fixes["dup"] = "--drop-duplicate-rows"
+            else:
+                k = int(same_t[~ident][0]) if (~ident).any() else int(same_t[0])
+                problems.append(f"column 'time_s': duplicate time {t[k]} s at lines {_row_of(k, line_of)} and "
+                                f"{_row_of(k + 1, line_of)} (different values; {same_t.size} duplicate(s) in total)")
+    guessed = None
+    if model == "cell" and cols.get("current_a") and cols.get("voltage_v"):
+        i = pd.to_numeric(raw[cols["current_a"]], errors="coerce").to_numpy(float)
+        v = pd.to_numeric(raw[cols["voltage_v"]], errors="coerce").to_numpy(float)
+        sign, corr = guess_current_sign(i, v)
+        if current_sign == "auto":
+            if sign is None:
+                problems.append(f"column 'current_a': the current sign cannot be told from the data (corr(dI, dV) = "
+                                f"{'n/a' if corr is None else f'{corr:+.2f}'}); pass --current-sign "
+                                f"discharge-positive or charge-positive")
+            else:
+                guessed = sign
+        elif current_sign in CURRENT_SIGNS and sign is not None and sign != current_sign:
+            problems.append(f"column 'current_a': voltage {'rises' if corr > 0 else 'falls'} when current rises "
+                            f"(corr(dI, dV) = {corr:+.2f}) - the current sign looks inverted for '{current_sign}'; "
+                            f"pass --current-sign {sign} (or leave --current-sign out: it is then guessed from "
+                            f"the data)")
+            fixes["sign"] = f"--current-sign {sign}"
+    if problems:
+        if len(problems) == 1:
+            msg = f"{path}: {problems[0]}"
+        else:
+            msg = f"{path}: {len(problems)} problems (all of them; fix them together):\n" + "\n".join(
+                f"  - {p}" for p in problems)
+        if len(fixes) > 1 or (fixes and len(problems) > 1):
+            msg += "\n  the options that fix the fixable ones: " + " ".join(fixes.values())
+        if guessed:
+            msg += (f"\n  (current sign guessed from the data: {guessed}, corr(dI, dV) = {corr:+.2f}; "
+                    f"stated with --current-sign to override)")
+        raise DataError(msg)
+    return guessed
 
 
 def _row_of(df_index: int, line_of: np.ndarray) -> int:
@@ -197,8 +388,8 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
     path = Path(path)
     if model not in REQUIRED:
         raise DataError(f"unknown model '{model}'; available: {', '.join(REQUIRED)}")
-    if current_sign not in CURRENT_SIGNS:
-        raise DataError(f"current sign '{current_sign}': expected one of {CURRENT_SIGNS}")
+    if current_sign not in CURRENT_SIGNS + ("auto",):
+        raise DataError(f"current sign '{current_sign}': expected one of {CURRENT_SIGNS + ('auto',)}")
     if power_sign not in POWER_SIGNS:
         raise DataError(f"power sign '{power_sign}': expected one of {POWER_SIGNS}")
     from ..core.errors import file_problem
@@ -239,11 +430,18 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
         if canon not in canon_all:
             raise DataError(f"--map {canon}={col}: '{canon}' is not a canonical column of model '{model}' "
                             f"({', '.join(canon_all)})")
-        if col not in raw.columns:
-            best = difflib.get_close_matches(col, list(raw.columns), n=1)
-            hint = f" (did you mean '{best[0]}'?)" if best else ""
-            raise DataError(f"{path}: column '{col}' (mapped to {canon}) not found{hint}; "
-                            f"columns: {', '.join(raw.columns)}")
+    guessed = _precheck(path, raw, model, mapping, canon_all, current_sign if check_sign or current_sign == "auto"
+                        else "auto-skip", drop_duplicate_rows, line_of)
+    notes = []
+    sign_how = "guessed" if current_sign == "auto" else "stated"
+    if current_sign == "auto":
+        if guessed is None:         # no current/voltage (not a cell): the canonical convention
+            current_sign = "discharge-positive"
+        else:
+            current_sign = guessed
+            notes.append(f"current sign guessed from the data: {guessed} (the voltage "
+                         f"{'rises' if guessed == 'charge-positive' else 'falls'} as the file's current rises); "
+                         f"pass --current-sign to state it")
     rename = {col: canon for canon, col in mapping.items()}
     # a canonical name already present in the file and also mapped from another column: the mapped wins
     df = raw.drop(columns=[c for c in raw.columns if c in mapping and c not in rename]).rename(columns=rename)
@@ -253,7 +451,6 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
             hint = f"; use --map {col}={best[0]} if that is it" if best else ""
             raise DataError(f"{path}: missing required column '{col}' for model '{model}'{hint}; "
                             f"columns: {', '.join(df.columns)}")
-    notes = []
     # numeric check
     for col in list(df.columns):
         conv = pd.to_numeric(df[col], errors="coerce")
@@ -323,6 +520,10 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
     if model == "vehicle" and power_sign == "delivered-positive":
         df["power_w"] = -df["power_w"]
         notes.append("power negated (file: delivered positive -> canonical: drawn positive)")
+    checks: dict = {"mapped": dict(mapping), "units": {c: u for c, (_, _, _, u) in declared.items()}}
+    if model == "cell":
+        checks["current_sign"] = {"file": current_sign, "how": sign_how,
+                                  "corr_dI_dV": _sign_corr(df["current_a"].to_numpy(), df["voltage_v"].to_numpy())}
     if model == "cell" and check_sign:
         di = np.diff(df["current_a"].to_numpy())
         dv = np.diff(df["voltage_v"].to_numpy())
@@ -334,7 +535,7 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
                 raise DataError(f"{path}: column 'current_a': voltage rises when current rises (corr(dI, dV) = "
                                 f"{c:+.2f}) - the current sign looks inverted for '{current_sign}'; "
                                 f"pass --current-sign {other}")
-    return MeasuredData(df=df, path=str(path), model=model, notes=notes)
+    return MeasuredData(df=df, path=str(path), model=model, notes=notes, checks=checks)
 
 
 def _check_units(df, model, path, line_of, declared=frozenset()):
@@ -413,3 +614,64 @@ def _check_units(df, model, path, line_of, declared=frozenset()):
             # any road vehicle above 5 m/s draws (or regenerates) well over 500 W
             bad("power_w", f"median |power| while moving faster than 5 m/s is {np.median(np.abs(p[moving])):.3g}"
                 " - looks like kW, expected W", int(np.argmax(moving)))
+
+
+# ------------------------------------------------------------------------------ shipped measured records
+RECORDS_FILE = "records.toml"
+
+
+def measured_root() -> Path:
+    """The folder of the shipped measured records (``data/measured`` in a checkout, inside the wheel too)."""
+    from ..core.paths import DATA_ROOT
+    return DATA_ROOT / "data" / "measured"
+
+
+def _record_folder_info(folder: Path) -> dict:
+    import tomllib
+    f = folder / RECORDS_FILE
+    if not f.is_file():
+        return {}
+    try:
+        return tomllib.loads(f.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise DataError(f"{f}: cannot read: {exc}") from exc
+
+
+def measured_records() -> list[dict]:
+    """The shipped measured records: ``{"name", "path", "model", "description", "options"}`` where ``options``
+    are the calibration options the record's ``records.toml`` declares (columns, sign, duplicates, parameters)
+    and ``name`` is what ``shevsim calibrate MODEL NAME`` accepts in place of a path."""
+    root = measured_root()
+    out = []
+    if not root.is_dir():
+        return out
+    for folder in sorted(p for p in root.iterdir() if p.is_dir()):
+        info = _record_folder_info(folder)
+        defaults = dict(info.get("defaults", {}))
+        for name, rec in sorted(info.get("records", {}).items()):
+            p = folder / name
+            if not p.is_file():
+                continue
+            opts = {**defaults, **{k: v for k, v in rec.items() if k != "description"}}
+            out.append({"name": f"{folder.name}/{Path(name).name.split('.')[0]}", "path": str(p),
+                        "model": opts.pop("model", "cell"), "description": rec.get("description", ""),
+                        "options": opts, "folder": str(folder)})
+    return out
+
+
+def resolve_record(name: str) -> dict | None:
+    """A shipped record by name (``panasonic_18650pf/25degC_US06_Pan18650PF``, with or without ``.csv``), else
+    None."""
+    stem = str(name)
+    for suf in (".csv.gz", ".csv"):
+        if stem.endswith(suf):
+            stem = stem[: -len(suf)]
+    for r in measured_records():
+        if r["name"] == stem or r["name"].split("/", 1)[1] == stem:
+            return r
+    return None
+
+
+def record_command(rec: dict, out: str = "DIR") -> str:
+    """The ``shevsim calibrate`` command line that calibrates a shipped record (its declared options applied)."""
+    return f"shevsim calibrate {rec['model']} {rec['name']} --out {out}"

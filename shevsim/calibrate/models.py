@@ -133,8 +133,10 @@ class CalibrationModel:
     #: correlated signal -> likely cause, for the baseline-failure report
     cause_hints: dict = {}
 
-    def likely_causes(self, channel: str, diag: dict) -> list[str]:
-        """Likely causes of a failing nominal model on ``channel`` from its held-out diagnostics."""
+    def likely_causes(self, channel: str, diag: dict, data=None) -> list[str]:
+        """Likely causes of a failing nominal model on ``channel`` from its held-out diagnostics; ``data`` (the
+        loaded :class:`~shevsim.calibrate.data.MeasuredData`) keeps the list to what the loader did not
+        already verify (a current sign checked against the voltage response is not suggested again)."""
         out = []
         if abs(diag["bias"]) > 0.5 * diag["rmse"]:
             out.append(f"a constant offset ({diag['bias']:+.4g}): sensor offset or a shifted curve/map")
@@ -142,7 +144,16 @@ class CalibrationModel:
             hint = self.cause_hints.get(c["signal"].replace("measured:", ""))
             if hint and abs(c["r"]) > 0.5 and hint not in out:
                 out.append(f"{hint} (residual correlates with {c['signal']}, r = {c['r']:+.2f})")
-        out.append("units or sign of an input column (check --map, --current-sign / --power-sign)")
+        checks = getattr(data, "checks", None) or {}
+        sign = checks.get("current_sign")
+        corr = sign.get("corr_dI_dV") if sign else None
+        if corr is not None and corr < -0.3:
+            how = "as stated" if sign.get("how") == "stated" else "guessed from the data"
+            out.append(f"an effect the model lacks, or the --params values (OCV curve, capacity, initial SOC): the "
+                       f"current sign ({sign.get('file')}, {how}) agrees with the voltage response (corr(dI, dV) = "
+                       f"{corr:+.2f}) and the columns passed the unit checks")
+        else:
+            out.append("units or sign of an input column (check --map, --current-sign / --power-sign)")
         return out
 
     def param_bounds(self, ctx: dict) -> dict:

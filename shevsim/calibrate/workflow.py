@@ -568,7 +568,7 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
                 "channel": c, "holdout_rmse": dh["rmse"], "noise_floor": nf, "ratio_to_noise_floor": ratio,
                 "bias": dh["bias"], "drift_per_hour": dh["drift_per_hour"],
                 "correlated_signals": dh["correlations"][:4],
-                "likely_causes": model.likely_causes(c, dh),
+                "likely_causes": model.likely_causes(c, dh, data),
                 "fixed_by_selected_effects": bool(diag_after[c]["holdout"]["rmse"]
                                                   <= BASELINE_FAILURE_RATIO * max(diag_after[c]["holdout"]["noise_floor"], 1e-300))})
     for b in baseline_failure:

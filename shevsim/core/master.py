@@ -173,6 +173,10 @@ class Master:
             raise ConnectionError_(f"{ctx}: unknown component '{comp}'{hint}")
         vs = self._vars[comp]
         if port not in vs or vs[port].causality != want:
+            why = getattr(self.components[comp], "not_connectable", None)
+            why = why(port) if callable(why) else None
+            if why:                     # an FMU's String/Binary/Clock variable: a value, never a port
+                raise ConnectionError_(f"{ctx}: {why}")
             import difflib
             cands = [n for n, v in vs.items() if v.causality == want]
             best = difflib.get_close_matches(port, cands, n=1)

@@ -36,6 +36,18 @@ class Overlay:
     path: Path
 
 
+def _find(path: str | Path) -> Path:
+    """An overlay file, or a bundled parameter set named as ``shevsim components --sets`` lists it
+    (``vehicle/matv``) when no such file exists."""
+    path = Path(path)
+    if not path.is_file():
+        from .paths import bundled_params
+        found = bundled_params(str(path))
+        if found is not None:
+            return found
+    return path
+
+
 def _read(path: Path) -> dict:
     from .errors import file_problem
     why = file_problem(path, "parameter overlay", 64 * 2**20)
@@ -51,7 +63,7 @@ def _read(path: Path) -> dict:
 
 def overlay_tables(path: str | Path) -> dict[str, dict]:
     """All component tables of an overlay file (``[params]`` is returned under the key ``""``)."""
-    path = Path(path)
+    path = _find(path)
     doc = _read(path)
     out = {}
     for k, v in doc.items():
@@ -67,7 +79,7 @@ def overlay_tables(path: str | Path) -> dict[str, dict]:
 
 def overlay_values(path: str | Path, component: str) -> Overlay:
     """The values an overlay file gives ``component`` (its ``[component]`` table, else its ``[params]``)."""
-    path = Path(path)
+    path = _find(path)
     tabs = overlay_tables(path)
     if component in tabs:
         vals = tabs[component]

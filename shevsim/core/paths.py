@@ -8,6 +8,7 @@ a checkout or an editable install.
 """
 from __future__ import annotations
 
+import os
 from importlib.resources import files
 from pathlib import Path
 
@@ -65,3 +66,12 @@ def bundled_cycle(name: str) -> Path | None:
 def bundled_cycles() -> list[str]:
     """Names of the bundled drive cycles."""
     return sorted(p.stem for p in (DATA_ROOT / "cycles").glob("*.csv"))
+
+
+def user_cache_dir() -> Path:
+    """shevsim's own cache folder outside the installed package (``$XDG_CACHE_HOME/shevsim``, else
+    ``~/.cache/shevsim``; ``SHEVSIM_CACHE_DIR`` overrides)."""
+    env = os.environ.get("SHEVSIM_CACHE_DIR")
+    if env:
+        return Path(env)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "shevsim"

@@ -67,7 +67,7 @@ class Termination(str):
 
     @classmethod
     def coerce(cls, value: Any, detail: dict | None = None) -> "Termination":
-        """A :class:`Termination` from itself, a detail dict or an old-style string
+        """A [`Termination`][shevsim.core.results.Termination] from itself, a detail dict or an old-style string
         (``"completed"``, ``"error: ..."``)."""
         if isinstance(value, Termination):
             return value
@@ -145,8 +145,8 @@ class Result:
 
     @property
     def metrics(self) -> dict:
-        """Scenario metrics (:func:`shevsim.metrics.compute_metrics`, registered with
-        :mod:`shevsim.core.registry`; a metric that cannot be computed is None and explained in
+        """Scenario metrics ([`shevsim.metrics.compute_metrics()`][shevsim.metrics.compute_metrics], registered with
+        `shevsim.core.registry`; a metric that cannot be computed is None and explained in
         ``metrics["notes"]``). Computed on first access."""
         if self._metrics is None:
             from .registry import result_metrics
@@ -316,7 +316,7 @@ def _conflicts(out_dir: Path, names, manifest) -> list[str]:
 def check_out_dir(out_dir: str | Path) -> Path:
     """Check, before anything runs, that ``out_dir`` can take a result; return it.
 
-    Refused with :class:`ShevsimError`: an existing file (or anything that is not a folder), a folder
+    Refused with `ShevsimError`: an existing file (or anything that is not a folder), a folder
     that holds files but no shevsim ``run.json`` (not a shevsim result: nothing a user wrote is touched),
     a result folder where a file the run would write is not the one shevsim wrote there (changed since,
     or added by the user: its content hash differs from the one in run.json), a place that cannot be
@@ -410,9 +410,59 @@ def clean_stale_temp(out_dir: str | Path) -> list[Path]:
     return removed
 
 
+#: formats of the saved trajectory (``shevsim run --format``)
+TIMESERIES_FORMATS = ("parquet", "csv", "mat")
+
+
+def _mat_name(name: str) -> str:
+    """A MATLAB variable/field name for a signal or port name (letters, digits, ``_``; starts with a letter)."""
+    import re
+    out = re.sub(r"\W", "_", name).strip("_") or "x"
+    return out if out[0].isalpha() else f"x_{out}"
+
+
+def write_mat(result: Result, path: Path) -> None:
+    """A MATLAB file: ``time_s``, one struct per component with its signals (``vehicle.speed_mps`` ->
+    ``vehicle.speed_mps``; other characters become ``_``), ``units`` (the same structs holding unit strings),
+    ``signal_names`` (the original names, in column order) and ``termination``."""
+    from scipy.io import savemat
+    data: dict = {"time_s": np.asarray(result.time_s, float)}
+    units: dict = {"time_s": "s"}
+    for name, values in result.signals.items():
+        comp, _, port = name.partition(".")
+        c, q = _mat_name(comp), _mat_name(port or comp)
+        if c in ("time_s", "units", "signal_names", "termination"):
+            c = f"{c}_"
+        data.setdefault(c, {})[q] = np.asarray(values, float)
+        units.setdefault(c, {})[q] = result.units.get(name, "")
+    data["units"] = units
+    data["signal_names"] = np.array(list(result.signals), dtype=object)
+    data["termination"] = str(result.termination)
+    savemat(str(path), data, do_compression=True, long_field_names=True)
+
+
+def _read_mat(path: Path):
+    import pandas as pd
+    from scipy.io import loadmat
+    m = loadmat(str(path), squeeze_me=True, struct_as_record=False)
+    signal_names = [str(x) for x in np.atleast_1d(m["signal_names"])] if np.size(m["signal_names"]) else []
+    cols = {"time_s": np.atleast_1d(np.asarray(m["time_s"], float))}
+    for name in signal_names:
+        comp, _, port = name.partition(".")
+        c = _mat_name(comp)
+        c = f"{c}_" if c in ("time_s", "units", "signal_names", "termination") else c
+        cols[name] = np.atleast_1d(np.asarray(getattr(m[c], _mat_name(port or comp)), float))
+    return pd.DataFrame(cols)
+
+
 def write_timeseries(result: Result, folder: Path, fmt: str = "parquet") -> str:
     """Write ``timeseries.parquet`` (units as field metadata ``unit`` and schema metadata
-    ``shevsim.units``) or ``timeseries.csv``; return the file name."""
+    ``shevsim.units``), ``timeseries.csv`` or ``timeseries.mat`` (`write_mat()`); return the file name."""
+    if fmt not in TIMESERIES_FORMATS:
+        raise ValueError(f"format must be one of {', '.join(TIMESERIES_FORMATS)}, got {fmt!r}")
+    if fmt == "mat":
+        write_mat(result, folder / "timeseries.mat")
+        return "timeseries.mat"
     units = {"time_s": "s", **{k: result.units.get(k, "") for k in result.signals}}
     if fmt == "parquet":
         try:
@@ -544,8 +594,11 @@ def load_result(out_dir: str | Path) -> Result:
     out_dir = Path(out_dir)
     meta = json.loads((out_dir / "run.json").read_text(encoding="utf-8"))
     path = out_dir / meta["timeseries"]
-    with open(path, "rb") as f:          # a file object: any path the OS takes (see write_timeseries)
-        df = pd.read_parquet(f) if path.suffix == ".parquet" else pd.read_csv(f)
+    if path.suffix == ".mat":
+        df = _read_mat(path)
+    else:
+        with open(path, "rb") as f:          # a file object: any path the OS takes (see write_timeseries)
+            df = pd.read_parquet(f) if path.suffix == ".parquet" else pd.read_csv(f)
     t = df.pop("time_s").to_numpy()
     units = meta.pop("units")
     units.pop("time_s", None)

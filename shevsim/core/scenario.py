@@ -1,6 +1,6 @@
-"""scenario.py - declarative scenario files (TOML) -> a ready-to-run :class:`Master`.
+"""scenario.py - declarative scenario files (TOML) -> a ready-to-run `Master`.
 
-Example::
+Example:
 
     [scenario]
     name = "hd_udds_rule"
@@ -180,7 +180,7 @@ class ComponentSpec:
     #: ``overrides['x.y']``): errors name that instead of the parameter file
     origins: dict[str, str] = field(default_factory=dict)
     #: the parameter file's ``[params]`` table captured with its ``*_file`` paths absolute (a study's
-    #: bundle, :mod:`shevsim.studies.bundle`): when set, ``params_file`` is named in messages but not read
+    #: bundle, `shevsim.studies.bundle`): when set, ``params_file`` is named in messages but not read
     params_table: dict[str, Any] | None = None
 
 
@@ -315,7 +315,7 @@ class Scenario:
         return ports[port]
 
     def connect(self, *ends: str, src: str | None = None, dst: str | None = None) -> "Scenario":
-        """Connect an output to an input, source first as in SSP and Simulink::
+        """Connect an output to an input, source first as in SSP and Simulink:
 
             sc.connect("vehicle.speed_mps", "driver.speed_mps")          # output, then the input it feeds
             sc.connect(src="vehicle.speed_mps", dst="driver.speed_mps")  # the same, explicit
@@ -407,7 +407,7 @@ class Scenario:
 def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), text: str | None = None,
                   overlays: list[str] | tuple = ()) -> Scenario:
     """Read and validate a scenario file; ``sets`` are ``component.param=value`` overrides, ``overlays``
-    are ``COMPONENT=FILE`` or ``FILE`` parameter overlays (:mod:`shevsim.core.overlay`).
+    are ``COMPONENT=FILE`` or ``FILE`` parameter overlays (`shevsim.core.overlay`).
 
     The checks run in the file's order: the TOML itself, ``[scenario]``, ``[components]``, the overlays,
     ``[connections]``, ``[[faults]]``, ``[record]``, the times and the order, then the ``--set`` values."""

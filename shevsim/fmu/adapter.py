@@ -30,9 +30,12 @@ Boolean inputs/outputs become ports (booleans and integers carried as floats:
 ``1.0``/``0.0``). FMI 3 **array variables** become one port per element,
 named ``name[i]`` (1-based; ``name[i,j]`` for matrices, row-major, as
 Modelica shows them); their size comes from fixed dimensions or the start
-value of the structural parameter that sizes them. String/Binary/Clock
-inputs and outputs are refused with a message naming the variable (string
-*parameters* can still be set with ``parameters``).
+value of the structural parameter that sizes them. String, Binary and Clock
+variables are not ports (ports carry numbers) but the FMU is accepted: they are
+listed (:attr:`FMUComponent.value_variables`, ``shevsim info X.fmu``), their
+start value can be set with ``parameters`` (a scenario's ``set``; Binary as
+bytes or a hex string), and only a connection to or from one is refused, with
+a message naming the variable.
 
 Hot path
 --------
@@ -687,6 +690,8 @@ class FMUComponent(Component):
                     f"{self.path}: mapping for component '{name}': FMU variable '{fmu_name}' has causality "
                     f"'{by_name[fmu_name].causality}'; only inputs, outputs and parameters can be mapped")
         expected_units = expected_units_of(expected)
+        #: String/Binary/Clock inputs, outputs and parameters: settable start values, never ports
+        self.value_variables: dict[str, dict] = {}
         self._port_of: dict[str, str] = {}          # FMU variable -> base port name
         self._ports_of: dict[str, tuple[str, ...]] = {}   # FMU variable -> its element ports
         self._fmu_of: dict[str, str] = {}           # port (base or element) -> FMU variable
@@ -699,12 +704,11 @@ class FMUComponent(Component):
             if v.causality not in ("input", "output", "parameter"):
                 continue
             if v.type not in _PORT_TYPES:
-                if v.causality == "parameter":
-                    continue  # string/binary parameters can still be set via `parameters`
-                raise FMUUnsupportedError(
-                    f"{self.path}: {v.causality} '{v.name}' is a {v.type} variable, which shevsim does not "
-                    f"support as a port (ports carry numbers: Float64/Real, Float32, integers, Boolean); "
-                    f"use an FMU without {v.type} inputs/outputs")
+                # String/Binary/Clock: not a port; its start value is settable (`parameters`), a connection
+                # to or from it is refused by name (Master: `not_connectable`)
+                self.value_variables[v.name] = {"causality": v.causality, "type": v.type, "start": v.start,
+                                                "description": v.description or ""}
+                continue
             try:
                 shape = variable_shape(v)
             except FMUUnsupportedError as exc:
@@ -972,7 +976,20 @@ class FMUComponent(Component):
             return fmu.setBoolean
         if typ == "String":
             return fmu.setString
+        if typ == "Binary" and self._is3:
+            return fmu.setBinary
+        if typ == "Clock" and self._is3:
+            return fmu.setClock
         return None
+
+    def not_connectable(self, port: str) -> str | None:
+        """Why ``port`` cannot be connected when it names a String/Binary/Clock variable, else None."""
+        v = self.value_variables.get(port)
+        if v is None:
+            return None
+        return (f"FMU variable '{port}' of component '{self.name}' is a {v['type']} {v['causality']}: it is not a "
+                f"port (ports carry numbers) and cannot be connected; set its start value instead "
+                f"([components.{self.name}] set = {{ {port} = ... }})")
 
     def _typed_getter(self, typ: str):
         fmu = self.fmu
@@ -999,6 +1016,15 @@ class FMUComponent(Component):
             return bool(x)
         if typ == "String":
             return str(x)
+        if typ == "Binary":
+            if isinstance(x, str):
+                try:
+                    return bytes.fromhex(x)
+                except ValueError:
+                    return x.encode()
+            return bytes(x)
+        if typ == "Clock":
+            return bool(x)
         return float(x)
 
     def _check_value_type(self, vname: str, value: Any, which: str, name: str) -> None:
@@ -1409,19 +1435,69 @@ def component_from_spec(spec, scenario, where: str) -> FMUComponent:
     from ..core.errors import ScenarioError, ShevsimError
     from ..core.registry import component_class
     from ..core.scenario import component_seed
-    if not spec.fmu.is_file():
+    from ..core.paths import DATA_ROOT
+    fmu_path = Path(spec.fmu)
+    if not fmu_path.is_file() and spec.replaces and _inside(fmu_path, DATA_ROOT):
+        fmu_path = _bundled_export(spec, where)      # a bundled scenario's exported native component
+    if not fmu_path.is_file():
         kind = spec.replaces or "TYPE"
         raise ScenarioError(f"{where}: field 'fmu': file '{spec.fmu}' not found (an exported native component "
-                            f"is built with: shevsim fmu export {kind} --params FILE -o {spec.fmu})")
+                            f"is built with: shevsim fmu export {kind} --params FILE -o {fmu_path.name} in a "
+                            f"folder of yours, and the scenario's fmu = \"...\" names that file)")
     expected = None
     if spec.replaces is not None:
         expected = component_class(spec.replaces, where)
     params = dict(spec.overrides)
     try:
-        md = load_model_description(spec.fmu)
+        md = load_model_description(fmu_path)
         names = {v.name for v in md.modelVariables if v.causality == "parameter"}
         if "seed" in names and "seed" not in params:   # same noise seed as the native component
             params["seed"] = component_seed(scenario.seed, spec.name)
-        return FMUComponent(spec.name, spec.fmu, mapping=spec.mapping, parameters=params, expected_units=expected)
+        return FMUComponent(spec.name, fmu_path, mapping=spec.mapping, parameters=params, expected_units=expected)
     except ShevsimError as exc:
         raise ScenarioError(f"{where}: {exc}") from exc
+
+
+def _inside(p: Path, root: Path) -> bool:
+    try:
+        Path(p).resolve().relative_to(Path(root).resolve())
+        return True
+    except ValueError:
+        return False
+
+
+def _bundled_export(spec: ComponentSpec, where: str) -> Path:
+    """The FMU a bundled scenario names but the package does not ship (``fmus/battery.fmu``, ``replaces =
+    "battery"``): exported once from the native component with its bundled default parameters into
+    :func:`user_cache_dir` (never into the installed package) and reused while the sources are unchanged."""
+    import hashlib
+    import logging
+    import os
+    from .. import __version__
+    from ..core.errors import ScenarioError, ShevsimError
+    from ..core.paths import DATA_ROOT, user_cache_dir
+    kind = str(spec.replaces)
+    params = DATA_ROOT / "components" / kind / "default.toml"
+    src = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256(f"{__version__}|{kind}|{params.read_bytes() if params.is_file() else b''!r}".encode())
+    for f in sorted(src.rglob("*.py")):
+        st = f.stat()
+        h.update(f"{f.relative_to(src)}:{st.st_size}:{st.st_mtime_ns}".encode())
+    out = user_cache_dir() / "fmus" / f"{Path(spec.fmu).stem}-{h.hexdigest()[:12]}.fmu"
+    if out.is_file():
+        return out
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        from ..fmu.export import export_component
+        logging.getLogger(__name__).warning("%s: building %s once from the native '%s' component (%s) into %s",
+                                            where, Path(spec.fmu).name, kind, params.name, out)
+        tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}")
+        export_component(kind, params if params.is_file() else None, tmp)
+        os.replace(tmp, out)
+    except ShevsimError as exc:
+        raise ScenarioError(f"{where}: field 'fmu': '{spec.fmu}' is not shipped and could not be built from the "
+                            f"native '{kind}' component: {exc}") from exc
+    except OSError as exc:
+        raise ScenarioError(f"{where}: field 'fmu': '{spec.fmu}' is not shipped and cannot be built into "
+                            f"{out.parent} ({exc}); set SHEVSIM_CACHE_DIR to a writable folder") from exc
+    return out

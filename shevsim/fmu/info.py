@@ -6,7 +6,7 @@ experiment, and a table of variables (name, causality, variability, type,
 unit, start, description) followed by the outputs' direct dependencies.
 A last section says what shevsim supports of the FMU and what it does not
 (interfaces, platform binary, array variables and how they become ports,
-integer/Boolean ports, String/Binary inputs/outputs that make it refused).
+integer/Boolean ports, String/Binary/Clock variables as settable values that cannot be connected).
 Nothing is extracted or instantiated.
 """
 from __future__ import annotations
@@ -138,11 +138,9 @@ def support_report(md, path: Path, version: str) -> list[str]:
             no.append(f"{v.causality} '{v.name}': {exc}")
             continue
         if v.type not in _PORT_TYPES:
-            if v.causality == "parameter":
-                ok.append(f"parameter '{v.name}' ({v.type}): settable with parameters/set, not a port")
-            else:
-                no.append(f"{v.causality} '{v.name}' ({v.type}): {v.type} ports are not supported - the FMU "
-                          f"is refused")
+            start = "" if v.start is None else f", start {v.start!r}"
+            ok.append(f"{v.causality} '{v.name}' ({v.type}{start}): a value, not a port - its start value is "
+                      f"settable with set = {{ {v.name} = ... }}; connecting it is refused")
             continue
         if shape:
             names = element_names(v.name, shape)

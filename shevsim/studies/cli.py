@@ -8,7 +8,7 @@
 
 Add a study by adding ``name: (help, handler)`` to :data:`STUDIES`; a handler takes the remaining
 argv and returns an exit code. Options shared by the evaluation studies: ``--workers`` (0 = serial;
-default 2 = embedded Dask LocalCluster), ``--scheduler`` (existing Dask cluster), ``--cache``
+N = embedded Dask LocalCluster, or a process pool without dask; default auto: serial for a handful), ``--scheduler`` (existing Dask cluster), ``--cache``
 (SQLite evaluation cache, default ``OUT/cache.sqlite``: rerunning the same command resumes),
 ``--stop-s`` (shorter runs), ``--set comp.param=value`` (applied to every run), ``--synthetic``
 (analytic surrogate instead of the scenario: a dry run of the machinery).
@@ -34,9 +34,24 @@ def _at_least_one(text: str) -> int:
                                          f"the study; a study resumes from its cache)")
     return v
 
+
+def _workers(text: str):
+    if text == "auto":
+        return "auto"
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or an integer >= 0, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or an integer >= 0, got {v}")
+    return v
+
+
 def _common(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("scenario", nargs="?", help="scenario TOML or a bundled scenario's name (its MPC supervisor component: --supervisor)")
-    ap.add_argument("--workers", type=int, default=2, help="Dask worker processes (0 = serial; default 2)")
+    ap.add_argument("--workers", type=_workers, default="auto",
+                    help="worker processes: 0 = serial; N = a Dask cluster of N (a process pool without dask); "
+                         "auto (default): serial for up to 8 new evaluations, else one per core")
     ap.add_argument("--scheduler", help="address of an existing Dask scheduler (e.g. tcp://host:8786)")
     ap.add_argument("-o", "--out", help="output folder")
     ap.add_argument("--cache", help="SQLite evaluation cache (default OUT/cache.sqlite)")

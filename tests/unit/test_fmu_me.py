@@ -186,10 +186,25 @@ def test_integer_boolean_float32_ports_round_trip(feedthrough):
     comp.terminate()
 
 
-def test_string_inputs_are_refused_with_a_clear_message(fmu_dir):
+def test_string_and_binary_variables_are_settable_values_not_ports(fmu_dir):
+    """Issue 26: an FMU with String/Binary inputs is accepted; they are listed, their start values set (the
+    reference Feedthrough FMU copies them to its String/Binary outputs, read back with fmpy's getters), and
+    they are not ports."""
     p = build_reference_fmu("Feedthrough", fmu_dir / "feedthrough_all.fmu", 3, interfaces=("cs",))
-    with pytest.raises(FMUUnsupportedError, match="input 'String_input' is a String variable"):
-        FMUComponent("ft", p)
+    comp = FMUComponent("ft", p, parameters={"String_input": "hello", "Binary_input": "0a0b0c"})
+    try:
+        vv = comp.value_variables
+        assert vv["String_input"]["type"] == "String" and vv["String_input"]["causality"] == "input"
+        assert vv["Binary_input"]["type"] == "Binary" and "String_output" in vv
+        assert not {"String_input", "Binary_input", "String_output"} & {v.name for v in comp.variables()}
+        comp.initialize(0.0)
+        comp.do_step(0.0, 0.1)
+        vr = {v.name: v.valueReference for v in comp.model_description.modelVariables}
+        assert comp.fmu.getString([vr["String_output"]]) == ["hello"]
+        assert comp.fmu.getBinary([vr["Binary_output"]]) == [b"\x0a\x0b\x0c"]
+        assert "String_input" in comp.not_connectable("String_input") and comp.not_connectable("Float64_input") is None
+    finally:
+        comp.terminate()
 
 
 # ------------------------------------------------------------------ units on connections
@@ -301,8 +316,8 @@ def test_info_says_what_is_supported(statespace, fmu_dir, ball):
     assert "model exchange: used" in text
     p = build_reference_fmu("Feedthrough", fmu_dir / "feedthrough_info.fmu", 3, interfaces=("cs",))
     text = fmu_info(p)
-    assert "shevsim support (NOT usable as is" in text
-    assert "NOT supported: input 'String_input' (String)" in text
+    assert "shevsim support (usable" in text
+    assert "input 'String_input' (String" in text and "connecting it is refused" in text
 
 
 def test_cli_info_lists_delayed_connections(capsys):

@@ -1,0 +1,323 @@
+"""warmup.py - when the compiled fast loop is built, and which engine runs meanwhile.
+
+The fast path (:mod:`shevsim.fast`) is one numba-compiled loop whose machine code depends on the
+scenario's component layout (how many components of each type): building it takes 15-40 s of CPU the first
+time a layout is used (numba caches it on disk afterwards).  The Python master steps the same compiled
+component steps (:mod:`shevsim.core.master`) and needs no loop, so for a run that is short on the master a
+user should not wait for the loop.  ``engine="auto"`` therefore decides as follows (:func:`choose`):
+
+1. the loop of this layout is known to be compiled (:func:`is_compiled`: a fast run or a warm-up of this
+   layout finished since the sources last changed) -> the fast path;
+2. else, when the run is estimated to take less on the master than building the loop
+   (``steps x components x`` :data:`MASTER_STEP_S` ``<`` :data:`LOOP_BUILD_S`) -> the Python master, and
+   when it has finished, a background process (:func:`start_background`, niced, detached) builds this
+   layout's loop so that later runs take the fast path;
+3. else (a long run) -> the fast path, compiled in the foreground with a message.
+
+Whatever compiles in the foreground says so on screen (:class:`CompileNotice`, a listener on numba's
+compile events, used by ``shevsim run``).  ``SHEVSIM_BACKGROUND_COMPILE=0`` turns the background build
+off (the test suite does); the markers live beside numba's cache (``shevsim/fast/__pycache__``, or
+``$NUMBA_CACHE_DIR/shevsim``, or the user cache folder when the package folder is read-only).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+#: wall time of one component step on the Python master (s), for the run-time estimate (hd_udds_mpc:
+#: 21,200 steps x 11 components in ~3 s)
+MASTER_STEP_S = 15e-6
+#: CPU time to build the fast loop for a new layout (s), what a run on the master is weighed against
+LOOP_BUILD_S = 30.0
+#: a warm-up lock older than this is stale (its process died)
+LOCK_STALE_S = 900.0
+_MARKERS = "compiled_layouts.json"
+_stamp_cache: dict = {}
+
+
+def background_enabled() -> bool:
+    """False when ``SHEVSIM_BACKGROUND_COMPILE`` is ``0``/``false``/``no``/``off``."""
+    return os.environ.get("SHEVSIM_BACKGROUND_COMPILE", "1").strip().lower() not in ("0", "false", "no", "off")
+
+
+def state_dir() -> Path:
+    """Where the compiled-layout markers and warm-up locks live (created; beside numba's cache)."""
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    cands = [Path(env) / "shevsim"] if env else []
+    cands.append(Path(__file__).resolve().parent / "fast" / "__pycache__")
+    xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    cands.append(Path(xdg) / "shevsim")
+    for d in cands:
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+            if os.access(d, os.W_OK):
+                return d
+        except OSError:
+            continue
+    return Path(tempfile.gettempdir())
+
+
+def _sources_stamp() -> str:
+    """Digest of the package's Python sources (path, size, mtime): any change makes every marker stale,
+    as numba's cache is (the loop inlines the component kernels)."""
+    root = Path(__file__).resolve().parent
+    if root in _stamp_cache:
+        return _stamp_cache[root]
+    h = hashlib.sha256()
+    import numba
+    h.update(f"{sys.version_info[:2]} numba {numba.__version__}".encode())
+    for p in sorted(root.rglob("*.py")):
+        try:
+            st = p.stat()
+        except OSError:
+            continue
+        h.update(f"{p.relative_to(root)}:{st.st_size}:{st.st_mtime_ns}\n".encode())
+    _stamp_cache[root] = h.hexdigest()[:16]
+    return _stamp_cache[root]
+
+
+def layout_of(scenario) -> str:
+    """The component layout of a scenario: ``"battery:1,bms:1,..."`` (types and their counts)."""
+    counts = Counter(str(c.type) for c in scenario.components)
+    return ",".join(f"{t}:{n}" for t, n in sorted(counts.items()))
+
+
+def layout_key(scenario) -> str:
+    return hashlib.sha256(f"{layout_of(scenario)}|{_sources_stamp()}".encode()).hexdigest()[:20]
+
+
+def _read_markers() -> dict:
+    try:
+        return json.loads((state_dir() / _MARKERS).read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def is_compiled(scenario) -> bool:
+    """True when this scenario's layout was compiled by a fast run or a warm-up since the sources changed."""
+    return bool(_read_markers().get(layout_key(scenario), {}).get("ok", False))
+
+
+def mark_compiled(scenario, ok: bool = True) -> None:
+    """Record that this layout's loop is compiled (``ok=False``: that building it failed, so no warm-up
+    retries it until the sources change); best effort: never fails a run."""
+    try:
+        d = state_dir()
+        marks = _read_markers()
+        marks[layout_key(scenario)] = {"layout": layout_of(scenario), "at": time.time(), "ok": bool(ok)}
+        fd, tmp = tempfile.mkstemp(dir=d, prefix=".markers")
+        with os.fdopen(fd, "w") as f:
+            json.dump(marks, f)
+        os.replace(tmp, d / _MARKERS)
+    except OSError as exc:          # a read-only cache folder: the next run decides again
+        log.debug("cannot record the compiled layout: %s", exc)
+
+
+def choose(scenario, n_steps: int, n_components: int) -> tuple[bool, str]:
+    """``(use_fast, why)`` for ``engine="auto"`` on a scenario the fast path can run (see module docstring)."""
+    if is_compiled(scenario):
+        return True, ""
+    est = n_steps * max(1, n_components) * MASTER_STEP_S
+    if est < LOOP_BUILD_S:
+        return False, (f"the compiled loop for this component layout is not built yet (~{LOOP_BUILD_S:.0f} s "
+                       f"of CPU once); the Python master takes ~{est:.2g} s for this run")
+    return True, ""
+
+
+def _lock_path(scenario) -> Path:
+    return state_dir() / f"warmup-{layout_key(scenario)}.lock"
+
+
+def warmup_running(scenario) -> bool:
+    """A background build of this layout is in progress (a fresh lock file)."""
+    p = _lock_path(scenario)
+    try:
+        return time.time() - p.stat().st_mtime < LOCK_STALE_S
+    except OSError:
+        return False
+
+
+def start_background(scenario) -> int | None:
+    """Start a detached, niced process that builds this layout's fast loop; returns its pid, or None when
+    off, already running or not possible.  Nothing is written outside :func:`state_dir`."""
+    if not background_enabled() or layout_key(scenario) in _read_markers() or warmup_running(scenario):
+        return None
+    import pickle
+    d = state_dir()
+    lock = _lock_path(scenario)
+    try:
+        fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+    except FileExistsError:         # stale: take it over
+        try:
+            lock.unlink()
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except OSError:
+            return None
+    except OSError:
+        return None
+    try:
+        sc_file = d / f"warmup-{layout_key(scenario)}.pickle"
+        sc_file.write_bytes(pickle.dumps(scenario))
+        logf = open(d / "warmup.log", "ab")
+        env = dict(os.environ)
+        root = str(Path(__file__).resolve().parent.parent)
+        env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        p = subprocess.Popen([sys.executable, "-m", "shevsim.warmup", str(sc_file), str(lock)],
+                             stdin=subprocess.DEVNULL, stdout=logf, stderr=logf, env=env,
+                             start_new_session=True, close_fds=True)
+        logf.close()
+        os.write(fd, str(p.pid).encode())
+        return p.pid
+    except Exception as exc:  # noqa: BLE001 - a warm-up that cannot start never fails the run
+        log.debug("background compile not started: %s", exc)
+        try:
+            lock.unlink()
+        except OSError:
+            pass
+        return None
+    finally:
+        os.close(fd)
+
+
+def warm(scenario) -> float:
+    """Build (or load from numba's cache) the fast loop for ``scenario``'s layout in this process by running
+    one communication step; mark the layout compiled; return the wall time (s)."""
+    from .fast import runner_for
+    t = time.perf_counter()
+    sc = scenario.copy()
+    runner, why = runner_for(sc)
+    if runner is None:
+        raise RuntimeError(f"not eligible for the fast path: {why}")
+    runner(float(sc.t0_s) + float(sc.settings.step_s))
+    mark_compiled(scenario)
+    return time.perf_counter() - t
+
+
+# --------------------------------------------------------------------------- messages while compiling
+_FRIENDLY = {"supervisor.mpc": "MPC supervisor", "supervisor.rule_based": "rule-based supervisor",
+             "battery": "battery model", "bms": "BMS estimators", "powertrain.engine": "engine-generator",
+             "powertrain.motor": "motor", "powertrain.vehicle": "vehicle", "powertrain.driver": "driver",
+             "components.cycle": "drive cycle", "core.lookup": "table lookups",
+             "fast.daqp_nb": "QP solver binding (DAQP)", "fast.kernels": "fast-path kernels",
+             "fast": "compiled fast loop"}
+
+
+def _friendly(module: str) -> str:
+    mod = module.removeprefix("shevsim.")
+    for k, v in _FRIENDLY.items():
+        if mod == k or mod.startswith(k + "."):
+            return v
+    return mod
+
+
+class CompileNotice:
+    """Context manager: while it is active, every top-level numba compilation of shevsim code prints one line
+    to ``stream`` (stderr) when it starts and the time when it ends, so a first run never waits in silence::
+
+        compiling the MPC supervisor (mpc_move; first use, cached afterwards) ... 8.1 s
+    """
+
+    def __init__(self, stream=None, enabled: bool = True, prefix: str = "shevsim"):
+        self.stream = stream if stream is not None else sys.stderr
+        self.prefix = prefix
+        self.enabled = enabled
+        self._depth = 0
+        self._t0 = 0.0
+        self._listener = None
+        self.count = 0
+        self.total_s = 0.0
+
+    def __enter__(self):
+        if not self.enabled:
+            return self
+        try:
+            from numba.core import event as ev
+        except ImportError:
+            return self
+        notice = self
+
+        class _L(ev.Listener):
+            def on_start(self, e):
+                notice._start(e)
+
+            def on_end(self, e):
+                notice._end(e)
+
+        self._listener = _L()
+        ev.register("numba:compile", self._listener)
+        return self
+
+    def _start(self, e):
+        self._depth += 1
+        if self._depth != 1:
+            return
+        d = e.data.get("dispatcher")
+        fn = getattr(d, "py_func", None)
+        mod = getattr(fn, "__module__", "") or ""
+        if not mod.startswith(self.prefix):
+            return
+        self._t0 = time.perf_counter()
+        self.count += 1
+        what = "the compiled fast loop for this component layout" if mod.startswith("shevsim.fast.loop") else \
+            f"the {_friendly(mod)}"
+        self.stream.write(f"compiling {what} ({fn.__name__}; first use, cached afterwards) ... ")
+        self.stream.flush()
+
+    def _end(self, e):
+        self._depth -= 1
+        if self._depth != 0 or not self._t0:
+            return
+        dt = time.perf_counter() - self._t0
+        self.total_s += dt
+        self._t0 = 0.0
+        self.stream.write(f"{dt:.1f} s\n")
+        self.stream.flush()
+
+    def __exit__(self, *exc):
+        if self._listener is not None:
+            from numba.core import event as ev
+            ev.unregister("numba:compile", self._listener)
+            self._listener = None
+        return False
+
+
+def main(argv=None) -> int:
+    """``python -m shevsim.warmup SCENARIO.pickle LOCK``: the background build (see :func:`start_background`)."""
+    import pickle
+    argv = list(sys.argv[1:] if argv is None else argv)
+    sc_file, lock = Path(argv[0]), Path(argv[1])
+    scenario = None
+    try:
+        try:
+            os.nice(10)
+        except (OSError, AttributeError):
+            pass
+        scenario = pickle.loads(sc_file.read_bytes())
+        dt = warm(scenario)
+        print(f"{time.strftime('%Y-%m-%d %H:%M:%S')} warm-up {layout_of(scenario)}: {dt:.1f} s", flush=True)
+        return 0
+    except Exception as exc:  # noqa: BLE001 - logged; the next run decides again
+        print(f"{time.strftime('%Y-%m-%d %H:%M:%S')} warm-up failed: {type(exc).__name__}: {exc}", flush=True)
+        if scenario is not None:
+            mark_compiled(scenario, ok=False)
+        return 1
+    finally:
+        for p in (sc_file, lock):
+            try:
+                p.unlink()
+            except OSError:
+                pass
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
