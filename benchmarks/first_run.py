@@ -78,7 +78,7 @@ def main(argv=None) -> int:
     env = {k: v for k, v in os.environ.items()
            if k not in ("PYTHONPATH", "NUMBA_CACHE_DIR", "SHEVSIM_BACKGROUND_COMPILE", "SHEVSIM_CACHE_DIR",
                         "VIRTUAL_ENV")}
-    env["SHEVSIM_CACHE_DIR"] = str(root / "user_cache")       # a new user's empty shevsim cache folder
+    env["SHEVSIM_CACHE_DIR"] = str(root / "user_cache")      # a new user's empty cache folder (.../shevsim)
     env["MPLBACKEND"] = "Agg"
     try:
         print(f"building the wheel of {a.repo} ...", flush=True)
@@ -113,10 +113,11 @@ def main(argv=None) -> int:
                 print(out[-2000:], file=sys.stderr)
         # a background build started by a run (shevsim.warmup): wait for it and report how long it took
         t0 = time.perf_counter()
-        locks = lambda: list((venv / "lib").rglob("shevsim/fast/__pycache__/warmup-*.lock"))  # noqa: E731
+        state = root / "user_cache" / "shevsim" / "warmup"
+        locks = lambda: list(state.glob("warmup-*.lock"))  # noqa: E731
         while locks() and time.perf_counter() - t0 < 900:
             time.sleep(2)
-        logs = list((venv / "lib").rglob("shevsim/fast/__pycache__/warmup.log"))
+        logs = list(state.glob("warmup.log"))
         if logs:
             text = logs[0].read_text().strip()
             print("background builds:\n  " + text.replace("\n", "\n  "), flush=True)

@@ -361,7 +361,7 @@ def _output_errors(exc: UnicodeEncodeError):
 
 
 def _robust_streams() -> None:
-    """Make stdout/stderr unable to fail on a character the locale cannot encode (see :func:`_output_errors`)."""
+    """Make stdout/stderr unable to fail on a character the locale cannot encode (see `_output_errors()`)."""
     import codecs
     try:
         codecs.lookup_error("shevsim-output")
@@ -381,7 +381,7 @@ class StdoutError(OSError):
 
 
 class _GuardedStdout:
-    """sys.stdout while a command runs: an OSError from writing or flushing it becomes :class:`StdoutError`
+    """sys.stdout while a command runs: an OSError from writing or flushing it becomes `StdoutError`
     (so a full stdout is told apart from a file shevsim writes)."""
 
     def __init__(self, stream):

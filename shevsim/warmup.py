@@ -16,8 +16,8 @@ user should not wait for the loop.  ``engine="auto"`` therefore decides as follo
 
 Whatever compiles in the foreground says so on screen (:class:`CompileNotice`, a listener on numba's
 compile events, used by ``shevsim run``).  ``SHEVSIM_BACKGROUND_COMPILE=0`` turns the background build
-off (the test suite does); the markers live beside numba's cache (``shevsim/fast/__pycache__``, or
-``$NUMBA_CACHE_DIR/shevsim``, or the user cache folder when the package folder is read-only).
+off (the test suite does); the markers live beside the compiled loops in the user cache folder
+(:func:`state_dir`).
 """
 from __future__ import annotations
 
@@ -51,12 +51,15 @@ def background_enabled() -> bool:
 
 
 def state_dir() -> Path:
-    """Where the compiled-layout markers and warm-up locks live (created; beside numba's cache)."""
-    env = os.environ.get("NUMBA_CACHE_DIR")
-    cands = [Path(env) / "shevsim"] if env else []
-    cands.append(Path(__file__).resolve().parent / "fast" / "__pycache__")
-    xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    cands.append(Path(xdg) / "shevsim")
+    """Where the compiled-layout markers and warm-up locks live (created): beside the compiled loops
+    (:mod:`shevsim.fast.loop` keeps them in ``$SHEVSIM_CACHE_DIR``, ``$XDG_CACHE_HOME/shevsim`` or
+    ``~/.cache/shevsim``), so removing that folder forgets both; ``SHEVSIM_WARMUP_DIR`` overrides."""
+    env = os.environ.get("SHEVSIM_WARMUP_DIR")
+    base = os.environ.get("SHEVSIM_CACHE_DIR") or os.environ.get("XDG_CACHE_HOME")
+    cands = [Path(env)] if env else []
+    cands.append((Path(base) / "shevsim" if base else Path.home() / ".cache" / "shevsim") / "warmup")
+    cands.append(Path(tempfile.gettempdir()) / f"shevsim-{os.getuid() if hasattr(os, 'getuid') else 'user'}"
+                 / "warmup")
     for d in cands:
         try:
             d.mkdir(parents=True, exist_ok=True)

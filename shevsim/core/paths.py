@@ -69,9 +69,7 @@ def bundled_cycles() -> list[str]:
 
 
 def user_cache_dir() -> Path:
-    """shevsim's own cache folder outside the installed package (``$XDG_CACHE_HOME/shevsim``, else
-    ``~/.cache/shevsim``; ``SHEVSIM_CACHE_DIR`` overrides)."""
-    env = os.environ.get("SHEVSIM_CACHE_DIR")
-    if env:
-        return Path(env)
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "shevsim"
+    """shevsim's own cache folder outside the installed package: ``shevsim`` in ``$SHEVSIM_CACHE_DIR``, else in
+    ``$XDG_CACHE_HOME``, else ``~/.cache/shevsim`` (where the compiled loops live too)."""
+    base = os.environ.get("SHEVSIM_CACHE_DIR") or os.environ.get("XDG_CACHE_HOME")
+    return Path(base) / "shevsim" if base else Path.home() / ".cache" / "shevsim"

@@ -249,9 +249,9 @@ def _earlier_manifest(out_dir: Path) -> dict[str, str | None] | None:
 
     ``{name: sha256 or None}`` from its ``run.json``; None when ``run.json`` is missing or not a shevsim
     record (then nothing in the folder is ours). An entry is kept only when it is a plain name shevsim
-    writes (:data:`_OWN_FILES`, figures ``*.png``); a ``run.json`` written since the content hashes were
+    writes (`_OWN_FILES`, figures ``*.png``); a ``run.json`` written since the content hashes were
     recorded (key ``sha256``) lists each file with its hash, and an older one (no hashes) only the
-    fixed names of :data:`_OWN_FILES` (hash None: taken as ours by name)."""
+    fixed names of `_OWN_FILES` (hash None: taken as ours by name)."""
     try:
         meta = json.loads((out_dir / "run.json").read_text(encoding="utf-8"))
     except (OSError, ValueError, UnicodeDecodeError, RecursionError):
@@ -497,7 +497,7 @@ def save_result(result: Result, out_dir: str | Path, *, scenario_text: str | Non
     its content recorded when written, and checked again before it is replaced or removed; anything else
     (files a user added or changed) stays. ``plots`` is an optional callable ``plots(result, folder)``
     that writes figures; when it fails, the run is saved without them and the error is raised afterwards
-    (with a note). A write the machine refuses (full disk, file-size limit) raises :class:`OutputError`
+    (with a note). A write the machine refuses (full disk, file-size limit) raises `OutputError`
     naming the file and the limit; the earlier result is then untouched and nothing half-written stays.
     """
     out_dir = check_out_dir(out_dir)
@@ -567,7 +567,7 @@ def save_result(result: Result, out_dir: str | Path, *, scenario_text: str | Non
 
 def _publish(tmp: Path, out_dir: Path, files: list[str]) -> None:
     """Move the files of ``tmp`` into ``out_dir``; replace or remove only files an earlier run wrote
-    there and nobody changed since (verified by name and content hash, :func:`_earlier_manifest`)."""
+    there and nobody changed since (verified by name and content hash, `_earlier_manifest()`)."""
     if not out_dir.exists() and not out_dir.is_symlink():
         os.replace(tmp, out_dir)
         return

@@ -64,8 +64,8 @@ _FAULT = {"at_s", "port", "value"}
 _RECORD = {"signals"}
 #: the options of a scenario's ``[metrics]`` table (``--set metrics.OPTION=...``) and their types: float,
 #: int, bool, a tuple of allowed strings, or [float] (a list of numbers). Numbers are checked against the
-#: name rule of their key (:func:`shevsim.core.params.name_rule`: ``_pct`` in [0, 100], densities > 0...).
-#: Read by :func:`shevsim.metrics.compute_metrics` and the speed-trace check (:data:`shevsim.run.TRACE_DEFAULTS`).
+#: name rule of their key (`shevsim.core.params.name_rule()`: ``_pct`` in [0, 100], densities > 0...).
+#: Read by [`shevsim.metrics.compute_metrics()`][shevsim.metrics.compute_metrics] and the speed-trace check ([`shevsim.run.TRACE_DEFAULTS`][shevsim.run.TRACE_DEFAULTS]).
 METRICS_OPTIONS = {"cycle_duration_s": float, "soc_tolerance_pct": float, "cells_parallel": int,
                    "fuel_density_kg_per_l": float, "ah_weighting": ("constant", "wang2011"),
                    "ah_severity_factor": float, "hist_edges_a": [float], "pack_capacity_ah": float,
@@ -76,7 +76,7 @@ METRICS_OPTIONS = {"cycle_duration_s": float, "soc_tolerance_pct": float, "cells
 
 def check_metrics_options(options: Any, where: str) -> dict:
     """Check a ``[metrics]`` table like component parameters: unknown keys (with a suggestion), types
-    and ranges (:data:`METRICS_OPTIONS`). Returns it as a dict (ScenarioError otherwise)."""
+    and ranges (`METRICS_OPTIONS`). Returns it as a dict (ScenarioError otherwise)."""
     if not isinstance(options, dict):
         raise ScenarioError(f"{where}: expected a table of name = value, got {type(options).__name__}")
     for k, v in options.items():

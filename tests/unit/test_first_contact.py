@@ -22,10 +22,9 @@ from shevsim.run import NOT_BUILT
 
 @pytest.fixture
 def fresh_state(tmp_path, monkeypatch):
-    """An empty marker folder (as after a fresh install): NUMBA_CACHE_DIR only moves shevsim's markers here,
-    numba's own cache location is fixed at import time."""
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "nbcache"))
-    assert warmup.state_dir() == tmp_path / "nbcache" / "shevsim"
+    """An empty marker folder (as after a fresh install; the compiled code itself stays where it is)."""
+    monkeypatch.setenv("SHEVSIM_WARMUP_DIR", str(tmp_path / "warmup"))
+    assert warmup.state_dir() == tmp_path / "warmup"
     return tmp_path
 
 
@@ -210,7 +209,7 @@ def test_a_bundled_scenarios_fmu_is_built_in_the_user_cache(tmp_path, monkeypatc
     spec.fmu = missing
     res = shevsim.simulate(sc, engine="python")
     assert not missing.exists()
-    built = list((tmp_path / "cache" / "fmus").glob("issue26_not_shipped_battery-*.fmu"))
+    built = list((tmp_path / "cache" / "shevsim" / "fmus").glob("issue26_not_shipped_battery-*.fmu"))
     assert len(built) == 1
     native = shevsim.simulate("hd_udds_mpc", stop_s=10.0, engine="python")
     for k in ("battery.soc_pct", "battery.voltage_v", "vehicle.speed_mps"):
