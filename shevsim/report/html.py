@@ -5,7 +5,7 @@ interactive figures (zoom, pan, hover; the time axes of a page zoom together) an
 read in plain language with units ("Battery power (kW)", "Speed (km/h)"); thesis symbols appear only in
 the hover text.
 
-Builders return the page as a string; :func:`shevsim.report.write_report` writes one beside a folder's
+Builders return the page as a string; [`shevsim.report.write_report()`][shevsim.report.write_report] writes one beside a folder's
 outputs. Each builder also records how many figures it drew (``page.n_figures``), which the browser test
 checks against the plots that render.
 """
@@ -97,7 +97,7 @@ def esc(x: Any) -> str:
 
 
 class Page:
-    """An HTML page being built: sections of HTML and Plotly figures, rendered by :meth:`render`."""
+    """An HTML page being built: sections of HTML and Plotly figures, rendered by `render()`."""
 
     def __init__(self, title: str, subtitle: str = ""):
         self.title, self.subtitle = title, subtitle

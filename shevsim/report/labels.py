@@ -1,8 +1,8 @@
 """labels.py - plain-language names and display units for signals, metrics and channels.
 
 Inside shevsim everything is SI with the unit in the name (``bus.battery_power_w``, ``vehicle.speed_mps``).
-People read kW, km/h and degrees C: :func:`display_unit` gives the unit a value is shown in and the factor
-from SI, :func:`signal_label` a plain-language name (``"Battery power (+ discharge)"``) and, where the
+People read kW, km/h and degrees C: [`display_unit()`][shevsim.report.labels.display_unit] gives the unit a value is shown in and the factor
+from SI, [`signal_label()`][shevsim.report.labels.signal_label] a plain-language name (``"Battery power (+ discharge)"``) and, where the
 thesis (Kim 2014) has one, its symbol (``"P_b"``) for a tooltip or a legend note only.
 """
 from __future__ import annotations

@@ -18,7 +18,7 @@ _MARK = '<meta name="generator" content="shevsim'
 
 
 def folder_kind(folder: str | Path) -> str:
-    """``"run"``, ``"study"`` or ``"calibration"``: what the folder holds; :class:`ShevsimError` otherwise."""
+    """``"run"``, ``"study"`` or ``"calibration"``: what the folder holds; `ShevsimError` otherwise."""
     folder = Path(folder)
     if not folder.is_dir():
         raise ShevsimError(f"report: '{folder}' is not a folder (give a result folder of shevsim run, study "
@@ -153,7 +153,7 @@ def write_report(target: str | Path | Sequence[str | Path], out: str | Path | No
 
 
 def write_html(results, path: str | Path, *, labels: Sequence[str] | None = None, title: str | None = None) -> Path:
-    """Write the report of one :class:`~shevsim.core.results.Result` (a run page) or of several (a
+    """Write the report of one [`Result`][shevsim.core.results.Result] (a run page) or of several (a
     comparison) to ``path``, from a notebook or a script; returns the path. A file there that shevsim did
     not write is never replaced."""
     from ..core.results import Result
