@@ -768,8 +768,9 @@ def calibration_summary_html(rep: dict) -> str:
         a = rep["rmse_after"][c]
         lab, du, f, _ = _channel_axis(c)
         rows.append((f"{lab} ({du})", fmt(b["holdout"] * f), fmt(a["holdout"] * f)))
-    return (f"<div><b>Calibration</b> {esc(rep.get('model', '?'))}: selected "
-            f"{esc(', '.join(sel) or 'nothing')}"
+    path = (rep.get("data") or {}).get("path")
+    return (f"<div><b>Calibration</b> {esc(rep.get('model', '?'))}" + (f" on {esc(path)}" if path else "")
+            + f": selected <b>{esc(', '.join(sel) or 'nothing')}</b>"
             + table(["Channel", "Held-out RMSE before", "after"], rows, num_cols=[1, 2]) + "</div>")
 
 

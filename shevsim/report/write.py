@@ -59,6 +59,12 @@ def _write(path: Path, text: str) -> Path:
     return path
 
 
+def write_page(path: str | Path, text: str) -> Path:
+    """Write an HTML page a builder made to ``path`` (atomically); a file there that shevsim did not
+    write is never replaced. Returns the path."""
+    return _write(Path(path), text)
+
+
 def write_run_html(result, folder: str | Path) -> Path:
     """Write ``report.html`` of a run into ``folder`` (the hook of a saved run)."""
     from .html import run_report
