@@ -473,6 +473,11 @@ def main(argv=None) -> int:
     """Entry point of ``shevsim``; returns the exit code (see [`EXIT_CODES`][shevsim.cli.EXIT_CODES])."""
     argv = list(sys.argv[1:] if argv is None else argv)
     _robust_streams()
+    if sys.stdout is None and not {"-q", "--quiet", "--help", "-h", "--version"} & set(argv):
+        # started with stdout closed (`>&-`): what the command prints would vanish without a word
+        print("shevsim: error: standard output is closed, so nothing shevsim prints can be seen; redirect it "
+              "(> FILE, or > /dev/null) or give -q", file=sys.stderr)
+        return EXIT_BAD_INPUT
     real = sys.stdout
     if real is not None and not isinstance(real, _GuardedStdout):
         sys.stdout = _GuardedStdout(real)

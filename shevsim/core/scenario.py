@@ -614,6 +614,12 @@ def _record_signals(doc: dict, where: str) -> list[str] | None:
         return None
     if not (isinstance(signals, list) and all(isinstance(x, str) for x in signals)):
         raise ScenarioError(f"{where}: [record] field 'signals' must be \"all\" or a list of 'component.port'")
+    if not signals:
+        raise ScenarioError(f"{where}: [record] field 'signals' is an empty list (nothing would be recorded): "
+                            f"list at least one 'component.port', or \"all\"")
+    bad = [x for x in signals if x.count(".") < 1 or not all(x.split(".", 1))]
+    if bad:
+        raise ScenarioError(f"{where}: [record] field 'signals': {bad[0]!r} is not 'component.port'")
     return signals
 
 

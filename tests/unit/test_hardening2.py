@@ -222,3 +222,21 @@ def test_max_evaluations_zero_is_a_usage_error(tmp_path, capsys):
         main(["study", "tradeoff", "hd_udds_rule", "--max-evaluations", "0", "--out", str(tmp_path / "st")])
     assert e.value.code == 2
     assert "expected an integer >= 1, got 0" in capsys.readouterr().err
+
+
+def test_closed_stdout_is_said_unless_quiet(tmp_path):
+    r = subprocess.run(f"{sys.executable} -m shevsim.cli scenarios >&-", shell=True, capture_output=True,
+                       text=True, env=_env(), timeout=120)
+    assert r.returncode == 2 and "standard output is closed" in r.stderr, r.stderr
+    r = subprocess.run(f"{sys.executable} -m shevsim.cli -q scenarios >&-", shell=True, capture_output=True,
+                       text=True, env=_env(), timeout=120)
+    assert r.returncode == 0, r.stderr
+
+
+def test_record_table_is_checked(tmp_path):
+    with pytest.raises(ScenarioError, match=r"\[record\] field 'signals' is an empty list"):
+        load_scenario(_scenario(tmp_path, edit=lambda s: s.replace('signals = "all"', "signals = []")))
+    with pytest.raises(ScenarioError, match=r"\[record\]: unknown key 'signal' \(did you mean 'signals'\?\)"):
+        load_scenario(_scenario(tmp_path, edit=lambda s: s.replace('signals = "all"', 'signal = ["vehicle.speed_mps"]')))
+    with pytest.raises(ScenarioError, match=r"'speed' is not 'component.port'"):
+        load_scenario(_scenario(tmp_path, edit=lambda s: s.replace('signals = "all"', 'signals = ["speed"]')))
