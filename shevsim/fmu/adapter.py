@@ -1028,19 +1028,20 @@ class FMUComponent(Component):
         return float(x)
 
     def _check_value_type(self, vname: str, value: Any, which: str, name: str) -> None:
-        """Refuse (FMUMappingError) a value the variable's FMI type cannot take: a number for Real/Float,
-        an integer for Integer/Enumeration types, true/false for Boolean, a string for String."""
+        """Refuse (FMUMappingError) a value the variable's FMI type cannot take: a number (or true/false as
+        1/0) for Real/Float, an integer for Integer/Enumeration types, true/false for Boolean, a string for
+        String."""
         v = self._vars_by_name.get(vname)
         if v is None:
             return
         typ = v.type
         vals = value if isinstance(value, (list, tuple)) else [value]
         for x in vals:
+            # true/false are taken as 1/0 by a numeric variable (an exported native component's flags are Real)
             if typ in _REAL_TYPES or typ in _OTHER_NUM:
-                ok, want = isinstance(x, (int, float)) and not isinstance(x, bool), "a number"
+                ok, want = isinstance(x, (int, float)), "a number"
             elif typ in _INT_TYPES:
-                ok, want = (isinstance(x, int) and not isinstance(x, bool)) or (
-                    isinstance(x, float) and x.is_integer()), "an integer"
+                ok, want = isinstance(x, int) or (isinstance(x, float) and x.is_integer()), "an integer"
             elif typ in _BOOL_TYPES:
                 ok, want = isinstance(x, bool) or (isinstance(x, int) and x in (0, 1)), "true or false"
             elif typ == "String":
