@@ -174,6 +174,15 @@ def test_study_on_separate_processes_identical_to_serial(user, cluster, tmp_path
         assert runner.stats.slots == 2
         assert runner.evaluate(items) == ref
         assert runner.stats.new == len(items) and len(cache) == len(items)
+        # the files went to each worker at most once (a Dask transfer of their one task), into its own store
+        fetched = runner.client.run(lambda dask_worker: [str(k) for e in dask_worker.transfer_incoming_log
+                                                         for k in e["keys"] if "shevsim-files" in str(k)])
+        assert all(len(v) <= 1 for v in fetched.values()), fetched
+        stored = runner.client.run(lambda dask_worker: sorted(
+            p.parent.name + "/" + p.name
+            for p in __import__("pathlib").Path(dask_worker.local_directory, "shevsim-files").glob("*/*")))
+        wanted = {t.split(":", 1)[1] for it in items for t in it.payload()[0].tokens()}
+        assert set().union(*map(set, stored.values())) == wanted and "mycycle.csv" in str(wanted)
     # the study command on the same cluster: same rows as the serial command
     if HIDE:
         from shevsim.studies.cli import main_study
