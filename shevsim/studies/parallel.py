@@ -348,7 +348,7 @@ class StudyRunner:
         self.stats.slots = self.workers
         ctx = mp.get_context("spawn")       # no fork of a process holding threads (tqdm, BLAS)
         with ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx) as pool:
-            futures = {pool.submit(run_item, it): (k, it) for k, it in pending}
+            futures = {pool.submit(run_item, *_payload(it)): (k, it) for k, it in pending}   # the captured run
             try:
                 for fut in as_completed(futures):
                     k, it = futures[fut]
