@@ -10,10 +10,10 @@ from .version import __version__  # noqa: E402
 from . import providers  # noqa: E402,F401  (registers component types, the FMU adapter and metrics with core)
 
 from .api import (Result, Scenario, compare, load_result, load_scenario, metrics_table,  # noqa: E402
-                  new_scenario, run_calibration, run_study, scenarios, simulate)
+                  new_scenario, run_calibration, run_study, scenarios, simulate, vehicles)
 from .core.errors import ScenarioError, ShevsimError, SimulationError  # noqa: E402
 from .core.results import Termination  # noqa: E402
 
-__all__ = ["__version__", "simulate", "load_scenario", "new_scenario", "scenarios", "compare", "metrics_table",
+__all__ = ["__version__", "simulate", "load_scenario", "new_scenario", "scenarios", "vehicles", "compare", "metrics_table",
            "load_result", "run_study", "run_calibration", "Scenario", "Result", "Termination", "ShevsimError",
            "ScenarioError", "SimulationError"]

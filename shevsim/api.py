@@ -30,13 +30,14 @@ from .core.scenario import Scenario, new_scenario
 from .core.scenario import load_scenario as _load_scenario
 
 __all__ = ["simulate", "load_scenario", "new_scenario", "compare", "metrics_table", "run_labels", "load_result",
-           "scenarios", "run_study", "run_calibration", "Scenario", "Result"]
+           "scenarios", "vehicles", "run_study", "run_calibration", "Scenario", "Result"]
 
 
 def simulate(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = None, *,
              stop_s: float | None = None, out: str | Path | None = None, engine: str = "auto",
              record: Sequence[str] | None = None, record_every: int = 1, plots: bool = False,
-             progress: bool = False, allow_large: bool = False) -> Result:
+             progress: bool = False, allow_large: bool = False, vehicle: str | None = None,
+             cycle: str | None = None) -> Result:
     """Simulate a scenario and return its [`Result`][shevsim.core.results.Result].
 
     Parameters
@@ -68,6 +69,10 @@ def simulate(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | Non
         Progress bar on long runs.
     allow_large : bool
         Run even when the record or duration estimate exceeds what this machine holds.
+    vehicle, cycle : str, optional
+        Run the scenario's powertrain and supervisors on a bundled vehicle (:func:`vehicles`, e.g.
+        ``"city_bus"``) or a vehicle file, and/or on a bundled cycle (``"orange_county_bus"``) or a
+        cycle CSV.
 
     Returns
     -------
@@ -84,11 +89,12 @@ def simulate(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | Non
     """
     from .run import run
     return run(scenario, overrides, stop_s=stop_s, out=out, engine=engine, record=([record] if isinstance(record, str) else list(record)) if record else None,
-               record_every=record_every, plots=plots, progress=progress, allow_large=allow_large)
+               record_every=record_every, plots=plots, progress=progress, allow_large=allow_large,
+               vehicle=vehicle, cycle=cycle)
 
 
-def load_scenario(scenario: str | Path, overrides: Mapping[str, Any] | None = None, *,
-                  params: Iterable[str] = ()) -> Scenario:
+def load_scenario(scenario: str | Path | None = None, overrides: Mapping[str, Any] | None = None, *,
+                  params: Iterable[str] = (), text: str | None = None) -> Scenario:
     """Load a scenario (bundled name or file) into an object to inspect and change.
 
     Parameters
@@ -99,6 +105,9 @@ def load_scenario(scenario: str | Path, overrides: Mapping[str, Any] | None = No
         Typed overrides as in [`simulate()`][shevsim.api.simulate].
     params : iterable of str
         Parameter overlays ``[COMPONENT=]FILE`` (the CLI's ``--params``, e.g. a calibration's params.toml).
+    text : str, optional
+        The scenario as TOML text instead of a file (``scenario`` may then be omitted), e.g. a few lines
+        that ``extends = "hd_udds_mpc"`` and change the ``[shared]`` quantities.
 
     Returns
     -------
@@ -109,11 +118,24 @@ def load_scenario(scenario: str | Path, overrides: Mapping[str, Any] | None = No
     """
     if isinstance(scenario, Scenario):
         sc = scenario.copy()
+    elif text is not None:
+        sc = _load_scenario(scenario, text=text, overlays=list(params))
     else:
         sc = _load_scenario(scenario, overlays=list(params))
     for k, v in dict(overrides or {}).items():
         sc.set(k, v, f"overrides['{k}']")
     return sc
+
+
+def vehicles() -> dict[str, dict[str, Any]]:
+    """The bundled vehicles: ``{name: {"description", "source", "shared": {quantity: value}}}``
+    (``shevsim vehicles`` prints them; run one with ``simulate(SCENARIO, vehicle=NAME)``)."""
+    from .components.shared import bundled_vehicles, load_vehicle
+    out = {}
+    for n in bundled_vehicles():
+        v = load_vehicle(n)
+        out[n] = {"description": v.description, "source": v.source, "shared": dict(v.shared), "path": str(v.path)}
+    return out
 
 
 def scenarios() -> list[str]:

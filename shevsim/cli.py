@@ -2,11 +2,12 @@
 
 Sub-commands:
 
-    shevsim run [SCENARIO] [--out DIR] [--set comp.param=value ...] [--params [COMP=]FILE ...] [--engine E]
+    shevsim run [SCENARIO] [--vehicle NAME] [--cycle CYCLE] [--out DIR] [--set comp.param=value ...] [--params [COMP=]FILE ...] [--engine E]
                 [--record SIG ...] [--record-every N] [--allow-large] [--no-plots] [--format parquet|csv|mat] [-q]
 
 Every command also takes ``-v``/``-vv`` and ``--log-level LEVEL`` (log lines on stderr).
     shevsim scenarios
+    shevsim vehicles
     shevsim components [TYPE] [--sets]
     shevsim info SCENARIO|FMU
     shevsim cycles [FOLDER]
@@ -46,7 +47,10 @@ scenario TOML file; default: the bundled hd_udds_mpc. A scenario file may name b
 cycles by their path in the data folder (params = "components/vehicle/matv.toml").
 
 --set KEY=VALUE changes one value, typed as TOML (numbers, true/false, "strings", [lists]):
-  component.param   e.g. --set vehicle.mass_kg=18000 --set cycle.repeat=1
+  shared.QUANTITY   a quantity of the vehicle as a whole, reaching every component that uses it
+                    e.g. --set shared.mass_kg=18000 --set shared.n_parallel=6 (shevsim/components/shared.py)
+  component.param   e.g. --set cycle.repeat=1 (a component's value of a shared quantity, such as
+                    vehicle.mass_kg, changes the shared quantity: declared twice differently is an error)
   scenario.FIELD    step_s, stop_s, t0_s, method, seed, name   e.g. --set scenario.stop_s=120
   metrics.OPTION    e.g. --set metrics.trace_allow_miss=true (a run that misses its speed trace is
                     'degraded' unless allowed; see trace_* options in docs/getting_started.md)
@@ -88,6 +92,7 @@ def _cmd_run(a) -> int:
     try:
         with CompileNotice(enabled=not a.quiet):
             res = run(a.scenario or DEFAULT_SCENARIO, out=a.out, sets=a.set or (), overlays=a.params or (),
+                      vehicle=a.vehicle, cycle=a.cycle,
                       engine=a.engine, record=a.record, record_every=a.record_every, plots=not a.no_plots,
                       progress=not a.quiet, allow_large=a.allow_large, save=True, fmt=a.format)
     finally:
@@ -132,6 +137,24 @@ def _cmd_scenarios(a) -> int:
         except (OSError, ValueError):
             pass
         print(n if a.quiet or not desc else f"{n:32s} {desc}")
+    return EXIT_OK
+
+
+def _cmd_vehicles(a) -> int:
+    from .api import vehicles
+    for n, v in vehicles().items():
+        if a.quiet:
+            print(n)
+            continue
+        q = v["shared"]
+        facts = ", ".join(x for x in (
+            f"{q['mass_kg'] / 1e3:.1f} t" if "mass_kg" in q else "",
+            f"engine {q['engine_power_w'] / 1e3:.0f} kW" if "engine_power_w" in q else "",
+            f"motor {q['motor_power_w'] / 1e3:.0f} kW" if "motor_power_w" in q else "",
+            f"pack {q.get('cell', '?')} {q['n_series']}s x {q['n_parallel']}p" if "n_series" in q and "n_parallel" in q
+            else "") if x)
+        print(f"{n:16s} {facts}\n{'':16s} {v['description']}")
+    print("run one: shevsim run [SCENARIO] --vehicle NAME [--cycle CYCLE] (cycles: shevsim cycles)")
     return EXIT_OK
 
 
@@ -303,7 +326,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--format", choices=("parquet", "csv", "mat"), default="parquet",
                    help="format of the trajectory file timeseries.* (default parquet; mat: one struct per "
                         "component, MATLAB/Octave/scipy.io.loadmat)")
+    r.add_argument("--vehicle", metavar="NAME", help="run on a bundled vehicle (shevsim vehicles) or a vehicle file: "
+                   "sets the scenario's shared quantities (mass, pack, ratings, fuel)")
+    r.add_argument("--cycle", metavar="CYCLE", help="run on a bundled drive cycle (shevsim cycles) or a cycle CSV")
     sub.add_parser("scenarios", parents=[q], help="list the bundled scenarios (names for `shevsim run NAME`)")
+    sub.add_parser("vehicles", parents=[q], help="list the bundled vehicles (names for `shevsim run --vehicle NAME`)")
     i = sub.add_parser("info", parents=[q], help="describe a scenario (components, ports, units) or an FMU")
     i.add_argument("target", metavar="SCENARIO|FMU", help="bundled scenario name, scenario TOML or .fmu file")
     co = sub.add_parser("components", parents=[q], help="component types (ports with units, parameters with "
@@ -525,7 +552,8 @@ def _dispatch(ap, argv, quiet) -> int:
         except SystemExit as exc:          # argparse: --help/--version (0) or a usage error (2)
             return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
         a.quiet = quiet or getattr(a, "quiet", False)
-        rc = {"run": _cmd_run, "scenarios": _cmd_scenarios, "info": _cmd_info, "cycles": _cmd_cycles,
+        rc = {"run": _cmd_run, "scenarios": _cmd_scenarios, "vehicles": _cmd_vehicles,
+              "info": _cmd_info, "cycles": _cmd_cycles,
               "components": _cmd_components, "fmu": _cmd_fmu, "report": _cmd_report}[a.cmd](a)
         if sys.stdout is not None:
             sys.stdout.flush()          # a full or failing output stream is said here, not at exit

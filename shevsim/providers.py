@@ -55,6 +55,12 @@ def scenario_html(scenario) -> str:
     return view(scenario)
 
 
+def shared_quantities():
+    """The rules of a scenario's ``[shared]`` quantities (:mod:`shevsim.components.shared`)."""
+    from .components import shared
+    return shared
+
+
 def register() -> None:
     """Register the package's providers with :mod:`shevsim.core.registry` (idempotent)."""
     registry.register_component_lookup(component_class)
@@ -63,6 +69,7 @@ def register() -> None:
     registry.register_fmu_ports(fmu_ports)
     registry.register_html_view("result", result_html)
     registry.register_html_view("scenario", scenario_html)
+    registry.register_shared_quantities(shared_quantities)
 
 
 register()

@@ -24,7 +24,8 @@ import numpy as np
 
 from .core.errors import FastPathError, ScenarioError, ShevsimError, SimulationError
 from .core.results import Result, Termination, beside_folder, check_out_dir, git_commit, holds_result, save_result
-from .core.scenario import PROJECT_ROOT, Scenario, build_master, check_metrics_options, load_scenario, stop_time
+from .core.scenario import PROJECT_ROOT, Scenario, build_master, check_metrics_options, load_scenario,
+                            shared_metrics, stop_time
 
 log = logging.getLogger(__name__)
 
@@ -389,7 +390,13 @@ def compute_run_metrics(res: Result, scenario: Scenario | None = None) -> dict:
     """Scenario metrics (SHEV metrics when the SHEV signals are present). Never raises: a metric
     that cannot be computed is None and ``notes`` says why."""
     from .metrics import result_metrics
-    opts = dict(scenario.metrics) if scenario is not None else None
+    opts = None
+    if scenario is not None:
+        from .core.scenario import shared_metrics
+        try:
+            opts = {**shared_metrics(scenario), **scenario.metrics}   # the fuel's density from [shared]
+        except ShevsimError:
+            opts = dict(scenario.metrics)        # refused before the run (check_run); never raises here
     out = result_metrics(res, opts)
     for name, values in res.signals.items():
         if name.endswith((".fallback_count", ".clamp_count")) and len(values) and values[-1] > 0:
@@ -414,8 +421,13 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
         stop_s: float | None = None, out: str | Path | None = None, engine: str = "auto",
         sets=(), overlays=(), record: list[str] | None = None, record_every: int = 1,
         plots: bool = False, progress: bool = False, allow_large: bool = False, save: bool | None = None,
-        scenario_text: str | None = None, fmt: str = "parquet") -> Result:
+        scenario_text: str | None = None, fmt: str = "parquet", vehicle: str | None = None,
+        cycle: str | None = None) -> Result:
     """Load, check, simulate, judge, compute metrics and (when ``out``) save one run.
+
+    ``vehicle`` (a bundled vehicle's name or a vehicle file) and ``cycle`` (a bundled cycle's name or a
+    CSV) run the scenario's powertrain and supervisors on another vehicle / drive cycle
+    (:meth:`Scenario.use`).
 
     Stopped runs are returned (and saved) with their termination; they do not raise.
     ``res.meta["out"]`` is the folder written (when saved); ``fmt`` is the trajectory's format there
@@ -425,6 +437,7 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
     if fmt not in TIMESERIES_FORMATS:
         raise ScenarioError(f"format must be one of {', '.join(TIMESERIES_FORMATS)}, got {fmt!r}")
     sc = _as_scenario(scenario, sets, overlays)
+    sc.use(vehicle, cycle)
     for k, v in dict(overrides or {}).items():
         sc.set(k, v, f"overrides['{k}']")
     if stop_s is not None:
@@ -432,6 +445,7 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
     if record is not None:
         sc.set("record.signals", list(record), "record=")
     check_trace_options(sc.metrics, str(sc.path or "<scenario>"))
+    shared_metrics(sc)       # a [metrics] value contradicting a shared quantity: refused before running
     check_metrics_options(sc.metrics, f"{sc.path or '<scenario>'}: [metrics]")   # also when changed by attribute
     trace = trace_signals(sc)
     if trace and sc.record is not None and sc.metrics.get("trace_allow_miss") is not True:
@@ -461,6 +475,8 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
         if overrides:
             scenario_text = "".join(f"# run with overrides[{k!r}] = {v!r}\n"
                                     for k, v in dict(overrides).items()) + scenario_text
+        if vehicle is not None or cycle is not None:
+            scenario_text = sc.to_toml()      # the scenario as run, on that vehicle and cycle
     res.meta["scenario_text"] = scenario_text
     res.meta["sets"] = list(sc.sets)
     res.meta["overlays"] = list(sc.overlays)

@@ -118,6 +118,19 @@ class _Grid2:
         self.nq = nq
 
 
+def _row_at(g: "_Grid2", t_c: float) -> list:
+    """The grid's values at temperature ``t_c`` (linear between its temperatures, clamped): one list of
+    ``nq`` values per SOC knot."""
+    ts = g.temps
+    if t_c <= ts[0] or len(ts) == 1:
+        return [list(c) for c in g.vals[0]]
+    if t_c >= ts[-1]:
+        return [list(c) for c in g.vals[-1]]
+    j = max(k for k in range(len(ts) - 1) if ts[k] <= t_c)
+    w = (t_c - ts[j]) / (ts[j + 1] - ts[j])
+    return [[(1.0 - w) * a + w * b for a, b in zip(ca, cb)] for ca, cb in zip(g.vals[j], g.vals[j + 1])]
+
+
 class _Table1:
     """Piecewise-linear 1-D table with clamped ends (data only: its slopes and the cumulative integral at
     the knots are precomputed for :func:`shevsim.core.lookup._t1_value` / ``_t1_slope`` / ``_t1_integral``)."""
@@ -148,9 +161,16 @@ class CellTables:
         CSV tables (``#`` comment lines allowed). Defaults: the representative A123 26650
         tables in ``components/battery/``. Columns: ``soc_frac, ocv_v``;
         ``soc_frac, delta_s_j_molk``; ``soc_frac, t_c, rs_ohm, r1_ohm, c1_f, r2_ohm, c2_f``.
+    scales : 5 floats, optional
+        Factors on the ECM tables' ``rs, r1, c1, r2, c2`` (a calibrated cell's ``rs_scale`` ...
+        ``c2_scale``; default 1: the tables as read).
+    fixed_t_c : float, optional
+        Look the ECM tables up at this temperature whatever the cell's (a cell model without
+        temperature dependence, as the battery's ``temperature_dependent = false`` at 25 degC).
     """
 
-    def __init__(self, ocv_file=None, entropy_file=None, discharge_file=None, charge_file=None):
+    def __init__(self, ocv_file=None, entropy_file=None, discharge_file=None, charge_file=None,
+                 scales=(1.0, 1.0, 1.0, 1.0, 1.0), fixed_t_c: float | None = None):
         p = _Paths(Path(ocv_file or DATA_DIR / "a123_26650_ocv.csv"),
                    Path(entropy_file or DATA_DIR / "a123_26650_entropy.csv"),
                    Path(discharge_file or DATA_DIR / "a123_26650_ecm_discharge.csv"),
@@ -167,6 +187,16 @@ class CellTables:
         self._ds = _Table1(xs, [r[1] for r in rows])
         self._dch = _Grid2(_read_csv(p.discharge, _ECM_COLS), p.discharge)
         self._chg = _Grid2(_read_csv(p.charge, _ECM_COLS), p.charge)
+        self.scales = tuple(float(k) for k in scales)
+        if self.scales != (1.0,) * 5:         # a calibrated cell: factors on R_s, R1, C1, R2, C2
+            if len(self.scales) != 5 or not all(k > 0.0 and math.isfinite(k) for k in self.scales):
+                raise DataError(f"cell tables: scales must be 5 finite factors > 0 (rs, r1, c1, r2, c2), got {scales!r}")
+            for g in (self._dch, self._chg):
+                g.vals = [[[v * k for v, k in zip(cell, self.scales)] for cell in row] for row in g.vals]
+        self.fixed_t_c = None if fixed_t_c is None else float(fixed_t_c)
+        if self.fixed_t_c is not None:        # a cell model without temperature dependence: every row = T
+            for g in (self._dch, self._chg):
+                g.vals = [list(_row_at(g, self.fixed_t_c)) for _ in g.temps]
         self._d, self._ix = self.packed()
 
     # -- lookups (soc as a fraction 0..1, temperature in degC): the one lookup module, compiled -----

@@ -146,6 +146,9 @@ class CellModel(CalibrationModel):
     optional_channels = ("t_core_c",)
     inputs = ("current_a", "t_ambient_c")
     known_defaults = {"soc0_frac": -1.0, "h_conv_w_m2k": 20.0, "change_width_s": 20.0}
+    #: the cell's voltage limits (data sheet / test record): not fitted, carried to the overlay's [shared]
+    #: table (``cell_v_min_v``, ``cell_v_max_v``), where a scenario's BMS takes them
+    limits = ("v_min_v", "v_max_v")
     cause_hints = {"discharged_ah": "capacity differs from the rated one, or the OCV curve is wrong",
                    "current_a": "resistance level wrong, or the current is in other units (mA?) or sign",
                    "current_sq_a2": "heat generation / resistance level wrong",
@@ -168,8 +171,13 @@ class CellModel(CalibrationModel):
                 raise DataError(f"{where}: table [{tname}] is not for the cell model (expected [battery] or [params])")
             known.update(vals)
         short_form = any(k in _LEGACY or k in ("thermal", "arrhenius_anchor") for k in known)
+        self.cell_limits: dict[str, float] = {}
         for k, v in known.items():
-            if k in _LEGACY or k in self.known_defaults:
+            if k in self.limits:
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+                    raise DataError(f"{where}: '{k}' (the cell's voltage limit) must be a number > 0, got {v!r}")
+                self.cell_limits[k] = float(v)
+            elif k in _LEGACY or k in self.known_defaults:
                 self.known[k] = v
             elif k in _FIELDS:
                 comp[k] = v
@@ -379,7 +387,10 @@ class CellModel(CalibrationModel):
             ov["ocv_file"] = "ocv.csv"
         elif "ocv_file" in self.user_params:
             ov["ocv_file"] = self.user_params["ocv_file"]
-        return {self.component_name: ov}
+        out = {self.component_name: ov}
+        if self.cell_limits:      # the cell's voltage limits, for the BMS of a scenario with shared quantities
+            out["shared"] = {f"cell_{k}": v for k, v in self.cell_limits.items()}
+        return out
 
     def replay(self, data, overlay_file) -> dict:
         """Step the ``battery`` component, parameters = overlay, through the master over the record."""

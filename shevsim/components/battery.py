@@ -236,6 +236,7 @@ class BatteryPack(CompiledStep, Component):
     """Battery pack plant: OCV-R-RC-RC cells with a radial thermal model (see module docstring)."""
 
     TYPE = "battery"
+    INPUT_DEFAULTS = ("h_conv_w_m2k", "t_ambient_c")   # 20 W/(m2 K), 25 degC; the unused drive input: defaulted_inputs
     Params = BatteryPackParams
     VARIABLES = (
         inp("power_w", "W", 0.0, "pack power demand, + discharge"),
@@ -361,6 +362,11 @@ class BatteryPack(CompiledStep, Component):
         return data[:D.noise] + (hit,) + data[D.noise + 1:]
 
     # -- contract --------------------------------------------------------------------------
+    def defaulted_inputs(self) -> set[str]:
+        """The declared defaults plus the drive input the ``input_mode`` does not use."""
+        unused = "current_cmd_a" if self.params.input_mode == "power" else "power_w"
+        return super().defaulted_inputs() | {unused}
+
     def initialize(self, t0: float) -> None:
         p = self.params
         st = np.zeros(_m.N_STATE)

@@ -93,8 +93,15 @@ class BMSParams(DEKFTuning, CellLimits, ThermalParams):
         ``"exact"`` (V1 trajectory over the horizon, default) or ``"seed"`` (the 5.31 bound).
     radius_m, length_m, density_kg_m3, cp_j_kgk, kt_w_mk : float
         Cell thermal parameters (Table 3.1).
-    ocv_file, entropy_file : str
-        OCV and entropy tables the BMS knows (empty: the A123 26650 defaults).
+    ocv_file, entropy_file, discharge_file, charge_file : str
+        OCV, entropy and ECM tables of the BMS's nominal cell model (empty: the A123 26650 defaults).
+    rs_scale, r1_scale, c1_scale, r2_scale, c2_scale : float
+        Factors on the nominal ECM tables (a calibrated cell's factors, as the battery's; default 1).
+    temperature_dependent : bool
+        False: the nominal ECM tables are looked up at 25 degC whatever the temperature estimate (a cell
+        model without temperature dependence, as the battery's parameter of that name).
+        In a scenario with shared quantities the BMS takes the pack's cell (tables, factors, capacity,
+        thermal parameters, voltage limits) from ``[shared]`` (:mod:`shevsim.components.shared`).
     rs_model, rc_model : str
         ``"table_scaled"`` (default): the DEKF estimates factors on the cell type's nominal
         R_s(SOC, T, direction) map (``rs_model``) and R1, C1 first-branch maps (``rc_model``) of the
@@ -126,6 +133,14 @@ class BMSParams(DEKFTuning, CellLimits, ThermalParams):
     rs_model: str = "table_scaled"
     rc_model: str = "table_scaled"
     v2_model: str = "nominal_maps"
+    discharge_file: str = ""
+    charge_file: str = ""
+    rs_scale: float = 1.0
+    r1_scale: float = 1.0
+    c1_scale: float = 1.0
+    r2_scale: float = 1.0
+    c2_scale: float = 1.0
+    temperature_dependent: bool = True
 
     def __post_init__(self) -> None:
         DEKFTuning.__post_init__(self)
@@ -163,6 +178,7 @@ class BMS(CompiledStep, Component):
     """Battery management system: DEKF -> thermal DKF -> power capability (see module docstring)."""
 
     TYPE = "bms"
+    INPUT_DEFAULTS = ("t_ambient_meas_c",)       # 25 degC
     Params = BMSParams
     VARIABLES = (
         inp("cell_current_meas_a", "A", 0.0, "measured cell current, + discharge"),
@@ -191,7 +207,10 @@ class BMS(CompiledStep, Component):
     def __init__(self, name: str = "bms", params: BMSParams | None = None):
         super().__init__(name, params)
         p = self.params
-        self.tables = CellTables(ocv_file=p.ocv_file or None, entropy_file=p.entropy_file or None)
+        self.tables = CellTables(ocv_file=p.ocv_file or None, entropy_file=p.entropy_file or None,
+                                 discharge_file=p.discharge_file or None, charge_file=p.charge_file or None,
+                                 scales=(p.rs_scale, p.r1_scale, p.c1_scale, p.r2_scale, p.c2_scale),
+                                 fixed_t_c=None if p.temperature_dependent else 25.0)
         self.thermal_params = p.thermal_params()
         self._ns = float(p.n_series)
         self._np = float(p.n_parallel)

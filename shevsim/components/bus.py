@@ -94,6 +94,7 @@ class PowerBus(CompiledStep, Component):
 
     TYPE = "bus"
     Params = BusParams
+    INPUT_DEFAULTS = ("aux_power_w", "battery_power_max_w", "battery_power_min_w")   # none, no limit
     VARIABLES = (
         inp("motor_power_w", "W", 0.0, "motor electrical power, + drawn from the bus"),
         inp("gen_power_w", "W", 0.0, "generator electrical power, + delivered to the bus"),
@@ -156,6 +157,7 @@ class PowerLimits(CompiledStep, Component):
 
     TYPE = "power_limits"
     Params = BusParams
+    INPUT_DEFAULTS = ("aux_power_w", "battery_power_max_w", "battery_power_min_w")   # none, no limit
     VARIABLES = (
         inp("motor_power_w", "W", 0.0, "motor electrical power, + drawn from the bus"),
         inp("gen_power_w", "W", 0.0, "generator electrical power, + delivered to the bus"),

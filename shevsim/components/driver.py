@@ -62,6 +62,7 @@ class Driver(CompiledStep, Component):
     """PI + feed-forward speed-following driver (see module docstring for ports)."""
 
     TYPE = "driver"
+    INPUT_DEFAULTS = ("accel_ref_mps2",)         # 0: no feed-forward of the reference acceleration
     Params = DriverParams
     _FT = ("speed_ref_mps", "accel_ref_mps2", "speed_mps")
     VARIABLES = (

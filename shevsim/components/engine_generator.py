@@ -50,6 +50,7 @@ supported.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -101,6 +102,14 @@ class EngineGeneratorParams:
         0 = no lag.
     soot_analyzer_offset_mgps : float
         Constant offset of the soot analyser's reading [mg/s]; 0 = none.
+    rated_power_w, maps_rated_power_w : float
+        Rated engine power [W] of this engine-generator and the rating the map files describe (261 kW
+        for the bundled maps).  Sizing by rating: with ``k = rated_power_w / maps_rated_power_w`` the maps
+        scale as :meth:`~shevsim.powertrain.engine.EngineGenMaps.scaled` states (torque, fuel, soot and
+        power x k at the same speed; the generator with the engine), the rotating inertia x k and the
+        rack gains (per N m) / k, so the torque loop and the speed response keep their dynamics.
+        ``k = 1`` (the default) is the maps as built, exactly.  In a scenario the rating is the shared
+        quantity ``engine_power_w`` (:mod:`shevsim.components.shared`).
     """
 
     fuel_map_file: str = str(EG_DIR / "engine_fuel_map.csv")
@@ -124,10 +133,18 @@ class EngineGeneratorParams:
     max_substep_s: float = 0.05
     soot_analyzer_tau_s: float = 0.0
     soot_analyzer_offset_mgps: float = 0.0
+    rated_power_w: float = 261e3
+    maps_rated_power_w: float = 261e3
+
+    @property
+    def power_scale(self) -> float:
+        """``rated_power_w / maps_rated_power_w``: the sizing factor of the maps."""
+        return self.rated_power_w / self.maps_rated_power_w
 
     def __post_init__(self):
         for k in ("fuel_lhv_j_per_g", "turbo_lag_s", "fuel_fall_s", "speed_time_constant_s",
-                  "speed_accel_max_radps2", "shaft_inertia_kg_m2", "power_rate_down_max_wps", "max_substep_s"):
+                  "speed_accel_max_radps2", "shaft_inertia_kg_m2", "power_rate_down_max_wps", "max_substep_s",
+                  "rated_power_w", "maps_rated_power_w"):
             if not getattr(self, k) > 0:
                 raise ValueError(f"parameter '{k}' must be > 0, got {getattr(self, k)!r}")
         for k in ("rack_kp_per_nm", "rack_ki_per_nm_s", "transient_soot_mg_per_g", "soot_scale_frac",
@@ -140,6 +157,7 @@ class EngineGenerator(CompiledStep, Component):
     """Diesel engine-generator with PI rack, turbo lag, soot and power-rate limit (see module docstring)."""
 
     TYPE = "engine_generator"
+    INPUT_DEFAULTS = ("power_rate_max_wps", "elec_power_max_w", "elec_power_min_w")   # no limit, no floor
     Params = EngineGeneratorParams
     VARIABLES = (
         inp("power_cmd_w", "W", 0.0, "electrical power command, + to the bus"),
@@ -177,11 +195,16 @@ class EngineGenerator(CompiledStep, Component):
                  compiled: bool = True):
         super().__init__(name, params)
         p = self.params
+        k = p.power_scale
         self.maps = EngineGenMaps(p.fuel_map_file, p.torque_map_file, p.max_torque_file, p.soot_map_file,
-                                  p.generator_eff_file, p.generator_max_torque_file, p.ool_file)
+                                  p.generator_eff_file, p.generator_max_torque_file, p.ool_file).scaled(k)
+        # sized by rating (k = 1: unchanged): rack gains per N m / k, inertia x k
+        prm = p if k == 1.0 else dataclasses.replace(
+            p, rack_kp_per_nm=p.rack_kp_per_nm / k, rack_ki_per_nm_s=p.rack_ki_per_nm_s / k,
+            shaft_inertia_kg_m2=p.shaft_inertia_kg_m2 * k)
         self._compiled = compiled
         self._md, self._mi = pack_maps(self.maps)
-        self._c = pack_params(p)
+        self._c = pack_params(prm)
 
     _static = _static + ("_md", "_mi", "_c")
 

@@ -53,7 +53,7 @@ from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port
 from shevsim.core.component import Component
 from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.maps import load_curve_csv, load_grid_csv
+from shevsim.powertrain.maps import load_curve_csv, load_grid_csv, scaled_curve, scaled_grid
 from shevsim.powertrain.motor import HEAT_RATE_PER_S, MotorMaps, motor_component_step
 from shevsim.core.paths import data_path
 
@@ -87,6 +87,12 @@ class MotorParams:
         beyond it goes to the friction brakes). Default inf = no limit (off).
     efficiency_scale_frac : float
         Actual / map efficiency [-]: ``eta = min(s eta_map(w, tau), 1)``. Default 1 (the map as built).
+    rated_power_w, maps_rated_power_w : float
+        Rated (peak) power [W] of this drive and the rating the map files describe (380 kW = 4 x 95 kW
+        for the bundled maps).  Sizing by rating: with ``k = rated_power_w / maps_rated_power_w`` the peak
+        and continuous torque x k and the efficiency map's torque axis x k (efficiency at the same speed
+        and relative torque unchanged; speeds unchanged), the rule of Autonomie and FASTSim.  ``k = 1``
+        (default) is the maps as built, exactly.  In a scenario: the shared quantity ``motor_power_w``.
     """
 
     efficiency_map_file: str = str(_DIR / "motor_eff_map.csv")
@@ -99,9 +105,11 @@ class MotorParams:
     extrapolate_speed: bool = True
     regen_power_max_w: float = field(default=float("inf"), metadata=rng(lo=0.0, allow_inf=True))
     efficiency_scale_frac: float = 1.0
+    rated_power_w: float = 380e3
+    maps_rated_power_w: float = 380e3
 
     def __post_init__(self):
-        for k in ("gear_ratio", "wheel_radius_m"):
+        for k in ("gear_ratio", "wheel_radius_m", "rated_power_w", "maps_rated_power_w"):
             if not getattr(self, k) > 0:
                 raise ValueError(f"parameter '{k}' must be > 0, got {getattr(self, k)!r}")
         if not 0.0 <= self.heat_index_init_frac <= 1.0:
@@ -118,6 +126,7 @@ class Motor(CompiledStep, Component):
     """Equivalent traction motor with heat-index derating (see module docstring for ports)."""
 
     TYPE = "motor"
+    INPUT_DEFAULTS = ("elec_power_max_w", "elec_power_min_w")   # no limit
     Params = MotorParams
     _FT = ("force_req_n", "speed_mps", "elec_power_max_w", "elec_power_min_w")
     VARIABLES = (
@@ -143,10 +152,12 @@ class Motor(CompiledStep, Component):
     def __init__(self, name: str = "motor", params: MotorParams | None = None):
         super().__init__(name, params)
         p = self.params
+        k = p.rated_power_w / p.maps_rated_power_w       # sized by rating (1: the maps as built)
         self.maps = MotorMaps(
-            load_grid_csv(p.efficiency_map_file, "speed_radps", "torque_nm", "efficiency_frac", "clamp"),
-            load_curve_csv(p.torque_curves_file, "speed_radps", "peak_torque_nm"),
-            load_curve_csv(p.torque_curves_file, "speed_radps", "cont_torque_nm"))
+            scaled_grid(load_grid_csv(p.efficiency_map_file, "speed_radps", "torque_nm", "efficiency_frac", "clamp"),
+                        k, 1.0),
+            scaled_curve(load_curve_csv(p.torque_curves_file, "speed_radps", "peak_torque_nm"), 1.0, k),
+            scaled_curve(load_curve_csv(p.torque_curves_file, "speed_radps", "cont_torque_nm"), 1.0, k))
         self._k_tau = p.wheel_radius_m / p.gear_ratio      # N m of motor torque per N at the wheel
         self._k_w = p.gear_ratio / p.wheel_radius_m        # rad/s of motor per m/s
         self.extrapolate = bool(p.extrapolate_speed)

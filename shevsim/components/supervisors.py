@@ -147,6 +147,7 @@ class MPCSupervisor(CompiledStep, Component):
     """Linear MPC power split (seed Sec. 5.2.2): TYPE ``mpc_supervisor``; ports in the module docstring."""
 
     TYPE = "mpc_supervisor"
+    INPUT_DEFAULTS = ()                         # every input is part of its model
     #: the step it must be called with (checked when the scenario is built: step_s x step_multiple)
     SAMPLE_TIME_PARAM = "sample_time_s"
     Params = MPCSupervisorParams
@@ -325,6 +326,7 @@ class RuleSupervisor(CompiledStep, Component):
     """Thermostat / power-follower baseline: TYPE ``rule_supervisor``; ports in the module docstring."""
 
     TYPE = "rule_supervisor"
+    INPUT_DEFAULTS = ("ocv_v", "rs_ohm")          # unused by the rule
     #: the step it must be called with (checked when the scenario is built: step_s x step_multiple)
     SAMPLE_TIME_PARAM = "sample_time_s"
     Params = RuleSupervisorParams

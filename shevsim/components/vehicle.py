@@ -117,6 +117,7 @@ class Vehicle(CompiledStep, Component):
     """Point-mass longitudinal vehicle (see module docstring for ports)."""
 
     TYPE = "vehicle"
+    INPUT_DEFAULTS = ("brake_force_n", "grade_rad", "accel_ref_mps2")   # no friction brake, flat road
     Params = VehicleParams
     VARIABLES = (
         inp("traction_force_n", "N", 0.0, "signed wheel force from the motors, + propel"),

@@ -68,6 +68,10 @@ class Component:
     Params: ClassVar[type | None] = None
     VARIABLES: ClassVar[tuple[Variable, ...]] = ()
     _static: ClassVar[tuple[str, ...]] = ("name", "params")
+    #: inputs that may be left unconnected: their start value is then a declared default ("no limit", a
+    #: flat road, no auxiliary load); any other input left unconnected is refused when the scenario is
+    #: built.  ``None`` (components that declare nothing): every input has its start value as default.
+    INPUT_DEFAULTS: ClassVar[tuple[str, ...] | None] = None
 
     def __init__(self, name: str, params: Any = None):
         self.name = name
@@ -79,6 +83,11 @@ class Component:
         self.params = params
         self.u: dict[str, float] = {v.name: v.start for v in self.variables() if v.causality == "input"}
         self.y: dict[str, float] = {v.name: v.start for v in self.variables() if v.causality == "output"}
+
+    def defaulted_inputs(self) -> set[str]:
+        """Inputs that may be left unconnected (:attr:`INPUT_DEFAULTS`; all of them when it is None)."""
+        names = {v.name for v in self.variables() if v.causality == "input"}
+        return names if self.INPUT_DEFAULTS is None else names & set(self.INPUT_DEFAULTS)
 
     # -- interface -------------------------------------------------------------
     def variables(self) -> tuple[Variable, ...]:

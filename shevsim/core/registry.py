@@ -12,7 +12,9 @@ asks the registry:
 * :func:`fmu_ports` - the inputs and outputs of an FMU spec before it is built (registered by
   :mod:`shevsim.fmu`), so a connection's direction is checked when it is made;
 * :func:`html_view` - the HTML a notebook shows for a result or a scenario (registered by
-  :mod:`shevsim.report`).
+  :mod:`shevsim.report`);
+* :func:`shared_quantities` - the rules of a scenario's ``[shared]`` quantities (which component parameter
+  each one is; registered by :mod:`shevsim.components`: :mod:`shevsim.components.shared`).
 
 ``import shevsim`` registers the package's own providers (:mod:`shevsim.providers`); a program that
 uses ``shevsim.core`` alone registers its own with the ``register_*`` functions.
@@ -40,6 +42,12 @@ def register_fmu_factory(factory: Callable[[Any, Any, str], Any]) -> None:
 def register_result_metrics(metrics: Callable[[Any], dict]) -> None:
     """Register ``metrics(result) -> dict``: what :attr:`Result.metrics` computes on first access."""
     _providers["metrics"] = metrics
+
+
+def register_shared_quantities(provider: Callable[[], Any]) -> None:
+    """Register ``provider() -> module`` with ``check_value(name, value, where)``, ``resolve(scenario,
+    file_params)`` and ``same(a, b)``: the rules of the scenario's ``[shared]`` quantities."""
+    _providers["shared"] = provider
 
 
 def _provider(kind: str, what: str) -> Callable[..., Any]:
@@ -90,3 +98,8 @@ def html_view(kind: str, obj) -> str | None:
     """The registered HTML view of ``obj``, or None (a notebook then shows its ``repr``)."""
     fn = _providers.get(f"html:{kind}")
     return fn(obj) if fn is not None else None
+
+
+def shared_quantities():
+    """The rules of the ``[shared]`` quantities (see :func:`register_shared_quantities`)."""
+    return _provider("shared", "shared-quantity rules")()

@@ -51,15 +51,15 @@ from .errors import ScenarioError, ShevsimError, file_problem, toml_loads
 from .master import Connection, Fault, Master, MasterSettings
 from .overlay import overlay_tables, overlay_values, resolve_files
 from .params import check_options, load_params
-from .registry import component_class, fmu_component, fmu_ports
+from .registry import component_class, fmu_component, fmu_ports, shared_quantities
 from .tomlio import toml_key, toml_value
 from shevsim.core.paths import DATA_ROOT, bundled_cycle, bundled_params, bundled_scenario
 
 PROJECT_ROOT = DATA_ROOT   # the folder holding components/, cycles/, scenarios/ (checkout or wheel)
 
-_TOP = {"scenario", "components", "connections", "faults", "record", "metrics"}
-_SCEN = {"name", "description", "step_s", "stop_s", "t0_s", "method", "seed", "order"}
-_COMP = {"type", "params", "set", "start", "step_multiple", "fmu", "map", "replaces", "overlay"}
+_TOP = {"scenario", "components", "connections", "faults", "record", "metrics", "shared"}
+_SCEN = {"name", "description", "step_s", "stop_s", "t0_s", "method", "seed", "order", "extends"}
+_COMP = {"type", "params", "set", "start", "step_multiple", "fmu", "map", "replaces", "overlay", "own"}
 _FAULT = {"at_s", "port", "value"}
 _RECORD = {"signals"}
 #: the options of a scenario's ``[metrics]`` table (``--set metrics.OPTION=...``) and their types: float,
@@ -182,6 +182,11 @@ class ComponentSpec:
     #: the parameter file's ``[params]`` table captured with its ``*_file`` paths absolute (a study's
     #: bundle, `shevsim.studies.bundle`): when set, ``params_file`` is named in messages but not read
     params_table: dict[str, Any] | None = None
+    #: parameters (or shared quantity names, ``"cell"``) this component keeps as its own instead of the
+    #: scenario's shared quantities (:mod:`shevsim.components.shared`), e.g. a mismatched BMS
+    own: list[str] = field(default_factory=list)
+    #: where a scenario ``set`` or overlay value came from (named by the shared-quantity checks)
+    sources: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -204,6 +209,11 @@ class Scenario:
     order: list[str] | None = None
     sets: list[str] = field(default_factory=list)     # command-line ``component.param=value`` overrides
     overlays: list[str] = field(default_factory=list)  # command-line ``--params COMPONENT=FILE`` overlays
+    #: the quantities of the vehicle as a whole (``[shared]``, :mod:`shevsim.components.shared`)
+    shared: dict[str, Any] = field(default_factory=dict)
+    shared_origins: dict[str, str] = field(default_factory=dict)
+    #: the vehicle's quantities resolved (a study's bundle captures them so a worker needs no vehicle file)
+    shared_base: dict[str, Any] = field(default_factory=dict)
 
     def __repr__(self) -> str:
         stop = f"{self.stop_s:g} s" if self.stop_s is not None else "from its cycle"
@@ -230,9 +240,11 @@ class Scenario:
         return [c.name for c in self.components]
 
     def set(self, key: str, value: Any, origin: str | None = None) -> "Scenario":
-        """Override one value (typed): ``"component.param"``, ``"scenario.step_s"`` (any [scenario]
-        field: name, description, step_s, stop_s, t0_s, method, seed, order), ``"record.signals"``
-        or ``"metrics.<option>"``. ``origin`` names the override in error messages. Returns self."""
+        """Override one value (typed): ``"component.param"``, ``"shared.QUANTITY"`` (a quantity of the
+        vehicle as a whole, reaching every component that uses it: ``"shared.mass_kg"``,
+        ``"shared.vehicle"``), ``"scenario.step_s"`` (any [scenario] field: name, description, step_s,
+        stop_s, t0_s, method, seed, order), ``"record.signals"`` or ``"metrics.<option>"``. ``origin``
+        names the override in error messages. Returns self."""
         apply_override(self, key, value, origin or f"override '{key}'")
         return self
 
@@ -382,6 +394,34 @@ class Scenario:
         self.text = ""
         return self
 
+    def use(self, vehicle: str | None = None, cycle: str | None = None) -> "Scenario":
+        """Run this scenario's powertrain and supervisors on another vehicle and/or drive cycle:
+        ``vehicle`` a bundled vehicle's name (``shevsim vehicles``) or a vehicle file (sets
+        ``shared.vehicle``); ``cycle`` a bundled cycle's name or a cycle CSV (the ``cycle_file`` of the
+        scenario's component of type ``cycle``). Returns self."""
+        if vehicle is not None:
+            self.set("shared.vehicle", str(vehicle), f"vehicle '{vehicle}'")
+        if cycle is not None:
+            comp = next((c for c in self.components if c.type == "cycle"), None)
+            if comp is None:
+                raise ScenarioError(f"scenario '{self.name}': cycle '{cycle}': the scenario has no component of "
+                                    f"type 'cycle'")
+            p = resolve_path(str(cycle), None)
+            if not p.is_file():
+                p = bundled_cycle(str(cycle))
+            if p is None:
+                from .paths import bundled_cycles
+                raise ScenarioError(f"cycle '{cycle}': neither a bundled cycle ({', '.join(bundled_cycles())}) "
+                                    f"nor a CSV file")
+            self.set(f"{comp.name}.cycle_file", str(p), f"cycle '{cycle}'")
+        return self
+
+    def shared_values(self) -> dict[str, Any]:
+        """The shared quantities in effect (the vehicle's, then the scenario's and every change, lifted
+        component values included), ``{}`` when the scenario declares none."""
+        r = shared_quantities().resolve(self, _file_params)
+        return {} if r is None else {k: v for k, (v, _) in r.values.items()}
+
     def copy(self) -> "Scenario":
         """An independent copy (change it without touching this one)."""
         import copy
@@ -416,6 +456,9 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
     _check_keys(doc, _TOP, where)
     sc = doc.get("scenario", {})
     _check_keys(sc, _SCEN, f"{where}: [scenario]")
+    if "extends" in sc:
+        doc = _extend(doc, spath, where)
+        sc = doc.get("scenario", {})
     name = sc.get("name", spath.stem if spath else "scenario")
     if not isinstance(name, str) or not name:
         raise ScenarioError(f"{where}: [scenario] field 'name' must be a string, got {name!r}")
@@ -427,7 +470,8 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
         raise ScenarioError(f"{where}: [scenario] {exc}") from None
     specs = _component_specs(doc, spath, where)
     names = {s.name for s in specs}
-    _apply_overlays(specs, names, overlays)
+    shared, shared_origins = _shared_table(doc, where)
+    _apply_overlays(specs, names, overlays, shared, shared_origins)
     conns = _connections(doc, names, where)
     faults = _faults(doc, names, where)
     signals = _record_signals(doc, where)
@@ -436,7 +480,7 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
     scen = Scenario(spath, text, name, str(sc.get("description", "")), settings,
                     stop_s, t0_s, seed, specs, conns, faults, signals,
                     check_metrics_options(doc.get("metrics", {}), f"{where}: [metrics]"), order,
-                    list(sets), [str(o) for o in overlays])
+                    list(sets), [str(o) for o in overlays], shared, shared_origins)
     for s in sets:
         if "=" not in s or "." not in s.split("=", 1)[0]:
             raise ScenarioError(f"--set '{s}': expected component.param=value (or scenario.FIELD=value)")
@@ -526,31 +570,57 @@ def _component_spec(cname: str, cd: dict, spath: Path | None, w: str) -> Compone
     rep = cd.get("replaces")
     if rep is not None and (cd["type"] != "fmu" or not isinstance(rep, str)):
         raise ScenarioError(f"{w}: field 'replaces' (a native component TYPE) is only for type = \"fmu\"")
-    over = {}
+    own = cd.get("own", [])
+    if not (isinstance(own, list) and all(isinstance(x, str) for x in own)):
+        raise ScenarioError(f"{w}: field 'own' must be a list of parameter (or shared quantity) names")
+    over, sources = {}, {}
     if "overlay" in cd:
         if not isinstance(cd["overlay"], str):
             raise ScenarioError(f"{w}: field 'overlay' must be a file path string")
         try:
-            over.update(resolve_files(overlay_values(resolve_path(cd["overlay"], spath), cname)))
+            ov = overlay_values(resolve_path(cd["overlay"], spath), cname)
+            over.update(resolve_files(ov))
+            sources.update({key: f"{w} overlay {ov.path}" for key in ov.values})
         except ScenarioError as exc:
             raise ScenarioError(f"{w}: field 'overlay': {exc}") from None
     over.update({key: _file_value(key, v, spath) for key, v in cd.get("set", {}).items()})
+    sources.update({key: f"{w} set.{key}" for key in cd.get("set", {})})
     return ComponentSpec(cname, cd["type"], pf, over, dict(cd.get("start", {})),
-                         k, fmu, dict(cd.get("map", {})), rep)
+                         k, fmu, dict(cd.get("map", {})), rep, own=list(own), sources=sources)
 
 
-def _apply_overlays(specs: list[ComponentSpec], names: set, overlays) -> None:
-    """Merge ``--params`` overlays (``COMPONENT=FILE`` or a bare ``FILE``) into the specs' overrides."""
+def _shared_table(doc: dict, where: str) -> tuple[dict, dict]:
+    """The ``[shared]`` quantities of the scenario (names and types checked) and where each was declared."""
+    tbl = doc.get("shared") or {}
+    if not isinstance(tbl, dict):
+        raise ScenarioError(f"{where}: [shared] must be a table of quantity = value")
+    check = shared_quantities().check_value if tbl else None
+    shared = {key: check(key, v, f"{where}: [shared]") for key, v in tbl.items()}
+    return shared, {key: f"{where}: [shared] {key}" for key in tbl}
+
+
+def _apply_overlays(specs: list[ComponentSpec], names: set, overlays, shared: dict, shared_origins: dict) -> None:
+    """Merge ``--params`` overlays (``COMPONENT=FILE`` or a bare ``FILE``) into the specs' overrides; an
+    overlay's ``[shared]`` table into the scenario's shared quantities."""
     for item in overlays:
         comp, sep, f = str(item).partition("=")
         if not sep or (comp not in names and Path(str(item)).exists()):
             comp, f = "", str(item)          # a bare FILE (its path may contain '=')
         fpath = Path(f)
         try:
-            targets = [comp] if comp else [n for n in overlay_tables(fpath) if n in names]
+            tabs = overlay_tables(fpath) if not comp else {}
+            targets = [comp] if comp else [n for n in tabs if n in names]
             if comp and comp not in names:
                 raise ScenarioError(f"unknown component '{comp}'{_hint(comp, names)}")
-            if not targets:
+            if "shared" in tabs and "shared" not in names:   # the overlay's shared quantities
+                if not shared:
+                    raise ScenarioError(f"{fpath}: table [shared] gives shared quantities, but the scenario "
+                                        f"declares none (add [shared] vehicle = \"NAME\" to it)")
+                check = shared_quantities().check_value
+                for key, v in resolve_files(overlay_values(fpath, "shared")).items():
+                    shared[key] = check(key, v, f"{fpath}: [shared]")
+                    shared_origins[key] = f"--params '{item}' [shared] {key}"
+            if not targets and "shared" not in tabs:
                 raise ScenarioError(f"{fpath}: no table names a component of this scenario "
                                     f"({', '.join(sorted(names))}); give COMPONENT=FILE")
             for cname in targets:
@@ -559,6 +629,7 @@ def _apply_overlays(specs: list[ComponentSpec], names: set, overlays) -> None:
                 spec.overrides.update(vals)
                 # an error in one of these values names the overlay, not the component's parameter file
                 spec.origins.update({k: f"--params '{item}' ({fpath}, table [{cname}])" for k in vals})
+                spec.sources.update({key: f"--params '{item}' [{cname}] {key}" for key in vals})
         except ScenarioError as exc:
             raise ScenarioError(f"--params '{item}': {exc}") from None
 
@@ -666,8 +737,99 @@ def _argv_text(text: str) -> str:
     return text
 
 
+def _extend(doc: dict, spath: Path | None, where: str, depth: int = 0) -> dict:
+    """Merge a scenario that ``extends`` another over its base: the child states only what differs.
+
+    ``[scenario]``, ``[shared]``, ``[metrics]``, ``[connections]`` (by input) and each component's table
+    (its ``set`` and ``start`` tables key by key) are merged, the child's value winning; a component the
+    base lacks is added; ``[[faults]]`` are appended; ``[record]`` is the child's when it has one.  The
+    base is a bundled scenario's name (``extends = "hd_udds_mpc"``) or a scenario file relative to this one.
+    """
+    sc = doc.get("scenario", {})
+    ext = sc.get("extends")
+    if not isinstance(ext, str) or not ext:
+        raise ScenarioError(f"{where}: [scenario] field 'extends' must be a bundled scenario's name or a "
+                            f"scenario file path, got {ext!r}")
+    if depth > 8:
+        raise ScenarioError(f"{where}: [scenario] 'extends' chain longer than 8 (a cycle?)")
+    cand = resolve_path(ext, spath) if spath is not None else Path(ext)
+    base_path = cand if cand.is_file() else bundled_scenario(ext)
+    if base_path is None:
+        from .paths import bundled_scenarios
+        raise ScenarioError(f"{where}: [scenario] extends = '{ext}': no such scenario file nor bundled scenario "
+                            f"({', '.join(bundled_scenarios())})")
+    bwhere = str(base_path)
+    try:
+        base = tomllib.loads(base_path.read_text(encoding="utf-8-sig"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, OSError) as exc:
+        raise ScenarioError(f"{where}: [scenario] extends = '{ext}': {bwhere}: cannot read: {exc}") from None
+    _check_keys(base, _TOP, bwhere)
+    if "extends" in base.get("scenario", {}):
+        base = _extend(base, base_path, bwhere, depth + 1)
+    bundled = base_path.resolve().parent == (PROJECT_ROOT / "scenarios").resolve()
+    if not bundled:      # a user's base file: its relative paths are relative to it, not to the child
+        for cd in (base.get("components") or {}).values():
+            if not isinstance(cd, dict):
+                continue
+            for key in ("params", "fmu", "overlay"):
+                if isinstance(cd.get(key), str):
+                    p = resolve_path(cd[key], base_path)
+                    if p.exists():
+                        cd[key] = str(p)
+            if isinstance(cd.get("set"), dict):
+                cd["set"] = {k: _file_value(k, v, base_path) for k, v in cd["set"].items()}
+    out = dict(base)
+    bsc = dict(base.get("scenario", {}))
+    bsc.pop("extends", None)
+    bsc.pop("name", None)
+    out["scenario"] = {**bsc, **{k: v for k, v in sc.items() if k != "extends"}}
+    for tbl in ("shared", "metrics", "connections"):
+        if tbl in doc or tbl in base:
+            b, c = base.get(tbl, {}), doc.get(tbl, {})
+            if not isinstance(b, dict) or not isinstance(c, dict):
+                raise ScenarioError(f"{where}: [{tbl}] must be a table")
+            out[tbl] = {**b, **c}
+    comps = {k: dict(v) for k, v in (base.get("components") or {}).items() if isinstance(v, dict)}
+    for cname, cd in (doc.get("components") or {}).items():
+        if not isinstance(cd, dict):
+            raise ScenarioError(f"{where}: [components.{cname}] must be a table")
+        if cname in comps and cd.get("type", comps[cname].get("type")) == comps[cname].get("type"):
+            merged = {**comps[cname], **cd}
+            for sub in ("set", "start", "map"):
+                if isinstance(comps[cname].get(sub), dict) and isinstance(cd.get(sub), dict):
+                    merged[sub] = {**comps[cname][sub], **cd[sub]}
+            comps[cname] = merged
+        else:
+            comps[cname] = dict(cd)
+    out["components"] = comps
+    out["faults"] = list(base.get("faults", [])) + list(doc.get("faults", []))
+    if not out["faults"]:
+        del out["faults"]
+    if "record" in doc:
+        out["record"] = doc["record"]
+    return out
+
+
+def _data_name(p: Path | str) -> str:
+    """A path under the bundled data folder as its portable name (``components/vehicle/matv.toml``, the
+    form scenario files use), else the absolute path."""
+    p = Path(p)
+    try:
+        return p.resolve().relative_to(PROJECT_ROOT.resolve()).as_posix()
+    except ValueError:
+        return str(p)
+
+
+def _portable(key: str, v: Any) -> Any:
+    if isinstance(v, str) and key.endswith("_file") and Path(v).is_absolute():
+        if key == "cycle_file" and Path(v).parent.resolve() == (PROJECT_ROOT / "cycles").resolve():
+            return Path(v).stem        # a bundled cycle by name
+        return _data_name(v)
+    return v
+
+
 #: names of the tables ``--set``/overrides address besides components (so no component may take them)
-RESERVED = {"scenario": _SCEN, "record": _RECORD, "metrics": None}
+RESERVED = {"scenario": _SCEN, "record": _RECORD, "metrics": None, "shared": None}
 
 
 def _check_component_name(name: str, where: str) -> None:
@@ -705,6 +867,16 @@ def apply_override(scen: "Scenario", key: str, value: Any, origin: str, base: Pa
         return
     if head == "metrics":
         scen.metrics.update(check_metrics_options({name: value}, f"{origin}: [metrics]"))
+        return
+    if head == "shared":
+        if value is None:
+            scen.shared.pop(name, None)
+            scen.shared_origins.pop(name, None)
+            return
+        if name.endswith("_file") and isinstance(value, str):
+            value = _file_value(name, value, scen.path if base == "scenario" else None)
+        scen.shared[name] = shared_quantities().check_value(name, value, origin)
+        scen.shared_origins[name] = origin
         return
     names = [c.name for c in scen.components]
     if head not in names:
@@ -766,7 +938,9 @@ def _set_scenario_field(scen: "Scenario", name: str, value: Any, origin: str) ->
 
 
 def scenario_to_toml(sc: "Scenario") -> str:
-    """TOML text of a scenario as it stands (paths absolute); loads back into an equal scenario."""
+    """TOML text of a scenario as it stands; loads back into an equal scenario.  Bundled data are named
+    by their path in the data folder (``components/vehicle/matv.toml``, ``cycle_file = "hd_udds"``), so the
+    text runs on any installation; a user's own files keep their absolute paths."""
     out = ["[scenario]", f"name = {toml_value(sc.name)}"]
     if sc.description:
         out.append(f"description = {toml_value(sc.description)}")
@@ -776,12 +950,16 @@ def scenario_to_toml(sc: "Scenario") -> str:
         out.append(f"stop_s = {toml_value(float(sc.stop_s))}")
     if sc.order:
         out.append(f"order = {toml_value(list(sc.order))}")
+    if sc.shared:
+        out += ["", "[shared]"] + [f"{toml_key(k)} = {toml_value(_portable(k, v))}" for k, v in sc.shared.items()]
     for c in sc.components:
         out += ["", f"[components.{toml_key(c.name)}]", f"type = {toml_value(c.type)}"]
         if c.params_file is not None:
-            out.append(f"params = {toml_value(str(c.params_file))}")
+            out.append(f"params = {toml_value(_data_name(c.params_file))}")
         if c.fmu is not None:
-            out.append(f"fmu = {toml_value(str(c.fmu))}")
+            out.append(f"fmu = {toml_value(_data_name(c.fmu))}")
+        if c.own:
+            out.append(f"own = {toml_value(list(c.own))}")
         if c.mapping:
             out.append(f"map = {toml_value(c.mapping)}")
         if c.replaces:
@@ -789,7 +967,7 @@ def scenario_to_toml(sc: "Scenario") -> str:
         if c.step_multiple != 1:
             out.append(f"step_multiple = {c.step_multiple}")
         if c.overrides:
-            out.append(f"set = {toml_value(c.overrides)}")
+            out.append(f"set = {toml_value({k: _portable(k, v) for k, v in c.overrides.items()})}")
         if c.start:
             out.append(f"start = {toml_value(c.start)}")
     if sc.connections:
@@ -839,8 +1017,53 @@ def component_seed(scenario_seed: int, name: str) -> int:
     return (scenario_seed * 1_000_003 + zlib.crc32(name.encode())) % (2**31 - 1)
 
 
-def instantiate(spec: ComponentSpec, scenario: Scenario):
-    """Create one component from its spec."""
+def _file_params(spec: ComponentSpec) -> dict:
+    """The ``[params]`` a component's parameter file states (``*_file`` values absolute), ``{}`` without."""
+    if spec.params_table is not None:        # captured (a study's bundle): paths already absolute
+        return dict(spec.params_table)
+    if spec.params_file is None or not Path(spec.params_file).is_file():
+        return {}
+    from .params import _read_param_toml
+    prm = _read_param_toml(Path(spec.params_file)).get("params", {})
+    if not isinstance(prm, dict):
+        return {}
+    base = Path(spec.params_file).parent
+    return {k: (str((base / v).resolve()) if k.endswith("_file") and isinstance(v, str) and v
+                and not Path(v).is_absolute() else v) for k, v in prm.items()}
+
+
+def shared_params(scenario: Scenario) -> tuple[dict[str, dict[str, Any]], dict[str, dict[str, str]]]:
+    """What the scenario's shared quantities give each component (``{name: {param: value}}``) and where
+    each value came from; checks that no component-level value contradicts them
+    (:mod:`shevsim.components.shared`)."""
+    try:
+        r = shared_quantities().resolve(scenario, _file_params)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{scenario.path or '<scenario>'}: [shared]: {exc}") from None
+    return ({}, {}) if r is None else (r.params, r.sources)
+
+
+def shared_metrics(scenario: Scenario) -> dict[str, Any]:
+    """Metric options the shared quantities set (``fuel_density_kg_per_l``); a ``[metrics]`` value that
+    contradicts one is an error naming both."""
+    sq = shared_quantities()
+    r = sq.resolve(scenario, _file_params)
+    if r is None:
+        return {}
+    out = {}
+    for k, (v, origin) in r.metrics.items():
+        if k in scenario.metrics and not sq.same(scenario.metrics[k], v):
+            raise ScenarioError(f"{scenario.path or '<scenario>'}: [metrics] {k} = {scenario.metrics[k]!r} "
+                                f"contradicts the shared quantity {k} = {v!r} ({origin}); declare it once, as "
+                                f"shared.{k}")
+        out[k] = v
+    return out
+
+
+def instantiate(spec: ComponentSpec, scenario: Scenario, injected: dict[str, Any] | None = None,
+                sources: dict[str, str] | None = None):
+    """Create one component from its spec; ``injected``: values from the shared quantities (below the
+    spec's own overrides, above its parameter file), ``sources`` where each came from."""
     where = f"{scenario.path or '<scenario>'}: [components.{spec.name}]"
     if spec.type == "fmu":
         comp = fmu_component(spec, scenario, where)
@@ -848,7 +1071,7 @@ def instantiate(spec: ComponentSpec, scenario: Scenario):
         cls = component_class(spec.type, where)
         params = None
         if cls.Params is not None:
-            over = dict(spec.overrides)
+            over = {**(injected or {}), **spec.overrides}
             fields = {f.name for f in dataclasses.fields(cls.Params)}
             if "seed" in fields and "seed" not in over:
                 over["seed"] = component_seed(scenario.seed, spec.name)
@@ -856,8 +1079,9 @@ def instantiate(spec: ComponentSpec, scenario: Scenario):
                 params = load_params(cls.Params, spec.params_file, over, table=spec.params_table)
             except ScenarioError as exc:
                 _blame_override(cls, spec, over, exc)
+                _blame_injected(cls, spec, injected or {}, sources or {})
                 raise ScenarioError(f"{where}: {exc}") from None
-        elif spec.overrides:
+        elif spec.overrides or injected:
             raise ScenarioError(f"{where}: component type '{spec.type}' takes no parameters")
         try:
             comp = cls(spec.name, params)
@@ -874,6 +1098,22 @@ def instantiate(spec: ComponentSpec, scenario: Scenario):
             raise ScenarioError(f"{where}: field 'start.{port}' must be a number")
         comp.u[port] = float(val)
     return comp
+
+
+def _blame_injected(cls, spec: ComponentSpec, injected: dict, sources: dict) -> None:
+    """When a value from the shared quantities makes a component's parameters invalid, name where the
+    shared value came from (``--set vehicle.mass_kg=...`` lifted, ``[shared] mass_kg``)."""
+    for key, v in injected.items():
+        if key in spec.overrides:
+            continue
+        try:
+            load_params(cls.Params, spec.params_file, {key: v})
+        except ScenarioError as e2:
+            msg = str(e2)
+            if spec.params_file is not None:
+                msg = msg.replace(f"{spec.params_file}: ", "")
+            msg = msg.replace("<overrides>: ", "").replace("<parameters>: ", "")
+            raise ScenarioError(f"{sources.get(key, 'shared quantities')}: component '{spec.name}': {msg}") from None
 
 
 def _blame_override(cls, spec: ComponentSpec, over: dict, exc: ScenarioError) -> None:
@@ -897,7 +1137,8 @@ def _blame_override(cls, spec: ComponentSpec, over: dict, exc: ScenarioError) ->
 
 def build_master(scenario: Scenario) -> Master:
     """Instantiate the components and the master of a scenario (connections checked)."""
-    comps = [instantiate(s, scenario) for s in scenario.components]
+    inj, src = shared_params(scenario)
+    comps = [instantiate(s, scenario, inj.get(s.name), src.get(s.name)) for s in scenario.components]
     where = scenario.path or '<scenario>'
     try:
         m = Master(comps, scenario.connections, scenario.settings,
@@ -909,6 +1150,19 @@ def build_master(scenario: Scenario) -> Master:
             if c.dst == spec.name and c.dst_port in spec.start:
                 raise ScenarioError(f"{where}: [components.{spec.name}] field 'start.{c.dst_port}': the input is "
                                     f"connected to {c.src}.{c.src_port}, so its start value is never used")
+    connected = {(c.dst, c.dst_port) for c in scenario.connections}
+    for spec, comp in zip(scenario.components, comps):   # an input nobody drives must have a declared default
+        fn = getattr(comp, "defaulted_inputs", None)
+        if fn is None:
+            continue
+        free = fn()
+        for v in comp.variables():
+            if v.causality == "input" and (spec.name, v.name) not in connected and v.name not in free \
+                    and v.name not in spec.start:
+                raise ScenarioError(f"{where}: [components.{spec.name}] input '{v.name}' ({v.unit}, {v.description}) "
+                                    f"is not connected and the component declares no default for it: connect it in "
+                                    f"[connections] (\"{spec.name}.{v.name}\" = \"COMPONENT.OUTPUT\") or give it a "
+                                    f"value in [components.{spec.name}] start")
     step = scenario.settings.step_s
     for spec, comp in zip(scenario.components, comps):   # a sampled controller must get its own step
         pname = getattr(comp, "SAMPLE_TIME_PARAM", None)

@@ -95,7 +95,7 @@ from __future__ import annotations
 
 import math
 
-from .maps import load_curve_csv, load_grid_csv
+from .maps import load_curve_csv, load_grid_csv, scaled_curve, scaled_grid
 from shevsim.core.paths import DATA_ROOT
 
 ROOT = DATA_ROOT
@@ -119,6 +119,38 @@ class EngineGenMaps:
         self.ool_fuel = load_curve_csv(ool_file, "elec_power_w", "fuel_gps")
         self.p_max_w = float(self.ool_speed.x[-1])
         self.w_min = float(self.fuel.x[0])
+
+    def scaled(self, k: float) -> "EngineGenMaps":
+        """The maps of an engine-generator ``k`` times as powerful (rated power x ``k``), by the rule
+        of Autonomie and FASTSim (maps normalised by rated power; speeds unchanged):
+
+        * engine: torque axes and full-load torque x k; fuel rate x k at (speed, torque x k), so the
+          brake-specific fuel consumption at the same speed and relative load is unchanged;
+          the torque map torque(speed, fuel) gets both axes' scaled values; full-load fuel x k;
+        * soot map x k at (speed, torque x k) (soot per fuel unchanged);
+        * generator: efficiency at (speed, torque x k) unchanged; max torque x k;
+        * optimal operating line: electrical and shaft power x k, fuel x k, speed unchanged.
+
+        ``k = 1`` gives maps equal to these (every array multiplied by 1.0: exact).
+        """
+        import copy
+        k = float(k)
+        if not (k > 0.0 and math.isfinite(k)):
+            raise ValueError(f"engine-generator power scale must be a finite number > 0, got {k!r}")
+        m = copy.copy(self)
+        m.fuel = scaled_grid(self.fuel, k, k)
+        m.torque = scaled_grid(self.torque, k, k)
+        m.tmax = scaled_curve(self.tmax, 1.0, k)
+        m.fmax = scaled_curve(self.fmax, 1.0, k)
+        m.soot = scaled_grid(self.soot, k, k)
+        m.geff = scaled_grid(self.geff, k, 1.0)
+        m.gmax = scaled_curve(self.gmax, 1.0, k)
+        m.ool_speed = scaled_curve(self.ool_speed, k, 1.0)
+        m.ool_shaft = scaled_curve(self.ool_shaft, k, k)
+        m.ool_fuel = scaled_curve(self.ool_fuel, k, k)
+        m.p_max_w = float(m.ool_speed.x[-1])
+        m.w_min = float(m.fuel.x[0])
+        return m
 
     @classmethod
     def default(cls) -> "EngineGenMaps":

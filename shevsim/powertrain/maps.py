@@ -274,6 +274,18 @@ def load_grid_csv(path, xcol: str, ycol: str, zcol: str, extrapolation="clamp") 
     return Grid2D(xs, ys, z, extrapolation, name=f"{path}:{zcol}")
 
 
+def scaled_curve(c: Curve, kx: float = 1.0, ky: float = 1.0) -> Curve:
+    """``c`` with its axis times ``kx`` and its values times ``ky`` (same extrapolation); exact at 1."""
+    return Curve(c.x * float(kx), c.y * float(ky), c.mode, name=c.name)
+
+
+def scaled_grid(g: Grid2D, ky: float = 1.0, kz: float = 1.0) -> Grid2D:
+    """``g`` with its second axis times ``ky`` and its values times ``kz`` (first axis, extrapolation kept);
+    exact at 1.  The rating rule of :mod:`shevsim.powertrain.engine` / :mod:`shevsim.components.motor`:
+    a machine ``k`` times as powerful has, at the same speed, ``k`` times the torque (and fuel, soot)."""
+    return Grid2D(g.x, g.y * float(ky), g.z * float(kz), (g.mode_x, g.mode_y), name=g.name)
+
+
 def write_long_csv(path, header_lines: list[str], columns: dict[str, np.ndarray], fmt: str = "%.8g") -> None:
     """Write a long-format CSV with a ``#`` provenance header."""
     path = Path(path)

@@ -125,11 +125,35 @@ def tokenize_scenario(sc, blobs: dict, seen: dict | None = None) -> None:
         spec.overrides = _tokenize_table(spec.overrides, w, blobs, None, seen)
         if spec.fmu is not None and not is_token(str(spec.fmu)):
             spec.fmu = _tokenize(str(spec.fmu), f"{w}: field 'fmu'", blobs, seen)
+    _capture_shared(sc, blobs, seen)
+
+
+def _capture_shared(sc, blobs: dict, seen: dict | None) -> None:
+    """The scenario's ``[shared]`` quantities resolved on the client: the vehicle's (and its cell's, fuel's)
+    values become ``sc.shared_base``, the declared ones ``sc.shared`` (names of cell/fuel sets expanded),
+    every ``*_file`` value a token - a worker reads no vehicle or cell file of the client's."""
+    if not sc.shared and not sc.shared_base:
+        return
+    from ..core.registry import shared_quantities
+    from ..core.scenario import _file_params
+    if not sc.shared_base or "vehicle" in sc.shared:
+        r = shared_quantities().resolve(sc, _file_params)
+        veh = r.vehicle
+        sc.shared_base = {q: v for q, (v, _) in r.values.items() if q not in r.explicit and q not in r.lifted}
+        declared = {q: r.values[q][0] for q in r.explicit if q in r.values}
+        sc.shared = {**{k: v for k, v in sc.shared.items() if k not in ("vehicle", "cell", "fuel")}, **declared}
+        if veh is not None:           # the vehicle's own values for its component types (below overrides)
+            for spec in sc.components:
+                for k, v in veh.components.get(spec.type, {}).items():
+                    spec.overrides.setdefault(k, v)
+    w = f"{sc.path or '<scenario>'}: [shared]"
+    sc.shared_base = _tokenize_table(sc.shared_base, w, blobs, None, seen)
+    sc.shared = _tokenize_table(sc.shared, w, blobs, None, seen)
 
 
 def tokens_of(sc) -> list[str]:
     """Every token in a captured scenario."""
-    out = []
+    out = [v for d in (sc.shared, sc.shared_base) for v in d.values() if is_token(v)]
     for spec in sc.components:
         for d in (spec.params_table or {}, spec.overrides):
             out += [v for v in d.values() if is_token(v)]
@@ -144,6 +168,7 @@ def describe(sc) -> dict:
     st.pop("progress", None)
     return {"name": sc.name, "settings": st, "stop_s": sc.stop_s, "t0_s": sc.t0_s, "seed": sc.seed,
             "order": sc.order, "record": sc.record, "metrics": sc.metrics,
+            "shared": sc.shared, "shared_base": sc.shared_base,
             "components": [{"name": c.name, "type": c.type, "params": c.params_table, "set": c.overrides,
                             "start": c.start, "step_multiple": c.step_multiple,
                             "fmu": None if c.fmu is None else str(c.fmu), "map": c.mapping,
@@ -272,6 +297,7 @@ def localize(sc, paths: dict[str, str]):
     def loc(d):
         return {k: (paths[v] if is_token(v) else v) for k, v in d.items()}
 
+    sc.shared, sc.shared_base = loc(sc.shared), loc(sc.shared_base)
     for spec in sc.components:
         if spec.params_table is not None:
             spec.params_table = loc(spec.params_table)

@@ -14,7 +14,7 @@ def _load(name, monkeypatch):
 
 def test_every_example_is_tested():
     assert sorted(p.name for p in EXAMPLES.glob("*.py")) == \
-        ["calibrate_cell.py", "compare_vehicles.py", "parameter_sweep.py"]
+        ["bus_vs_matv.py", "calibrate_cell.py", "compare_vehicles.py", "parameter_sweep.py"]
 
 
 def test_compare_vehicles(tmp_path, monkeypatch):
@@ -25,6 +25,20 @@ def test_compare_vehicles(tmp_path, monkeypatch):
     assert light.metrics["distance_km"] == pytest.approx(heavy.metrics["distance_km"], rel=0.01)
     assert light.metrics["fuel_mass_g"] < heavy.metrics["fuel_mass_g"]
     assert (tmp_path / "compare_vehicles.png").stat().st_size > 10_000
+
+
+def test_bus_vs_matv(tmp_path, monkeypatch):
+    mod = _load("bus_vs_matv.py", monkeypatch)
+    text = mod["BUS"].strip().splitlines()
+    assert len([x for x in text if x.strip() and not x.strip().startswith("#")]) <= 20   # a bus in ~20 lines
+    runs = mod["main"](tmp_path)
+    bus, matv = runs.values()
+    assert bus.termination == "completed" and matv.termination == "completed"
+    assert bus.parameters["engine_generator"]["rated_power_w"] == 150000.0
+    assert bus.parameters["driver"]["mass_kg"] == 12000.0
+    assert bus.metrics["distance_km"] == pytest.approx(matv.metrics["distance_km"], rel=0.01)
+    # a smaller engine, 3.5 t lighter: less fuel on the same trace
+    assert bus.metrics["fuel_mass_g"] < matv.metrics["fuel_mass_g"]
 
 
 def test_parameter_sweep(tmp_path, monkeypatch):

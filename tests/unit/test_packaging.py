@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-FOLDERS = ("components", "cycles", "scenarios", "fmus")
+FOLDERS = ("components", "cycles", "scenarios", "fmus", "vehicles")
 
 
 def test_pyproject_ships_every_data_folder_inside_the_package():
@@ -113,3 +113,8 @@ def test_wheel_in_a_fresh_venv_runs_from_an_empty_folder(tmp_path):
     lines = run(str(py), "-c", SCRIPT).splitlines()
     assert lines[0].startswith(str(venv)), lines
     assert lines[1] == "completed 1201 m/s True"
+    # a scenario saved by this checkout (Scenario.to_toml) runs in the other installation
+    from shevsim.core.scenario import load_scenario
+    (work / "saved.toml").write_text(load_scenario("hd_udds_rule").use(vehicle="city_bus").to_toml())
+    run(str(exe), "run", str(work / "saved.toml"), "-s", "scenario.stop_s=30", "-q", "-o", "res2", "--no-plots")
+    assert (work / "res2" / "timeseries.parquet").is_file()

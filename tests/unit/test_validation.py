@@ -102,6 +102,8 @@ def test_shipped_parameter_files_are_valid():
         kind = f.parent.name
         if kind == "supervisor":
             kind = "mpc_supervisor" if "mpc" in f.stem else "rule_supervisor"
+        if kind == "cell":      # a cell set: the BMS's nominal cell model has every cell field
+            kind = "bms"
         load_params(get_component_class(kind).Params, f)
 
 
