@@ -55,3 +55,7 @@ def test_calibrate_cell_on_the_shipped_measured_data(tmp_path, monkeypatch):
     before, after = rep["rmse_before"]["voltage_v"]["holdout"], rep["rmse_after"]["voltage_v"]["holdout"]
     assert 0 < after <= before < 0.1          # volts: held-out error not worse after the calibration
     assert (tmp_path / "calibration" / "params.toml").is_file()
+    # the record's voltage limits travel to the scenario's BMS through the overlay's [shared] table (issue 25)
+    from shevsim.core.overlay import overlay_tables
+    assert overlay_tables(tmp_path / "calibration" / "params.toml")["shared"] == {"cell_v_min_v": 2.5,
+                                                                               "cell_v_max_v": 4.2}
