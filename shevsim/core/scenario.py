@@ -470,7 +470,7 @@ def load_scenario(path: str | Path | None = None, sets: list[str] | tuple = (), 
         raise ScenarioError(f"{where}: [scenario] {exc}") from None
     specs = _component_specs(doc, spath, where)
     names = {s.name for s in specs}
-    shared, shared_origins = _shared_table(doc, where)
+    shared, shared_origins = _shared_table(doc, spath, where)
     _apply_overlays(specs, names, overlays, shared, shared_origins)
     conns = _connections(doc, names, where)
     faults = _faults(doc, names, where)
@@ -589,13 +589,14 @@ def _component_spec(cname: str, cd: dict, spath: Path | None, w: str) -> Compone
                          k, fmu, dict(cd.get("map", {})), rep, own=list(own), sources=sources)
 
 
-def _shared_table(doc: dict, where: str) -> tuple[dict, dict]:
-    """The ``[shared]`` quantities of the scenario (names and types checked) and where each was declared."""
+def _shared_table(doc: dict, spath: Path | None, where: str) -> tuple[dict, dict]:
+    """The ``[shared]`` quantities of the scenario (names and types checked; ``*_file`` paths relative to the
+    scenario's folder) and where each was declared."""
     tbl = doc.get("shared") or {}
     if not isinstance(tbl, dict):
         raise ScenarioError(f"{where}: [shared] must be a table of quantity = value")
     check = shared_quantities().check_value if tbl else None
-    shared = {key: check(key, v, f"{where}: [shared]") for key, v in tbl.items()}
+    shared = {key: check(key, _file_value(key, v, spath), f"{where}: [shared]") for key, v in tbl.items()}
     return shared, {key: f"{where}: [shared] {key}" for key in tbl}
 
 
