@@ -113,6 +113,10 @@ DERIVED: dict[str, tuple[str, ...]] = {
     "bms": ("v2_model",),
 }
 
+#: derived values that replace the component's default without being a contradiction: the BMS's
+#: ``v2_model = "nominal_maps"`` is its design for a two-branch cell; a cell without the branch has none
+_FOLLOWS = {"v2_model"}
+
 FUELS = {"diesel": {"fuel_lhv_j_per_g": 42600.0,          # ADVISOR fc_fuel_lhv
                     "fuel_density_kg_per_l": 3.167 / 3.78541}}   # = shevsim.metrics.DIESEL_DENSITY_KG_PER_L (GREET)
 
@@ -414,7 +418,7 @@ def resolve(scenario, file_params) -> Resolution | None:
         # a component-level value that contradicts: its file, or an override of a derived parameter
         fvals = file_params(spec)
         for param, v in inj.items():
-            if param not in src or src[param].startswith("vehicle '"):
+            if param not in src or src[param].startswith("vehicle '") or param in _FOLLOWS:
                 continue          # a vehicle's own value for this component type: above the file
             if param in spec.overrides and not _same(spec.overrides[param], v) and \
                     param not in IDENTITY.get(spec.type, {}):

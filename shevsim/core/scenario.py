@@ -885,6 +885,11 @@ def apply_override(scen: "Scenario", key: str, value: Any, origin: str, base: Pa
     if not name:
         raise ScenarioError(f"{origin}: missing parameter name after '{head}.'")
     spec = next(c for c in scen.components if c.name == head)
+    if name == "own":         # the component keeps these parameters instead of the shared quantities
+        if not (isinstance(value, (list, tuple)) and all(isinstance(x, str) for x in value)):
+            raise ScenarioError(f"{origin}: {head}.own must be a list of parameter (or shared quantity) names")
+        spec.own = list(value)
+        return
     spec.overrides[name] = _file_value(name, value, scen.path if base == "scenario" else None)
     spec.origins[name] = origin
 

@@ -172,7 +172,7 @@ def describe(sc) -> dict:
             "components": [{"name": c.name, "type": c.type, "params": c.params_table, "set": c.overrides,
                             "start": c.start, "step_multiple": c.step_multiple,
                             "fmu": None if c.fmu is None else str(c.fmu), "map": c.mapping,
-                            "replaces": c.replaces} for c in sc.components],
+                            "replaces": c.replaces, "own": sorted(c.own)} for c in sc.components],
             "connections": [str(c) for c in sc.connections],
             "faults": [dataclasses.asdict(f) for f in sc.faults]}
 

@@ -53,7 +53,8 @@ def test_plant_limit_stop_keeps_the_trajectory_and_exits_1(tmp_path, capsys):
     for engine in ("python", "auto"):   # auto: the compiled fast path when eligible; same stop expected
         out = tmp_path / engine
         code = main(["run", "hd_udds_rule", "-o", str(out), "-q", "--no-plots", "-s", "cycle.repeat=1", "--engine",
-                     engine, "-s", "battery.soc_init_pct=3", "-s", "battery.capacity_ah=0.05"])
+                     engine, "-s", "battery.soc_init_pct=3", "-s", "battery.capacity_ah=0.05",
+                     "-s", 'bms.own=["capacity_ah"]'])   # the BMS keeps its own (A123) capacity (issue 25)
         assert code == 1
         err = capsys.readouterr().err
         assert "stopped" in err and "component battery" in err and str(out) in err
