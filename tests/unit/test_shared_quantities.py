@@ -356,3 +356,19 @@ def test_vehicle_only_scenario_refused_not_run_to_zero_distance():
     ok = text + "start = { traction_force_n = 1000.0 }\n"
     r = build_master(load_scenario(text=ok)).run(10.0)
     assert r.termination.status == "completed"
+
+
+# --------------------------------------------------------------- studies: the key sees the shared quantities
+def test_study_evaluation_key_and_run_carry_shared_quantities():
+    """A study's evaluation captures the resolved shared quantities (values, cell tables by content): a
+    shared change changes the key, equal inputs by any route give equal keys, the captured run uses them."""
+    from shevsim.studies.evaluate import Evaluation
+    scen = DATA_ROOT / "scenarios" / "hd_udds_rule.toml"
+    a = Evaluation.make(scen, {"shared.mass_kg": 12000.0}, stop_s=80.0, final_signals=("vehicle.distance_m",))
+    b = Evaluation.make(scen, {"shared.mass_kg": 13000.0}, stop_s=80.0, final_signals=("vehicle.distance_m",))
+    c = Evaluation.make(scen, {}, stop_s=80.0, final_signals=("vehicle.distance_m",))
+    assert len({a.key(), b.key(), c.key()}) == 3
+    assert Evaluation.make(scen, {"shared.mass_kg": 12000.0}, stop_s=80.0,
+                           final_signals=("vehicle.distance_m",)).key() == a.key()
+    out = a.run()
+    assert out["termination"] == "completed" and out["final:vehicle.distance_m"] > 10.0
