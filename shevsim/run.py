@@ -24,8 +24,8 @@ import numpy as np
 
 from .core.errors import FastPathError, ScenarioError, ShevsimError, SimulationError
 from .core.results import Result, Termination, beside_folder, check_out_dir, git_commit, holds_result, save_result
-from .core.scenario import PROJECT_ROOT, Scenario, build_master, check_metrics_options, load_scenario,
-                            shared_metrics, stop_time
+from .core.scenario import (PROJECT_ROOT, Scenario, build_master, check_metrics_options, load_scenario,
+                            shared_metrics, stop_time)
 
 log = logging.getLogger(__name__)
 
@@ -392,7 +392,6 @@ def compute_run_metrics(res: Result, scenario: Scenario | None = None) -> dict:
     from .metrics import result_metrics
     opts = None
     if scenario is not None:
-        from .core.scenario import shared_metrics
         try:
             opts = {**shared_metrics(scenario), **scenario.metrics}   # the fuel's density from [shared]
         except ShevsimError:
