@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-FOLDERS = ("components", "cycles", "scenarios", "fmus", "vehicles")
+FOLDERS = ("components", "cycles", "scenarios", "fmus", "vehicles", "data/measured")
 
 
 def test_pyproject_ships_every_data_folder_inside_the_package():
