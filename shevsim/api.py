@@ -70,7 +70,7 @@ def simulate(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | Non
     allow_large : bool
         Run even when the record or duration estimate exceeds what this machine holds.
     vehicle, cycle : str, optional
-        Run the scenario's powertrain and supervisors on a bundled vehicle (:func:`vehicles`, e.g.
+        Run the scenario's powertrain and supervisors on a bundled vehicle (`shevsim.vehicles()`, e.g.
         ``"city_bus"``) or a vehicle file, and/or on a bundled cycle (``"orange_county_bus"``) or a
         cycle CSV.
 

@@ -426,7 +426,7 @@ def run(scenario: str | Path | Scenario | None = None, overrides: Mapping[str, A
 
     ``vehicle`` (a bundled vehicle's name or a vehicle file) and ``cycle`` (a bundled cycle's name or a
     CSV) run the scenario's powertrain and supervisors on another vehicle / drive cycle
-    (:meth:`Scenario.use`).
+    (`Scenario.use`).
 
     Stopped runs are returned (and saved) with their termination; they do not raise.
     ``res.meta["out"]`` is the folder written (when saved); ``fmt`` is the trajectory's format there

@@ -183,7 +183,7 @@ class ComponentSpec:
     #: bundle, `shevsim.studies.bundle`): when set, ``params_file`` is named in messages but not read
     params_table: dict[str, Any] | None = None
     #: parameters (or shared quantity names, ``"cell"``) this component keeps as its own instead of the
-    #: scenario's shared quantities (:mod:`shevsim.components.shared`), e.g. a mismatched BMS
+    #: scenario's shared quantities (`shevsim.components.shared`), e.g. a mismatched BMS
     own: list[str] = field(default_factory=list)
     #: where a scenario ``set`` or overlay value came from (named by the shared-quantity checks)
     sources: dict[str, str] = field(default_factory=dict)
@@ -1041,7 +1041,7 @@ def _file_params(spec: ComponentSpec) -> dict:
 def shared_params(scenario: Scenario) -> tuple[dict[str, dict[str, Any]], dict[str, dict[str, str]]]:
     """What the scenario's shared quantities give each component (``{name: {param: value}}``) and where
     each value came from; checks that no component-level value contradicts them
-    (:mod:`shevsim.components.shared`)."""
+    (`shevsim.components.shared`)."""
     try:
         r = shared_quantities().resolve(scenario, _file_params)
     except ScenarioError as exc:
