@@ -86,7 +86,8 @@ def test_metrics_table_rows_are_distinct(shev):
     tab = shevsim.metrics_table([shev, heavy, again], ["distance_km", "fuel_mass_g"])
     idx = list(tab.index)
     assert len(set(idx)) == 3, idx
-    assert idx[1] == "hd_udds_rule (vehicle.mass_kg=20000)" and idx[0].startswith("hd_udds_rule (vehicle.mass_kg=")
+    assert idx[1].startswith("hd_udds_rule (") and "vehicle.mass_kg=20000" in idx[1], idx   # what differs
+    assert idx[0].startswith("hd_udds_rule (") and "vehicle.mass_kg=" in idx[0], idx
     assert idx[2] != idx[0]                                          # same parameters: numbered apart
     assert tab.attrs["units"]["fuel_mass_g"] == "g"
     assert tab.loc[idx[1], "fuel_mass_g"] > tab.loc[idx[0], "fuel_mass_g"]   # heavier: more fuel
