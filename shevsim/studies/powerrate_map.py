@@ -279,7 +279,9 @@ def plot_rate_maps(summary: dict, path: Path) -> None:
                         label="narrowed by GA" if i == 0 else None)
     for row in summary["top_solutions"][1:]:
         ax.plot(*_step(edges, row["rates_wps"]), color="0.45", lw=0.9, alpha=0.8)
-    ax.plot(*_step(edges, summary["best_map"]["rates_wps"]), color="tab:blue", lw=2.2, label="optimal map (ES)")
+    kind = summary["best_map"].get("kind", "map")
+    ax.plot(*_step(edges, summary["best_map"]["rates_wps"]), color="tab:blue", lw=2.2,
+            label="best: a constant limit (no map beat it)" if kind == "constant" else "best map (ES)")
     if summary["best_constant"]:
         r = summary["best_constant"]["rate_wps"] / 1e3
         ax.axhline(r, color="tab:red", ls="--", lw=1.2, label=f"best constant limit ({r:g} kW/s)")
@@ -297,11 +299,15 @@ def plot_comparison(summary: dict, path: Path) -> None:
     """Fig. A.4 analogue: fuel-economy and soot change of the top maps and the best constant limit."""
     from shevsim.plotting import headless_pyplot
     plt = headless_pyplot()
-    rows = [(f"#{r['rank']}", r) for r in summary["top_solutions"]]
+    best = summary["best_map"]
+    kind = best.get("kind", "map")
+    rows = [("best" if kind == "map" else "best (constant)", best)]
+    rows += [(f"#{r['rank']}", r) for r in summary["top_solutions"] if r["rates_wps"] != best["rates_wps"]][:7]
     if summary["best_constant"]:
         rows.append((f"const {summary['best_constant']['rate_wps'] / 1e3:g}", summary["best_constant"]))
     labels = [l for l, _ in rows]
-    colors = ["tab:blue"] + ["0.55"] * (len(summary["top_solutions"]) - 1) + (["tab:red"] if summary["best_constant"] else [])
+    colors = ["tab:blue"] + ["0.55"] * (len(rows) - 1 - bool(summary["best_constant"])) \
+        + (["tab:red"] if summary["best_constant"] else [])
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
     a1.bar(labels, [r["fe_change_pct"] for _, r in rows], color=colors)
     a1.axhline(-100 * summary["config"]["fe_loss_max_frac"], color="k", ls=":", lw=1, label="constraint")
@@ -309,7 +315,8 @@ def plot_comparison(summary: dict, path: Path) -> None:
     a1.legend(fontsize=8)
     a2.bar(labels, [r["soot_change_pct"] for _, r in rows], color=colors)
     a2.set_ylabel("soot change (%)")
-    a1.set_title("Top maps vs baseline (blue: optimal; red: best constant limit)")
+    a1.set_title("Top maps vs baseline (blue: the reported best" + (", a constant limit" if kind == "constant" else "")
+                 + "; red: best constant limit)")
     for a in (a1, a2):
         a.grid(alpha=0.3, axis="y")
         a.axhline(0, color="k", lw=0.6)

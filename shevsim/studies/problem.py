@@ -37,23 +37,25 @@ SOOT_KEY = "soot_g_per_km"
 #: soot on the fuel economy's Delta-SOC-corrected basis (shevsim.metrics; issue 14): the studies' default
 SOOT_DSOC_KEY = "soot_dsoc_corrected_g_per_km"
 
-# 8 partitions of the 236 kW generator rating (seed: 8 variables, 8 levels, 8^8 cases). 25 kW bins are
-# grouped below 50 kW (ramps there produce little soot) and above 200 kW, so the space stays at the seed's
-# size. The generator's electrical output cannot pass 200.6 kW, so the top bin of this layout is never
-# reached: a study uses :func:`reachable_edges` (this layout scaled to the power the generator can deliver,
-# ScenarioProblem.default_edges) unless edges are given.
+# The seed's partitions are 25 kW bins, d_1 = [0, 25), d_2 = [25, 50), ... (App. A, eq. A.2), eight of them
+# (8 variables x 8 levels): 0-200 kW, the power the generator delivers (200.6 kW electrical at its 236 kW shaft
+# rating). A scenario study uses :func:`reachable_edges` (eight equal bins up to the supervisor's
+# ``power_gen_max_w``: 25.075 kW bins for the M-ATV), ScenarioProblem.default_edges. ``DEFAULT_EDGES_W`` is the
+# former layout (the lowest two bins grouped, a 200-236 kW top bin the generator never reaches), kept as the
+# default of the analytic surrogate and of code that passes no edges.
 DEFAULT_EDGES_W = (0.0, 50e3, 75e3, 100e3, 125e3, 150e3, 175e3, 200e3, 236e3)
 
 
-def reachable_edges(p_max_w: float, layout_w=DEFAULT_EDGES_W) -> tuple:
-    """The partition layout ``layout_w`` scaled so its last edge is ``p_max_w``, the most the generator can
-    deliver (every partition then holds reachable powers). For the M-ATV (200.6 kW): 0, 42.5, 63.7, 85.0,
-    106.2, 127.5, 148.8, 170.0, 200.6 kW."""
+def reachable_edges(p_max_w: float, n_partitions: int = 8) -> tuple:
+    """``n_partitions`` equal partitions of [0, ``p_max_w``], the power the generator can deliver (the seed's
+    25 kW bins for the M-ATV's 200.6 kW: 0, 25.075, 50.15, ..., 200.6 kW)."""
     p_max_w = float(p_max_w)
     if not (math.isfinite(p_max_w) and p_max_w > 0.0):
         raise ValueError(f"reachable_edges: the generator's maximum power must be positive and finite, got {p_max_w}")
-    top = float(layout_w[-1])
-    return tuple(float(e) * p_max_w / top for e in layout_w)
+    if int(n_partitions) < 1:
+        raise ValueError(f"reachable_edges: n_partitions must be >= 1, got {n_partitions}")
+    n = int(n_partitions)
+    return tuple(p_max_w * i / n for i in range(n)) + (p_max_w,)
 # 8 discrete levels beta_j of the maximum power rate (W/s); the top one is Table A.1's 30 kW/s.
 DEFAULT_LEVELS_WPS = (5e3, 7.5e3, 10e3, 12.5e3, 15e3, 20e3, 25e3, 30e3)
 
