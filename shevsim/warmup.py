@@ -207,10 +207,14 @@ def warm(scenario) -> float:
 
 
 # --------------------------------------------------------------------------- messages while compiling
-_FRIENDLY = {"supervisor.mpc": "MPC supervisor", "supervisor.rule_based": "rule-based supervisor",
+_FRIENDLY = {"components.supervisors": "supervisor", "components.battery": "battery",
+             "components.bms": "BMS", "components.engine_generator": "engine-generator",
+             "components.vehicle": "vehicle", "components.motor": "motor", "components.driver": "driver",
+             "components.bus": "power bus", "components.cycle": "drive cycle",
+             "supervisor.daqp_nb": "QP solver binding (DAQP)", "supervisor.mpc": "MPC supervisor", "supervisor.rule_based": "rule-based supervisor",
              "battery": "battery model", "bms": "BMS estimators", "powertrain.engine": "engine-generator",
              "powertrain.motor": "motor", "powertrain.vehicle": "vehicle", "powertrain.driver": "driver",
-             "components.cycle": "drive cycle", "core.lookup": "table lookups",
+             "core.lookup": "table lookups",
              "fast.daqp_nb": "QP solver binding (DAQP)", "fast.kernels": "fast-path kernels",
              "fast": "compiled fast loop"}
 
@@ -271,7 +275,8 @@ class CompileNotice:
             return
         self._t0 = time.perf_counter()
         self.count += 1
-        what = "the compiled fast loop for this component layout" if mod.startswith("shevsim.fast.loop") else \
+        what = "the compiled fast loop for this component layout" if mod.startswith(("shevsim.fast.loop",
+                                                                                   "shevsim_loop")) else \
             f"the {_friendly(mod)}"
         self.stream.write(f"compiling {what} ({fn.__name__}; first use, cached afterwards) ... ")
         self.stream.flush()
