@@ -209,7 +209,7 @@ class Scenario:
     order: list[str] | None = None
     sets: list[str] = field(default_factory=list)     # command-line ``component.param=value`` overrides
     overlays: list[str] = field(default_factory=list)  # command-line ``--params COMPONENT=FILE`` overlays
-    #: the quantities of the vehicle as a whole (``[shared]``, :mod:`shevsim.components.shared`)
+    #: the quantities of the vehicle as a whole (``[shared]``, `shevsim.components.shared`)
     shared: dict[str, Any] = field(default_factory=dict)
     shared_origins: dict[str, str] = field(default_factory=dict)
     #: the vehicle's quantities resolved (a study's bundle captures them so a worker needs no vehicle file)
