@@ -129,6 +129,9 @@ def test_bundle_is_content_addressed_and_location_free(user, tmp_path):
     names = {t.split("/", 1)[1] for spec in b.scenario.components
              for t in list((spec.params_table or {}).values()) + list(spec.overrides.values())
              if isinstance(t, str) and t.startswith("shevsim-blob:")}
+    # the pack's cell tables are shared quantities (issue 25): captured in the scenario's shared tables
+    names |= {t.split("/", 1)[1] for t in list(b.scenario.shared_base.values()) + list(b.scenario.shared.values())
+              if isinstance(t, str) and t.startswith("shevsim-blob:")}
     assert {"mycycle.csv", "mymap.csv", "motor_torque_curves.csv", "a123_26650_ocv.csv"} <= names
     assert b.scenario.component("vehicle").overrides["mass_kg"] == 16554.0          # the overlay's value
     # the same folder elsewhere gives the same keys; a changed byte in a referenced file changes them
