@@ -108,6 +108,18 @@ def _tokenize_table(d: dict, where: str, blobs: dict, base: Path | None = None, 
     return out
 
 
+def _fmu_file(spec, where: str) -> Path:
+    """The FMU file of a component: a bundled scenario's FMU that the package does not ship (e.g.
+    ``fmus/battery.fmu`` of ``hd_udds_fmu_battery``) is built first, through the same export as ``shevsim run``
+    (:func:`shevsim.fmu.adapter._bundled_export`, into the user cache), so that its bytes can be captured."""
+    p = Path(spec.fmu)
+    if p.is_file() or not spec.replaces:
+        return p
+    from ..core.paths import DATA_ROOT
+    from ..fmu.adapter import _bundled_export, _inside
+    return _bundled_export(spec, where) if _inside(p, DATA_ROOT) else p
+
+
 def tokenize_scenario(sc, blobs: dict, seen: dict | None = None) -> None:
     """Capture, in place, every file ``sc`` references (see the module docstring); bytes go to ``blobs``, the
     state of every file read to ``seen`` (``{path: file_state}``)."""
@@ -124,7 +136,7 @@ def tokenize_scenario(sc, blobs: dict, seen: dict | None = None) -> None:
             spec.params_table = _tokenize_table(spec.params_table, str(spec.params_file), blobs, None, seen)
         spec.overrides = _tokenize_table(spec.overrides, w, blobs, None, seen)
         if spec.fmu is not None and not is_token(str(spec.fmu)):
-            spec.fmu = _tokenize(str(spec.fmu), f"{w}: field 'fmu'", blobs, seen)
+            spec.fmu = _tokenize(str(_fmu_file(spec, w)), f"{w}: field 'fmu'", blobs, seen)
     _capture_shared(sc, blobs, seen)
 
 

@@ -79,3 +79,29 @@ def test_fmu_travels_with_the_study_bundle(battery_fmu, tmp_path):
     assert "error" not in out, out
     nums = {k: float(v) for k, v in ref.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
     assert len(nums) > 20 and all(out[k] == v for k, v in nums.items())
+
+
+def test_bundled_fmu_scenario_is_built_then_captured_by_a_study(tmp_path, monkeypatch):
+    """The bundled ``hd_udds_fmu_battery`` names ``fmus/battery.fmu``, which the package does not ship: a study
+    builds it first through the same export as ``shevsim run`` (into the user cache), then captures its bytes;
+    its evaluation gives the direct run's metrics."""
+    from shevsim.core.paths import bundled_scenario, user_cache_dir
+    from shevsim.run import compute_run_metrics
+    from shevsim.studies.evaluate import Evaluation
+    monkeypatch.setenv("SHEVSIM_CACHE_DIR", str(tmp_path / "cache"))     # built afresh, in a folder of the test's
+    scen = bundled_scenario("hd_udds_fmu_battery")
+    assert not (scen.parent.parent / "fmus" / "battery.fmu").exists()
+    ev = Evaluation.make(scen, stop_s=5.0)
+    run, blobs = ev.payload()
+    built = list((user_cache_dir() / "fmus").glob("battery-*.fmu"))
+    assert len(built) == 1
+    tok = [t for t in run.tokens() if t.endswith(".fmu")]
+    assert len(tok) == 1 and blobs[tok[0].split(":", 1)[1].split("/")[0]] == built[0].read_bytes()
+    assert len(ev.key()) == 64
+    out = ev.run()
+    assert "error" not in out, out
+    sc = load_scenario(scen)
+    sc.stop_s = 5.0
+    ref = compute_run_metrics(simulate(sc), sc)
+    nums = {k: float(v) for k, v in ref.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    assert len(nums) > 20 and all(out[k] == v for k, v in nums.items())
