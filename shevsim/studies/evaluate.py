@@ -7,7 +7,7 @@ An *evaluation item* is a small, picklable object with three methods:
     evaluation the scenario as captured on the client (:mod:`.bundle`: its settings, components,
     parameter tables, overrides and connections, with every referenced file - parameter sets, maps,
     cycles, cell tables, FMUs, overlays - by the SHA-256 of its bytes, never by its path), the stop
-    time, the shevsim version and a hash of the shevsim package sources (:func:`code_version`).
+    time, the shevsim version and a hash of the shevsim package sources and bundled data files (:func:`code_version`).
     Change any of them and the cache (``cache.py``) no longer matches, so a stale result is never
     reused; move the files to another machine and the key stays the same.
 ``inputs() -> dict``
@@ -58,15 +58,46 @@ def limit_threads() -> None:
         os.environ[k] = v
 
 
+#: the bundled data folders (under :data:`shevsim.core.paths.DATA_ROOT`) hashed into :func:`code_version`
+DATA_FOLDERS = ("components", "cycles", "scenarios", "fmus", "vehicles", "data/measured")
+
+
+def _data_files(root: Path) -> list[tuple[str, Path]]:
+    """``(relative name, path)`` of every file of the bundled data folders under ``root`` (caches excluded)."""
+    out = []
+    for folder in DATA_FOLDERS:
+        d = root / folder
+        if not d.is_dir():
+            continue
+        for p in d.rglob("*"):
+            rel = p.relative_to(root).parts
+            # caches and build outputs are not data: FMUs (fmus/*.fmu is git-ignored, none is shipped) are
+            # captured by content whenever a scenario names one
+            if not p.is_file() or "__pycache__" in rel or any(part.startswith(".") for part in rel) \
+                    or p.suffix in (".pyc", ".fmu"):
+                continue
+            out.append(("/".join(rel), p))
+    return sorted(out)
+
+
 @functools.lru_cache(maxsize=1)
 def code_version() -> str:
-    """SHA-256 of the shevsim package's Python sources (sorted relative paths + contents)."""
+    """SHA-256 of what the installed shevsim runs: the package's Python sources and the bundled data files
+    (:data:`DATA_FOLDERS` under ``shevsim.core.paths.DATA_ROOT``: the parameter sets, cycles, maps and tables
+    that components take by default - the cycle's ``hd_udds.csv``, the supervisor's fuel curve, the battery's
+    OCV table - which a scenario does not name and a study therefore does not capture)."""
+    from ..core import paths
     h = hashlib.sha256()
     for p in sorted(_PKG_ROOT.rglob("*.py")):
         rel = p.relative_to(_PKG_ROOT).parts
-        if "__pycache__" in rel or rel[0] == "_data":      # the wheel's data folder is not code
+        if "__pycache__" in rel or rel[0] == "_data":      # the wheel's data folder: hashed below, as data
             continue
         h.update(str(p.relative_to(_PKG_ROOT)).encode())
+        h.update(b"\0")
+        h.update(p.read_bytes())
+        h.update(b"\0")
+    for rel, p in _data_files(Path(paths.DATA_ROOT)):
+        h.update(b"data:" + rel.encode())
         h.update(b"\0")
         h.update(p.read_bytes())
         h.update(b"\0")

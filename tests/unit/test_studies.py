@@ -363,3 +363,31 @@ def test_narrowed_space_grows_to_the_case_cap_and_never_past_it():
     if k1 < len(ranked):
         nxt = np.array(ranked[:k1 + 1])
         assert space_size([(int(nxt[:, j].min()), int(nxt[:, j].max())) for j in range(6)]) > 648
+
+
+def test_key_covers_the_bundled_data_files_components_take_by_default(tmp_path, monkeypatch):
+    """Files a component takes from its code defaults (e.g. the supervisor's fuel curve when its
+    ``fuel_curve_file`` is empty) are not named by a scenario, so a study does not capture them: the key covers
+    them through the code version.  One byte changed in a copy of the data root changes the key."""
+    from shevsim.core import paths
+    from shevsim.studies.evaluate import code_version
+    root = tmp_path / "data_root"
+    for f in ("components", "cycles", "scenarios", "fmus", "vehicles", "data/measured"):
+        if (paths.DATA_ROOT / f).is_dir():
+            shutil.copytree(paths.DATA_ROOT / f, root / f)
+    ev = Evaluation.make(PROJECT_ROOT / "scenarios" / "hd_udds_rule.toml", stop_s=10.0)
+    monkeypatch.setattr(paths, "DATA_ROOT", root)
+    code_version.cache_clear()
+    try:
+        before = (code_version(), Evaluation.make(ev.scenario, stop_s=10.0, bundle=ev.bundle).key())
+        curve = root / "components" / "engine_generator" / "fuel_vs_power.csv"
+        data = bytearray(curve.read_bytes())
+        i = data.rindex(b"5")
+        data[i:i + 1] = b"6"
+        curve.write_bytes(bytes(data))
+        code_version.cache_clear()
+        after = (code_version(), Evaluation.make(ev.scenario, stop_s=10.0, bundle=ev.bundle).key())
+        assert before[0] != after[0] and before[1] != after[1]
+    finally:
+        monkeypatch.undo()
+        code_version.cache_clear()
