@@ -318,7 +318,13 @@ def warm_up_fast_path() -> str:
 
 
 class WorkerVersionError(Exception):
-    """A worker runs another shevsim version than the client (raised in the worker, refused by the client)."""
+    """A worker runs another shevsim than the client, version or package sources (raised in the worker,
+    refused by the client).  ``args[0]`` is the worker's :func:`worker_identity` (with its ``address``)."""
+
+    def __str__(self) -> str:
+        info = self.args[0] if self.args and isinstance(self.args[0], dict) else {}
+        return f"worker {info.get('address', '?')} runs shevsim {info.get('shevsim')} (sources " \
+               f"{str(info.get('code_sha256'))[:12]})"
 
 
 def worker_identity() -> dict:
@@ -327,19 +333,27 @@ def worker_identity() -> dict:
     return {"shevsim": shevsim_version(), "code_sha256": code_version(), "python": platform.python_version()}
 
 
-def run_item(item, blobs: dict | None = None, expect_version: str | None = None) -> tuple[dict, float, str]:
+def run_item(item, blobs: dict | None = None, expect_version: str | None = None,
+             expect_code: str | None = None) -> tuple[dict, float, str]:
     """Worker entry point: run one evaluation item; return (outputs, wall time in s, worker code version).
 
     ``item`` is a :class:`ScenarioRun`/:class:`FailedRun` (its files in ``blobs``, ``{sha256: bytes}``,
     written once into this worker's store) or any object with ``run()`` (e.g. the synthetic problem's).
-    ``expect_version``: the client's shevsim version; a worker with another one raises
-    :class:`WorkerVersionError` naming both.  The code version returned lets the client refuse to cache a
-    result computed by a worker whose shevsim sources differ from the ones the key was made with (e.g.
-    files edited while a study runs).
+    ``expect_version``, ``expect_code``: the client's shevsim version and :func:`code_version`; a worker with
+    another one (e.g. one that joined the cluster after the client checked the workers) raises
+    :class:`WorkerVersionError` with its own identity and runs nothing.  The code version returned lets the
+    client refuse to cache a result computed by a worker whose shevsim sources differ from the ones the key
+    was made with (e.g. files edited while a study runs, with the process pool that gets no ``expect_code``).
     """
-    if expect_version is not None and expect_version != shevsim_version():
-        raise WorkerVersionError(f"this worker runs shevsim {shevsim_version()}, the client shevsim "
-                                 f"{expect_version}")
+    if (expect_version is not None and expect_version != shevsim_version()) or \
+            (expect_code is not None and expect_code != code_version()):
+        info = worker_identity()
+        try:
+            from distributed import get_worker
+            info["address"] = get_worker().address
+        except (ImportError, ValueError, AttributeError):
+            info["address"] = f"pid {os.getpid()}"
+        raise WorkerVersionError(info)
     limit_threads()
     t0 = time.perf_counter()
     if isinstance(item, (ScenarioRun, FailedRun)):

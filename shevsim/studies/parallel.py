@@ -12,7 +12,9 @@
 
 Before the first evaluation every worker is asked for its shevsim version and the hash of its package
 sources (:meth:`StudyRunner.check_workers`): a worker that differs from the client is refused with both
-named; a worker joining later with another version is refused at its first evaluation.
+named; a cluster without any worker is refused after ``worker_wait_s``.  Each evaluation task carries the
+client's version and sources hash too: a worker that joins later with other ones refuses it, and the study
+stops with the same message.
 
 Workers share no files with the client: a scenario evaluation is sent as its captured run
 (:mod:`.bundle`: values and file hashes) plus one Dask task per distinct set of files holding their bytes,
@@ -132,6 +134,8 @@ class StudyRunner:
         Show tqdm progress bars.
     max_new_evaluations : int or None
         Stop (raise :class:`StudyInterrupted`) once this many new evaluations have finished.
+    worker_wait_s : float
+        With ``scheduler``: how long to wait for a first worker on a cluster that has none before refusing it.
 
     Use as a context manager so the embedded cluster is shut down::
 
@@ -140,7 +144,7 @@ class StudyRunner:
     """
 
     def __init__(self, cache=None, workers: int | str = 0, scheduler: str | None = None, progress: bool = True,
-                 max_new_evaluations: int | None = None):
+                 max_new_evaluations: int | None = None, worker_wait_s: float = 60.0):
         self.auto = workers == "auto"
         if self.auto:
             workers = 0
@@ -151,6 +155,7 @@ class StudyRunner:
         self.scheduler = scheduler
         self.progress = progress
         self.max_new = max_new_evaluations
+        self.worker_wait_s = float(worker_wait_s)
         self.stats = RunnerStats()
         self._client = None
         self._cluster = None
@@ -204,11 +209,34 @@ class StudyRunner:
             pass
         return self
 
+    def _where(self) -> str:
+        return f"--scheduler {self.scheduler}" if self.scheduler else "Dask cluster"
+
+    def _mismatch(self, addr: str, info: dict, mine: dict, joined: bool = False) -> ShevsimError:
+        """The error refusing worker ``addr`` whose :func:`worker_identity` ``info`` differs from ``mine``."""
+        same = info.get("shevsim") == mine["shevsim"]
+        return ShevsimError(
+            f"{self._where()}: " + ("a worker that joined the study was refused: " if joined else "") +
+            f"worker {addr} runs shevsim {info.get('shevsim')} (sources "
+            f"{str(info.get('code_sha256'))[:12]}), this client shevsim {mine['shevsim']} (sources "
+            f"{mine['code_sha256'][:12]}): " + ("the same version with other package sources; " if same
+                                                else "") +
+            f"install the client's shevsim on every worker (pip install 'shevsim[studies]=="
+            f"{mine['shevsim']}') or run the client with the workers' version")
+
     def check_workers(self) -> None:
         """Refuse, before any evaluation, a cluster whose workers run another shevsim than this client (version
-        or package sources), or none at all: :class:`~shevsim.core.errors.ShevsimError` naming both."""
-        where = f"--scheduler {self.scheduler}" if self.scheduler else "Dask cluster"
+        or package sources), or none at all after waiting ``worker_wait_s`` for one to connect:
+        :class:`~shevsim.core.errors.ShevsimError` naming both versions, or the scheduler."""
+        where = self._where()
         mine = worker_identity()
+        if not self._client.scheduler_info().get("workers"):
+            try:
+                self._client.wait_for_workers(1, timeout=self.worker_wait_s)
+            except (TimeoutError, OSError):
+                raise ShevsimError(f"{where}: no Dask worker connected to the scheduler within "
+                                   f"{self.worker_wait_s:g} s; start workers with: dask worker "
+                                   f"{self.scheduler or '<scheduler address>'} --nthreads 1") from None
         try:
             theirs = self._client.run(worker_identity)
         except (ImportError, AttributeError) as exc:     # the worker cannot even unpickle a shevsim function
@@ -217,14 +245,7 @@ class StudyRunner:
                                f"{mine['shevsim']}'") from None
         for addr, info in sorted(theirs.items()):
             if (info.get("shevsim"), info.get("code_sha256")) != (mine["shevsim"], mine["code_sha256"]):
-                same = info.get("shevsim") == mine["shevsim"]
-                raise ShevsimError(
-                    f"{where}: worker {addr} runs shevsim {info.get('shevsim')} (sources "
-                    f"{str(info.get('code_sha256'))[:12]}), this client shevsim {mine['shevsim']} (sources "
-                    f"{mine['code_sha256'][:12]}): " + ("the same version with other package sources; " if same
-                                                        else "") +
-                    f"install the client's shevsim on every worker (pip install 'shevsim[studies]=="
-                    f"{mine['shevsim']}') or run the client with the workers' version")
+                raise self._mismatch(addr, info, mine)
 
     def close(self) -> None:
         self._files.clear()
@@ -365,11 +386,13 @@ class StudyRunner:
         self.start()
         client = self._client
         futures = {}
-        version = shevsim_version()
+        version, code = shevsim_version(), code_version()
         for k, it in pending:
             payload, blobs = _payload(it)
             files = self._files_future(client, blobs)
-            fut = client.submit(run_item, payload, files, version, pure=False,
+            # every task carries the client's version and sources hash: a worker that joined after
+            # check_workers with other ones refuses it (WorkerVersionError) instead of computing a result
+            fut = client.submit(run_item, payload, files, version, code, pure=False,
                                 key=f"shevsim-eval-{k[:24]}-{time.monotonic_ns()}")
             futures[fut] = (k, it)
         try:
@@ -378,9 +401,8 @@ class StudyRunner:
                 try:
                     out, wall, wcode = fut.result()
                 except WorkerVersionError as exc:
-                    raise ShevsimError(f"--scheduler {self.scheduler or ''}: a worker that joined the study was "
-                                       f"refused: {exc}; install the client's shevsim on every worker "
-                                       f"(pip install 'shevsim[studies]=={version}')") from None
+                    info = exc.args[0] if exc.args and isinstance(exc.args[0], dict) else {}
+                    raise self._mismatch(info.get("address", "?"), info, worker_identity(), joined=True) from None
                 self._finish(k, it, out, wall, results, bar, wcode)
                 if self.max_new is not None and self.stats.new >= self.max_new:
                     break

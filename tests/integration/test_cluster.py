@@ -293,3 +293,45 @@ def test_faults_killed_worker_joining_worker_interrupted_client(user, cluster, s
     with EvaluationCache(db) as cache, StudyRunner(cache, scheduler=cluster.address, progress=False) as runner:
         assert runner.evaluate(items) == ref
         assert runner.stats.cached == kept and runner.stats.new == n - kept and len(cache) == n
+
+
+def test_no_worker_and_a_joining_worker_with_other_sources_refused(tmp_path, monkeypatch):
+    """A scheduler without workers is refused (naming it; exit 2 from the study command) after a bounded wait;
+    a worker with the same version but other package sources that joins after the client's check refuses the
+    evaluations it receives, and the study stops naming both sources hashes (no result of it is used)."""
+    import functools
+
+    from shevsim.core.errors import ShevsimError
+    from shevsim.studies import cli, parallel
+    from shevsim.studies.evaluate import code_version
+    from shevsim.studies.problem import SyntheticProblem
+    other = tmp_path / "other"            # the same shevsim with one comment added: same version, other sources
+    shutil.copytree(WORKTREE / "shevsim", other / "shevsim", ignore=shutil.ignore_patterns("__pycache__", "_data"))
+    for f in ("components", "cycles", "scenarios", "fmus", "vehicles", "data/measured"):
+        shutil.copytree(DATA_ROOT / f, other / f, ignore=shutil.ignore_patterns("__pycache__", "*.fmu"))
+    with (other / "shevsim" / "metrics.py").open("a") as fh:
+        fh.write("# edited on this worker only\n")
+    with ProcessCluster() as c:
+        c.start_scheduler()
+        with pytest.raises(ShevsimError) as ei:
+            StudyRunner(None, scheduler=c.address, progress=False, worker_wait_s=1.0).start()
+        assert "no Dask worker" in str(ei.value) and c.address in str(ei.value)
+        monkeypatch.setattr(parallel, "StudyRunner", functools.partial(StudyRunner, worker_wait_s=1.0))
+        assert cli.main_study(["tradeoff", "--synthetic", "--rates-kwps", "30", "--no-plots", "--quiet",
+                               "--scheduler", c.address, "-o", str(tmp_path / "out")]) == 2
+
+        c.start_worker("edited", env={"PYTHONPATH": str(other)})
+        from distributed import Client
+        with Client(c.address, timeout="60s") as cl:
+            cl.wait_for_workers(1, timeout=120)
+            theirs = next(iter(cl.run(lambda: __import__("shevsim.studies.evaluate").studies.evaluate
+                                      .code_version()).values()))
+        assert theirs != code_version()
+        runner = StudyRunner(None, scheduler=c.address, progress=False)
+        monkeypatch.setattr(runner, "check_workers", lambda: None)     # as if the worker joined after the check
+        monkeypatch.setattr(parallel, "warm_up_fast_path", lambda: "")
+        with runner, pytest.raises(ShevsimError) as ei:
+            runner.evaluate([SyntheticProblem().item(DEFAULT_EDGES_W, [10e3] * 8)])
+        msg = str(ei.value)
+        assert "joined the study was refused" in msg and "other package sources" in msg
+        assert theirs[:12] in msg and code_version()[:12] in msg and runner.stats.new == 0
