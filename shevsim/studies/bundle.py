@@ -29,6 +29,7 @@ import copy
 import dataclasses
 import hashlib
 import os
+import re
 import shutil
 import tempfile
 import threading
@@ -174,6 +175,33 @@ def tokens_of(sc) -> list[str]:
     return sorted(set(out))
 
 
+_DIRS = re.compile(r"(?:[A-Za-z]:)?[\\/](?:[^\s:\\/'\"]+[\\/])+")
+
+
+def _names_only(text: str) -> str:
+    """``text`` with the folder part of every absolute path removed (``/home/u/p/my.toml: x`` -> ``my.toml: x``)."""
+    return _DIRS.sub("", text)
+
+
+def strip_locations(sc) -> None:
+    """Remove, in place, every trace of where the client's files lie from a captured scenario, before it is
+    shipped: its path and its parameter files' become their file names (messages still name them), the
+    origins noted for messages lose their folders, and the scenario's text (not needed to run it) is dropped.
+    None of these enter the key (:func:`describe`)."""
+    if sc.path is not None:
+        sc.path = Path(Path(sc.path).name)
+    sc.text = ""
+    sc.overlays = [_names_only(str(o)) for o in (getattr(sc, "overlays", None) or [])]
+    sc.sets = [_names_only(str(x)) for x in (getattr(sc, "sets", None) or [])]
+    if getattr(sc, "shared_origins", None):
+        sc.shared_origins = {k: _names_only(str(v)) for k, v in sc.shared_origins.items()}
+    for spec in sc.components:
+        if spec.params_file is not None:
+            spec.params_file = Path(Path(spec.params_file).name)
+        if getattr(spec, "sources", None):
+            spec.sources = {k: _names_only(str(v)) for k, v in spec.sources.items()}
+
+
 def describe(sc) -> dict:
     """What decides a captured scenario's run, free of paths (files by content): hashed into the key."""
     st = dataclasses.asdict(sc.settings)
@@ -217,6 +245,7 @@ class ScenarioBundle:
         tokenize_scenario(sc, blobs)
         if stop_s is not None:
             sc.stop_s = float(stop_s)
+        strip_locations(sc)
         used = {token_sha(t) for t in tokens_of(sc)}
         return sc, {h: b for h, b in blobs.items() if h in used}
 

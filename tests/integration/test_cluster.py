@@ -142,10 +142,15 @@ def test_bundle_is_content_addressed_and_location_free(user, tmp_path):
     assert [i.key() for i in it] == [i.key() for i in it2]
     (moved / "motor" / "mymap.csv").write_text((moved / "motor" / "mymap.csv").read_text().replace("0.", "0.0", 1))
     assert _items(ScenarioProblem(str(moved / "my.toml")), (10e3,))[1].key() != it[1].key()
-    # a bundle holds data only: pickling its run names no user path
+    # what is shipped to a worker holds data only: the pickled run names no folder of the user's (the scenario
+    # and parameter files by name, the origins of values without their folders, no scenario text)
     import pickle
     run, blobs = it[1].payload()
-    assert str(scen.parent).encode() not in pickle.dumps(run.tokens())
+    shipped = pickle.dumps(run)
+    assert str(scen.parent.parent).encode() not in shipped and str(moved).encode() not in shipped
+    assert str(run.scenario.path) == "my.toml" and run.scenario.text == ""
+    assert str(run.scenario.component("motor").params_file) == "mymotor.toml"
+    assert run.scenario.component("vehicle").sources["mass_kg"].startswith("my.toml: ")
     assert capture(scen).scenario.component("cycle").params_table["cycle_file"].endswith("/mycycle.csv")
 
 
