@@ -20,7 +20,8 @@ components' parameter tables and overrides with file *contents* (by hash) in pla
 depends on where the files lie - so the same inputs give the same key on any machine.
 
 Nothing here imports or executes anything a user's file names: files are read as bytes, and the scenario
-and parameter files are parsed as TOML.
+and parameter files are parsed as TOML.  An FMU, however, is native code: the worker that runs a captured
+scenario loads and runs the FMUs it ships (as ``shevsim run`` does), so a study must use trusted FMUs only.
 """
 from __future__ import annotations
 
