@@ -28,9 +28,12 @@ exception raised by the model) is returned as ``{"error": message}`` so one bad 
 a campaign; studies treat it as infeasible. Because the code version is in the key, a failure
 caused by a bug is not reused once the code changes.
 
-Worker processes must not oversubscribe the 2 cores with BLAS threads: :func:`limit_threads` sets
-``OPENBLAS_NUM_THREADS``/``MKL_NUM_THREADS``/``OMP_NUM_THREADS``/... to 1 (the parallel runner also
-passes them in the worker environment, where they take effect before NumPy loads).
+Worker processes must not oversubscribe the cores with BLAS threads: ``OPENBLAS_NUM_THREADS``/
+``MKL_NUM_THREADS``/``OMP_NUM_THREADS``/... (:data:`THREAD_ENV`) must be 1 when a worker process starts,
+before NumPy loads its BLAS: the embedded cluster passes them in its workers' environment; workers of an
+existing cluster must be started with them (docs/cluster.md).  :func:`limit_threads` sets them in the
+running process too, which reaches only what reads them later (child processes, libraries not yet loaded),
+not a BLAS that is already loaded.
 """
 from __future__ import annotations
 
@@ -53,7 +56,9 @@ _PKG_ROOT = Path(__file__).resolve().parents[1]          # .../shevsim
 
 
 def limit_threads() -> None:
-    """Set the single-thread BLAS/OpenMP environment variables in this process (idempotent)."""
+    """Set the single-thread BLAS/OpenMP environment variables in this process (idempotent).  This reaches
+    only what reads them afterwards (child processes, a library not yet loaded): a BLAS that NumPy has already
+    loaded keeps its thread count, so a worker must have them in its environment when it starts."""
     for k, v in THREAD_ENV.items():
         os.environ[k] = v
 

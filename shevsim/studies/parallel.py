@@ -8,7 +8,8 @@
   (``evaluate.THREAD_ENV``) before NumPy loads, and malloc settings that keep evaluation-sized arrays off
   mmap (:data:`MALLOC_ENV`);
 * ``scheduler="tcp://host:8786"``: a ``distributed.Client`` on an existing cluster (the runner
-  does not start or stop that cluster; it asks every worker to apply the single-thread settings).
+  does not start or stop that cluster; its workers must have been started with the single-thread settings
+  in their environment, docs/cluster.md: set later, in a running worker, they would not reach NumPy's BLAS).
 
 Before the first evaluation every worker is asked for its shevsim version and the hash of its package
 sources (:meth:`StudyRunner.check_workers`): a worker that differs from the client is refused with both
@@ -43,7 +44,7 @@ import time
 from dataclasses import dataclass, field
 
 from ..core.errors import ShevsimError
-from .evaluate import (THREAD_ENV, WorkerVersionError, code_version, limit_threads, run_item, shevsim_version,
+from .evaluate import (THREAD_ENV, WorkerVersionError, code_version, run_item, shevsim_version,
                        warm_up_fast_path, worker_identity)
 
 log = logging.getLogger(__name__)
@@ -182,7 +183,8 @@ class StudyRunner:
                 self._client = Client(self.scheduler, timeout="30s")
             except OSError as exc:
                 raise ShevsimError(f"--scheduler {self.scheduler}: cannot connect to the Dask scheduler: {exc}") from exc
-            self._client.run(limit_threads)
+            # (the BLAS thread variables cannot be set from here: a running worker has loaded NumPy already;
+            # they must be in its environment when it starts - docs/cluster.md)
         else:
             import dask
             pre = dict(dask.config.get("distributed.nanny.pre-spawn-environ", default=None) or {})
