@@ -32,14 +32,14 @@ HEADLINE_METRICS = ("distance_km", "fuel_economy_dsoc_corrected_kmpl", "fuel_eco
 
 def _panels(result) -> list[tuple[str, list[tuple[str, np.ndarray, str, str | None]]]]:
     """(y-axis title with unit, [(legend, values in display unit, signal, thesis symbol)]) of each panel."""
-    from .report.html import _series, run_figure_spec
+    from .report.html import run_figure_spec, signal_series
     from .report.labels import signal_label, to_display
     panels = []
     for _ftitle, rows in run_figure_spec([result]):
         for rtitle, sigs in rows:
             series, du_row = [], None
             for sgn in sigs:
-                ser = _series(result, sgn)
+                ser = signal_series(result, sgn)
                 if ser is None:
                     continue
                 _, y, unit = ser

@@ -35,7 +35,7 @@ from pathlib import Path
 
 from shevsim.core.errors import DataError
 from shevsim.core.params import name_rule
-from shevsim.core.lookup import _t1_integral, _t1_slope, _t1_value, ecm_lookup
+from shevsim.core.lookup import t1_integral, t1_slope, t1_value, ecm_lookup
 from shevsim.core.paths import data_path
 from shevsim.core.filecache import memo_file
 
@@ -133,7 +133,7 @@ def _row_at(g: "_Grid2", t_c: float) -> list:
 
 class _Table1:
     """Piecewise-linear 1-D table with clamped ends (data only: its slopes and the cumulative integral at
-    the knots are precomputed for :func:`shevsim.core.lookup._t1_value` / ``_t1_slope`` / ``_t1_integral``)."""
+    the knots are precomputed for :func:`shevsim.core.lookup.t1_value` / ``t1_slope`` / ``t1_integral``)."""
 
     def __init__(self, xs: list[float], ys: list[float]):
         self.xs, self.ys = xs, ys
@@ -206,19 +206,19 @@ class CellTables:
 
     def ocv(self, soc: float) -> float:
         """Open-circuit voltage [V]."""
-        return _t1_value(self._d, self._ix[0], self._ix[1], float(soc))
+        return t1_value(self._d, self._ix[0], self._ix[1], float(soc))
 
     def docv_dsoc(self, soc: float) -> float:
         """dV_oc/dSOC [V per unit SOC] (right slope at knots; the end segments' slopes beyond the table)."""
-        return _t1_slope(self._d, self._ix[0], self._ix[1], float(soc))
+        return t1_slope(self._d, self._ix[0], self._ix[1], float(soc))
 
     def ocv_integral(self, soc: float) -> float:
         """Integral of V_oc from the table's first SOC to ``soc`` [V * unit SOC] (exact)."""
-        return _t1_integral(self._d, self._ix[0], self._ix[1], float(soc))
+        return t1_integral(self._d, self._ix[0], self._ix[1], float(soc))
 
     def entropy_change(self, soc: float) -> float:
         """Delta S = F dU_oc/dT [J/mol/K]."""
-        return _t1_value(self._d, self._ix[2], self._ix[3], float(soc))
+        return t1_value(self._d, self._ix[2], self._ix[3], float(soc))
 
     def packed(self):
         """All tables in one float array plus int offsets, for compiled lookups.

@@ -52,7 +52,7 @@ import math
 import numpy as np
 
 from shevsim.battery.thermal import two_state_coeffs
-from shevsim.core.lookup import _njit, _t1_integral, _t1_slope, _t1_value, ecm_lookup, interp_held
+from shevsim.core.lookup import njit, t1_integral, t1_slope, t1_value, ecm_lookup, interp_held
 
 from shevsim.battery.cell import FARADAY_C_MOL  # noqa: E402  (one constant)
 
@@ -144,7 +144,7 @@ def _cell_electrical(d, ix, c, st, p_in, h, t_mean, y):
     tau1 = r1 * c1
     ex1 = math.exp(-h / tau1)
     g1 = tau1 * (1.0 - ex1)
-    a = h * _t1_value(d, oo, no, soc) - v1 * g1
+    a = h * t1_value(d, oo, no, soc) - v1 * g1
     b = h * rs + r1 * (h - g1)
     tau2 = 1.0
     ex2 = 0.0
@@ -155,7 +155,7 @@ def _cell_electrical(d, ix, c, st, p_in, h, t_mean, y):
         g2 = tau2 * (1.0 - ex2)
         a = a - v2 * g2
         b = b + r2 * (h - g2)
-    b = b + 0.5 * h * h * _t1_slope(d, oo, no, soc) / q_as
+    b = b + 0.5 * h * h * t1_slope(d, oo, no, soc) / q_as
     m_h = c[C_HYST_M]
     hy = st[S_HY]
     if m_h != 0.0:
@@ -187,16 +187,16 @@ def _cell_electrical(d, ix, c, st, p_in, h, t_mean, y):
     if c[C_NDUDT] > 0.0:
         q -= i * (t_mean + 273.15) * _dudt(c, 0.5 * (soc + soc_new))
     elif c[C_ENTROPIC] > 0.5:
-        ds = _t1_value(d, ix[2], ix[3], 0.5 * (soc + soc_new))
+        ds = t1_value(d, ix[2], ix[3], 0.5 * (soc + soc_new))
         q -= i * (t_mean + 273.15) * ds / c[C_F]
-    st[S_ECHEM] += q_as * (_t1_integral(d, oo, no, soc) - _t1_integral(d, oo, no, soc_new))
+    st[S_ECHEM] += q_as * (t1_integral(d, oo, no, soc) - t1_integral(d, oo, no, soc_new))
     st[S_ELOSS] += e_loss
     st[S_AH] += abs(i) * h / 3600.0
     st[S_SOC] = soc_new
     st[S_V1] = v1n
     st[S_V2] = v2n
     st[S_HY] = hy
-    voc = _t1_value(d, oo, no, soc_new)
+    voc = t1_value(d, oo, no, soc_new)
     y[Y_I] = i
     y[Y_RS] = rs
     y[Y_Q] = q
@@ -263,7 +263,7 @@ def _run_profile(d, ix, c, st, t, p_in, t_amb, h_conv, out_v, out_ts, out_tc):
     th = np.full(16, np.nan)
     bad = 0
     # initial outputs (no step, as the component's initialize): the open-circuit voltage
-    out_v[0] = _t1_value(d, ix[0], ix[1], st[S_SOC]) + c[C_HYST_M] * st[S_HY]
+    out_v[0] = t1_value(d, ix[0], ix[1], st[S_SOC]) + c[C_HYST_M] * st[S_HY]
     _thermal_outputs(c, st, t_amb[0], _effective_h(c, t[0], h_conv), y)
     out_ts[0] = y[Y_TSURF]
     out_tc[0] = y[Y_TCORE]
@@ -286,7 +286,7 @@ def _run_profile(d, ix, c, st, t, p_in, t_amb, h_conv, out_v, out_ts, out_tc):
 def _jit(f):
     """Compile one source.  ``error_model="numpy"``: IEEE division (no Python zero-division check and its
     branch on every ``/``), the same results for every finite, non-zero divisor."""
-    return _njit(cache=True, error_model="numpy")(f)
+    return njit(cache=True, error_model="numpy")(f)
 
 
 _effective_h = _jit(_effective_h)

@@ -274,7 +274,7 @@ _two_state_abcd = _njit(cache=True, error_model="numpy")(_two_state_abcd)
 two_state_coeffs = _njit(cache=True, error_model="numpy")(_two_state_coeffs)
 
 
-def _zoh(A: np.ndarray, B: np.ndarray, dt: float):
+def zoh(A: np.ndarray, B: np.ndarray, dt: float):
     """Exact zero-order-hold discretisation (works for singular A)."""
     n, m = B.shape
     M = np.zeros((n + m, n + m))
@@ -362,7 +362,7 @@ class TwoStateThermal:
     def discretise(self, h_w_m2k: float, dt: float):
         """Exact ZOH (Ad, Bd) as 2x2 numpy arrays."""
         A, B, _, _ = two_state_matrices(self.params, h_w_m2k)
-        return _zoh(A, B, _check_dt(dt, "TwoStateThermal.discretise"))
+        return zoh(A, B, _check_dt(dt, "TwoStateThermal.discretise"))
 
     def _all_coeffs(self, h: float, dt: float):
         key = (h, dt)
@@ -559,7 +559,7 @@ class FDThermal:
             _check_h(h, "FDThermal.step")
             _check_dt(dt, "FDThermal.step")
             A, B = fd_matrices(self.params, h, self.n_nodes, self.scheme)[:2]
-            Ad, Bd = _zoh(A, B, dt)
+            Ad, Bd = zoh(A, B, dt)
             c = (Ad, np.ascontiguousarray(Bd[:, 0]), np.ascontiguousarray(Bd[:, 1]))
             if len(self._disc) >= self._CACHE_MAX:
                 self._disc.clear()

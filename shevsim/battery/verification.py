@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .thermal import (ThermalParams, analytical_tf, fd_matrices, state_space_tf, two_state_matrices, _zoh)
+from .thermal import (ThermalParams, analytical_tf, fd_matrices, state_space_tf, two_state_matrices, zoh)
 
 __all__ = [
     "frequency_responses",
@@ -141,7 +141,7 @@ def identifiability_jacobian(p: ThermalParams, h_w_m2k: float, normalise: bool =
 def simulate_two_state(p: ThermalParams, h_w_m2k: float, dt_s: float, q_w, t_amb_c, t0_c: float | None = None):
     """Simulate the two-state model (exact ZOH) and return outputs (n, 2): [T_core, T_surface]."""
     A, B, C, D = two_state_matrices(p, h_w_m2k)
-    Ad, Bd = _zoh(A, B, dt_s)
+    Ad, Bd = zoh(A, B, dt_s)
     q = np.asarray(q_w, dtype=float)
     ta = np.broadcast_to(np.asarray(t_amb_c, dtype=float), q.shape)
     x = np.array([ta[0] if t0_c is None else t0_c, 0.0])

@@ -96,7 +96,7 @@ import numpy as np
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
 from shevsim.core.compiled import field_index
-from shevsim.core.lookup import HAVE_NUMBA, _njit, _t1_slope, _t1_value, ecm_lookup
+from shevsim.core.lookup import HAVE_NUMBA, njit, t1_slope, t1_value, ecm_lookup
 from shevsim.core.errors import SimulationError
 
 __all__ = ["DEKFParams", "DEKF", "dekf_step", "cell_heat"]
@@ -190,14 +190,14 @@ class DEKFParams(DEKFTuning):
     rs_min_ohm: float = 1e-5
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _ecm_nom(d, ix, soc, t_c, i_a):
     """``(R_s, R1, C1)`` of the nominal maps (``CellTables.params(soc, t_c, i_a)[:3]``; the one lookup)."""
     rs, r1, c1, _r2, _c2 = ecm_lookup(d, ix, soc, t_c, i_a)
     return rs, r1, c1
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def cell_heat(i_a, rs, v1, r1, t_c, ds):
     """Heat generation [W] of the OCV-R-RC cell (5.16): ``i^2 R_s + V1^2 / R1 - i T dS / F`` (``ds`` = the
     entropy change dS [J/mol/K] at the SOC, ``t_c`` [degC])."""
@@ -210,7 +210,7 @@ E = field_index(("soc", "v1", "x2", "th1", "th2", "p00", "p01", "p02", "p11", "p
                  "rs", "r1", "c1", "v2", "r2", "innovation", "variance"), "E")
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     """One DEKF step (5.21-5.24, module docstring) and the heat (5.16) at the new estimates.
 
@@ -266,9 +266,9 @@ def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     # 3. state measurement update (5.23); R_s = x2 * rsn (free: rsn = 1, x2 = R_s)
     oo = ix[0]
     no = ix[1]
-    c0 = _t1_slope(d, oo, no, soc)
+    c0 = t1_slope(d, oo, no, soc)
     c2 = -i_a * rsn
-    e = v_meas_v - (_t1_value(d, oo, no, soc) - v1 - v2 - x2 * rsn * i_a)
+    e = v_meas_v - (t1_value(d, oo, no, soc) - v1 - v2 - x2 * rsn * i_a)
     # P C^T with C = [c0, -1, c2]
     h0 = p00 * c0 - p01 + p02 * c2
     h1 = p01 * c0 - p11 + p12 * c2
@@ -319,13 +319,13 @@ def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     th1 = r1 / r1n
     th2 = c1 / c1n
     rs = x2 * rsn
-    heat = cell_heat(i_a, rs, v1, r1, t_mean_c, _t1_value(d, ix[2], ix[3], soc))
+    heat = cell_heat(i_a, rs, v1, r1, t_mean_c, t1_value(d, ix[2], ix[3], soc))
     if k[15] > 0.5:
         heat += v2 * v2 / r2n
     return (1, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, sden, heat, v2, r2n)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def store_update(xe, r):
     """Write a :func:`dekf_step` result ``r`` into the state array ``xe`` (:data:`E`); returns ``(ok, heat [W])``.
     When the innovation variance is unusable (``ok = 0``) only the innovation and its variance are written."""
@@ -340,7 +340,7 @@ def store_update(xe, r):
     return 1, r[20]
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def dekf_update(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     """:func:`dekf_step` on the state array ``xe`` (:data:`E`), in place (:func:`store_update`); returns
     ``(ok, heat [W])``."""

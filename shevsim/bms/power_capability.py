@@ -54,8 +54,8 @@ from typing import NamedTuple
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
 from shevsim.battery.thermal import ThermalParams, two_state_ad_bd, two_state_out
-from shevsim.core.lookup import HAVE_NUMBA, _njit, _t1_slope, _t1_value
-from shevsim.bms.thermal_estimators import TwoStateDiscretiser, _py
+from shevsim.core.lookup import HAVE_NUMBA, njit, py_func, t1_slope, t1_value
+from shevsim.bms.thermal_estimators import TwoStateDiscretiser
 from shevsim.core.errors import ScenarioError
 from shevsim.core.params import rng
 
@@ -157,7 +157,7 @@ def _constants(p: PowerCapabilityParams):
                      1.0 if p.polarisation_heat == "exact" else 0.0, FARADAY_C_MOL, float(p.horizon_steps)])
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _pole_sum(rho, e00, e01, e10, e11, bq0, bq1, n00, n01, n10, n11, cc0, cc1, n):
     """``C_c (A^N - rho^N I) (A - rho I)^{-1} B_q`` of the 2x2 thermal model (``n`` = float(N));
     the removable singularity at ``rho = eig(A)`` is stepped around."""
@@ -175,27 +175,27 @@ def _pole_sum(rho, e00, e01, e10, e11, bq0, bq1, n00, n01, n10, n11, cc0, cc1, n
     return cc0 * (n00 * v0 + n01 * v1_ - rn * v0) + cc1 * (n10 * v0 + n11 * v1_ - rn * v1_)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _electrical_limits(d, ix, k, soc, v1, rs, r1, c1):
     """``(i_soc_min, i_soc_max, i_v_min, i_v_max)`` [A], seed 5.28 (cell, + discharge)."""
     ndt = k[0] * k[1]
     q_as = 3600.0 * k[8]
     aN = math.exp(-ndt / (r1 * c1))
-    gain = rs + r1 * (1.0 - aN) + _t1_slope(d, ix[0], ix[1], soc) * ndt / q_as
-    free = _t1_value(d, ix[0], ix[1], soc) - aN * v1
+    gain = rs + r1 * (1.0 - aN) + t1_slope(d, ix[0], ix[1], soc) * ndt / q_as
+    free = t1_value(d, ix[0], ix[1], soc) - aN * v1
     return (soc - k[2]) * q_as / ndt, (soc - k[3]) * q_as / ndt, (free - k[4]) / gain, (free - k[5]) / gain
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _voltage_after(d, ix, k, i_a, soc, v1, rs, r1, c1):
     """Predicted cell terminal voltage after N steps at the held current ``i_a`` (5.36) [V]."""
     ndt = k[0] * k[1]
     aN = math.exp(-ndt / (r1 * c1))
     soc_n = soc - i_a * ndt / (3600.0 * k[8])
-    return _t1_value(d, ix[0], ix[1], soc_n) - i_a * rs - aN * v1 - i_a * r1 * (1.0 - aN)
+    return t1_value(d, ix[0], ix[1], soc_n) - i_a * rs - aN * v1 - i_a * r1 * (1.0 - aN)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _thermal_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, last_max, last_min):
     """``(i_t_dch, i_t_chg)`` [A] keeping the predicted core temperature <= T_c,max after N steps: exact
     quadratic (``k[10]`` = 1, module docstring) or the 5.31 bound with the previous limits ``last_*``."""
@@ -205,7 +205,7 @@ def _thermal_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c,
     free = (cc0 * (a00 * t_mean_c + a01 * gamma + b01 * t_amb_c)
             + cc1 * (a10 * t_mean_c + a11 * gamma + b11 * t_amb_c) + dc * t_amb_c)
     gq = cc0 * b00 + cc1 * b10            # sum_i C A^i B_q  (> 0)
-    beta = (t_mean_c + 273.15) * _t1_value(d, ix[2], ix[3], soc) / k[11]
+    beta = (t_mean_c + 273.15) * t1_value(d, ix[2], ix[3], soc) / k[11]
     if k[10] > 0.5:
         # S(rho) = C_c (A^N - rho^N I) (A - rho I)^{-1} B_q for rho = a and a^2
         a = math.exp(-k[1] / (r1 * c1))
@@ -233,7 +233,7 @@ def _thermal_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c,
             (beta - math.sqrt(disc_c)) / (2.0 * rs) if disc_c >= 0.0 else i_min_heat)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def power_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, last_max, last_min):
     """One power-capability evaluation (4.17-4.19 / 5.34-5.36): the 12 fields of :class:`PowerLimits`."""
     i_smin, i_smax, i_vmin, i_vmax = _electrical_limits(d, ix, k, soc, v1, rs, r1, c1)
@@ -248,7 +248,7 @@ def power_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, la
             i_smin, i_smax, i_vmin, i_vmax, i_td, i_tc, v_d, v_c)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def round3(x):
     """Python's ``round(x, 3)`` (correctly rounded: the decimal ``x`` rounded half-even to 3 places, then
     the nearest double), the thermal coefficients' key."""
@@ -277,7 +277,7 @@ def round3(x):
     return r
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def thermal_coeffs(tp, h_w_m2k, keys, vals):
     """The thermal coefficients :func:`power_limits` reads (``ZOH(N dt)`` (8), ``C_core/D_core`` (3), ``ZOH(dt)``
     A and B_q (6)) at ``h_w_m2k`` rounded to 1e-3 W/m^2/K (the estimated h changes a little every step; the
@@ -370,7 +370,7 @@ class PowerCapability:
         #: ``[R, k, alpha, bq, N dt, dt]`` of :func:`thermal_coeffs`
         self.thermal_args = np.array(a_n[:5] + (a_1[4],), dtype=np.float64)
         self.compiled = bool(compiled and HAVE_NUMBA)
-        self._limits = power_limits if self.compiled else _py(power_limits)
+        self._limits = power_limits if self.compiled else py_func(power_limits)
         self._tabs = self.tables.packed()
         self._k = _constants(p)
         self.last_i_max_a = 0.0

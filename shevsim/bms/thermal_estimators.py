@@ -44,7 +44,7 @@ import numpy as np
 from shevsim.battery.thermal import (ThermalParams, two_state_a, two_state_ad_bd, two_state_d_ad_bd,  # noqa: F401
                                      two_state_dout, two_state_out)  # the one two-state model
 from shevsim.core.errors import SimulationError
-from shevsim.core.lookup import HAVE_NUMBA, _njit
+from shevsim.core.lookup import HAVE_NUMBA, njit, py_func
 
 __all__ = ["ThermalEstimate", "ThermalKF", "ThermalDKF", "ThermalJEKF", "TwoStateDiscretiser", "tuning",
            "two_state_a", "two_state_ad_bd",
@@ -93,17 +93,12 @@ class ThermalEstimate(NamedTuple):
 # ---------------------------------------------------------------------------------
 # the two-state model and the three filters, each written ONCE as a numba-compatible pure function
 # (floats and float arrays in, tuples out, filter state updated in place).  ``f`` is the compiled
-# function, ``f.py_func`` the same source run by Python (the reference; :func:`_py`).
+# function, ``f.py_func`` the same source run by Python (the reference; :func:`shevsim.core.lookup.py_func`).
 # ---------------------------------------------------------------------------------
 # constants vector ``c`` shared by the three filters (built by :meth:`_Base._constants`)
 _R, _K, _ALPHA, _BQ, _DT, _EULER, _TWO, _Q, _RV, _QH, _HMIN, _HMAX, _TOTAL = range(13)
 # filter state ``st`` (one float array; :class:`ThermalDKF` / :class:`ThermalJEKF` name slots 6-8)
 _X0, _X1, _P00, _P01, _P11, _H, _S6, _S7, _S8, _HAS_U, _UQ, _UT = range(12)
-
-
-def _py(f):
-    """The uncompiled (reference) form of a compiled function: the same source, run by Python."""
-    return getattr(f, "py_func", f)
 
 
 class TwoStateDiscretiser:
@@ -151,7 +146,7 @@ class TwoStateDiscretiser:
         return two_state_dout(h, self._R, self._k, 2.0)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _predict_state(st, c, h):
     """``x <- Ad x + Bd u_prev`` (3.12a); returns ``Ad, Bd`` (8) and the prior ``x`` (2)."""
     a00, a01, a10, a11, b00, b01, b10, b11 = two_state_ad_bd(h, c[_R], c[_K], c[_ALPHA], c[_BQ], c[_DT],
@@ -165,7 +160,7 @@ def _predict_state(st, c, h):
     return a00, a01, a10, a11, x0, x1
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _ad_p(st, a00, a01, a10, a11):
     """``M = Ad P`` of the 2x2 state covariance ``P`` in ``st``: ``(m00, m01, m10, m11)``."""
     p00 = st[_P00]
@@ -174,14 +169,14 @@ def _ad_p(st, a00, a01, a10, a11):
     return (a00 * p00 + a01 * p01, a00 * p01 + a01 * p11, a10 * p00 + a11 * p01, a10 * p01 + a11 * p11)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _g_dh(da, x0, x1, uq, ut):
     """``g = dAd/dh x + dBd/dh u`` (``da`` = :func:`two_state_d_ad_bd`): the h-sensitivity of the prediction."""
     return (da[0] * x0 + da[1] * x1 + da[4] * uq + da[5] * ut,
             da[2] * x0 + da[3] * x1 + da[6] * uq + da[7] * ut)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _predict_cov(st, a00, a01, a10, a11, q):
     """``P <- Ad P Ad' + q I`` of the 2x2 state covariance (3.12b)."""
     m00, m01, m10, m11 = _ad_p(st, a00, a01, a10, a11)
@@ -190,7 +185,7 @@ def _predict_cov(st, a00, a01, a10, a11, q):
     st[_P11] = m10 * a10 + m11 * a11 + q
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _correct_state(st, e, cs0, cs1, r):
     """Measurement update of (x, P) with the surface row ``[cs0, cs1]`` (3.13); returns the gain."""
     p00 = st[_P00]
@@ -209,7 +204,7 @@ def _correct_state(st, e, cs0, cs1, r):
     return k0, k1
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _finish(st, c, h, ta, q_w):
     """Store ``h`` (clipped to [h_min, h_max]) and the inputs for the next prediction; return the
     a-posteriori ``(T_mean, gamma, T_core, T_surface, h)``."""
@@ -224,7 +219,7 @@ def _finish(st, c, h, ta, q_w):
     return x0, x1, cc0 * x0 + cc1 * x1 + dc * ta, cs0 * x0 + cs1 * x1 + ds * ta, h
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def kf_step(st, c, y, ta, q_w):
     """One :class:`ThermalKF` update (h = ``st[5]`` given, not clipped) on the state ``st`` (in place)."""
     h = st[_H]
@@ -236,7 +231,7 @@ def kf_step(st, c, y, ta, q_w):
     return _finish(st, c, h, ta, q_w)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def dkf_step(st, c, y, ta, q_w):
     """One :class:`ThermalDKF` update (3.10-3.15) on ``st = [x0, x1, p00, p01, p11, h, ph, dx0, dx1, has_u,
     uq, ut]`` (in place); ``dx = d x^+ / d h`` is the recursive sensitivity of the total derivative."""
@@ -275,7 +270,7 @@ def dkf_step(st, c, y, ta, q_w):
     return _finish(st, c, h + lg * e, ta, q_w)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def jekf_step(st, c, y, ta, q_w):
     """One :class:`ThermalJEKF` update (3.16-3.20) on ``st = [x0, x1, p00, p01, p11, h, p22, p02, p12, has_u,
     uq, ut]`` (in place): the EKF of the augmented state (T_mean, gamma, h)."""
@@ -385,7 +380,7 @@ class _Base:
         self.total = bool(total)
         self._u = None   # (q_w, t_amb_c) of the previous sample
         self.compiled = bool(compiled and HAVE_NUMBA)
-        self._step = self._STEP if self.compiled else _py(self._STEP)
+        self._step = self._STEP if self.compiled else py_func(self._STEP)
         d = self.disc
         c = [0.0] * 13
         c[_R], c[_K], c[_ALPHA], c[_BQ], c[_DT], c[_EULER], c[_TWO] = \

@@ -76,7 +76,7 @@ from ..powertrain import engine as eng
 from .models import CalibrationModel, Effect, Param, resolve_known_files, sampling_grid, split_known
 
 _FIELDS = {f.name: f for f in dataclasses.fields(EngineGeneratorParams)}
-_DEFAULT_PARAMS_FILE = eng.EG_DIR / "default.toml"
+DEFAULT_PARAMS_FILE = eng.EG_DIR / "default.toml"
 _INPUTS = {"power_rate_max_wps": 1e12, "elec_power_max_w": 1e12}   # held inputs of the component
 
 
@@ -249,8 +249,8 @@ class EngineModel(CalibrationModel):
         t = df["time_s"].to_numpy(float)
         tg, (pg,), h, resampled = sampling_grid(t, df["power_w"].to_numpy(float))
         cls = get_component_class(self.component)
-        prm = load_params(cls.Params, _DEFAULT_PARAMS_FILE, _overlay_values(overlay_file, self.component_name))
-        src = _power_source(tg, pg)
+        prm = load_params(cls.Params, DEFAULT_PARAMS_FILE, _overlay_values(overlay_file, self.component_name))
+        src = power_source(tg, pg)
         eg = cls(self.component_name, prm)
         eg.u["power_rate_max_wps"] = float(self.known["power_rate_max_wps"])
         eg.u["elec_power_max_w"] = float(self.known["elec_power_max_w"])
@@ -263,13 +263,13 @@ class EngineModel(CalibrationModel):
 
 def _default_params() -> EngineGeneratorParams:
     from ..core.params import load_params
-    return load_params(EngineGeneratorParams, _DEFAULT_PARAMS_FILE)
+    return load_params(EngineGeneratorParams, DEFAULT_PARAMS_FILE)
 
 
 def _user_values(known: Mapping[str, Any] | None, where: str) -> dict:
     """The ``--params`` values as one flat dict of engine-generator parameters and held inputs.
 
-    ``known`` is the flat ``[params]`` dict of :func:`shevsim.calibrate.cli.load_params_toml`, optionally
+    ``known`` is the flat ``[params]`` dict of :func:`shevsim.calibrate.known.load_params_toml`, optionally
     with ``"__base_dir__"`` (folder of the ``--params`` file: relative ``*_file`` paths are resolved
     against it) and ``"__tables__"`` (``{table: {param: value}}`` of a file with component tables; the
     ``[engine_generator]`` table is merged over ``[params]``, other components' tables are ignored).
@@ -292,7 +292,7 @@ def _overlay_values(path, component: str) -> dict:
     return resolve_files(overlay_values(path, component))
 
 
-def _power_source(t: np.ndarray, p: np.ndarray):
+def power_source(t: np.ndarray, p: np.ndarray):
     """The sample-and-hold ``profile`` source of ``power_w``."""
     from ..components.profile import ProfileParams, ProfileSource
     return ProfileSource("profile", ProfileParams(time_s=tuple(map(float, t)), power_w=tuple(map(float, p))))

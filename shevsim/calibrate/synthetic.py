@@ -198,7 +198,7 @@ def synth_vehicle(effects: dict | None = None, duration_s: float = 1800.0, dt_s:
     from ..components import get_component_class
     from ..core.master import Connection, Master, MasterSettings
     from ..core.params import load_params
-    from .vehicle import PARAM_FILES, _OWNER
+    from .vehicle import PARAM_FILES, OWNER
 
     rng = np.random.default_rng(seed)
     dt = 0.1
@@ -209,8 +209,8 @@ def synth_vehicle(effects: dict | None = None, duration_s: float = 1800.0, dt_s:
         vals.update(dict(VEHICLE_EFFECTS[name], **(over or {})))
     over = {"vehicle": {}, "motor": {}, "bus": {}}
     for k, x in vals.items():
-        if k in _OWNER:
-            over[_OWNER[k]][k] = x
+        if k in OWNER:
+            over[OWNER[k]][k] = x
     if vals.get("amplitude_frac", 0.0) or vals.get("offset_frac", 0.0):
         d_end = float(np.sum(v) * dt)
         kd = np.arange(0.0, d_end + 50.0, 50.0)
@@ -282,16 +282,16 @@ def synth_engine(effects: dict | None = None, duration_s: float = 900.0, dt_s: f
     from ..components import get_component_class
     from ..core.master import Connection, Master, MasterSettings
     from ..core.params import load_params
-    from .engine import _DEFAULT_PARAMS_FILE, _power_source
+    from .engine import DEFAULT_PARAMS_FILE, power_source
     rng = np.random.default_rng(seed)
     t, p = _engine_command(duration_s, dt_s, rng)
     vals = dict(ENGINE_TRUTH, **(truth or {}))
     for name, over in (effects or {}).items():
         vals.update(dict(ENGINE_EFFECTS[name], **(over or {})))
     cls = get_component_class("engine_generator")
-    eg = cls("engine_generator", load_params(cls.Params, _DEFAULT_PARAMS_FILE, vals))
+    eg = cls("engine_generator", load_params(cls.Params, DEFAULT_PARAMS_FILE, vals))
     eg.u["power_rate_max_wps"] = rate_wps
-    src = _power_source(t, p)
+    src = power_source(t, p)
     m = Master([src, eg], [Connection(src.name, "power_w", "engine_generator", "power_cmd_w")],
                MasterSettings(step_s=dt_s), order=[src.name, "engine_generator"])
     res = m.run(float(t[-1]))

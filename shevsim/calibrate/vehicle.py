@@ -55,7 +55,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..core.errors import DataError, ShevsimError
-from ..core.lookup import _njit
+from ..core.lookup import njit
 from ..powertrain.motor import bus_balance, motor_step
 from ..powertrain.vehicle import grade_total_rad, speed_follow_step
 from .models import CalibrationModel, Effect, Param, resolve_known_files, sampling_grid, split_known
@@ -95,7 +95,7 @@ def _owners(files: dict) -> dict:
 
 
 _FILES = _file_params()
-_OWNER = _owners(_FILES)
+OWNER = _owners(_FILES)
 
 
 def _as_dict(p) -> dict:
@@ -105,7 +105,7 @@ def _as_dict(p) -> dict:
 def _user_values(known: Mapping[str, Any] | None, where: str) -> dict:
     """The ``--params`` values as one flat dict of vehicle / motor / bus parameters (and ``substep_s``).
 
-    ``known`` is the flat ``[params]`` dict of :func:`shevsim.calibrate.cli.load_params_toml` (a component
+    ``known`` is the flat ``[params]`` dict of :func:`shevsim.calibrate.known.load_params_toml` (a component
     parameter file of any of the three components, or the short form), optionally with ``"__base_dir__"``
     (folder of the ``--params`` file: relative ``*_file`` paths are resolved against it) and
     ``"__tables__"`` (``{table: {param: value}}`` of an overlay with component tables, e.g. a previous
@@ -125,12 +125,12 @@ def _user_values(known: Mapping[str, Any] | None, where: str) -> dict:
         if not isinstance(tab, Mapping):
             raise DataError(f"{where}: [{comp}] must be a table of name = value")
         for k, v in tab.items():
-            if k in _OWNER and _OWNER[k] != comp:
-                raise DataError(f"{where}: [{comp}] {k}: '{k}' is a {_OWNER[k]} parameter (table [{_OWNER[k]}])")
+            if k in OWNER and OWNER[k] != comp:
+                raise DataError(f"{where}: [{comp}] {k}: '{k}' is a {OWNER[k]} parameter (table [{OWNER[k]}])")
             vals[k] = v
     for k in _IGNORED:
         vals.pop(k, None)
-    resolve_known_files(vals, _OWNER, base_dir, where, "map file")
+    resolve_known_files(vals, OWNER, base_dir, where, "map file")
     return vals
 
 
@@ -163,7 +163,7 @@ def _sample(rec: np.ndarray, n_sub: int, n_g: int) -> np.ndarray:
     return out
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _speed_following_power(vr, ar, h, kd, kg, m, c, fr, g, md, mi, k_w, k_tau, extrapolate, v_regen, p_regen,
                            eff_scale, heat_rate, gamma0, aux):  # pragma: no cover - compiled
     """Bus power [W] at every master step of cycle -> vehicle (speed mode) -> motor -> bus (index 0 = initialise).
@@ -218,7 +218,7 @@ class VehicleModel(CalibrationModel):
         # own parameter classes, once
         from ..core.params import make_params
         for comp, cls in _component_classes().items():
-            given = {k: v for k, v in self.known.items() if _OWNER.get(k) == comp}
+            given = {k: v for k, v in self.known.items() if OWNER.get(k) == comp}
             try:
                 prm = make_params(cls.Params, {**_as_dict(_FILES[comp]), **given}, f"{where}: {comp} parameters")
             except ShevsimError as exc:
@@ -271,11 +271,11 @@ class VehicleModel(CalibrationModel):
         """{component: params dataclass}: the files, the known parameters, then ``values`` (full)."""
         over = {n: {} for n in PARAM_FILES}
         for key, val in self.known.items():
-            if key in _OWNER and val != getattr(_FILES[_OWNER[key]], key):
-                over[_OWNER[key]][key] = val
+            if key in OWNER and val != getattr(_FILES[OWNER[key]], key):
+                over[OWNER[key]][key] = val
         for key, val in (values or {}).items():
-            if key in _OWNER:
-                over[_OWNER[key]][key] = val
+            if key in OWNER:
+                over[OWNER[key]][key] = val
         gk = [float((values or {}).get(f"grade_frac[{j}]", 0.0)) for j in range(N_GRADE)]
         if any(x != 0.0 for x in gk) and grade_d is not None:
             d0, g0 = tuple(self.known["grade_distance_m"]), tuple(self.known["grade_frac"])

@@ -52,7 +52,7 @@ from shevsim.bms.thermal_estimators import ThermalDKF, ThermalJEKF, ThermalKF, d
 from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
 from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError
-from shevsim.core.lookup import _t1_value
+from shevsim.core.lookup import t1_value
 from shevsim.core.variables import inp, out
 
 _IN = ("cell_current_meas_a", "cell_voltage_meas_v", "t_surface_meas_c", "t_ambient_meas_c")
@@ -381,7 +381,7 @@ def bms_step(data, u, y, t, h):
     y[Y.t_core_c] = xb[XB.t_core]
     y[Y.h_w_m2k] = xb[XB.h]
     y[Y.heat_w] = q
-    y[Y.ocv_v] = _t1_value(dd, dix[0], dix[1], soc) * ns
+    y[Y.ocv_v] = t1_value(dd, dix[0], dix[1], soc) * ns
     y[Y.power_max_w] = lim[2]
     y[Y.power_min_w] = lim[3]
     y[Y.i_max_a] = lim[0]

@@ -12,7 +12,7 @@ import numpy as np
 
 from shevsim.core.compiled import CompiledStep, port_index
 from shevsim.core.component import Component
-from shevsim.core.lookup import _njit
+from shevsim.core.lookup import njit
 from shevsim.core.variables import out
 from shevsim.cycles import load_cycle
 from shevsim.core.paths import data_path
@@ -46,7 +46,7 @@ class CycleParams:
             raise ValueError(f"parameter 'repeat' must be in [1, 1000000], got {self.repeat}")
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def cycle_sample(v, slope, dt: float, dur: float, repeat: int, t0: float, t: float):
     """``(speed_ref_mps, accel_ref_mps2, time_in_cycle_s)`` of the trace ``v`` (samples every ``dt``,
     segment slopes ``slope``) played ``repeat`` times from ``t0``, at time ``t`` (see :class:`CycleSource`).

@@ -27,7 +27,7 @@ from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError
 from shevsim.core.lookup import py_max
 from shevsim.core.variables import out
-from shevsim.supervisor.rule_based import _bisect_right
+from shevsim.supervisor.rule_based import bisect_right
 
 _PORTS = ("current_a", "power_w", "speed_mps", "t_ambient_c", "h_conv_w_m2k")
 
@@ -110,7 +110,7 @@ def profile_step(data, u, y, t, h):
     ts, cols, has = data
     te = t + h
     tol = 1e-9 * py_max(1.0, abs(te))
-    k = _bisect_right(ts, te + tol) - 1
+    k = bisect_right(ts, te + tol) - 1
     if k < 0:
         k = 0
     for q in range(has.shape[0]):

@@ -45,7 +45,7 @@ from shevsim.supervisor import daqp_nb
 from shevsim.supervisor.mpc import MPCSettings, MPCSupervisor as _MPC, mpc_move
 from shevsim.supervisor.rate_map import PowerRateMap
 from shevsim.supervisor.rule_based import RuleBasedSupervisor, RuleSettings, rule_command
-from shevsim.supervisor.rule_based import _bisect_right
+from shevsim.supervisor.rule_based import bisect_right
 from shevsim.core.paths import data_path
 
 DEFAULT_FUEL_CURVE = data_path("components", "engine_generator", "fuel_vs_power.csv")
@@ -415,7 +415,7 @@ def rule_supervisor_step(data, u, y, t, h):
                            u[UR.power_min_w])
     x[0] = 1.0 if on else 0.0
     y[YR.power_cmd_w] = cmd
-    y[YR.power_rate_max_wps] = rates[_bisect_right(inner, prev)]
+    y[YR.power_rate_max_wps] = rates[bisect_right(inner, prev)]
     y[YR.battery_power_plan_w] = demand - cmd
     y[YR.engine_on_1] = 1.0 if on else 0.0
     x[1] = cmd

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from numba import njit as _njit   # a hard dependency: the physics is compiled from its one source
+from numba import njit   # a hard dependency: the physics is compiled from its one source
 
 HAVE_NUMBA = True    # kept for callers that still ask
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _bisect_right(d, o, n, x):  # pragma: no cover - compiled
     lo = 0
     hi = n
@@ -28,8 +28,8 @@ def _bisect_right(d, o, n, x):  # pragma: no cover - compiled
     return lo
 
 
-@_njit(cache=True, error_model="numpy")
-def _t1_value(d, o, n, x):  # pragma: no cover - compiled
+@njit(cache=True, error_model="numpy")
+def t1_value(d, o, n, x):  # pragma: no cover - compiled
     if x <= d[o]:
         return d[o + n]
     if x >= d[o + n - 1]:
@@ -38,8 +38,8 @@ def _t1_value(d, o, n, x):  # pragma: no cover - compiled
     return d[o + n + k] + d[o + 2 * n + k] * (x - d[o + k])
 
 
-@_njit(cache=True, error_model="numpy")
-def _t1_slope(d, o, n, x):  # pragma: no cover - compiled
+@njit(cache=True, error_model="numpy")
+def t1_slope(d, o, n, x):  # pragma: no cover - compiled
     if x <= d[o]:
         k = 0
     elif x >= d[o + n - 1]:
@@ -49,8 +49,8 @@ def _t1_slope(d, o, n, x):  # pragma: no cover - compiled
     return d[o + 2 * n + k]
 
 
-@_njit(cache=True, error_model="numpy")
-def _t1_integral(d, o, n, x):  # pragma: no cover - compiled
+@njit(cache=True, error_model="numpy")
+def t1_integral(d, o, n, x):  # pragma: no cover - compiled
     oc = o + 3 * n - 1
     if x <= d[o]:
         return d[o + n] * (x - d[o])
@@ -61,7 +61,7 @@ def _t1_integral(d, o, n, x):  # pragma: no cover - compiled
     return d[oc + k] + d[o + n + k] * dx + 0.5 * d[o + 2 * n + k] * dx * dx
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _g2_locate(d, o, n, x):  # pragma: no cover - compiled
     if x <= d[o]:
         return 0, 0.0
@@ -71,8 +71,8 @@ def _g2_locate(d, o, n, x):  # pragma: no cover - compiled
     return j, (x - d[o + j]) / (d[o + j + 1] - d[o + j])
 
 
-@_njit(cache=True, error_model="numpy")
-def _curve_nb(d, o, n, x):  # pragma: no cover - compiled
+@njit(cache=True, error_model="numpy")
+def curve_nb(d, o, n, x):  # pragma: no cover - compiled
     """Clamped curve at ``d[o:o+n]`` (x) / ``d[o+n:o+2n]`` (y), as ``Curve.__call__``; NaN for NaN x."""
     if x != x:
         return x
@@ -90,8 +90,8 @@ def _curve_nb(d, o, n, x):  # pragma: no cover - compiled
     return y0 + f * (d[o + n + i + 1] - y0)
 
 
-@_njit(cache=True, error_model="numpy")
-def _grid_nb(d, o, nx, ny, x, y):  # pragma: no cover - compiled
+@njit(cache=True, error_model="numpy")
+def grid_nb(d, o, nx, ny, x, y):  # pragma: no cover - compiled
     """Clamped bilinear map: axes ``d[o:o+nx]``, ``d[o+nx:o+nx+ny]``, values row-major after them."""
     if x != x or y != y:
         return x + y
@@ -130,7 +130,7 @@ import math  # noqa: E402
 EXTRAPOLATION_CODES = {"clamp": 0, "linear": 1, "error": 2}
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _axis_ex(d, o, n, mode, x):  # pragma: no cover - compiled
     """Cell index and fraction of ``x`` on the axis ``d[o:o+n]`` with extrapolation ``mode`` (0 clamp,
     1 linear, 2 error), as ``maps._locate``; a NaN fraction where ``_locate`` raises (NaN ``x``, or
@@ -153,27 +153,27 @@ def _axis_ex(d, o, n, mode, x):  # pragma: no cover - compiled
     return j, (x - d[o + j]) / (d[o + j + 1] - d[o + j])
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _curve_out(d, o, n, mode, x):  # pragma: no cover - compiled
     """Value of the curve outside its axis (or NaN ``x``) with extrapolation ``mode`` (cold path of
-    :func:`_curve_ex`)."""
+    :func:`curve_ex`)."""
     i, f = _axis_ex(d, o, n, mode, x)
     y0 = d[o + n + i]
     return y0 + f * (d[o + n + i + 1] - y0)
 
 
-@_njit(cache=True, inline="always")   # inlined at numba IR level: keeps the clamp path as fast as _curve_nb
-def _curve_ex(d, o, n, mode, x):  # pragma: no cover - compiled
-    """:func:`_curve_nb` with the extrapolation ``mode`` of ``Curve`` (0 clamp, 1 linear, 2 error -> NaN
-    outside the axis); inside the axis, or in mode 0, it *is* ``_curve_nb``, so clamped maps keep their bits."""
+@njit(cache=True, inline="always")   # inlined at numba IR level: keeps the clamp path as fast as curve_nb
+def curve_ex(d, o, n, mode, x):  # pragma: no cover - compiled
+    """:func:`curve_nb` with the extrapolation ``mode`` of ``Curve`` (0 clamp, 1 linear, 2 error -> NaN
+    outside the axis); inside the axis, or in mode 0, it *is* ``curve_nb``, so clamped maps keep their bits."""
     if mode != 0 and not (d[o] <= x <= d[o + n - 1]):
         return _curve_out(d, o, n, mode, x)
-    return _curve_nb(d, o, n, x)
+    return curve_nb(d, o, n, x)
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _grid_out(d, o, nx, ny, mx, my, x, y):  # pragma: no cover - compiled
-    """Bilinear value with per-axis extrapolation modes (cold path of :func:`_grid_ex`)."""
+    """Bilinear value with per-axis extrapolation modes (cold path of :func:`grid_ex`)."""
     i, fx = _axis_ex(d, o, nx, mx, x)
     j, fy = _axis_ex(d, o + nx, ny, my, y)
     r0 = o + nx + ny + i * ny
@@ -183,16 +183,16 @@ def _grid_out(d, o, nx, ny, mx, my, x, y):  # pragma: no cover - compiled
     return a + fx * (b - a)
 
 
-@_njit(cache=True, inline="always")
-def _grid_ex(d, o, nx, ny, mx, my, x, y):  # pragma: no cover - compiled
-    """:func:`_grid_nb` with per-axis extrapolation modes of ``Grid2D`` (0 clamp, 1 linear, 2 error -> NaN
-    outside the axis); inside the grid, or in modes (0, 0), it *is* ``_grid_nb``."""
+@njit(cache=True, inline="always")
+def grid_ex(d, o, nx, ny, mx, my, x, y):  # pragma: no cover - compiled
+    """:func:`grid_nb` with per-axis extrapolation modes of ``Grid2D`` (0 clamp, 1 linear, 2 error -> NaN
+    outside the axis); inside the grid, or in modes (0, 0), it *is* ``grid_nb``."""
     if (mx != 0 and not (d[o] <= x <= d[o + nx - 1])) or (my != 0 and not (d[o + nx] <= y <= d[o + nx + ny - 1])):
         return _grid_out(d, o, nx, ny, mx, my, x, y)
-    return _grid_nb(d, o, nx, ny, x, y)
+    return grid_nb(d, o, nx, ny, x, y)
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def ecm_lookup(d, ix, soc, t_c, sign):
     """``(rs, r1, c1, r2, c2)`` of the cell ECM tables packed by ``CellTables.packed()`` at SOC [1] and
     temperature [degC]: bilinear, clamped at the edges; discharge table for ``sign >= 0``, charge below."""
@@ -220,25 +220,25 @@ def ecm_lookup(d, ix, soc, t_c, sign):
     return rs, r1, c1, r2, c2
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def curve_eval_array(d, n, mode, xs):  # pragma: no cover - compiled
-    """:func:`_curve_ex` over an array of ``x`` (a curve packed alone: axis ``d[:n]``, values ``d[n:2n]``)."""
+    """:func:`curve_ex` over an array of ``x`` (a curve packed alone: axis ``d[:n]``, values ``d[n:2n]``)."""
     out = np.empty(xs.size)
     for k in range(xs.size):
-        out[k] = _curve_ex(d, 0, n, mode, xs[k])
+        out[k] = curve_ex(d, 0, n, mode, xs[k])
     return out
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def grid_eval_array(d, nx, ny, mx, my, xs, ys):  # pragma: no cover - compiled
-    """:func:`_grid_ex` over arrays of ``(x, y)`` (a map packed alone: axes then row-major values)."""
+    """:func:`grid_ex` over arrays of ``(x, y)`` (a map packed alone: axes then row-major values)."""
     out = np.empty(xs.size)
     for k in range(xs.size):
-        out[k] = _grid_ex(d, 0, nx, ny, mx, my, xs[k], ys[k])
+        out[k] = grid_ex(d, 0, nx, ny, mx, my, xs[k], ys[k])
     return out
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def interp_held(xa, ox, ya, oy, n, x):  # pragma: no cover - compiled
     """Piecewise-linear ``y(x)`` through ``n >= 1`` knots ``xa[ox:ox+n]`` (increasing) / ``ya[oy:oy+n]``,
     held beyond the end knots (knot lists of parameters: dU/dT(SOC), road grade along distance)."""
@@ -251,14 +251,20 @@ def interp_held(xa, ox, ya, oy, n, x):  # pragma: no cover - compiled
     return ya[oy + j] + f * (ya[oy + j + 1] - ya[oy + j])
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def py_min(a, b):
     """Python's ``min(a, b)`` in compiled code: the first argument unless the second is strictly smaller
     (numba's ``min`` may pick the other one of two equal values, e.g. signed zeros)."""
     return b if b < a else a
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def py_max(a, b):
     """Python's ``max(a, b)`` in compiled code (see :func:`py_min`)."""
     return b if b > a else a
+
+
+def py_func(f):
+    """The uncompiled (reference) form of a compiled function: the same source, run by Python
+    (``f.py_func``; ``f`` itself when it is not compiled)."""
+    return getattr(f, "py_func", f)

@@ -100,7 +100,7 @@ _INT_TYPES = ("Integer", "Int32", "Int64", "Int16", "Int8", "UInt32", "UInt16", 
               "Enumeration")
 _BOOL_TYPES = ("Boolean",)
 _OTHER_NUM = ("Float32",)
-_PORT_TYPES = _REAL_TYPES + _INT_TYPES + _BOOL_TYPES + _OTHER_NUM
+PORT_TYPES = _REAL_TYPES + _INT_TYPES + _BOOL_TYPES + _OTHER_NUM
 
 #: wall-time bound of one communication step of an FMU (s); scenario key ``step_timeout_s`` (0: none).
 #: Long enough for any step of a working FMU stepped at a co-simulation step (well under a second here),
@@ -243,7 +243,7 @@ def expected_units_of(component: type | Mapping[str, str] | None) -> dict[str, s
     return {v.name: v.unit for v in variables if v.causality in ("input", "output")}
 
 
-def _var_unit(v) -> str:
+def var_unit(v) -> str:
     unit = getattr(v, "unit", None)
     if not unit and getattr(v, "declaredType", None) is not None:
         unit = getattr(v.declaredType, "unit", None)
@@ -703,7 +703,7 @@ class FMUComponent(Component):
         for v in md.modelVariables:
             if v.causality not in ("input", "output", "parameter"):
                 continue
-            if v.type not in _PORT_TYPES:
+            if v.type not in PORT_TYPES:
                 # String/Binary/Clock: not a port; its start value is settable (`parameters`), a connection
                 # to or from it is refused by name (Master: `not_connectable`)
                 self.value_variables[v.name] = {"causality": v.causality, "type": v.type, "start": v.start,
@@ -725,7 +725,7 @@ class FMUComponent(Component):
             for i, p in enumerate(ports):
                 self._fmu_of[p] = v.name
                 self._elem_of[p] = i
-            unit = _var_unit(v)
+            unit = var_unit(v)
             if port in expected_units and v.causality != "parameter":
                 want = expected_units[port]
                 if not unit:

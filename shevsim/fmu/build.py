@@ -39,7 +39,7 @@ def fmu_sources_dir() -> Path:
     return repo_root() / "fmus" / "src"
 
 
-def _python_env() -> dict[str, str]:
+def python_env() -> dict[str, str]:
     env = dict(os.environ)
     root = str(repo_root())
     env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
@@ -130,7 +130,7 @@ def build_python_fmu(script: str | Path, out_path: str | Path, fmi_version: int 
         if handle_state:
             cmd.append("--handle-state")
         cmd += [str(Path(p).absolute()) for p in project_files]
-        res = subprocess.run(cmd, cwd=tmp, env=_python_env(), stdout=subprocess.PIPE,
+        res = subprocess.run(cmd, cwd=tmp, env=python_env(), stdout=subprocess.PIPE,
                              stderr=subprocess.STDOUT, text=True, timeout=timeout_s)
         built = list(Path(tmp).glob("*.fmu"))
         if res.returncode or len(built) != 1:

@@ -101,8 +101,8 @@ def required_packages(module: str) -> list[str]:
     code = ("import sys, importlib; importlib.import_module('shevsim.fmu.slave'); "
             f"importlib.import_module({module!r}); "
             "print(' '.join(sorted({m.split('.')[0] for m in sys.modules})))")
-    from .build import _python_env      # the package's root on PYTHONPATH, as for the build
-    env = _python_env()
+    from .build import python_env      # the package's root on PYTHONPATH, as for the build
+    env = python_env()
     env["PYTHONPATH"] = str(Path(__file__).resolve().parents[2]) + os.pathsep + env.get("PYTHONPATH", "")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
     if res.returncode:

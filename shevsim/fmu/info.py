@@ -14,7 +14,7 @@ from __future__ import annotations
 import zipfile
 from pathlib import Path
 
-from .adapter import _var_unit, read_fmi_version
+from .adapter import var_unit, read_fmi_version
 
 __all__ = ["fmu_info"]
 
@@ -79,7 +79,7 @@ def fmu_info(path: str | Path, causalities: tuple[str, ...] | None = None) -> st
     shown.sort(key=lambda v: _ORDER.get(v.causality, 9))
     rows = [("name", "causality", "variability", "type", "unit", "start", "description")]
     for v in shown:
-        rows.append((v.name, v.causality or "", v.variability or "", v.type, _var_unit(v) or "-",
+        rows.append((v.name, v.causality or "", v.variability or "", v.type, var_unit(v) or "-",
                      "" if v.start is None else str(v.start), (v.description or "")[:60]))
     widths = [max(len(r[i]) for r in rows) for i in range(6)]
     lines.append("")
@@ -103,7 +103,7 @@ def support_report(md, path: Path, version: str) -> list[str]:
     """What shevsim can and cannot do with this FMU (the ``shevsim support`` section of the info)."""
     import fmpy
 
-    from .adapter import _PORT_TYPES, element_names, variable_shape
+    from .adapter import PORT_TYPES, element_names, variable_shape
 
     ok: list[str] = []
     no: list[str] = []
@@ -137,7 +137,7 @@ def support_report(md, path: Path, version: str) -> list[str]:
         except Exception as exc:
             no.append(f"{v.causality} '{v.name}': {exc}")
             continue
-        if v.type not in _PORT_TYPES:
+        if v.type not in PORT_TYPES:
             start = "" if v.start is None else f", start {v.start!r}"
             ok.append(f"{v.causality} '{v.name}' ({v.type}{start}): a value, not a port - its start value is "
                       f"settable with set = {{ {v.name} = ... }}; connecting it is refused")

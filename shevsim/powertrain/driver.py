@@ -15,12 +15,12 @@ start of the step (direct feedthrough); the integral is then advanced by ``k_I e
 """
 from __future__ import annotations
 
-from shevsim.core.lookup import _njit
+from shevsim.core.lookup import njit
 
 from .vehicle import G_MPS2
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def feedforward_n(v_ref: float, a_ref: float, mass_kg: float, c_aero: float, f_roll: float,
                   g: float = G_MPS2) -> float:
     """Feed-forward force [N] for reference speed and acceleration."""
@@ -30,7 +30,7 @@ def feedforward_n(v_ref: float, a_ref: float, mass_kg: float, c_aero: float, f_r
     return f
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def pi_force(e: float, integ: float, ff: float, kp: float, f_min: float, f_max: float) -> tuple[float, bool]:
     """Saturated PI output and whether the integral may integrate ``e`` (anti-windup)."""
     f = ff + kp * e + integ
@@ -41,7 +41,7 @@ def pi_force(e: float, integ: float, ff: float, kp: float, f_min: float, f_max: 
     return f, True
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def driver_step(v_ref: float, a_ref: float, v: float, integ: float, h: float, kp: float, ki: float, mass_kg: float,
                 c_aero: float, f_roll: float, g: float, force_brake_max_n: float, force_prop_max_n: float):
     """One driver step with the inputs held over ``h``: ``(force_req_n, speed_error_mps, feedforward_n,

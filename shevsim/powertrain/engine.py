@@ -82,7 +82,7 @@ Chain, advanced in sub-steps of at most ``max_substep_s`` with the inputs held:
 The physics above is written once, in :func:`step` (numba-compiled; :data:`step_py` is the same source
 run by the Python interpreter), on maps packed by :func:`pack_maps`; every extrapolation rule of the
 maps (``clamp``, ``linear``, ``error``) is carried in the packed form (:func:`shevsim.core.lookup._curve_ex`,
-``_grid_ex``).  :class:`EngineGenStep` binds it to one (maps, parameters) pair for the component.
+``grid_ex``).  :class:`EngineGenStep` binds it to one (maps, parameters) pair for the component.
 
 Energy bookkeeping per sub-step (all exact for the discrete trajectory):
 ``E_fuel = LHV * fuel mass``; ``W_e = mean(tau_e) * mean(w) * dt`` (trapezoid in torque);
@@ -236,7 +236,7 @@ import numpy as np  # noqa: E402
 
 from shevsim.core.compiled import field_index  # noqa: E402
 from shevsim.core.errors import DataError  # noqa: E402
-from shevsim.core.lookup import EXTRAPOLATION_CODES, HAVE_NUMBA, _curve_ex, _grid_ex, _njit  # noqa: E402
+from shevsim.core.lookup import EXTRAPOLATION_CODES, HAVE_NUMBA, curve_ex, grid_ex, njit  # noqa: E402
 
 
 #: index constants of the state array ``x`` (:data:`STATE`) and the parameter array ``c`` (:data:`PRM_FIELDS`)
@@ -246,7 +246,7 @@ C = field_index(PRM_FIELDS, "C")
 T = field_index(("e_el", "fuel", "soot", "soot_meas"), "T")
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _coefficients(md, mi, c, p_max, dt, p_cmd_w, rate_up_wps, elec_max_w, elec_min_w):
     """The sub-steps' constants ``k = (dt, target, r_up, r_dn, a_w, dw_max, a_up, a_dn, a_a, p_shed, e_shed,
     e_floor, w_idle)``."""
@@ -262,11 +262,11 @@ def _coefficients(md, mi, c, p_max, dt, p_cmd_w, rate_up_wps, elec_max_w, elec_m
     p_shed = max(elec_max_w, 0.0)
     e_shed = p_shed * dt
     e_floor = min(elec_min_w, p_max) * dt          # 10d: <= 0 = no floor
-    w_idle = _curve_ex(md, mi[0], mi[1], mi[2], 0.0)
+    w_idle = curve_ex(md, mi[0], mi[1], mi[2], 0.0)
     return (dt, target, r_up, r_dn, a_w, dw_max, a_up, a_dn, a_a, p_shed, e_shed, e_floor, w_idle)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _rack_and_fuel(md, mi, c, k, x):
     """Items 1-6 of a sub-step: rate limit and cut (``x[p_lim]``), speed response, torque demand, PI rack
     (``x[integ]``, ``x[rack]``), fuel command and turbo lag.  Returns ``(cut, w0, w1, m_c, m1, dm, fl)``."""
@@ -282,17 +282,17 @@ def _rack_and_fuel(md, mi, c, k, x):
     x[S.p_lim] = p_lim
     # 2-3. speed set point and speed response
     w0 = x[S.w]
-    w_set = _curve_ex(md, mi[0], mi[1], mi[2], p_lim)
+    w_set = curve_ex(md, mi[0], mi[1], mi[2], p_lim)
     w1 = w_set + (w0 - w_set) * a_w
     if w1 - w0 > dw_max:
         w1 = w0 + dw_max
     elif w0 - w1 > dw_max:
         w1 = w0 - dw_max
     # 4. torque demand (10c. + the speed loop's torque while the generator torque is cut)
-    tau_ref = _curve_ex(md, mi[3], mi[4], mi[5], p_lim) / w0
+    tau_ref = curve_ex(md, mi[3], mi[4], mi[5], p_lim) / w0
     if x[S.gen_sat] > 0.0:
         tau_ref += c[C.shaft_inertia_kg_m2] * (w_set - w0) / c[C.speed_time_constant_s]
-    tl = _curve_ex(md, mi[6], mi[7], mi[8], w0)
+    tl = curve_ex(md, mi[6], mi[7], mi[8], w0)
     if tau_ref > tl:
         tau_ref = tl
     # 5. PI rack with conditional integration
@@ -311,7 +311,7 @@ def _rack_and_fuel(md, mi, c, k, x):
     x[S.integ] = integ
     x[S.rack] = rack
     # 6. fuel command and turbo lag (exact)
-    fl = _curve_ex(md, mi[9], mi[10], mi[11], w1)
+    fl = curve_ex(md, mi[9], mi[10], mi[11], w1)
     m_c = rack * fl
     m0 = x[S.m_f]
     if m_c > m0:
@@ -325,7 +325,7 @@ def _rack_and_fuel(md, mi, c, k, x):
     return cut, w0, w1, m_c, m1, dm, fl
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _shaft_and_generator(md, mi, c, k, x, cut, w0, w1, m1):
     """Items 7, 10b, 10d of a sub-step: engine torque, shaft energy, generator work and its cut to the bus limit
     or raise to the floor (``x[gen_sat]``, the shedding counters).  Returns ``(w1, tau1, w_avg, tau_avg,
@@ -333,20 +333,20 @@ def _shaft_and_generator(md, mi, c, k, x, cut, w0, w1, m1):
     dt, _target, _r_up, _r_dn, _a_w, _dw_max, _a_up, _a_dn, _a_a, _p_shed, e_shed, e_floor, w_idle = k
     J = c[C.shaft_inertia_kg_m2]
     # 7. engine torque
-    tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
+    tau1 = grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
     w_avg = 0.5 * (w0 + w1)
     tau_avg = 0.5 * (x[S.tau_e] + tau1)
     w_e = tau_avg * w_avg * dt
     dke = 0.5 * J * (w1 * w1 - w0 * w0)
     w_g = w_e - dke
     tau_g = w_g / (w_avg * dt)
-    eta = _grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg, abs(tau_g))
+    eta = grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg, abs(tau_g))
     el = w_g * eta if w_g >= 0.0 else w_g / eta
     # 10b. generator torque cut to the bus limit; the surplus engine work accelerates the shaft
     gen_sat = 0.0
     if el > e_shed:
         if e_shed > 0.0:
-            eta = _grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg, e_shed / (eta * w_avg * dt))
+            eta = grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg, e_shed / (eta * w_avg * dt))
             w_gc = e_shed / eta
         else:
             w_gc = 0.0
@@ -355,11 +355,11 @@ def _shaft_and_generator(md, mi, c, k, x, cut, w0, w1, m1):
         el = e_shed
         dke = w_e - w_g
         w1 = math.sqrt(w0 * w0 + 2.0 * dke / J)
-        tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
+        tau1 = grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
         gen_sat = 1.0
     elif e_floor > 0.0 and el < e_floor and w1 > w_idle:
         # 10d. generator torque raised to the floor; the deficit comes out of the shaft's kinetic energy
-        eta_f = _grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg,
+        eta_f = grid_ex(md, mi[17], mi[18], mi[19], mi[20], mi[21], w_avg,
                          e_floor / (max(eta, 1e-3) * w_avg * dt))
         w1sq = w0 * w0 + 2.0 * (w_e - e_floor / eta_f) / J
         if w1sq < w_idle * w_idle:
@@ -370,7 +370,7 @@ def _shaft_and_generator(md, mi, c, k, x, cut, w0, w1, m1):
             w_g = w_e - dke
             el = w_g * eta_f
             w1 = w1f
-            tau1 = _grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
+            tau1 = grid_ex(md, mi[12], mi[13], mi[14], mi[15], mi[16], w1, m1)
     x[S.gen_sat] = gen_sat
     if cut > 0.0 or gen_sat > 0.0:
         if x[S.shed] == 0.0:
@@ -382,14 +382,14 @@ def _shaft_and_generator(md, mi, c, k, x, cut, w0, w1, m1):
     return w1, tau1, w_avg, tau_avg, w_e, dke, w_g, el
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _soot(md, mi, c, k, x, w_avg, tau_avg, m_c, dm, fl):
     """Items 8 and 11 of a sub-step: quasi-static and transient soot, the analyser's lag (``x[soot_lag]``).
     Returns ``(s_sub, s_tr, analyser reading integral)``."""
     dt = k[0]
     a_a = k[8]
     if tau_avg > 0.0:
-        s = c[C.soot_scale_frac] * _grid_ex(md, mi[22], mi[23], mi[24], mi[25], mi[26], w_avg, tau_avg) * dt
+        s = c[C.soot_scale_frac] * grid_ex(md, mi[22], mi[23], mi[24], mi[25], mi[26], w_avg, tau_avg) * dt
     else:
         s = 0.0
     deficit = m_c * dt - dm                              # int (m_c - m_f) dt over the sub-step [g]
@@ -403,7 +403,7 @@ def _soot(md, mi, c, k, x, w_avg, tau_avg, m_c, dm, fl):
     return s_sub, s_tr, meas
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def step(md, mi, c, p_max, x, p_cmd_w, rate_up_wps, h, elec_max_w, elec_min_w, tot):
     """Advance the engine-generator by ``h`` with the inputs held (items 1-11 of the module docstring).
 
@@ -459,7 +459,7 @@ def step(md, mi, c, p_max, x, p_cmd_w, rate_up_wps, h, elec_max_w, elec_min_w, t
     tot[T.soot_meas] = soot_meas / h + c[C.soot_analyzer_offset_mgps]
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def run_record(md, mi, c, p_max, x, t, p_cmd, rate_up_wps, elec_max_w, out):  # pragma: no cover - compiled
     """:func:`step` through a record (the calibration's loop, :mod:`shevsim.calibrate.engine`): state ``x``
     (order of :data:`STATE`; not changed) at ``t[0]``; step ``k`` runs from ``t[k-1]`` to ``t[k]`` with

@@ -29,7 +29,7 @@ import numpy as np
 
 from shevsim.core.errors import DataError
 from shevsim.core.params import name_rule
-from shevsim.core.lookup import EXTRAPOLATION_CODES, _curve_ex, _grid_ex, curve_eval_array, grid_eval_array
+from shevsim.core.lookup import EXTRAPOLATION_CODES, curve_ex, grid_ex, curve_eval_array, grid_eval_array
 from shevsim.core.filecache import memo_file
 
 _MODES = ("clamp", "linear", "error")
@@ -54,7 +54,7 @@ def _lookup_error(axis, x: float, mode: str, name: str) -> DataError:
 
 class Curve:
     """Piecewise-linear curve ``y(x)``, evaluated by the one compiled lookup module
-    (:func:`shevsim.core.lookup._curve_ex`) on the packed array ``[x, y]``.
+    (:func:`shevsim.core.lookup.curve_ex`) on the packed array ``[x, y]``.
 
     Parameters
     ----------
@@ -80,7 +80,7 @@ class Curve:
         self.fn = self.__call__
 
     def __call__(self, x: float) -> float:
-        v = _curve_ex(self._d, 0, self._n, self._m, float(x))
+        v = curve_ex(self._d, 0, self._n, self._m, float(x))
         if v != v:
             raise _lookup_error(self.x, float(x), self.mode, self.name)
         return v
@@ -96,7 +96,7 @@ class Curve:
 
 class Grid2D:
     """Bilinear map ``z(x, y)`` on a regular (rectilinear) grid, ``z.shape == (len(x), len(y))``, evaluated
-    by the one compiled lookup module (:func:`shevsim.core.lookup._grid_ex`) on ``[x, y, z row-major]``.
+    by the one compiled lookup module (:func:`shevsim.core.lookup.grid_ex`) on ``[x, y, z row-major]``.
 
     Parameters
     ----------
@@ -139,7 +139,7 @@ class Grid2D:
         return _lookup_error(self.y, y, "error", self.name)
 
     def __call__(self, x: float, y: float) -> float:
-        v = _grid_ex(self._d, 0, self._nx, self._ny, self._mx, self._my, float(x), float(y))
+        v = grid_ex(self._d, 0, self._nx, self._ny, self._mx, self._my, float(x), float(y))
         if v != v:
             raise self._error(float(x), float(y))
         return v

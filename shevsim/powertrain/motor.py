@@ -40,26 +40,26 @@ from __future__ import annotations
 
 import numpy as np
 
-from shevsim.core.lookup import _curve_nb, _grid_nb, _njit, py_max, py_min
+from shevsim.core.lookup import curve_nb, grid_nb, njit, py_max, py_min
 
 from .maps import Curve, Grid2D
 
 HEAT_RATE_PER_S = 0.3 / 180.0
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def torque_limit(tau_peak: float, tau_cont: float, gamma: float) -> float:
     """Max torque magnitude (B.2'): ``tau_cont + (1 - gamma)(tau_peak - tau_cont)``."""
     return tau_cont + (1.0 - gamma) * (tau_peak - tau_cont)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def heat_index_rate(tau: float, tau_cont: float, rate_per_s: float = HEAT_RATE_PER_S) -> float:
     """d gamma / dt (B.3'), unclipped."""
     return rate_per_s * (abs(tau) / tau_cont - 1.0)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def heat_index_step(gamma: float, tau: float, tau_cont: float, h: float,
                     rate_per_s: float = HEAT_RATE_PER_S) -> float:
     """gamma after ``h`` seconds at constant torque (exact, clipped to [0, 1])."""
@@ -67,23 +67,23 @@ def heat_index_step(gamma: float, tau: float, tau_cont: float, h: float,
     return 0.0 if g < 0.0 else (1.0 if g > 1.0 else g)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def electrical_power(tau: float, w: float, eta: float) -> float:
     """Electrical power [W] (+ drawn) for shaft torque ``tau`` [N m] at ``w`` [rad/s]."""
     p = tau * w
     return p / eta if p >= 0.0 else p * eta
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def efficiency(md, mi, w: float, tau: float, scale: float) -> float:
     """Map efficiency at motor speed ``w`` [rad/s], torque ``tau`` [N m], times ``scale`` (capped at 1)."""
-    eta = _grid_nb(md, mi[4], mi[5], mi[6], w, tau)
+    eta = grid_nb(md, mi[4], mi[5], mi[6], w, tau)
     if scale != 1.0:
         eta = min(eta * scale, 1.0)
     return eta
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: float, v_prev: float,
                h_prev: float, gamma: float, k_w: float, k_tau: float, extrapolate: bool, regen_speed_min: float,
                regen_power_max: float, eff_scale: float, heat_rate: float):
@@ -118,8 +118,8 @@ def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: floa
     # mid-step speed by linear extrapolation of the speed input (second-order accurate power)
     v_mid = v + 0.5 * (v - v_prev) * (h / h_prev) if extrapolate else v
     w_mid = v_mid * k_w if v_mid > 0.0 else 0.0
-    t_peak = _curve_nb(md, mi[0], mi[1], w)
-    t_cont = _curve_nb(md, mi[2], mi[3], w)
+    t_peak = curve_nb(md, mi[0], mi[1], w)
+    t_cont = curve_nb(md, mi[2], mi[3], w)
     t_lim = torque_limit(t_peak, t_cont, gamma)
     tau = f_req * k_tau
     brake = 0.0
@@ -157,7 +157,7 @@ def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: floa
     return tau, brake, p_el, p_m, w, t_lim, gamma1, v
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def motor_component_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: float, v_prev: float,
                          h_prev: float, gamma: float, e_loss: float, e_elec: float, e_mech: float, k_w: float,
                          k_tau: float, extrapolate: bool, regen_speed_min: float, regen_power_max: float,
@@ -178,14 +178,14 @@ def motor_component_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: floa
     return tau / k_tau, brake, p_el, tau, w, t_lim, gamma1, e_loss, e_elec, e_mech, v_used
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def bus_aux_w(aux_in_w: float, aux_param_w: float) -> float:
     """Auxiliary load on the bus [W]: the ``aux_power_w`` input plus the constant ``aux_power_w`` parameter
     (the input unchanged when the parameter is 0)."""
     return aux_in_w + aux_param_w if aux_param_w != 0.0 else aux_in_w
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def bus_balance(motor_w: float, gen_w: float, aux_in_w: float, aux_param_w: float):
     """Power balance of the DC bus (:class:`shevsim.components.bus.PowerBus`; the vehicle calibration's loop
     sums the bus with it too): ``(aux, demand = motor + aux, battery = demand - gen)`` [W]."""
@@ -194,7 +194,7 @@ def bus_balance(motor_w: float, gen_w: float, aux_in_w: float, aux_param_w: floa
     return pa, d, d - gen_w
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def bus_limits(motor_w: float, gen_w: float, aux_in_w: float, bpmax_w: float, bpmin_w: float, aux_param_w: float,
                enforce: bool):
     """The bus's limit law (:class:`shevsim.components.bus.PowerBus` and ``PowerLimits``):

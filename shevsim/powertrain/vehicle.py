@@ -45,18 +45,18 @@ from __future__ import annotations
 
 import math
 
-from shevsim.core.lookup import _njit, interp_held
+from shevsim.core.lookup import njit, interp_held
 
 G_MPS2 = 9.80665
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def road_forces(grade_rad: float, mass_kg: float, f_roll_coeff: float, g: float = G_MPS2) -> tuple[float, float]:
     """Grade force ``M g sin(theta)`` and rolling force ``f_r M g cos(theta)`` [N] (rolling applies while moving)."""
     return mass_kg * g * math.sin(grade_rad), f_roll_coeff * mass_kg * g * math.cos(grade_rad)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def grade_rad_at(d: float, knot_d, knot_frac) -> float:
     """Road grade [rad] at distance ``d`` [m]: ``atan`` of the grade ``tan(theta)`` interpolated linearly
     between knots ``knot_d`` [m] (increasing) / ``knot_frac`` [-], held beyond the end knots; 0 without knots."""
@@ -66,7 +66,7 @@ def grade_rad_at(d: float, knot_d, knot_frac) -> float:
     return math.atan(interp_held(knot_d, 0, knot_frac, 0, n, d))
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def traction_force_n(v0: float, v1: float, h: float, grade_rad: float, mass_kg: float, c_aero: float,
                      f_roll_coeff: float, g: float = G_MPS2) -> float:
     """Propulsion force [N] (negative = braking) that takes :func:`step_vehicle` from ``v0`` to ``v1``
@@ -80,7 +80,7 @@ def traction_force_n(v0: float, v1: float, h: float, grade_rad: float, mass_kg: 
     return mass_kg * (v1 - v0) / h + c_aero * v0 * v1 + f_rr + f_g
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def grade_total_rad(grade_in: float, d: float, knot_d, knot_frac) -> float:
     """Road grade [rad] a vehicle sees at distance ``d``: the ``grade_rad`` input plus the knots' grade
     (:func:`grade_rad_at`); the input unchanged without knots."""
@@ -89,7 +89,7 @@ def grade_total_rad(grade_in: float, d: float, knot_d, knot_frac) -> float:
     return grade_in
 
 
-@_njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def speed_follow_step(v0: float, grade0: float, d0: float, v_ref: float, a_ref: float, grade_in: float, h: float,
                       knot_d, knot_frac, mass_kg: float, c_aero: float, f_roll_coeff: float, g: float = G_MPS2):
     """One step of the speed-following (``input_mode = "speed"``) vehicle: the whole physics of
@@ -120,7 +120,7 @@ def speed_follow_step(v0: float, grade0: float, d0: float, v_ref: float, a_ref: 
     return v1, d1, grade1, f_req, dist, f * dist, f_rr * dist, c_aero * v0 * v1 * dist, f_g * dist
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def step_vehicle(v0: float, f_prop: float, f_brk: float, grade_rad: float, h: float,
                  mass_kg: float, c_aero: float, f_roll_coeff: float,
                  g: float = G_MPS2) -> tuple[float, float, float, float, float, float, float]:
@@ -170,7 +170,7 @@ def step_vehicle(v0: float, f_prop: float, f_brk: float, grade_rad: float, h: fl
     return v1, dist, f_prop * dist, f_brk * dist, f_rr * dist, f_a * dist, f_g * dist
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def vehicle_force_step(v0: float, dist: float, e_trac: float, e_brake: float, e_roll: float, e_aero: float,
                        e_grade: float, f_prop: float, f_brk: float, grade_in: float, h: float, mass_kg: float,
                        c_aero: float, f_roll_coeff: float, g: float, knots: bool, knot_d, knot_frac):
@@ -188,7 +188,7 @@ def vehicle_force_step(v0: float, dist: float, e_trac: float, e_brake: float, e_
             0.5 * mass_kg * v1 * v1)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def vehicle_speed_mode_step(v0: float, grade0: float, dist: float, e_trac: float, e_brake: float, e_roll: float,
                             e_aero: float, e_grade: float, v_ref: float, a_ref: float, grade_in: float, h: float,
                             knot_d, knot_frac, mass_kg: float, c_aero: float, f_roll_coeff: float, g: float):

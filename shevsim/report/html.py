@@ -249,7 +249,7 @@ def _decimate(t: np.ndarray, y: np.ndarray, limit: int = MAX_POINTS):
     return t[idx], y[idx]
 
 
-def _series(result, name: str):
+def signal_series(result, name: str):
     """(time, SI values, SI unit) of a signal, or None; ``__rate__X`` is the time derivative of X."""
     t = np.asarray(result.time_s, dtype=float)
     if name.startswith("__rate__"):
@@ -304,7 +304,7 @@ def time_figure(results: Sequence, labels: Sequence[str], rows: list[tuple[str, 
         du_row = None
         for j, s in enumerate(sigs):
             for k, (res, lab) in enumerate(zip(results, labels)):
-                ser = _series(res, s)
+                ser = signal_series(res, s)
                 if ser is None:
                     continue
                 t, y, unit = ser

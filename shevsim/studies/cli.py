@@ -92,8 +92,8 @@ def _problem(a, name: str):
             raise ShevsimError(f"--set '{s}': expected component.param=value")
         k, v = s.split("=", 1)
         extra[k.strip()] = parse_value(v.strip())
-    from .evaluate import _freeze
-    prob = ScenarioProblem(str(p.resolve()), a.supervisor, a.stop_s, tuple(sorted((k, _freeze(v)) for k, v in extra.items())))
+    from .evaluate import freeze
+    prob = ScenarioProblem(str(p.resolve()), a.supervisor, a.stop_s, tuple(sorted((k, freeze(v)) for k, v in extra.items())))
     prob.item((0.0, 1.0), None).key()          # fail early on a malformed scenario
     prob.check(_edges(a, prob))                      # ... on an unknown --supervisor, a bad --set: before any run
     return prob, Path(a.out or f"results/study_{name}_{p.stem}")

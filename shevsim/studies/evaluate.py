@@ -114,16 +114,16 @@ def shevsim_version() -> str:
     return __version__
 
 
-def _canonical(obj: Any) -> str:
+def canonical(obj: Any) -> str:
     """Canonical JSON (sorted keys, floats by repr, inf/nan allowed) used for hashing."""
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=True, default=str)
 
 
 
 
-def _freeze(v):
+def freeze(v):
     if isinstance(v, (list, tuple)):
-        return tuple(_freeze(x) for x in v)
+        return tuple(freeze(x) for x in v)
     if hasattr(v, "item") and not isinstance(v, (str, bytes)):
         return v.item()
     return v
@@ -233,7 +233,7 @@ class Evaluation:
              final_signals=(), engine: str = "auto", bundle=None) -> "Evaluation":
         """An evaluation of ``scenario`` (captured now, or ``bundle``: a :class:`.bundle.ScenarioBundle`
         captured once for a whole study)."""
-        ov = tuple(sorted((str(k), _freeze(v)) for k, v in (overrides or {}).items()))
+        ov = tuple(sorted((str(k), freeze(v)) for k, v in (overrides or {}).items()))
         for k, _ in ov:
             if "." not in k:
                 raise ValueError(f"override '{k}': expected 'component.param'")
@@ -279,7 +279,7 @@ class Evaluation:
                 desc = {"scenario": _describe(bundle.scenario), "overrides": self.overrides_dict(),
                         "stop_s": self.stop_s, "final_signals": list(self.final_signals), "failed": run.error}
             payload = {**desc, "shevsim_version": shevsim_version(), "code_sha256": code_version()}
-            got = (run, blobs, hashlib.sha256(_canonical(payload).encode()).hexdigest())
+            got = (run, blobs, hashlib.sha256(canonical(payload).encode()).hexdigest())
             object.__setattr__(self, "_payload", got)
         return got[0], got[1]
 

@@ -24,7 +24,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from .evaluate import Evaluation, _canonical, code_version
+from .evaluate import Evaluation, canonical, code_version
 
 #: the study's fuel-economy metric (shevsim.metrics): the Delta-SOC-corrected figure. The seed's
 #: SOC-sustainable definition (A.1, ``fuel_economy_soc_sustained_kmpl``, selectable with --fe-metric) needs
@@ -172,7 +172,7 @@ class SyntheticEvaluation:
                 "rates_wps": None if self.rates_wps is None else list(self.rates_wps)}
 
     def key(self) -> str:
-        return hashlib.sha256(_canonical({"inputs": self.inputs(), "code_sha256": code_version()}).encode()).hexdigest()
+        return hashlib.sha256(canonical({"inputs": self.inputs(), "code_sha256": code_version()}).encode()).hexdigest()
 
     def run(self) -> dict:
         if self.log_path:

@@ -29,13 +29,13 @@ import numpy as np
 
 from shevsim.core.errors import ScenarioError
 
-from shevsim.core.lookup import _njit
+from shevsim.core.lookup import njit
 
 from .rate_map import PowerRateMap
 
 
-@_njit(cache=True)
-def _bisect_right(a, x):
+@njit(cache=True)
+def bisect_right(a, x):
     """``bisect.bisect_right`` (the power-rate map's partition of :class:`PowerRateMap`)."""
     lo = 0
     hi = a.shape[0]
@@ -48,17 +48,17 @@ def _bisect_right(a, x):
     return lo
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _min(a, b):
     return b if b < a else a          # Python's min(a, b)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def _max(a, b):
     return b if b > a else a          # Python's max(a, b)
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def rule_command(rp, inner, rates, engine_on, soc_pct, demand_w, gen_power_w, power_max_w, power_min_w):
     """The rules 1-5 of the module docstring, compiled once: ``(engine_on, command_w)``.
 
@@ -84,7 +84,7 @@ def rule_command(rp, inner, rates, engine_on, soc_pct, demand_w, gen_power_w, po
     if power_min_w <= power_max_w:                               # 4. battery limits
         p = _min(_max(p, demand_w - power_max_w), demand_w - power_min_w)
     p = _min(_max(p, rp[8]), rp[9])                              # 5. engine and rate limits
-    rate = rates[_bisect_right(inner, gen_power_w)]
+    rate = rates[bisect_right(inner, gen_power_w)]
     return on, _min(_max(p, gen_power_w + rp[10] * rp[11]), gen_power_w + rate * rp[11])
 
 

@@ -14,7 +14,7 @@ import pytest
 from scipy.linalg import expm
 
 from shevsim.battery import model as m
-from shevsim.battery.thermal import ThermalParams, _zoh, two_state_coeffs, two_state_matrices
+from shevsim.battery.thermal import ThermalParams, zoh, two_state_coeffs, two_state_matrices
 from shevsim.components.battery import BatteryPack, BatteryPackParams
 
 EFFECTS_ON = dict(arrhenius_ea_r_k=3500.0, hyst_max_v=0.02, hyst_rate=50.0, current_offset_a=0.05,
@@ -120,12 +120,12 @@ print(json.dumps([ov.tolist(), ots.tolist(), otc.tolist()]))
 def test_two_state_closed_form_zoh_matches_expm(h, dt):
     p = ThermalParams()
     A, B, C, D = two_state_matrices(p, h)
-    Ad, Bd = _zoh(A, B, dt)
+    Ad, Bd = zoh(A, B, dt)
     c = two_state_coeffs(p.radius_m, p.length_m, p.density_kg_m3, p.cp_j_kgk, p.kt_w_mk, h, dt)
     assert np.allclose(c[:4], Ad.ravel(), rtol=1e-12, atol=1e-13)
     assert np.allclose(c[4:8], Bd.ravel(), rtol=1e-11, atol=1e-12 * np.abs(Bd).max())
     assert c[8:] == pytest.approx([C[0, 0], C[0, 1], D[0, 1], C[1, 0], C[1, 1], D[1, 1]], rel=1e-15)
-    # and expm of the augmented matrix directly (independent of _zoh's construction)
+    # and expm of the augmented matrix directly (independent of zoh's construction)
     M = np.zeros((4, 4)); M[:2, :2] = A; M[:2, 2:] = B
     assert np.allclose(expm(M * dt)[:2, :2].ravel(), c[:4], rtol=1e-12, atol=1e-13)
 

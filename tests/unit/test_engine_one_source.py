@@ -22,7 +22,7 @@ import pytest
 
 from shevsim.components.engine_generator import EngineGenerator, EngineGeneratorParams
 from shevsim.core.errors import DataError, SimulationError
-from shevsim.core.lookup import HAVE_NUMBA, _curve_ex, _grid_ex
+from shevsim.core.lookup import HAVE_NUMBA, curve_ex, grid_ex
 from shevsim.powertrain import engine as eng
 from shevsim.powertrain.maps import Curve, Grid2D
 
@@ -129,15 +129,15 @@ def test_packed_lookups_follow_every_extrapolation_rule():
         cv = Curve(x, y, mode)
         d = np.concatenate([x, y])
         for p in pts:
-            assert _curve_ex(d, 0, 4, EXTRAPOLATION_CODES[mode], p) == cv(p)
+            assert curve_ex(d, 0, 4, EXTRAPOLATION_CODES[mode], p) == cv(p)
         for my in ("clamp", "linear"):
             g = Grid2D(x, yy, z, (mode, my))
             dg = np.concatenate([x, yy, z.ravel()])
             for p in pts:
                 for q in (-3.0, -1.0, 0.2, 3.0, 4.5):
-                    assert _grid_ex(dg, 0, 4, 3, EXTRAPOLATION_CODES[mode], EXTRAPOLATION_CODES[my], p, q) == g(p, q)
-    assert math.isnan(_curve_ex(np.concatenate([x, y]), 0, 4, 2, 5.0))
-    assert _curve_ex(np.concatenate([x, y]), 0, 4, 2, 2.0) == Curve(x, y, "error")(2.0)
+                    assert grid_ex(dg, 0, 4, 3, EXTRAPOLATION_CODES[mode], EXTRAPOLATION_CODES[my], p, q) == g(p, q)
+    assert math.isnan(curve_ex(np.concatenate([x, y]), 0, 4, 2, 5.0))
+    assert curve_ex(np.concatenate([x, y]), 0, 4, 2, 2.0) == Curve(x, y, "error")(2.0)
 
 
 @pytest.mark.parametrize("compiled", [True, False])

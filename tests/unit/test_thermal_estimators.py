@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from shevsim.battery.thermal import ThermalParams, TwoStateThermal, _zoh, two_state_matrices
+from shevsim.battery.thermal import ThermalParams, TwoStateThermal, zoh, two_state_matrices
 from shevsim.battery.verification import drive_like_current
 from shevsim.battery.thermal import FDThermal
 from shevsim.bms.thermal_estimators import ThermalDKF, ThermalJEKF, ThermalKF, TwoStateDiscretiser, tuning
@@ -19,7 +19,7 @@ P = ThermalParams()
 def test_closed_form_discretisation_equals_matrix_exponential(h, dt):
     d = TwoStateDiscretiser(P, dt)
     A, B, C, D = two_state_matrices(P, h)
-    Ad, Bd = _zoh(A, B, dt)
+    Ad, Bd = zoh(A, B, dt)
     np.testing.assert_allclose(d.ad_bd(h), np.r_[Ad.ravel(), Bd.ravel()], rtol=1e-10, atol=1e-14)
     e = TwoStateDiscretiser(P, dt, "euler").ad_bd(h)
     np.testing.assert_allclose(e, np.r_[(np.eye(2) + A * dt).ravel(), (B * dt).ravel()], rtol=1e-12, atol=1e-16)
