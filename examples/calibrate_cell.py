@@ -28,7 +28,7 @@ def main(out: Path) -> dict:
     options = dict(params=DATA / "ocv_25degC_hwfet_lowcurrent.toml",
                    map={"time_s": "Time", "current_a": "Current", "voltage_v": "Voltage",
                         "t_surface_c": "Battery_Temp_degC", "t_ambient_c": "Chamber_Temp_degC"},
-                   current_sign="charge-positive", drop_duplicate_rows=True, quiet=True)
+                   current_sign="charge-positive", drop_duplicate_rows=True)
     if QUICK:   # a shorter record (the first 600 s: comment lines, header, 0.1 s samples) and one effect
         lines = record.read_text().splitlines(keepends=True)
         head = [ln for ln in lines[:10] if ln.startswith("#")]
@@ -36,13 +36,11 @@ def main(out: Path) -> dict:
         record = out / "us06_first_600s.csv"
         out.mkdir(parents=True, exist_ok=True)
         record.write_text("".join(head + body[:6001]))
-        options.update(effects=["second_rc_branch"], no_plots=True, drop_duplicate_rows=False)
-    res = shevsim.run_calibration("cell", record, out=out / "calibration", **options)
-    rep = res["report"]
-    print(f"selected effects: {', '.join(rep['selected_effects']) or 'none'}")
-    for col, before in rep["rmse_before"].items():
-        after = rep["rmse_after"][col]
-        print(f"  {col}: held-out RMSE {before['holdout']:.4g} -> {after['holdout']:.4g}")
+        options.update(effects=["second_rc_branch"], plots=False, drop_duplicate_rows=False)
+    cal = shevsim.run_calibration("cell", record, out=out / "calibration", **options)
+    print(cal)                                    # <CalibrationReport cell: selected ...; held-out RMSE ...>
+    print(cal.before_after.to_string(float_format=lambda x: f"{x:.4g}"))   # RMSE per channel, before / after
+    rep = cal.report
     print(f"calibrated parameters: {out / 'calibration' / 'params.toml'} (use with shevsim run --params)")
     return rep
 

@@ -16,8 +16,9 @@ Inspect and change a scenario before running, or build one in code:
     sc.set("scenario.step_s", 0.2)
     res = shevsim.simulate(sc, stop_s=120.0)
 
-Studies and calibration take the command line's options as keyword arguments
-([`run_study()`][shevsim.api.run_study], [`run_calibration()`][shevsim.api.run_calibration]).
+Studies and calibration return objects ([`run_study()`][shevsim.api.run_study]: a
+[`StudyResult`][shevsim.studies.result.StudyResult]; [`run_calibration()`][shevsim.api.run_calibration]: a
+[`CalibrationReport`][shevsim.calibrate.report.CalibrationReport]); the command line calls them and prints.
 """
 from __future__ import annotations
 
@@ -255,92 +256,34 @@ def metrics_table(results: Sequence[Result] | Mapping[str, Result], keys: Sequen
 
 
 # --------------------------------------------------------------------- studies and calibration
-_APPEND = {"set", "map", "params"}      # options given once per value on the command line
+def run_study(which: str, scenario: str | Path | None = None, *, out: str | Path | None = None, **options):
+    """Run a study (``tradeoff``, ``powerrate-map``, ``thermal``, ``bms``) and return its
+    :class:`~shevsim.studies.result.StudyResult` (tables as DataFrames, ``best_map``, ``plot()``, ``save()``).
 
+    ``scenario`` is a scenario file or a bundled scenario's name; ``out`` saves the files the command
+    ``shevsim study WHICH --out DIR`` writes. Options: :func:`shevsim.studies.result.run_study`
+    (``workers=0``, ``stop_s=120.0``, ``set={"cycle.repeat": 1}``, ``synthetic=True``, ``plots=False``
+    and the study's own, e.g. ``rates_kwps=[30, 20]``)::
 
-def _argv(positional: Sequence[Any], options: Mapping[str, Any]) -> list[str]:
-    argv = [str(p) for p in positional if p is not None]
-    for key, val in options.items():
-        flag = "--" + key.replace("_", "-")
-        if val is None or val is False:
-            continue
-        if val is True:
-            argv.append(flag)
-        elif isinstance(val, (list, tuple)):
-            if key in _APPEND:
-                for v in val:
-                    argv += [flag, str(v)]
-            else:
-                argv += [flag, *[str(v) for v in val]]
-        elif isinstance(val, Mapping) and key in _APPEND:
-            for k, v in val.items():
-                argv += [flag, f"{k}={v}"]
-        else:
-            argv += [flag, str(val)]
-    return argv
-
-
-def _call_cli(fn, argv: list[str], what: str) -> int:
-    import contextlib
-    import io
-    quiet = "--quiet" in argv or "-q" in argv
-    try:
-        with contextlib.redirect_stdout(io.StringIO()) if quiet else contextlib.nullcontext():
-            return int(fn(argv))
-    except SystemExit as exc:          # argparse: a bad option
-        code = exc.code if isinstance(exc.code, int) else 2
-        if code:
-            raise ScenarioError(f"{what}: bad arguments {argv} (see the message above)") from None
-        return 0
-
-
-def run_study(which: str, scenario: str | Path | None = None, *, out: str | Path | None = None, **options) -> dict:
-    """Run a study (``tradeoff``, ``powerrate-map``, ``thermal``, ``bms``) with the CLI's options.
-
-    ``scenario`` is a scenario file or a bundled scenario's name.
-
-    Keyword arguments are the options of ``shevsim study WHICH --help`` with ``_`` for ``-``
-    (``workers=0``, ``stop_s=120.0``, ``rates_kwps=[10, 20]``, ``set=["cycle.repeat=1"]``,
-    ``synthetic=True``); the study writes its tables and figures to ``out``.
-
-    Returns
-    -------
-    dict
-        ``exit_code`` (0 ok; see ``shevsim --help``) and ``out`` (the folder, when given).
-
-    Raises
-    ------
-    ShevsimError
-        When the study exits non-zero (its message is printed on stderr).
+        st = shevsim.run_study("tradeoff", "uac_proxy_mpc", rates_kwps=[30, 20, 10], workers=2)
+        st.tables["tradeoff"]; st.best_map; st.plot(); st.save("out/tradeoff")
     """
-    from .core.paths import bundled_scenario
-    from .studies.cli import main_study
-    if scenario is not None and not Path(scenario).is_file() and bundled_scenario(str(scenario)) is not None:
-        scenario = bundled_scenario(str(scenario))          # a bundled scenario by name
-    argv = [which] + _argv([scenario], {"out": out, **options})
-    code = _call_cli(main_study, argv, f"study {which}")
-    if code != 0:
-        raise ShevsimError(f"study {which} failed with exit code {code} (arguments {argv[1:]})")
-    return {"exit_code": code, "out": Path(out) if out is not None else None}
+    from .studies.result import run_study as _run
+    return _run(which, scenario, out=out, **options)
 
 
-def run_calibration(model: str, data: str | Path, *, out: str | Path, **options) -> dict:
-    """Calibrate a model (``shevsim calibrate --help``: battery cell, vehicle, engine) on a measured
-    CSV with the CLI's options (``_`` for ``-``: ``map={"current_a": "I"}``, ``effects=[...]``,
-    ``params="FILE"``). Writes ``out`` (params.toml, report.json, report.md, figures).
+def run_calibration(model: str, data: str | Path, *, out: str | Path | None = None, **options):
+    """Calibrate a model (battery cell, vehicle, engine) on a measured CSV and return its
+    :class:`~shevsim.calibrate.report.CalibrationReport` (selected effects, ``before_after``, ``overlay``,
+    ``replay``, ``plot()``, ``save()``).
 
-    Returns
-    -------
-    dict
-        ``exit_code``, ``out`` and ``report`` (the parsed ``report.json`` when written).
+    ``out`` saves the files ``shevsim calibrate ... --out DIR`` writes (params.toml, report.json,
+    report.md, figures). Options: :func:`shevsim.calibrate.report.run_calibration`
+    (``params="ocv.toml"``, ``map={"time_s": "Time", "current_a": "I"}``, ``current_sign=...``,
+    ``effects=[...]``, ``holdout=0.3``)::
+
+        cal = shevsim.run_calibration("cell", "record.csv", map={"time_s": "Time", "current_a": "I"})
+        cal.selected_effects; cal.before_after; cal.overlay; cal.plot(); cal.save("out/cal")
     """
-    import json
-
-    from .calibrate.cli import main_calibrate
-    argv = _argv([model, data], {"out": out, **options})
-    code = _call_cli(main_calibrate, argv, "calibrate")
-    if code != 0:
-        raise ShevsimError(f"calibrate {model} failed with exit code {code} (arguments {argv})")
-    rep = Path(out) / "report.json"
-    return {"exit_code": code, "out": Path(out),
-            "report": json.loads(rep.read_text()) if rep.is_file() else None}
+    from .calibrate.report import run_calibration as _run
+    return _run(model, data, out=out, **options)

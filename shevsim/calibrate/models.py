@@ -228,7 +228,7 @@ def resolve_known_files(vals: dict, fields, base_dir, where: str, what: str = "f
 
 
 def split_known(known, where: str):
-    """``(known, base_dir, tables)`` from a ``--params`` dict of :func:`shevsim.calibrate.cli.load_params_toml`:
+    """``(known, base_dir, tables)`` from a ``--params`` dict of :func:`shevsim.calibrate.known.load_params_toml`:
     the flat values, the file's folder (``"__base_dir__"``) and its component tables (``"__tables__"``)."""
     from typing import Mapping as _Mapping
     known = dict(known or {})

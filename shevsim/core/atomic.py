@@ -81,3 +81,36 @@ def refuse_overwrite(path: str | Path, force: bool = False, option: str = "--for
         raise ShevsimError(f"'{path}' exists: not overwritten; give {option} to replace it, or choose another "
                            f"output file")
     return path
+
+
+def read_files(folder: str | Path, exclude: tuple[str, ...] = ()) -> dict[str, bytes]:
+    """Every file under ``folder`` (relative POSIX path -> bytes), sorted; names in ``exclude`` (and
+    names starting with one of them, e.g. ``cache.sqlite-wal``) and hidden files are left out."""
+    folder = Path(folder)
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        rel = p.relative_to(folder).as_posix()
+        if p.is_file() and not any(part.startswith(".") for part in p.relative_to(folder).parts) \
+                and not any(rel.startswith(x) for x in exclude):
+            out[rel] = p.read_bytes()
+    return out
+
+
+def write_files(out_dir: str | Path, files: dict[str, bytes], marker: str, what: str) -> Path:
+    """Write ``files`` (relative path -> bytes) into ``out_dir``, each atomically; return the folder.
+
+    Files of the same names are replaced (an earlier output of the same kind); other files are kept.
+    A folder that holds files but no ``marker`` (say ``summary.json``) is not an output of ours and is
+    refused before anything is written, as is a path that exists and is not a folder."""
+    from .errors import ShevsimError
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ShevsimError(f"{what}: '{out}' exists and is not a folder: not replaced; choose another folder")
+    if out.is_dir() and not (out / marker).is_file():
+        clash = sorted(n for n in files if (out / n).exists())
+        if clash:
+            raise ShevsimError(f"{what}: '{out}' holds files but no {marker} (not an output of shevsim), and "
+                               f"{clash[0]} would be replaced: choose another folder")
+    for name in sorted(files, key=lambda n: n == marker):      # the marker last: a complete folder has it
+        write_bytes_atomic(out / name, files[name])
+    return out

@@ -34,7 +34,7 @@ Command line::
 """
 from __future__ import annotations
 
-import argparse
+import sys
 import dataclasses
 import math
 import os
@@ -741,47 +741,38 @@ def run_all(out_dir, seed: int = 1, quick: bool = False, only=("dekf", "thermal"
     return summary
 
 
-def main(argv=None) -> int:
-    """``shevsim study bms OUT [--seed S] [--quick] [--only ...]``; returns the exit code."""
-    ap = argparse.ArgumentParser(prog="shevsim study bms",
-                                 description="BMS studies: DEKF tracking (Fig. 5.11-5.12), Table 3.3, "
-                                             "power capability under the cooling fault (Fig. 5.15)")
-    ap.add_argument("out", nargs="?", default="results/study_bms", help="output folder")
-    ap.add_argument("--out", dest="out_opt", help=argparse.SUPPRESS)
-    ap.add_argument("--seed", type=int, default=1, help="scenario / noise seed (default 1)")
-    ap.add_argument("--quick", action="store_true", help="shortened runs (1800 s DEKF, 1500 s fault, 1200 s stages)")
-    ap.add_argument("--only", default="dekf,thermal,power", help="comma list of dekf,thermal,power")
-    a = ap.parse_args(argv)
-    only = tuple(s.strip() for s in a.only.split(",") if s.strip())
-    unknown = set(only) - {"dekf", "thermal", "power"}
-    if unknown:
-        raise ShevsimError(f"study bms: --only: unknown {sorted(unknown)} (known: dekf, thermal, power)")
-    out = a.out_opt or a.out
-    s = run_all(out, seed=a.seed, quick=a.quick, only=only)
+def summary_lines(s: dict) -> list[str]:
+    """The lines ``shevsim study bms`` prints for the summary ``s`` of :func:`run_all`."""
+    lines = []
     if "dekf" in s:
         d = s["dekf"]
         tc = d["soc_time_below_2pct_s"]
-        print(f"DEKF: SOC |err| < 2 % from {'never' if tc is None else f'{tc:.1f} s'}; after {d['settle_s']:.0f} s max |SOC err| "
-              f"{d['soc_err_max_after_settle_pct']:.2f} %, max |R_s err| {100 * d['rs_rel_err_max_after_settle']:.2f} %, "
-              f"heat RMSE {100 * d['heat_rmse_rel_mean']:.2f} % of mean (OCV-R-RC floor "
-              f"{100 * d['heat_floor_rel_mean']:.2f} %)")
+        lines.append(f"DEKF: SOC |err| < 2 % from {'never' if tc is None else f'{tc:.1f} s'}; after {d['settle_s']:.0f} s max |SOC err| "
+                     f"{d['soc_err_max_after_settle_pct']:.2f} %, max |R_s err| {100 * d['rs_rel_err_max_after_settle']:.2f} %, "
+                     f"heat RMSE {100 * d['heat_rmse_rel_mean']:.2f} % of mean (OCV-R-RC floor "
+                     f"{100 * d['heat_floor_rel_mean']:.2f} %)")
     if "thermal" in s:
         for dt, rows in s["thermal"].get("rates", {}).items():
             for st, v in rows.items():
-                print(f"Table 3.3 (dt {dt} s) {st}: core/surface RMSE KF {v['KF']['core_c']:.3f}/{v['KF']['surface_c']:.3f}, "
-                      f"DKF {v['DKF']['core_c']:.3f}/{v['DKF']['surface_c']:.3f}, JEKF {v['JEKF']['core_c']:.3f}/"
-                      f"{v['JEKF']['surface_c']:.3f} degC (DKF/JEKF from h = {v['h0_adaptive_w_m2k']:.1f})")
+                lines.append(f"Table 3.3 (dt {dt} s) {st}: core/surface RMSE KF {v['KF']['core_c']:.3f}/{v['KF']['surface_c']:.3f}, "
+                             f"DKF {v['DKF']['core_c']:.3f}/{v['DKF']['surface_c']:.3f}, JEKF {v['JEKF']['core_c']:.3f}/"
+                             f"{v['JEKF']['surface_c']:.3f} degC (DKF/JEKF from h = {v['h0_adaptive_w_m2k']:.1f})")
         for name, u in s["thermal"].get("uac_proxy", {}).items():
-            print(f"{name} (mean heat {u['heat_mean_w']:.2f} W/cell, dt 1 s): stage III KF/DKF "
-                  f"{u['stage_III_kf_over_dkf']:.2f}, KF/JEKF {u['stage_III_kf_over_jekf']:.2f}")
+            lines.append(f"{name} (mean heat {u['heat_mean_w']:.2f} W/cell, dt 1 s): stage III KF/DKF "
+                         f"{u['stage_III_kf_over_dkf']:.2f}, KF/JEKF {u['stage_III_kf_over_jekf']:.2f}")
     if "power" in s:
         p = s["power"]
         for k, r in p["runs"].items():
-            print(f"cooling fault, {k}: max core {r['t_core_max_c']:.2f} degC, cell voltage "
-                  f"{r['cell_voltage_min_v']:.3f}-{r['cell_voltage_max_v']:.3f} V, SOC {r['soc_min_pct']:.1f}-"
-                  f"{r['soc_max_pct']:.1f} %, distance {r['distance_m'] / 1e3:.2f} km ({r['termination'][:60]})")
-    print(f"BMS studies written to {out}")
-    return 0
+            lines.append(f"cooling fault, {k}: max core {r['t_core_max_c']:.2f} degC, cell voltage "
+                         f"{r['cell_voltage_min_v']:.3f}-{r['cell_voltage_max_v']:.3f} V, SOC {r['soc_min_pct']:.1f}-"
+                         f"{r['soc_max_pct']:.1f} %, distance {r['distance_m'] / 1e3:.2f} km ({r['termination'][:60]})")
+    return lines
+
+
+def main(argv=None) -> int:
+    """``shevsim study bms OUT [--seed S] [--quick] [--only ...]`` (:func:`shevsim.studies.cli.cmd_bms`)."""
+    from .cli import cmd_bms
+    return cmd_bms(sys.argv[1:] if argv is None else argv)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -71,95 +71,49 @@ def _common(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
-def _problem(a, name: str):
-    from .problem import ScenarioProblem, SyntheticProblem
-    if a.synthetic:
-        return SyntheticProblem(), Path(a.out or f"results/study_{name}_synthetic")
-    if not a.scenario:
-        raise ShevsimError(f"study {name}: a SCENARIO file is needed (or --synthetic)")
-    p = Path(a.scenario)
-    if not p.is_file():
-        from ..core.paths import bundled_scenario, bundled_scenarios
-        b = bundled_scenario(a.scenario)
-        if b is None:
-            raise ShevsimError(f"{p}: scenario file not found (bundled scenarios by name: "
-                               f"{', '.join(bundled_scenarios())})")
-        p = b
-    from ..core.scenario import parse_value
-    extra = {}
-    for s in a.set:
-        if "=" not in s or "." not in s.split("=", 1)[0]:
-            raise ShevsimError(f"--set '{s}': expected component.param=value")
-        k, v = s.split("=", 1)
-        extra[k.strip()] = parse_value(v.strip())
-    from .evaluate import freeze
-    prob = ScenarioProblem(str(p.resolve()), a.supervisor, a.stop_s, tuple(sorted((k, freeze(v)) for k, v in extra.items())))
-    prob.item((0.0, 1.0), None).key()          # fail early on a malformed scenario
-    prob.check(_edges(a, prob))                      # ... on an unknown --supervisor, a bad --set: before any run
-    return prob, Path(a.out or f"results/study_{name}_{p.stem}")
+def _evaluation_options(a) -> dict:
+    """The options every evaluation study takes, as :func:`~shevsim.studies.result.run_study` keywords."""
+    return dict(workers=a.workers, scheduler=a.scheduler, cache=a.cache, supervisor=a.supervisor,
+                stop_s=a.stop_s, set=a.set, edges_kw=a.edges_kw, max_evaluations=a.max_evaluations,
+                synthetic=a.synthetic, fe_metric=a.fe_metric, soot_metric=a.soot_metric, plots=not a.no_plots,
+                progress=not a.quiet, log=print)
 
 
-def _runner(a, out: Path):
-    from .cache import EvaluationCache
-    from .parallel import StudyRunner
-    cache = EvaluationCache(a.cache or out / "cache.sqlite")
-    return cache, StudyRunner(cache, workers=a.workers, scheduler=a.scheduler, progress=not a.quiet,
-                              max_new_evaluations=a.max_evaluations)
+def _default_out(a, which: str) -> Path:
+    """``--out``, else ``results/study_<which>_<scenario stem>`` (``_synthetic`` for the surrogate)."""
+    if a.out:
+        return Path(a.out)
+    from .result import study_problem
+    return study_problem(which, a.scenario, synthetic=a.synthetic, supervisor=a.supervisor, stop_s=a.stop_s,
+                         sets=a.set)[1]
 
 
-def _metric_keys(a) -> dict:
-    d = {}
-    if a.fe_metric:
-        d["fe_key"] = a.fe_metric
-    if a.soot_metric:
-        d["soot_key"] = a.soot_metric
-    return d
-
-
-def _edges(a, problem=None):
-    """--edges-kw, else the seed's layout over the power the scenario's generator can reach."""
-    from .problem import DEFAULT_EDGES_W
-    if a.edges_kw:
-        return tuple(1e3 * x for x in a.edges_kw)
-    return problem.default_edges() if hasattr(problem, "default_edges") else DEFAULT_EDGES_W
+def _report(which: str, res, out: Path) -> int:
+    """Print a finished study's notes (stderr) and where its files are; return its exit status."""
+    for n in res.notes:
+        print(f"shevsim study {which}: {n}", file=sys.stderr)
+    print(f"outputs in {out}")
+    return res.exit_code
 
 
 def cmd_tradeoff(argv) -> int:
-    from .tradeoff import run_tradeoff
+    from .result import STUDY_OPTIONS, run_study
     ap = argparse.ArgumentParser(prog="shevsim study tradeoff",
                                  description="fuel economy and soot vs a constant max engine power rate (seed Fig. A.2)")
     _common(ap)
     ap.add_argument("--rates-kwps", "--rates", type=float, nargs="+",
-                    default=[30, 27.5, 25, 22.5, 20, 19.3, 17.5, 15, 12.5, 10, 7.5, 5],
+                    default=list(STUDY_OPTIONS["tradeoff"]["rates_kwps"]),
                     help="constant max power rates to sweep (kW/s)")
     ap.add_argument("--fe-loss-pct", type=float, default=0.5, help="fuel-economy loss accepted (%%, seed 0.5)")
     a = ap.parse_args(argv)
-    problem, out = _problem(a, "tradeoff")
-    cache, runner = _runner(a, out)
-    with cache, runner:
-        summary = run_tradeoff(problem, runner, [1e3 * r for r in a.rates_kwps], out, _edges(a, problem),
-                               fe_loss_max_frac=a.fe_loss_pct / 100, plots=not a.no_plots, **_metric_keys(a))
-    return _failed_rows_status("tradeoff", summary.get("rows", []))
-
-
-def _failed_rows_status(name: str, rows) -> int:
-    """Exit status of a study from its rows: 1 when every evaluation failed (said on stderr with the first
-    reason), 0 otherwise (failures, if any, counted on stderr)."""
-    failed = [r for r in rows if r.get("error")]
-    if rows and len(failed) == len(rows):
-        print(f"shevsim study {name}: error: all {len(rows)} evaluations failed; first: {failed[0]['error']}",
-              file=sys.stderr)
-        return 1
-    if failed:
-        print(f"shevsim study {name}: warning: {len(failed)} of {len(rows)} evaluations failed; first: "
-              f"{failed[0]['error']}", file=sys.stderr)
-    return 0
+    out = _default_out(a, "tradeoff")
+    res = run_study("tradeoff", a.scenario, out=out, rates_kwps=a.rates_kwps, fe_loss_pct=a.fe_loss_pct,
+                    **_evaluation_options(a))
+    return _report("tradeoff", res, out)
 
 
 def cmd_powerrate_map(argv) -> int:
-    from .ga import GAConfig
-    from .powerrate_map import MapStudyConfig, run_powerrate_map
-    from .problem import DEFAULT_LEVELS_WPS
+    from .result import run_study
     ap = argparse.ArgumentParser(prog="shevsim study powerrate-map",
                                  description="power-rate constraint map: GA + narrowed exhaustive search (seed A.3)")
     _common(ap)
@@ -177,34 +131,46 @@ def cmd_powerrate_map(argv) -> int:
     ap.add_argument("--unique-population", action="store_true",
                     help="GA with duplicate elimination: better optimum, ~2.5x the evaluations (see ga.py)")
     a = ap.parse_args(argv)
-    problem, out = _problem(a, "powerrate_map")
-    levels = DEFAULT_LEVELS_WPS if not a.levels_kwps else tuple(1e3 * x for x in a.levels_kwps)
-    cfg = MapStudyConfig(edges_w=_edges(a, problem), levels_wps=levels, fe_loss_max_frac=a.fe_loss_pct / 100,
-                         ga=GAConfig(population=a.population, generations=a.generations,
-                                     crossover_prob=a.crossover, mutation_prob=a.mutation, seed=a.seed,
-                                     unique_population=a.unique_population),
-                         top_k=a.top_k, max_cases=a.max_cases, fill_cases=not a.no_fill_cases, **_metric_keys(a))
-    cache, runner = _runner(a, out)
-    with cache, runner:
-        run_powerrate_map(problem, runner, cfg, out, plots=not a.no_plots)
-    return 0
+    out = _default_out(a, "powerrate-map")
+    res = run_study("powerrate-map", a.scenario, out=out, levels_kwps=a.levels_kwps, generations=a.generations,
+                    population=a.population, crossover=a.crossover, mutation=a.mutation, seed=a.seed,
+                    fe_loss_pct=a.fe_loss_pct, top_k=a.top_k, max_cases=a.max_cases,
+                    unique_population=a.unique_population, fill_cases=not a.no_fill_cases,
+                    **_evaluation_options(a))
+    return _report("powerrate-map", res, out)
 
 
 def cmd_thermal(argv) -> int:
+    from .result import run_study
     ap = argparse.ArgumentParser(prog="shevsim study thermal", description="battery thermal-model verification")
     ap.add_argument("out_dir", nargs="?", help="output folder (same as --out)")
     ap.add_argument("-o", "--out", default="results/study_thermal", help="output folder (default results/study_thermal)")
     a = ap.parse_args(argv)
-    from ..battery.verification import run_thermal_verification
     out = a.out_dir or a.out
-    run_thermal_verification(Path(out))
+    run_study("thermal", out=out)
     print(f"thermal verification written to {out}")
     return 0
 
 
 def cmd_bms(argv) -> int:
-    from .bms_study import main as bms_main    # shevsim study bms OUT [--seed S] [--quick] [--only ...]
-    return bms_main(argv)
+    """``shevsim study bms OUT [--seed S] [--quick] [--only ...]``."""
+    from .bms_study import summary_lines
+    from .result import run_study
+    ap = argparse.ArgumentParser(prog="shevsim study bms",
+                                 description="BMS studies: DEKF tracking (Fig. 5.11-5.12), Table 3.3, "
+                                             "power capability under the cooling fault (Fig. 5.15)")
+    ap.add_argument("out", nargs="?", default="results/study_bms", help="output folder")
+    ap.add_argument("--out", dest="out_opt", help=argparse.SUPPRESS)
+    ap.add_argument("--seed", type=int, default=1, help="scenario / noise seed (default 1)")
+    ap.add_argument("--quick", action="store_true", help="shortened runs (1800 s DEKF, 1500 s fault, 1200 s stages)")
+    ap.add_argument("--only", default="dekf,thermal,power", help="comma list of dekf,thermal,power")
+    a = ap.parse_args(argv)
+    out = a.out_opt or a.out
+    res = run_study("bms", out=out, seed=a.seed, quick=a.quick, only=a.only)
+    for line in summary_lines(res.summary):
+        print(line)
+    print(f"BMS studies written to {out}")
+    return 0
 
 
 #: study name -> (one-line help, handler(argv) -> exit code). Extend here.

@@ -219,7 +219,6 @@ def run_powerrate_map(problem, runner, cfg: MapStudyConfig | None = None, out_di
     }
     if out_dir is not None:
         _write_outputs(Path(out_dir), summary, es_scored, obj, levels, plots)
-        log(f"outputs in {out_dir}")
     return summary
 
 
@@ -265,12 +264,18 @@ def _step(edges_w, rates_wps):
 
 
 def plot_rate_maps(summary: dict, path: Path) -> None:
-    """Fig. A.3 analogue: design space (grey), narrowed space (blue band), top maps, best map."""
-    from shevsim.plotting import headless_pyplot
-    plt = headless_pyplot()
+    """Write :func:`rate_maps_figure` to ``path`` (PNG)."""
+    rate_maps_figure(summary).savefig(path, dpi=120)
+
+
+def rate_maps_figure(summary: dict):
+    """Fig. A.3 analogue: design space (grey), narrowed space (blue band), top maps, best map (a
+    matplotlib ``Figure``, not registered with pyplot)."""
+    from matplotlib.figure import Figure
     edges = summary["best_map"]["edges_w"]
     lv = summary["config"]["levels_wps"]
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    fig = Figure(figsize=(7, 4.2))
+    ax = fig.subplots()
     for i, (lo, hi) in enumerate(zip(edges, edges[1:])):
         ax.fill_between([lo / 1e3, hi / 1e3], min(lv) / 1e3, max(lv) / 1e3, color="0.88", lw=0,
                         label="design space" if i == 0 else None)
@@ -291,14 +296,18 @@ def plot_rate_maps(summary: dict, path: Path) -> None:
     ax.legend(fontsize=8, loc="best")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    return fig
 
 
 def plot_comparison(summary: dict, path: Path) -> None:
-    """Fig. A.4 analogue: fuel-economy and soot change of the top maps and the best constant limit."""
-    from shevsim.plotting import headless_pyplot
-    plt = headless_pyplot()
+    """Write `comparison_figure` to ``path`` (PNG)."""
+    comparison_figure(summary).savefig(path, dpi=120)
+
+
+def comparison_figure(summary: dict):
+    """Fig. A.4 analogue: fuel-economy and soot change of the top maps and the best constant limit (a
+    matplotlib ``Figure``, not registered with pyplot)."""
+    from matplotlib.figure import Figure
     best = summary["best_map"]
     kind = best.get("kind", "map")
     rows = [("best" if kind == "map" else "best (constant)", best)]
@@ -308,7 +317,8 @@ def plot_comparison(summary: dict, path: Path) -> None:
     labels = [l for l, _ in rows]
     colors = ["tab:blue"] + ["0.55"] * (len(rows) - 1 - bool(summary["best_constant"])) \
         + (["tab:red"] if summary["best_constant"] else [])
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    fig = Figure(figsize=(7, 5))
+    a1, a2 = fig.subplots(2, 1, sharex=True)
     a1.bar(labels, [r["fe_change_pct"] for _, r in rows], color=colors)
     a1.axhline(-100 * summary["config"]["fe_loss_max_frac"], color="k", ls=":", lw=1, label="constraint")
     a1.set_ylabel("fuel economy change (%)")
@@ -321,5 +331,4 @@ def plot_comparison(summary: dict, path: Path) -> None:
         a.grid(alpha=0.3, axis="y")
         a.axhline(0, color="k", lw=0.6)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    return fig

@@ -74,17 +74,22 @@ def run_tradeoff(problem, runner, rates_wps, out_dir: str | Path | None = None, 
         if plots:
             from ..report.write import write_study_html
             write_study_html(out, summary)
-        log(f"outputs in {out}")
     return summary
 
 
 def plot_tradeoff(summary: dict, path: Path) -> None:
-    """Fig. A.2 analogue: fuel-economy and soot change vs the constant maximum power rate."""
-    from shevsim.plotting import headless_pyplot
-    plt = headless_pyplot()
+    """Write :func:`tradeoff_figure` to ``path`` (PNG)."""
+    tradeoff_figure(summary).savefig(path, dpi=120)
+
+
+def tradeoff_figure(summary: dict):
+    """Fig. A.2 analogue: fuel-economy and soot change vs the constant maximum power rate (a matplotlib
+    ``Figure``, not registered with pyplot)."""
+    from matplotlib.figure import Figure
     rows = sorted(summary["rows"], key=lambda r: r["rate_wps"])
     x = [r["rate_wps"] / 1e3 for r in rows]
-    fig, a1 = plt.subplots(figsize=(6.5, 4))
+    fig = Figure(figsize=(6.5, 4))
+    a1 = fig.subplots()
     a1.plot(x, [r["fe_change_pct"] for r in rows], "o-", color="tab:blue", label="fuel economy")
     a1.set_xlabel("maximum engine-generator power rate (kW/s)")
     a1.set_ylabel("fuel economy change (%)", color="tab:blue")
@@ -97,5 +102,4 @@ def plot_tradeoff(summary: dict, path: Path) -> None:
     a1.set_title("Constant max power rate vs baseline (cf. seed Fig. A.2)")
     a1.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    return fig

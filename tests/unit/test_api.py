@@ -153,31 +153,6 @@ def test_engine_choice():
             shevsim.simulate(TWO_BODY, stop_s=0.1, engine="fast")
 
 
-def test_calibrate_wrapper_passes_the_cli_options(tmp_path, monkeypatch):
-    # the wrapper is the CLI: options become argv (repeated --map, flags), a bad option is a ScenarioError
-    seen = {}
-
-    def fake(argv):
-        seen["argv"] = argv
-        return 0
-    import shevsim.calibrate.cli as ccli
-    monkeypatch.setattr(ccli, "main_calibrate", fake)
-    out = shevsim.run_calibration("cell", "x.csv", out=tmp_path, map={"time_s": "Time", "current_a": "I"},
-                            drop_duplicate_rows=True, effects=["a", "b"], holdout=0.2)
-    assert seen["argv"] == ["cell", "x.csv", "--out", str(tmp_path), "--map", "time_s=Time", "--map",
-                            "current_a=I", "--drop-duplicate-rows", "--effects", "a", "b", "--holdout", "0.2"]
-    assert out["exit_code"] == 0
-    monkeypatch.undo()
-    with pytest.raises(ScenarioError, match="bad arguments"):
-        shevsim.run_calibration("cell", "x.csv", out=tmp_path, no_such_option=1)
-
-
-def test_study_wrapper_runs_the_synthetic_tradeoff(tmp_path):
-    out = shevsim.run_study("tradeoff", synthetic=True, workers=0, out=tmp_path / "s", rates_kwps=[20, 40],
-                        no_plots=True, quiet=True)
-    assert out["exit_code"] == 0 and any((tmp_path / "s").iterdir())
-
-
 def test_user_scenario_names_bundled_parameter_sets_and_cycles(tmp_path):
     p = tmp_path / "mine.toml"
     p.write_text('[scenario]\nname = "mine"\nstop_s = 5.0\n'
@@ -221,16 +196,6 @@ def test_internal_error_has_its_own_exit_code(monkeypatch, capsys):
     monkeypatch.setattr(run_mod, "run", bug)
     assert main(["run", str(TWO_BODY), "-q"]) == 3
     assert "internal error: ZeroDivisionError: a bug" in capsys.readouterr().err
-
-
-def test_study_wrapper_takes_a_bundled_scenario_by_name(monkeypatch):
-    import shevsim.studies.cli as scli
-    seen = {}
-    monkeypatch.setattr(scli, "main_study", lambda argv: seen.setdefault("argv", argv) and 0)
-    shevsim.run_study("tradeoff", "uac_proxy_mpc", out="o", rates_kwps=[30, 20], set=["cycle.repeat=1"], workers=0)
-    from shevsim.core.paths import bundled_scenario
-    assert seen["argv"] == ["tradeoff", str(bundled_scenario("uac_proxy_mpc")), "--out", "o", "--rates-kwps", "30",
-                            "20", "--set", "cycle.repeat=1", "--workers", "0"]
 
 
 def test_quiet_works_for_study_and_calibrate(tmp_path, capsys):

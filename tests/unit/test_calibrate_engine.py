@@ -186,7 +186,7 @@ def _component_file_known(path) -> dict:
     """What ``shevsim calibrate engine DATA --params PATH`` passes for a component parameter file."""
     from pathlib import Path
 
-    from shevsim.calibrate.cli import load_params_toml
+    from shevsim.calibrate.known import load_params_toml
     known = load_params_toml(path)
     known["__base_dir__"] = str(Path(path).resolve().parent)
     return known

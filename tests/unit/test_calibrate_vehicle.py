@@ -380,7 +380,7 @@ def test_params_overlay_tables_seed_the_next_calibration(tmp_path):
     data, _ = _data(["mass_error"], duration_s=300.0)
     rep = run_workflow("vehicle", data, plots=False, out_dir=tmp_path / "first")
     assert rep["selected_effects"] == ["mass_error"]
-    from shevsim.calibrate.cli import load_params_toml
+    from shevsim.calibrate.known import load_params_toml
     known = load_params_toml(tmp_path / "first" / "params.toml")
     known.setdefault("__base_dir__", str(tmp_path / "first"))
     if "__tables__" not in known:   # older cli: tables not passed through yet
