@@ -34,7 +34,6 @@ Command line::
 """
 from __future__ import annotations
 
-import sys
 import dataclasses
 import math
 import os
@@ -767,14 +766,3 @@ def summary_lines(s: dict) -> list[str]:
                          f"{r['cell_voltage_min_v']:.3f}-{r['cell_voltage_max_v']:.3f} V, SOC {r['soc_min_pct']:.1f}-"
                          f"{r['soc_max_pct']:.1f} %, distance {r['distance_m'] / 1e3:.2f} km ({r['termination'][:60]})")
     return lines
-
-
-def main(argv=None) -> int:
-    """``shevsim study bms OUT [--seed S] [--quick] [--only ...]`` (:func:`shevsim.studies.cli.cmd_bms`)."""
-    from .cli import cmd_bms
-    return cmd_bms(sys.argv[1:] if argv is None else argv)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    import sys
-    sys.exit(main())
