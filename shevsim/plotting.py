@@ -130,7 +130,7 @@ def plot_signals(results, signals, ax=None, labels=None):
         One per display unit (in order of first appearance); a new figure (pyplot, the caller's
         backend) when omitted.
     labels : sequence of str, optional
-        One per result (default: :func:`shevsim.api.run_labels`).
+        One per result (default: :func:`shevsim.core.results.run_labels`).
 
     Returns
     -------
@@ -161,7 +161,7 @@ def plot_signals(results, signals, ax=None, labels=None):
             raise ValueError(f"plot: {len(units)} units ({units}) need {len(units)} axes, got {len(axes)}")
         fig = axes[0].figure
     if labels is None:
-        from .api import run_labels
+        from .core.results import run_labels
         labels = run_labels(results)
     for a, du in zip(axes, units):
         sigs = by_unit[du]

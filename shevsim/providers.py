@@ -59,6 +59,16 @@ def shared_quantities():
     """The rules of a scenario's ``[shared]`` quantities (:mod:`shevsim.components.shared`)."""
     from .components import shared
     return shared
+def plot_signals(*args, **kwargs):
+    """Signals against time, one axis per display unit (:func:`shevsim.plotting.plot_signals`)."""
+    from .plotting import plot_signals as plot
+    return plot(*args, **kwargs)
+
+
+def scenario_plots(*args, **kwargs):
+    """The figures (and the HTML report) a saved run gets (:func:`shevsim.plotting.scenario_plots`)."""
+    from .plotting import scenario_plots as plots
+    return plots(*args, **kwargs)
 
 
 def register() -> None:
@@ -70,6 +80,8 @@ def register() -> None:
     registry.register_html_view("result", result_html)
     registry.register_html_view("scenario", scenario_html)
     registry.register_shared_quantities(shared_quantities)
+    registry.register_plot("signals", plot_signals)
+    registry.register_plot("scenario", scenario_plots)
 
 
 register()

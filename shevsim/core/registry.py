@@ -48,6 +48,19 @@ def register_shared_quantities(provider: Callable[[], Any]) -> None:
     """Register ``provider() -> module`` with ``check_value(name, value, where)``, ``resolve(scenario,
     file_params)`` and ``same(a, b)``: the rules of the scenario's ``[shared]`` quantities."""
     _providers["shared"] = provider
+def register_plot(kind: str, plot: Callable[..., Any]) -> None:
+    """Register a figure maker: ``"signals"`` (``plot(results, signals, ax=None, labels=None) -> Figure``,
+    what :meth:`Result.plot` draws) or ``"scenario"`` (``plot(result, folder) -> [paths]``, the figures
+    :meth:`Result.save` writes with ``plots=True``)."""
+    _providers[f"plot:{kind}"] = plot
+
+
+def plot_function(kind: str) -> Callable[..., Any]:
+    """The figure maker registered as ``kind`` (see :func:`register_plot`)."""
+    if f"plot:{kind}" not in _providers:
+        raise ShevsimError(f"no '{kind}' plot is registered (import shevsim, or register one with "
+                           f"shevsim.core.registry.register_plot)")
+    return _providers[f"plot:{kind}"]
 
 
 def _provider(kind: str, what: str) -> Callable[..., Any]:

@@ -15,7 +15,7 @@ import subprocess
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -187,7 +187,8 @@ class Result:
         matplotlib.figure.Figure
             Its axes (``fig.axes``) are one per unit, in order of first appearance.
         """
-        from ..plotting import plot_signals
+        from .registry import plot_function
+        plot_signals = plot_function("signals")
         if isinstance(signals, str):
             signals = [signals]
         if signals is None:
@@ -202,10 +203,61 @@ class Result:
         """
         plot_fn = None
         if plots:
-            from ..plotting import scenario_plots
-            plot_fn = scenario_plots
+            from .registry import plot_function
+            plot_fn = plot_function("scenario")
         return save_result(self, out_dir, scenario_text=self.meta.get("scenario_text"), metrics=self.metrics,
                            plots=plot_fn, fmt=fmt)
+
+
+def _flat_params(params: Mapping[str, Any]) -> dict[str, str]:
+    import json
+    out = {}
+    for comp, p in (params or {}).items():
+        if isinstance(p, Mapping):
+            for k, v in p.items():
+                out[f"{comp}.{k}"] = json.dumps(v, sort_keys=True, default=str)
+        else:
+            out[str(comp)] = json.dumps(p, sort_keys=True, default=str)
+    return out
+
+
+def run_labels(results: Sequence[Result], fallback: Sequence[str] | None = None) -> list[str]:
+    """One distinct label per result: ``res.meta["label"]`` when set, else the scenario name; runs of the same
+    name are told apart by the parameters in which they differ (``hd_udds_mpc (vehicle.mass_kg=18000)``),
+    else by ``fallback`` (e.g. their folder names), else numbered (``#2``)."""
+    import json
+    results = list(results)
+    base = []
+    for i, r in enumerate(results):
+        lab = r.meta.get("label") or r.meta.get("scenario") or (fallback[i] if fallback else None) or f"run {i + 1}"
+        base.append(str(lab))
+    out = list(base)
+    for name in set(base):
+        group = [i for i, b in enumerate(base) if b == name]
+        if len(group) < 2:
+            continue
+        flat = [_flat_params(results[i].parameters) for i in group]
+        keys = sorted(set().union(*flat))
+        differ = [k for k in keys if len({f.get(k) for f in flat}) > 1]
+        for j, i in enumerate(group):
+            parts = []
+            for k in differ[:2]:
+                v = flat[j].get(k)
+                v = "unset" if v is None else json.loads(v)
+                parts.append(f"{k}={v:g}" if isinstance(v, (int, float)) and not isinstance(v, bool) else f"{k}={v}")
+            if parts:
+                out[i] = f"{name} ({', '.join(parts)}{', ...' if len(differ) > 2 else ''})"
+            elif fallback and len({fallback[g] for g in group}) == len(group):
+                out[i] = f"{name} ({fallback[i]})"
+            else:
+                out[i] = f"{name} #{j + 1}"
+    counts = {lab: out.count(lab) for lab in out}
+    seen: dict[str, int] = {}
+    for i, lab in enumerate(out):            # still equal (the same differences shown): number them
+        if counts[lab] > 1:
+            seen[lab] = seen.get(lab, 0) + 1
+            out[i] = f"{lab} #{seen[lab]}"
+    return out
 
 
 def git_commit(path: Path | None = None) -> str:

@@ -121,7 +121,7 @@ class Page:
 
     def render(self) -> str:
         from plotly.offline import get_plotlyjs
-        from .. import __version__
+        from ..version import __version__
         stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
         sub = esc(self.subtitle) + (" · " if self.subtitle else "") + f"shevsim {esc(__version__)} · {stamp}"
         return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
@@ -377,7 +377,7 @@ def compare_page(results: Sequence, labels: Sequence[str] | None = None, title: 
     from .labels import metric_label as _ml
     results = list(results)
     if labels is None:
-        from ..api import run_labels
+        from ..core.results import run_labels
         labels = run_labels(results)
     labels = [str(x) for x in labels]
     page = Page(title or "Comparison of runs: " + ", ".join(labels), f"{len(results)} runs")

@@ -152,7 +152,7 @@ def write_report(target: str | Path | Sequence[str | Path], out: str | Path | No
     if bad:
         raise ShevsimError(f"report: a comparison takes run folders only; not runs: {', '.join(bad)}")
     results = [_load_run(p, load_result) for p, _ in kinds]
-    from ..api import run_labels
+    from ..core.results import run_labels
     from .html import compare_report
     labels = run_labels(results, fallback=[p.name for p, _ in kinds])
     return _write(Path(out) if out is not None else Path("comparison.html"), compare_report(results, labels))

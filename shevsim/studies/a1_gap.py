@@ -79,9 +79,9 @@ def scaled_fuel_maps(engine_params: dict, factor: float, folder: Path) -> dict:
 
 def run_factor(scenario: str = SCENARIO, overrides: dict | None = None, repeat: int = 4) -> dict:
     """One run of ``scenario`` with ``overrides`` (and ``cycle.repeat``); returns the fuel-economy metrics."""
-    from shevsim.api import simulate
+    from shevsim.run import run
     ov = {"cycle.repeat": repeat, **(overrides or {})}
-    res = simulate(scenario, overrides=ov)
+    res = run(scenario, ov)
     m = res.metrics
     return {"termination": str(res.termination),
             "a1_kmpl": m.get("fuel_economy_soc_sustained_kmpl"),
@@ -92,8 +92,7 @@ def run_factor(scenario: str = SCENARIO, overrides: dict | None = None, repeat: 
 
 def _fuel_overrides(folder: Path, factor: float) -> dict:
     """Overrides for the reproduction scenario's engine and supervisor with fuel x ``factor``."""
-    from shevsim.api import load_scenario
-    from shevsim.core.scenario import build_master
+    from shevsim.core.scenario import build_master, load_scenario
     master = build_master(load_scenario(SCENARIO))
     eng = next(c for c in master.components.values() if type(c).__name__ == "EngineGenerator")
     sup = master.components.get("supervisor")

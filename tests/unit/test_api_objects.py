@@ -42,7 +42,8 @@ def test_run_study_tradeoff_in_a_notebook(tmp_path, monkeypatch):
     assert _one_line_and_short(repr(st)) and "tradeoff" in repr(st) and f"{best_rate / 1e3:g} kW/s" in repr(st)
     assert "<table" in st._repr_html_()
     saved = st.save(tmp_path / "saved")
-    assert sorted(p.name for p in saved.iterdir()) == ["fig_a2_tradeoff.png", "summary.json", "tradeoff.csv"]
+    assert {p.name for p in saved.iterdir()} == set(st.files) >= {"fig_a2_tradeoff.png", "summary.json", "tradeoff.csv",
+                                                             "report.html"}
     assert json.loads((saved / "summary.json").read_text())["best_within_loss"]["rate_wps"] == best_rate
 
 
