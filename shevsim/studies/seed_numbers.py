@@ -49,10 +49,10 @@ TRADEOFF_RATES_KWPS = (30, 25, 22.5, 20, 19.3, 17.5, 15, 12.5, 10, 7.5, 5)
 def _runs() -> dict:
     import numpy as np
 
-    from shevsim.api import simulate
+    from shevsim.run import run
     out = {}
     for name in RUN_SCENARIOS:
-        res = simulate(name)
+        res = run(name)
         m = res.metrics
         keep = ("fuel_economy_soc_sustained_kmpl", "soc_sustained_windows_count", "fuel_economy_dsoc_corrected_kmpl",
                 "soot_g_per_km", "soot_dsoc_corrected_g_per_km", "soot_per_fuel_g_per_kg", "ah_effective_cell_ah",
