@@ -261,7 +261,7 @@ def study_edges(problem, edges_w=None) -> tuple:
     return problem.default_edges() if hasattr(problem, "default_edges") else DEFAULT_EDGES_W
 
 
-def _failed_rows(which: str, rows) -> tuple[int, list[str]]:
+def failed_rows(which: str, rows) -> tuple[int, list[str]]:
     """Exit status and notes from a study's rows: 1 when every evaluation failed, 0 otherwise."""
     failed = [r for r in rows if r.get("error")]
     if rows and len(failed) == len(rows):
@@ -363,7 +363,7 @@ def _run_evaluations(which, scenario, work: Path, opts: dict, say, *, workers, s
             from .tradeoff import run_tradeoff
             summary = run_tradeoff(problem, runner, [1e3 * float(r) for r in opts["rates_kwps"]], work, edges,
                                    fe_loss_max_frac=opts["fe_loss_pct"] / 100, plots=plots, log=say, **keys)
-            code, notes = _failed_rows(which, summary.get("rows", []))
+            code, notes = failed_rows(which, summary.get("rows", []))
             return summary, code, notes
         from .ga import GAConfig
         from .powerrate_map import MapStudyConfig, run_powerrate_map

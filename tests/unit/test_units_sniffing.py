@@ -205,8 +205,11 @@ def test_study_unknown_supervisor_refused_up_front(capsys):
 
 
 def test_study_all_failed_exits_nonzero(capsys):
-    from shevsim.studies.cli import _failed_rows_status
-    assert _failed_rows_status("t", [{"error": "boom"}, {"error": "bang"}]) == 1
+    from shevsim.studies.cli import _report
+    from shevsim.studies.result import StudyResult, failed_rows
+    code, notes = failed_rows("t", [{"error": "boom"}, {"error": "bang"}])
+    assert code == 1 and "all 2 evaluations failed; first: boom" in notes[0]
+    assert _report("t", StudyResult("tradeoff", {}, notes=notes, exit_code=code), "out") == 1   # what the CLI exits
     assert "all 2 evaluations failed; first: boom" in capsys.readouterr().err
-    assert _failed_rows_status("t", [{"error": ""}, {"error": "bang"}]) == 0
-    assert "1 of 2 evaluations failed" in capsys.readouterr().err
+    code, notes = failed_rows("t", [{"error": ""}, {"error": "bang"}])
+    assert code == 0 and "1 of 2 evaluations failed" in notes[0]
