@@ -139,7 +139,7 @@ class CycleSource(CompiledStep, Component):
 Y = port_index(CycleSource.VARIABLES, "output")
 
 
-@_njit(cache=True)
+@njit(cache=True)
 def cycle_step(data, u, y, t, h):
     """:class:`CycleSource`'s step: the trace sampled at ``t + h`` (:func:`cycle_sample`)."""
     v, slope, p = data

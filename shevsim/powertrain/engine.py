@@ -81,7 +81,7 @@ Chain, advanced in sub-steps of at most ``max_substep_s`` with the inputs held:
 
 The physics above is written once, in :func:`step` (numba-compiled; :data:`step_py` is the same source
 run by the Python interpreter), on maps packed by :func:`pack_maps`; every extrapolation rule of the
-maps (``clamp``, ``linear``, ``error``) is carried in the packed form (:func:`shevsim.core.lookup._curve_ex`,
+maps (``clamp``, ``linear``, ``error``) is carried in the packed form (:func:`shevsim.core.lookup.curve_ex`,
 ``grid_ex``).  :class:`EngineGenStep` binds it to one (maps, parameters) pair for the component.
 
 Energy bookkeeping per sub-step (all exact for the discrete trajectory):

@@ -295,7 +295,7 @@ def test_round3_is_pythons_round():
 
 
 def test_rate_map_bisection_is_bisect_right():
-    from shevsim.supervisor.rule_based import _bisect_right as bisect_right
+    from shevsim.supervisor.rule_based import bisect_right
     a = np.array([-1.0, 0.0, 0.0, 2.5, 236e3])
     for x in [-2.0, -1.0, -0.5, 0.0, 1.0, 2.5, 3.0, 236e3, 1e9, math.nan, -math.inf, math.inf]:
         assert bisect_right(a, x) == bisect.bisect_right(list(a), x), x
