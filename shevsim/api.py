@@ -207,15 +207,19 @@ def metrics_table(results: Sequence[Result] | Mapping[str, Result], keys: Sequen
 # --------------------------------------------------------------------- studies and calibration
 def run_study(which: str, scenario: str | Path | None = None, *, out: str | Path | None = None, **options):
     """Run a study (``tradeoff``, ``powerrate-map``, ``thermal``, ``bms``) and return its
-    :class:`~shevsim.studies.result.StudyResult` (tables as DataFrames, ``best_map``, ``plot()``, ``save()``).
+    `StudyResult` (tables as DataFrames, ``best_map``, ``plot()``, ``save()``).
 
     ``scenario`` is a scenario file or a bundled scenario's name; ``out`` saves the files the command
-    ``shevsim study WHICH --out DIR`` writes. Options: :func:`shevsim.studies.result.run_study`
+    ``shevsim study WHICH --out DIR`` writes. Options: `shevsim.studies.result.run_study`
     (``workers=0``, ``stop_s=120.0``, ``set={"cycle.repeat": 1}``, ``synthetic=True``, ``plots=False``
-    and the study's own, e.g. ``rates_kwps=[30, 20]``)::
+    and the study's own, e.g. ``rates_kwps=[30, 20]``):
 
-        st = shevsim.run_study("tradeoff", "uac_proxy_mpc", rates_kwps=[30, 20, 10], workers=2)
-        st.tables["tradeoff"]; st.best_map; st.plot(); st.save("out/tradeoff")
+    Examples
+    --------
+    ```python
+    st = shevsim.run_study("tradeoff", "uac_proxy_mpc", rates_kwps=[30, 20, 10], workers=2)
+    st.tables["tradeoff"]; st.best_map; st.plot(); st.save("out/tradeoff")
+    ```
     """
     from .studies.result import run_study as _run
     return _run(which, scenario, out=out, **options)
@@ -223,16 +227,20 @@ def run_study(which: str, scenario: str | Path | None = None, *, out: str | Path
 
 def run_calibration(model: str, data: str | Path, *, out: str | Path | None = None, **options):
     """Calibrate a model (battery cell, vehicle, engine) on a measured CSV and return its
-    :class:`~shevsim.calibrate.report.CalibrationReport` (selected effects, ``before_after``, ``overlay``,
+    `CalibrationReport` (selected effects, ``before_after``, ``overlay``,
     ``replay``, ``plot()``, ``save()``).
 
     ``out`` saves the files ``shevsim calibrate ... --out DIR`` writes (params.toml, report.json,
-    report.md, figures). Options: :func:`shevsim.calibrate.report.run_calibration`
+    report.md, figures). Options: `shevsim.calibrate.report.run_calibration`
     (``params="ocv.toml"``, ``map={"time_s": "Time", "current_a": "I"}``, ``current_sign=...``,
-    ``effects=[...]``, ``holdout=0.3``)::
+    ``effects=[...]``, ``holdout=0.3``):
 
-        cal = shevsim.run_calibration("cell", "record.csv", map={"time_s": "Time", "current_a": "I"})
-        cal.selected_effects; cal.before_after; cal.overlay; cal.plot(); cal.save("out/cal")
+    Examples
+    --------
+    ```python
+    cal = shevsim.run_calibration("cell", "record.csv", map={"time_s": "Time", "current_a": "I"})
+    cal.selected_effects; cal.before_after; cal.overlay; cal.plot(); cal.save("out/cal")
+    ```
     """
     from .calibrate.report import run_calibration as _run
     return _run(model, data, out=out, **options)

@@ -1,8 +1,8 @@
 """providers.py - register the package's own component types, FMU adapter and metrics with ``core``.
 
-:mod:`shevsim.core` imports nothing above it: it asks :mod:`shevsim.core.registry` for the class of a
+`shevsim.core` imports nothing above it: it asks `shevsim.core.registry` for the class of a
 component type, for an FMU component and for a result's metrics. ``import shevsim`` runs
-:func:`register` once; each provider imports its layer only when first used, so a scenario pays only
+`register` once; each provider imports its layer only when first used, so a scenario pays only
 for what it names.
 """
 from __future__ import annotations
@@ -11,19 +11,19 @@ from .core import registry
 
 
 def component_class(type_name: str, where: str = "scenario") -> type:
-    """The class of a native or plugin component type (:func:`shevsim.components.get_component_class`)."""
+    """The class of a native or plugin component type (`shevsim.components.get_component_class`)."""
     from .components import get_component_class
     return get_component_class(type_name, where)
 
 
 def fmu_component(spec, scenario, where: str):
-    """A scenario's ``type = "fmu"`` component (:func:`shevsim.fmu.adapter.component_from_spec`)."""
+    """A scenario's ``type = "fmu"`` component (`shevsim.fmu.adapter.component_from_spec`)."""
     from .fmu.adapter import component_from_spec
     return component_from_spec(spec, scenario, where)
 
 
 def result_metrics(result) -> dict:
-    """A result's metrics (:func:`shevsim.metrics.result_metrics`)."""
+    """A result's metrics (`shevsim.metrics.result_metrics`)."""
     from .metrics import result_metrics as compute
     return compute(result)
 
@@ -44,35 +44,35 @@ def fmu_ports(spec) -> dict | None:
 
 
 def result_html(result) -> str:
-    """A result's notebook view (:func:`shevsim.report.html.result_summary_html`)."""
+    """A result's notebook view (`shevsim.report.html.result_summary_html`)."""
     from .report.html import result_summary_html
     return result_summary_html(result)
 
 
 def scenario_html(scenario) -> str:
-    """A scenario's notebook view (:func:`shevsim.report.html.scenario_html`)."""
+    """A scenario's notebook view (`shevsim.report.html.scenario_html`)."""
     from .report.html import scenario_html as view
     return view(scenario)
 
 
 def shared_quantities():
-    """The rules of a scenario's ``[shared]`` quantities (:mod:`shevsim.components.shared`)."""
+    """The rules of a scenario's ``[shared]`` quantities (`shevsim.components.shared`)."""
     from .components import shared
     return shared
 def plot_signals(*args, **kwargs):
-    """Signals against time, one axis per display unit (:func:`shevsim.plotting.plot_signals`)."""
+    """Signals against time, one axis per display unit (`shevsim.plotting.plot_signals`)."""
     from .plotting import plot_signals as plot
     return plot(*args, **kwargs)
 
 
 def scenario_plots(*args, **kwargs):
-    """The figures (and the HTML report) a saved run gets (:func:`shevsim.plotting.scenario_plots`)."""
+    """The figures (and the HTML report) a saved run gets (`shevsim.plotting.scenario_plots`)."""
     from .plotting import scenario_plots as plots
     return plots(*args, **kwargs)
 
 
 def register() -> None:
-    """Register the package's providers with :mod:`shevsim.core.registry` (idempotent)."""
+    """Register the package's providers with `shevsim.core.registry` (idempotent)."""
     registry.register_component_lookup(component_class)
     registry.register_fmu_factory(fmu_component)
     registry.register_result_metrics(result_metrics)

@@ -1,4 +1,4 @@
-"""report.py - calibrate from Python and get an object back: :func:`run_calibration` and :class:`CalibrationReport`.
+"""report.py - calibrate from Python and get an object back: `run_calibration` and `CalibrationReport`.
 
     import shevsim
     cal = shevsim.run_calibration("cell", "record.csv", map={"time_s": "Time", "current_a": "I"},
@@ -10,8 +10,8 @@
     fig = cal.plot()        # matplotlib Figure
     cal.save("out/cal")     # the files ``shevsim calibrate ... --out out/cal`` writes (params.toml, report.*)
 
-The command line (:mod:`shevsim.calibrate.cli`) parses its options, calls :func:`run_calibration` and
-prints the report; the loop itself is :func:`shevsim.calibrate.workflow.run_workflow`.
+The command line (`shevsim.calibrate.cli`) parses its options, calls `run_calibration` and
+prints the report; the loop itself is `shevsim.calibrate.workflow.run_workflow`.
 """
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ class CalibrationReport:
         The output files by name (``params.toml``, ``report.json``, ``report.md``, the PNG figures and any
         file the overlay refers to), exactly what ``shevsim calibrate ... --out DIR`` writes.
     out : Path or None
-        Where the files were saved (``out=`` of :func:`run_calibration`, or the last :meth:`save`).
+        Where the files were saved (``out=`` of `run_calibration`, or the last `save`).
     notes : list of str
         What reading the record noticed (units converted, rows dropped...).
     """
@@ -117,13 +117,13 @@ class CalibrationReport:
 
     @property
     def figures(self) -> list[str]:
-        """Names of the PNG figures among :attr:`files`."""
+        """Names of the PNG figures among `files`."""
         return [n for n in self.files if n.endswith(".png")]
 
     def plot(self, which: str | None = None):
         """A matplotlib ``Figure``: by default the held-out RMSE per channel before, after and replayed
         (from the report); ``which`` = a saved figure's name (``fit_before_after.png``,
-        ``residuals_before_after.png``, ``evidence.png``; see :attr:`figures`) draws that one."""
+        ``residuals_before_after.png``, ``evidence.png``; see `figures`) draws that one."""
         from matplotlib.figure import Figure
         if which is None:
             df = self.before_after
@@ -188,7 +188,7 @@ def _pairs(x: Mapping[str, Any] | Sequence[str] | None) -> list[str]:
 
 def check_record_size(data, model_name: str, known: dict, allow_large: bool, log) -> None:
     """Time one simulation of the model over the record, say the estimate, and refuse (DataError) a record
-    of more than :data:`MAX_RECORD_ROWS` rows unless ``allow_large``."""
+    of more than `MAX_RECORD_ROWS` rows unless ``allow_large``."""
     import time as _time
     from .models import get_model
     n = len(data.df)
@@ -251,19 +251,19 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
                     plots: bool = True, decimate: int = 1, allow_large: bool = False,
                     log: Callable[[str], None] | None = None, progress_every_s: float | None = None
                     ) -> CalibrationReport:
-    """Calibrate ``model`` on the measured CSV ``data`` and return a :class:`CalibrationReport`.
+    """Calibrate ``model`` on the measured CSV ``data`` and return a `CalibrationReport`.
 
     Parameters
     ----------
     model : str
-        ``cell``, ``vehicle``, ``engine``... (:data:`shevsim.calibrate.models.MODELS`).
+        ``cell``, ``vehicle``, ``engine``... (`shevsim.calibrate.models.MODELS`).
     data : str or Path
         The measured CSV (or .csv.gz; ``#`` lines are comments), or a shipped record by name
         (``shevsim calibrate --records``): its declared columns, current sign, repeated rows and
         parameters apply under what is given here.
     out : str or Path, optional
         Save the files there (as ``shevsim calibrate --out``); default: nothing written, the files stay
-        in the report (:meth:`CalibrationReport.save` writes them later).
+        in the report (`CalibrationReport.save` writes them later).
     params : str or Path, optional
         TOML with known parameters, starting values, an OCV curve or a calibration's own overlay.
     map : mapping or list of str, optional
@@ -275,7 +275,7 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
     decimate : int
         Keep every k-th row of the record (a long record sampled faster than the model needs).
     allow_large : bool
-        Calibrate on a record of more than :data:`MAX_RECORD_ROWS` rows (after ``decimate``) as it is.
+        Calibrate on a record of more than `MAX_RECORD_ROWS` rows (after ``decimate``) as it is.
     log : callable, optional
         Called with each progress line (default: silent).
     progress_every_s : float, optional

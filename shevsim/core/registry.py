@@ -4,19 +4,19 @@
 layers that do register what they provide here (as FMPy's and PyBaMM's registries do), and ``core``
 asks the registry:
 
-* :func:`component_class` - the class of a scenario's component ``type`` (registered by
-  :mod:`shevsim.components`, which also finds installed plugins);
-* :func:`fmu_component` - a component for ``type = "fmu"`` (registered by :mod:`shevsim.fmu`);
-* :func:`result_metrics` - the metrics of a :class:`~shevsim.core.results.Result` (registered by
-  :mod:`shevsim.metrics`);
-* :func:`fmu_ports` - the inputs and outputs of an FMU spec before it is built (registered by
-  :mod:`shevsim.fmu`), so a connection's direction is checked when it is made;
-* :func:`html_view` - the HTML a notebook shows for a result or a scenario (registered by
-  :mod:`shevsim.report`);
-* :func:`shared_quantities` - the rules of a scenario's ``[shared]`` quantities (which component parameter
-  each one is; registered by :mod:`shevsim.components`: :mod:`shevsim.components.shared`).
+* `component_class` - the class of a scenario's component ``type`` (registered by
+  `shevsim.components`, which also finds installed plugins);
+* `fmu_component` - a component for ``type = "fmu"`` (registered by `shevsim.fmu`);
+* `result_metrics` - the metrics of a `Result` (registered by
+  `shevsim.metrics`);
+* `fmu_ports` - the inputs and outputs of an FMU spec before it is built (registered by
+  `shevsim.fmu`), so a connection's direction is checked when it is made;
+* `html_view` - the HTML a notebook shows for a result or a scenario (registered by
+  `shevsim.report`);
+* `shared_quantities` - the rules of a scenario's ``[shared]`` quantities (which component parameter
+  each one is; registered by `shevsim.components`: `shevsim.components.shared`).
 
-``import shevsim`` registers the package's own providers (:mod:`shevsim.providers`); a program that
+``import shevsim`` registers the package's own providers (`shevsim.providers`); a program that
 uses ``shevsim.core`` alone registers its own with the ``register_*`` functions.
 """
 from __future__ import annotations
@@ -30,7 +30,7 @@ _providers: dict[str, Callable[..., Any]] = {}
 
 def register_component_lookup(lookup: Callable[[str, str], type]) -> None:
     """Register ``lookup(type_name, where) -> class``: the class of a scenario's component type
-    (raising :class:`~shevsim.core.errors.ScenarioError` naming ``where`` for an unknown name)."""
+    (raising `ScenarioError` naming ``where`` for an unknown name)."""
     _providers["component"] = lookup
 
 
@@ -40,7 +40,7 @@ def register_fmu_factory(factory: Callable[[Any, Any, str], Any]) -> None:
 
 
 def register_result_metrics(metrics: Callable[[Any], dict]) -> None:
-    """Register ``metrics(result) -> dict``: what :attr:`Result.metrics` computes on first access."""
+    """Register ``metrics(result) -> dict``: what `Result.metrics` computes on first access."""
     _providers["metrics"] = metrics
 
 
@@ -50,13 +50,13 @@ def register_shared_quantities(provider: Callable[[], Any]) -> None:
     _providers["shared"] = provider
 def register_plot(kind: str, plot: Callable[..., Any]) -> None:
     """Register a figure maker: ``"signals"`` (``plot(results, signals, ax=None, labels=None) -> Figure``,
-    what :meth:`Result.plot` draws) or ``"scenario"`` (``plot(result, folder) -> [paths]``, the figures
-    :meth:`Result.save` writes with ``plots=True``)."""
+    what `Result.plot` draws) or ``"scenario"`` (``plot(result, folder) -> [paths]``, the figures
+    `Result.save` writes with ``plots=True``)."""
     _providers[f"plot:{kind}"] = plot
 
 
 def plot_function(kind: str) -> Callable[..., Any]:
-    """The figure maker registered as ``kind`` (see :func:`register_plot`)."""
+    """The figure maker registered as ``kind`` (see `register_plot`)."""
     if f"plot:{kind}" not in _providers:
         raise ShevsimError(f"no '{kind}' plot is registered (import shevsim, or register one with "
                            f"shevsim.core.registry.register_plot)")
@@ -86,7 +86,7 @@ def fmu_component(spec, scenario, where: str):
 
 
 def result_metrics(result) -> dict:
-    """The metrics of ``result`` (see :func:`register_result_metrics`)."""
+    """The metrics of ``result`` (see `register_result_metrics`)."""
     return _provider("metrics", "metrics function")(result)
 
 
@@ -114,5 +114,5 @@ def html_view(kind: str, obj) -> str | None:
 
 
 def shared_quantities():
-    """The rules of the ``[shared]`` quantities (see :func:`register_shared_quantities`)."""
+    """The rules of the ``[shared]`` quantities (see `register_shared_quantities`)."""
     return _provider("shared", "shared-quantity rules")()

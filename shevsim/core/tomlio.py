@@ -1,8 +1,8 @@
 """tomlio.py - the one TOML writer of values and keys (``tomllib`` reads; nothing in the standard library writes).
 
-Scenario files (:func:`shevsim.core.scenario.scenario_to_toml`), parameter overlays
-(:func:`shevsim.core.overlay.write_overlay`), study overrides (``component.param=value``) and scenarios
-imported from SSP packages all write their values through :func:`toml_value`, so a value written by one
+Scenario files (`shevsim.core.scenario.scenario_to_toml`), parameter overlays
+(`shevsim.core.overlay.write_overlay`), study overrides (``component.param=value``) and scenarios
+imported from SSP packages all write their values through `toml_value`, so a value written by one
 reads back the same everywhere: ``tomllib.loads(f"x = {toml_value(v)}")["x"] == v`` for every value it
 accepts (floats exactly, via ``repr``; ``nan`` and ``inf`` as TOML's own words).
 """

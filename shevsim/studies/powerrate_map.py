@@ -10,7 +10,7 @@ d_i (``edges_w``, default 8 partitions of 0-236 kW: [0,50), [50,75), ..., [175,2
 (baseline = the scenario as written, i.e. without the map).  Fuel economy is the Delta-SOC-corrected
 figure (``FE_KEY`` = ``fuel_economy_dsoc_corrected_kmpl``; the SOC-sustainable definition A.1 is selectable
 with ``fe_key`` / ``--fe-metric`` but needs one-cycle windows a short run may lack), and soot is on the
-same basis by default (``SOOT_DSOC_KEY`` = ``soot_dsoc_corrected_g_per_km``, :func:`shevsim.metrics.soot_dsoc_corrected`:
+same basis by default (``SOOT_DSOC_KEY`` = ``soot_dsoc_corrected_g_per_km``, `shevsim.metrics.soot_dsoc_corrected`:
 the battery's net energy booked as fuel at the run's soot per fuel), so a map whose run ends at a lower
 SOC does not show soot borrowed from the battery as a cut (issue 14; ``soot_key = "soot_g_per_km"`` for
 the raw figure). Three steps:
@@ -23,7 +23,7 @@ the raw figure). Three steps:
    while it stays within them: seed 648 cases);
 3. exhaustive search of the narrowed space.
 
-Every evaluation goes through a :class:`~.parallel.StudyRunner` (Dask + SQLite cache): duplicates
+Every evaluation goes through a `StudyRunner` (Dask + SQLite cache): duplicates
 within a generation run once, anything already cached (earlier generations, a stopped run, the
 trade-off study on the same cache) is not rerun. Outputs in ``out_dir``: ``summary.json`` (written
 atomically), ``top_solutions.csv``, ``exhaustive.csv``, ``ga_history.csv``, ``constant_limits.csv``,
@@ -264,7 +264,7 @@ def _step(edges_w, rates_wps):
 
 
 def plot_rate_maps(summary: dict, path: Path) -> None:
-    """Write :func:`rate_maps_figure` to ``path`` (PNG)."""
+    """Write `rate_maps_figure` to ``path`` (PNG)."""
     rate_maps_figure(summary).savefig(path, dpi=120)
 
 

@@ -1,4 +1,4 @@
-"""result.py - run a study from Python and get an object back: :func:`run_study` and :class:`StudyResult`.
+"""result.py - run a study from Python and get an object back: `run_study` and `StudyResult`.
 
     import shevsim
     st = shevsim.run_study("tradeoff", "uac_proxy_mpc", rates_kwps=[30, 20, 10], workers=2)
@@ -8,7 +8,7 @@
     fig = st.plot()         # matplotlib Figure
     st.save("out/tradeoff") # the same files ``shevsim study tradeoff --out out/tradeoff`` writes
 
-The command line (:mod:`shevsim.studies.cli`) parses its options, calls :func:`run_study` and prints
+The command line (`shevsim.studies.cli`) parses its options, calls `run_study` and prints
 the result; nothing here reads ``sys.argv`` or prints.
 """
 from __future__ import annotations
@@ -25,7 +25,7 @@ from typing import Any, Callable, Mapping, Sequence
 from ..core.errors import ScenarioError, ShevsimError
 
 #: the studies and their own options with defaults (the options every study of evaluations takes are
-#: the keyword arguments of :func:`run_study`)
+#: the keyword arguments of `run_study`)
 STUDY_OPTIONS: dict[str, dict[str, Any]] = {
     "tradeoff": {"rates_kwps": (30, 27.5, 25, 22.5, 20, 19.3, 17.5, 15, 12.5, 10, 7.5, 5), "fe_loss_pct": 0.5},
     "powerrate-map": {"levels_kwps": None, "generations": 50, "population": 30, "crossover": 0.8,
@@ -70,7 +70,7 @@ class StudyResult:
         The output files by relative path (tables as CSV, figures as PNG, the summary as JSON),
         exactly what ``shevsim study ... --out DIR`` writes, without the evaluation cache.
     out : Path or None
-        Where the files were saved (``out=`` of :func:`run_study`, or the last :meth:`save`).
+        Where the files were saved (``out=`` of `run_study`, or the last `save`).
     notes : list of str
         Warnings of the run (failed evaluations), also what the command line prints on stderr.
     exit_code : int
@@ -110,7 +110,7 @@ class StudyResult:
 
     @property
     def figures(self) -> list[str]:
-        """Names of the PNG figures among :attr:`files`."""
+        """Names of the PNG figures among `files`."""
         return [n for n in self.files if n.endswith(".png")]
 
     def plot(self, which: str | None = None):
@@ -118,7 +118,7 @@ class StudyResult:
 
         Trade-off: seed Fig. A.2 (fuel economy and soot vs the rate). Power-rate map: ``which="maps"``
         (default, Fig. A.3) or ``"comparison"`` (Fig. A.4). Thermal and BMS studies: the saved figure
-        ``which`` (a name from :attr:`figures`; default the first) drawn on a new Figure.
+        ``which`` (a name from `figures`; default the first) drawn on a new Figure.
         """
         if self.study == "tradeoff":
             from .tradeoff import tradeoff_figure
@@ -254,7 +254,7 @@ def study_problem(which: str, scenario, *, synthetic: bool = False, supervisor: 
 
 def study_edges(problem, edges_w=None) -> tuple:
     """The power partition edges (W): ``edges_w`` when given, else the seed's layout over the power the
-    scenario's generator can reach (``problem.default_edges()``), else :data:`~.problem.DEFAULT_EDGES_W`."""
+    scenario's generator can reach (``problem.default_edges()``), else `DEFAULT_EDGES_W`."""
     from .problem import DEFAULT_EDGES_W
     if edges_w:
         return tuple(float(x) for x in edges_w)
@@ -278,7 +278,7 @@ def run_study(which: str, scenario: str | Path | None = None, *, out: str | Path
               max_evaluations: int | None = None, synthetic: bool = False, fe_metric: str | None = None,
               soot_metric: str | None = None, plots: bool = True, progress: bool = False,
               log: Callable[[str], None] | None = None, **options) -> StudyResult:
-    """Run a study and return a :class:`StudyResult`.
+    """Run a study and return a `StudyResult`.
 
     Parameters
     ----------
@@ -287,7 +287,7 @@ def run_study(which: str, scenario: str | Path | None = None, *, out: str | Path
         Scenario file or a bundled scenario's name (the trade-off and the map study; not with ``synthetic``).
     out : str or Path, optional
         Save the study's files there (as ``shevsim study ... --out``); default: nothing written, the files
-        stay in the result (:meth:`StudyResult.save` writes them later). The evaluation cache goes to
+        stay in the result (`StudyResult.save` writes them later). The evaluation cache goes to
         ``cache``, else ``out/cache.sqlite`` (rerunning resumes), else a temporary folder.
     workers, scheduler, cache, supervisor, stop_s, set, edges_kw, max_evaluations, synthetic, fe_metric, soot_metric
         The evaluation studies' options (``shevsim study tradeoff --help``): Dask worker processes
@@ -301,7 +301,7 @@ def run_study(which: str, scenario: str | Path | None = None, *, out: str | Path
     log : callable, optional
         Called with each progress line the study reports (default: silent).
     **options
-        The study's own options, :data:`STUDY_OPTIONS` (``rates_kwps=[30, 20]``, ``fe_loss_pct=0.5``,
+        The study's own options, `STUDY_OPTIONS` (``rates_kwps=[30, 20]``, ``fe_loss_pct=0.5``,
         ``generations=50``, ``seed=0``...; ``bms``: ``seed``, ``quick``, ``only``).
 
     Raises

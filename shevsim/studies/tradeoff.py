@@ -78,7 +78,7 @@ def run_tradeoff(problem, runner, rates_wps, out_dir: str | Path | None = None, 
 
 
 def plot_tradeoff(summary: dict, path: Path) -> None:
-    """Write :func:`tradeoff_figure` to ``path`` (PNG)."""
+    """Write `tradeoff_figure` to ``path`` (PNG)."""
     tradeoff_figure(summary).savefig(path, dpi=120)
 
 
