@@ -170,11 +170,26 @@ class CalibrationReport:
 
     def _repr_html_(self) -> str:
         import html
-        head = (f"<p><b>CalibrationReport</b> {html.escape(self.model)} on "
-                f"{html.escape(str(self.report.get('data', {}).get('path', '')))}: selected "
-                f"<b>{html.escape(', '.join(self.selected_effects) or 'nothing')}</b>"
-                f"{'; saved in ' + html.escape(str(self.out)) if self.out else ''}</p>")
-        return head + self.before_after.to_html(float_format=lambda x: f"{x:.4g}")
+
+        from ..report.html import calibration_summary_html
+        saved = f"saved in {self.out}" if self.out else "not saved"
+        notes = "".join(f"<li>{html.escape(n)}</li>" for n in self.notes)
+        return (calibration_summary_html(self.report)
+                + (f"<ul style='font-size:12px'>{notes}</ul>" if notes else "")
+                + f"<p style='font-size:11px;color:#666'>{html.escape(saved)}; cal.to_html(PATH) writes the "
+                  "interactive report (fit before and after, residuals, evidence)</p>")
+
+    def to_html(self, path: str | Path | None = None):
+        """The interactive report of the calibration (fit before and after, residuals, evidence table,
+        parameters; the page ``report.html`` of its folder): the HTML text, or written to ``path`` (returns
+        the path)."""
+        import pandas as pd
+
+        from ..report.html import calibration_report
+        from ..report.write import write_page
+        traces = self.files.get("fit_traces.csv")
+        text = calibration_report(self.report, pd.read_csv(io.BytesIO(traces)) if traces else None)
+        return text if path is None else write_page(path, text)
 
 
 def _pairs(x: Mapping[str, Any] | Sequence[str] | None) -> list[str]:

@@ -183,14 +183,24 @@ class StudyResult:
 
     def _repr_html_(self) -> str:
         import html
-        rows = [("study", self.study), ("result", self._headline()),
-                ("tables", ", ".join(Path(n).stem for n in self.files if n.endswith(".csv")) or "none"),
+
+        from ..report.html import study_summary_html
+        rows = [("tables", ", ".join(Path(n).stem for n in self.files if n.endswith(".csv")) or "none"),
                 ("figures", ", ".join(self.figures) or "none"), ("saved in", str(self.out) if self.out else "not saved")]
         rows += [("note", n) for n in self.notes]
         body = "".join(f"<tr><th style='text-align:left'>{html.escape(k)}</th><td style='text-align:left'>"
                        f"{html.escape(str(v))}</td></tr>" for k, v in rows)
-        return f"<table><caption>StudyResult</caption>{body}</table>"
+        return (f"<div><b>StudyResult</b> {html.escape(self.study)}: {html.escape(self._headline())}"
+                f"{study_summary_html(self.summary)}<table>{body}</table>"
+                "<p style='font-size:11px;color:#666'>st.to_html(PATH) writes the interactive report</p></div>")
 
+    def to_html(self, path: str | Path | None = None):
+        """The interactive report of the study (trade-off, GA history, chosen map, parameters; the page
+        ``report.html`` of its folder): the HTML text, or written to ``path`` (returns the path)."""
+        from ..report.html import study_report
+        from ..report.write import write_page
+        text = study_report(self.summary, self.tables)
+        return text if path is None else write_page(path, text)
 
 # ---------------------------------------------------------------------- running a study
 def _check_options(which: str, options: Mapping[str, Any]) -> dict:

@@ -193,3 +193,21 @@ def _write(folder, text):
     p = folder / "s.toml"
     p.write_text(text)
     return p
+
+
+# ----------------------------------------------------------------------------------------- study and calibration objects
+
+def test_study_and_calibration_objects_show_html_and_write_the_report(tmp_path):
+    from shevsim.calibrate.synthetic import synth_vehicle
+    st = shevsim.run_study("tradeoff", synthetic=True, workers=0, rates_kwps=[30, 10])
+    h = st._repr_html_()
+    assert "<script" not in h and "Baseline fuel economy (km/l)" in h and "Chosen rate limit (kW/s)" in h
+    page = st.to_html(tmp_path / "study.html").read_text()
+    assert '<meta name="shevsim-figures" content="2">' in page and "Maximum engine-generator power rate" in page
+    df, _ = synth_vehicle({"regen_limit": {}}, seed=7, duration_s=300.0)
+    df.to_csv(tmp_path / "veh.csv", index=False)
+    cal = shevsim.run_calibration("vehicle", tmp_path / "veh.csv")
+    h = cal._repr_html_()
+    assert "<script" not in h and "Power (kW)" in h and "veh.csv" in h
+    text = cal.to_html()
+    assert '<meta name="shevsim-figures" content="3">' in text and "Fit before and after" in text
