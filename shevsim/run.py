@@ -274,8 +274,9 @@ def simulate(scenario: Scenario, progress: bool = False, *, engine: str = "auto"
                 _guess_port(exc, master)
                 res = master.result(_stop_info(exc))
                 _drop_non_finite_tail(res)
-                if isinstance(exc, KeyboardInterrupt):
-                    res.termination = Termination("stopped", _interrupt_reason(exc), None, None, master.time_s)
+                if isinstance(exc, KeyboardInterrupt):      # the time of the last row kept
+                    res.termination = Termination("stopped", _interrupt_reason(exc), None, None,
+                                                  float(res.time_s[-1]) if len(res.time_s) else master.time_s)
                 if not partial:
                     _finish(res, scenario, master, time.perf_counter() - wall, used, why)
                     exc.result = res

@@ -1034,14 +1034,28 @@ class FMUComponent(Component):
         v = self._vars_by_name.get(vname)
         if v is None:
             return
+        import numbers
+
+        import numpy as np
+
+        def flat(val):          # a scalar, a list/tuple/array of elements, or {index: value} element sets
+            if isinstance(val, dict):
+                for w in val.values():
+                    yield from flat(w)
+            elif isinstance(val, (list, tuple)):
+                for w in val:
+                    yield from flat(w)
+            elif isinstance(val, np.ndarray):
+                yield from val.ravel().tolist()
+            else:
+                yield val.item() if isinstance(val, np.generic) else val
         typ = v.type
-        vals = value if isinstance(value, (list, tuple)) else [value]
-        for x in vals:
+        for x in flat(value):
             # true/false are taken as 1/0 by a numeric variable (an exported native component's flags are Real)
             if typ in _REAL_TYPES or typ in _OTHER_NUM:
-                ok, want = isinstance(x, (int, float)), "a number"
+                ok, want = isinstance(x, numbers.Real), "a number"
             elif typ in _INT_TYPES:
-                ok, want = isinstance(x, int) or (isinstance(x, float) and x.is_integer()), "an integer"
+                ok, want = isinstance(x, numbers.Integral) or (isinstance(x, float) and x.is_integer()), "an integer"
             elif typ in _BOOL_TYPES:
                 ok, want = isinstance(x, bool) or (isinstance(x, int) and x in (0, 1)), "true or false"
             elif typ == "String":
