@@ -341,6 +341,11 @@ class CellModel(CalibrationModel):
             out["t_core_c"] = otc
         return out
 
+    def quiet_mask(self, ctx):
+        """Rest: |current| below 1 % of the record's largest."""
+        i = ctx["i"]
+        return np.abs(i) <= 0.01 * max(float(np.abs(i).max()), 1e-9)
+
     def param_bounds(self, ctx):
         t = ctx["t"]
         return {"h_change_time_s": (float(t[0]), float(t[-1]))}

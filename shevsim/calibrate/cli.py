@@ -66,6 +66,13 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--unit", action="append", default=[], metavar="CANONICAL=UNIT",
                     help="unit of a column in the file, converted to SI (time_s=ms, current_a=mA, speed_mps=kmh, "
                          "power_w=kW, t_surface_c=K, voltage_v=mV; CANONICAL=its SI unit skips the unit sniffing)")
+    ap.add_argument("--sample-convention", choices=("instantaneous", "mean-ending", "mean-starting"),
+                    default="instantaneous",
+                    help="what a logged value stands for: the value at the sample time (default), the mean over "
+                         "the period ending at it, or over the period starting at it (stated in the report)")
+    ap.add_argument("--sensor-noise", action="append", default=[], metavar="CHANNEL=VALUE",
+                    help="declared sensor noise (1 sigma, SI) of a channel, used as its noise floor (otherwise "
+                         "estimated from quiet segments and a local smoother; the method is stated)")
     ap.add_argument("--effects", nargs="+", help="restrict the candidate effects to these names")
     ap.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     ap.add_argument("--decimate", type=_at_least_one, default=1, metavar="K",
@@ -91,6 +98,20 @@ def list_records() -> str:
     return "\n".join(lines)
 
 
+def _sensor_noise(items) -> dict:
+    out = {}
+    for it in items:
+        name, sep, val = it.partition("=")
+        try:
+            v = float(val)
+        except ValueError:
+            v = float("nan")
+        if not sep or not name or not (v > 0 and v < float("inf")):
+            raise DataError(f"--sensor-noise {it!r}: expected CHANNEL=VALUE with a positive number (e.g. power_w=300)")
+        out[name.strip()] = v
+    return out
+
+
 def main_calibrate(argv=None) -> int:
     """Entry point of ``shevsim calibrate``: parse, call `shevsim.calibrate.report.run_calibration`, print the
     report; returns the exit status."""
@@ -106,7 +127,9 @@ def main_calibrate(argv=None) -> int:
                               holdout=args.holdout, split=args.split, current_sign=args.current_sign,
                               power_sign=args.power_sign, drop_duplicate_rows=args.drop_duplicate_rows,
                               units=args.unit, effects=args.effects, plots=not args.no_plots,
-                              decimate=args.decimate, allow_large=args.allow_large, log=log, progress_every_s=15.0)
+                              decimate=args.decimate, allow_large=args.allow_large, log=log, progress_every_s=15.0,
+                              sample_convention=args.sample_convention,
+                              sensor_noise=_sensor_noise(args.sensor_noise))
     except ShevsimError as exc:
         hint = ""
         if isinstance(exc, DataError) and Path(args.data).is_file():
@@ -126,7 +149,9 @@ def main_calibrate(argv=None) -> int:
 def report_lines(rep: dict) -> list[str]:
     """What ``shevsim calibrate`` prints of a report: the selected effects, RMSE before -> after per
     channel, the parameters the record cannot identify."""
-    lines = [f"selected effects: {', '.join(rep['selected_effects']) or 'nothing found'}"]
+    lines = [f"selected effects: {', '.join(rep['selected_effects']) or 'nothing found'}"
+             + (f" (sample convention: {rep['timing']['sample_convention']})" if rep.get("timing") else "")]
+    lines += [f"model-form discrepancy: {d['statement']}" for d in rep.get("model_form_discrepancy", [])]
     for c, b in rep["rmse_before"].items():
         a = rep["rmse_after"][c]
         lines.append(f"  {c}: held-out RMSE {b['holdout']:.4g} -> {a['holdout']:.4g} "

@@ -39,6 +39,9 @@ class Param:
     default: float
     doc: str = ""
     log: bool = False
+    #: the range a physical value of this parameter falls in (None: the bounds); a selected effect whose
+    #: parameter lands outside it (or on a bound) is reported as a model-form discrepancy, not as the cause
+    plausible: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -129,6 +132,13 @@ class CalibrationModel:
         data's sample times (the same channels as :meth:`simulate`).
         """
         raise NotImplementedError
+
+    #: what the model's predicted value at a sample stands for (:mod:`shevsim.calibrate.timing`)
+    native_convention: str = "instantaneous"
+
+    def quiet_mask(self, ctx: dict):
+        """Samples where the model's inputs are still (standstill, rest): for the sensor-noise floor; None = none."""
+        return None
 
     #: correlated signal -> likely cause, for the baseline-failure report
     cause_hints: dict = {}

@@ -264,7 +264,8 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
                     power_sign: str = "drawn-positive", drop_duplicate_rows: bool = False,
                     units: Mapping[str, str] | Sequence[str] | None = None, effects: Sequence[str] | None = None,
                     plots: bool = True, decimate: int = 1, allow_large: bool = False,
-                    log: Callable[[str], None] | None = None, progress_every_s: float | None = None
+                    log: Callable[[str], None] | None = None, progress_every_s: float | None = None,
+                    sample_convention: str | None = None, sensor_noise: Mapping[str, float] | None = None
                     ) -> CalibrationReport:
     """Calibrate ``model`` on the measured CSV ``data`` and return a `CalibrationReport`.
 
@@ -295,6 +296,11 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
         Called with each progress line (default: silent).
     progress_every_s : float, optional
         Also report the time elapsed this often while the fit runs (the command line: 15 s).
+    sample_convention : str, optional
+        What a logged value stands for: ``instantaneous`` (default), ``mean-ending`` or ``mean-starting``
+        (`shevsim.calibrate.timing`); stated in the report.
+    sensor_noise : mapping, optional
+        Declared sensor noise per channel (``{"power_w": 300.0}``), used as its noise floor.
 
     Raises
     ------
@@ -361,7 +367,8 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
             rep = run_workflow(model, measured, known, holdout=holdout, split=split, out_dir=work,
                                effects=list(effects) if effects else None, plots=plots,
                                params_where=str(params) if params else "<params>",
-                               log=tick.say if tick is not None else say)
+                               log=tick.say if tick is not None else say,
+                               sample_convention=sample_convention, sensor_noise=sensor_noise)
         files = read_files(work)
     finally:
         shutil.rmtree(work, ignore_errors=True)       # our own temporary folder

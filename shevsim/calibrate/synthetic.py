@@ -247,9 +247,17 @@ def synth_vehicle(effects: dict | None = None, duration_s: float = 1800.0, dt_s:
     return df, vals
 
 
-def as_measured(df: pd.DataFrame, model: str) -> MeasuredData:
-    """Wrap a synthetic DataFrame as loaded data (skips the file checks)."""
-    return MeasuredData(df=df.reset_index(drop=True), path="<synthetic>", model=model)
+#: the sample convention of this module's records: the vehicle plant's power is the mean over the period
+#: ending at the sample; cell and engine records are the plant's values at the sample time
+SYNTH_CONVENTION = {"vehicle": "mean-ending", "cell": "instantaneous", "engine": "instantaneous"}
+
+
+def as_measured(df: pd.DataFrame, model: str, convention: str | None = None, path: str = "<synthetic>") -> MeasuredData:
+    """Wrap a synthetic DataFrame as loaded data (skips the file checks); ``sample_convention`` is the
+    generator's (default: this module's, :data:`SYNTH_CONVENTION`)."""
+    data = MeasuredData(df=df.reset_index(drop=True), path=path, model=model)
+    data.sample_convention = convention or SYNTH_CONVENTION.get(model, "instantaneous")
+    return data
 
 
 # the engine-generator plant: the component's default parameters, soot scale away from 1, no effect

@@ -250,7 +250,7 @@ class VehicleModel(CalibrationModel):
                    (Param("aux_power_w", "W", -2e4, 1e5, float(k["aux_power_w"]) + 1000.0, "constant auxiliary load"),),
                    {"aux_power_w": float(k["aux_power_w"])}, ("power_w",)),
             Effect("mass_error", "vehicle mass differs from the nominal (payload; vehicle mass_kg)",
-                   (Param("mass_kg", "kg", 0.5 * m0, 2.0 * m0, m0, "vehicle mass"),),
+                   (Param("mass_kg", "kg", 0.5 * m0, 2.0 * m0, m0, "vehicle mass", plausible=(0.8 * m0, 1.8 * m0)),),
                    {"mass_kg": m0}, ("power_w",)),
             Effect("rolling_error", "rolling-resistance coefficient differs from the nominal (tyres, surface)",
                    (Param("rolling_coefficient", "-", 0.002, 0.06, float(k["rolling_coefficient"]),
@@ -338,6 +338,12 @@ class VehicleModel(CalibrationModel):
             float(bp.aux_power_w))
         pg = _sample(rec, ctx["n_sub"], ctx["tg"].size)
         return {"power_w": np.interp(ctx["t"], ctx["tg"], pg)}
+
+    native_convention = "mean-ending"
+
+    def quiet_mask(self, ctx):
+        """Standstill: measured speed below 0.05 m/s."""
+        return ctx["v"] < 0.05
 
     def param_bounds(self, ctx):
         pm = ctx["power_meas"]

@@ -42,10 +42,20 @@ Steps (:func:`run_workflow`):
    less than ``DROP_TOL`` = 3 % of held-out score (an early choice made redundant by later ones).
    Measured: on 20 noise/profile realisations of a cell record with no missing effect, 1 false selection.
 6. **Refit and report**: ``report.json``, ``report.md`` and PNG plots in the output directory, all
-   written atomically (temp file + ``os.replace``).  Channels whose final held-out residual still exceeds
-   3x the noise floor with a significant correlation are listed under ``unexplained``; a nominal model
-   whose held-out error is more than ``BASELINE_FAILURE_RATIO`` = 20x the noise floor is reported under
-   ``baseline_failure`` (channel, ratio, correlated signals, likely causes) and in words.
+   written atomically (temp file + ``os.replace``).  The noise floor of each channel is the sensor noise
+   (:func:`shevsim.calibrate.timing.sensor_noise_floor`: declared, or the smallest of a quiet-segment, a
+   local-smoother and a first-difference estimate; the method is reported), so it holds on dynamic signals.
+   Channels whose final held-out residual still exceeds 3x the noise floor with a significant correlation
+   are listed under ``unexplained``; a nominal model whose held-out error is more than
+   ``BASELINE_FAILURE_RATIO`` = 20x the noise floor is reported under ``baseline_failure`` (channel, ratio,
+   correlated signals, likely causes) and in words.  A selected effect whose parameter ends on a bound or
+   outside its plausible range (``Param.plausible``) is removed, the model refitted without it, and the
+   effect reported under ``model_form_discrepancy`` with that evidence; a baseline failure the selected
+   effects do not fix is stated there too.
+
+Sample timing (:mod:`shevsim.calibrate.timing`): the record's declared ``sample_convention`` moves the
+prediction once; the ``timing`` effect (a fitted time shift between inputs and outputs) is a candidate of
+every model, so a logger latency is named as timing, not read as a physical parameter.
 7. **Close the loop**: the final parameters are written as a parameter overlay ``params.toml`` in the
    components' own names (:mod:`shevsim.core.overlay`), and the record's inputs are replayed through the
    component(s) with that overlay, stepped by the master; ``report["replay"]`` holds the replay's RMSE
@@ -68,6 +78,8 @@ from scipy import optimize, stats
 
 from ..core.errors import DataError, ShevsimError
 from .models import CalibrationModel, Param, get_model
+from .timing import (CONVENTIONS, DEFAULT_CONVENTION, convention_offset_s, median_dt, sensor_noise_floor,
+                     shift_prediction, timing_effect)
 
 MIN_GAIN = 0.10
 MAX_WORSEN = 0.10
@@ -183,11 +195,20 @@ class FitResult:
 class Fitter:
     """Least-squares fits of a model (+ effects) on the training part of one data set."""
 
-    def __init__(self, model: CalibrationModel, data, train: np.ndarray, hold: np.ndarray):
+    def __init__(self, model: CalibrationModel, data, train: np.ndarray, hold: np.ndarray,
+                 sample_convention: str = DEFAULT_CONVENTION):
         self.model = model
         self.ctx = model.prepare(data)
         df = data.df
         self.channels = [c for c in model.channels + model.optional_channels if c in df.columns]
+        # sample timing (shevsim.calibrate.timing): the declared convention moves the prediction once; the
+        # ``timing`` effect (a fitted time shift) is a candidate of every model
+        self.t = df["time_s"].to_numpy(float)
+        self.dt = median_dt(self.t)
+        self.sample_convention = sample_convention
+        self.conv_offset = convention_offset_s(sample_convention, model.native_convention, self.dt)
+        self.effects = dict(model.effects)
+        self.effects["timing"] = timing_effect(self.channels, self.dt)
         self.meas = {c: df[c].to_numpy(float) for c in self.channels}
         self.train, self.hold = train, hold
         self.weights = {c: 1.0 / max(float(np.std(self.meas[c])), 1e-12) for c in self.channels}
@@ -201,7 +222,7 @@ class Fitter:
     def _params_for(self, effects) -> list[Param]:
         ps = list(self.model.declared)
         for e in effects:
-            ps += list(self.model.effects[e].params)
+            ps += list(self.effects[e].params)
         return ps
 
     def _bounds(self, p: Param):
@@ -241,7 +262,12 @@ class Fitter:
                 self._t_said = now
                 self.progress(f"... {self.nsim} simulations, {now - self._t_start:.0f} s "
                               f"({(now - self._t_start) / self.nsim:.2g} s each)")
-        return self.model.simulate(self.ctx, values)
+        own = {k: v for k, v in values.items() if k != "time_shift_s"}
+        return shift_prediction(self.model.simulate(self.ctx, own), self.t, self.shift_of(values))
+
+    def shift_of(self, values) -> float:
+        """Offset [s] at which the model's prediction is read: sample convention and fitted time shift."""
+        return self.conv_offset - float(values.get("time_shift_s", 0.0))
 
     def _resid(self, values):
         pred = self.simulate(values)
@@ -258,13 +284,13 @@ class Fitter:
         ps = self._params_for(effects)
         base = self.model.defaults()
         for e in effects:
-            base.update({p.name: p.default for p in self.model.effects[e].params})
+            base.update({p.name: p.default for p in self.effects[e].params})
         if start:
             base.update({k: v for k, v in start.items() if k in {p.name for p in ps}})
         starts = [base]
         for e in effects:
-            fn = self.model.effects[e].starts
-            if fn is not None and not (start and all(p.name in start for p in self.model.effects[e].params)):
+            fn = self.effects[e].starts
+            if fn is not None and not (start and all(p.name in start for p in self.effects[e].params)):
                 # multi-start: from the current fit and from the declared defaults (the current fit may
                 # have bent its declared parameters to mimic the effect)
                 bases = starts + ([dict(base, **self.model.defaults())] if start else [])
@@ -296,7 +322,7 @@ class Fitter:
             rmse[c] = {"train": float(np.sqrt(np.mean(rt * rt))), "holdout": float(np.sqrt(np.mean(rh * rh)))}
             sse[c] = float(np.sum(rt * rt))
             ntr[c] = int(rt.size)
-        full = self.model.full_values(values)
+        full = dict(self.model.full_values(values), time_shift_s=float(values.get("time_shift_s", 0.0)))
         shown = {p.name: full[p.name] for p in self._params_for(effects)}
         return FitResult(tuple(effects), shown, pred, rmse, sse, ntr, k, cost, nfev)
 
@@ -385,267 +411,392 @@ def _bic(fr: FitResult, rho: dict) -> float:
 
 def run_workflow(model_name: str, data, known: dict | None = None, holdout: float = 0.3,
                  split: str = "blocks", out_dir=None, effects=None, plots: bool = True,
-                 params_where: str = "<params>", log=None) -> dict:
+                 params_where: str = "<params>", log=None, sample_convention: str | None = None,
+                 sensor_noise: dict | None = None) -> dict:
     """Run the whole calibration loop on ``data`` (:class:`~shevsim.calibrate.data.MeasuredData`).
 
+    ``sample_convention``: what a logged value stands for (:data:`shevsim.calibrate.timing.CONVENTIONS`;
+    default ``data.sample_convention`` when the data carry one, else ``instantaneous``); ``sensor_noise``:
+    ``{channel: noise}`` declared sensor noise (otherwise estimated, :func:`~shevsim.calibrate.timing.sensor_noise_floor`).
     Returns the report dictionary (also written to ``out_dir/report.json`` with ``report.md`` and plots
     when ``out_dir`` is given).  BLAS is limited to one thread during the run (via threadpoolctl when
     installed): the least-squares SVDs of tall, thin Jacobians are ~100x slower when BLAS threads fight
     over a shared machine's cores.
     """
+    conv = sample_convention or getattr(data, "sample_convention", None) or DEFAULT_CONVENTION
+    if conv not in CONVENTIONS:
+        raise DataError(f"sample convention '{conv}': expected one of {', '.join(CONVENTIONS)}")
+    opts = {"sample_convention": conv, "sensor_noise": dict(sensor_noise or {})}
+    args = (model_name, data, known, holdout, split, out_dir, effects, plots, params_where, log, opts)
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover - optional
-        return _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plots, params_where, log)
+        return _run_workflow(*args)
     with threadpool_limits(limits=1):
         try:
-            return _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plots, params_where,
-                                 log)
+            return _run_workflow(*args)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
             # a numerical failure on this record: keep the original message, name the model and the data
             raise DataError(f"{getattr(data, 'path', '<data>')}: calibration of model '{model_name}' failed: "
                             f"{type(exc).__name__}: {exc} (check the record's units and excitation)") from exc
 
 
-def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plots, params_where, log):
-    t_start = time.perf_counter()
-    say = log or (lambda msg: None)
-    model = get_model(model_name, known, params_where)
-    if data.model != model_name:
-        raise DataError(f"{data.path}: loaded for model '{data.model}', not '{model_name}'")
-    t = data.df["time_s"].to_numpy(float)
-    train, hold, split_info = make_split(t, holdout, split)
-    fitter = Fitter(model, data, train, hold)
-    fitter.progress = log
-    names = list(model.effects) if effects is None else list(effects)
-    for e in names:
-        if e not in model.effects:
-            held = model.known.get("effects_in_nominal") or {}
-            why = (f"'{e}' is already part of the nominal model (its parameters are set in --params)" if e in held
-                   else f"unknown effect '{e}' for model '{model_name}'")
-            raise DataError(f"{why}; available: {', '.join(model.effects)}")
+class _Run:
+    """The state of one calibration run shared by the workflow's steps."""
 
-    # baseline: fit, reweight by training RMSE, refit
-    base = fitter.fit(())
-    fitter.weights = {c: 1.0 / max(base.rmse[c]["train"], 1e-12) for c in fitter.channels}
-    base = fitter.fit((), start=base.params)
-    say(f"baseline fitted ({fitter.nsim} simulations)")
-    ref = {c: base.rmse[c]["holdout"] for c in fitter.channels}
-    regs = model.regressors(fitter.ctx)
-    for col in data.extra_columns:
-        regs["measured:" + col] = data.df[col].to_numpy(float)
+    def __init__(self, model_name, data, known, holdout, split, effects, params_where, log, opts):
+        self.t_start = time.perf_counter()
+        self.say = log or (lambda msg: None)
+        self.model_name, self.data = model_name, data
+        self.model = model = get_model(model_name, known, params_where)
+        if data.model != model_name:
+            raise DataError(f"{data.path}: loaded for model '{data.model}', not '{model_name}'")
+        self.t = data.df["time_s"].to_numpy(float)
+        self.train, self.hold, self.split_info = make_split(self.t, holdout, split)
+        self.fitter = Fitter(model, data, self.train, self.hold, opts["sample_convention"])
+        self.fitter.progress = log
+        self.sensor_noise = opts["sensor_noise"]
+        for c in self.sensor_noise:
+            if c not in self.fitter.channels:
+                raise DataError(f"--sensor-noise {c}: not a channel of model '{model_name}' in this record "
+                                f"(channels: {', '.join(self.fitter.channels)})")
+        effs = self.fitter.effects
+        self.names = list(effs) if effects is None else list(effects)
+        for e in self.names:
+            if e not in effs:
+                held = model.known.get("effects_in_nominal") or {}
+                why = (f"'{e}' is already part of the nominal model (its parameters are set in --params)"
+                       if e in held else f"unknown effect '{e}' for model '{model_name}'")
+                raise DataError(f"{why}; available: {', '.join(effs)}")
+        self.regs = model.regressors(self.fitter.ctx)
+        for col in data.extra_columns:
+            self.regs["measured:" + col] = data.df[col].to_numpy(float)
 
-    def rho_of(fr):
-        return {c: float(np.clip(_acf(fitter.residual(fr, c)[train], 1)[0], 0.0, 0.999)) for c in fitter.channels}
+    def rho_of(self, fr):
+        f = self.fitter
+        return {c: float(np.clip(_acf(f.residual(fr, c)[self.train], 1)[0], 0.0, 0.999)) for c in f.channels}
 
-    def diag(fr):
+    def diag(self, fr):
         out = {}
-        for c in fitter.channels:
-            r = fitter.residual(fr, c)
-            out[c] = {part: diagnose(r[m], t[m], {k: v[m] for k, v in regs.items()})
-                      for part, m in (("train", train), ("holdout", hold))}
+        for c in self.fitter.channels:
+            r = self.fitter.residual(fr, c)
+            out[c] = {part: diagnose(r[m], self.t[m], {k: v[m] for k, v in self.regs.items()})
+                      for part, m in (("train", self.train), ("holdout", self.hold))}
         return out
 
-    base.score = 1.0
-    current = base
-    selected: list[str] = []
-    rounds = []
-    first_round = []
-    remaining = list(names)
-    for rnd in range(MAX_ROUNDS):
-        if not remaining:
-            break
-        rho = rho_of(current)
-        current.bic = _bic(current, rho)
-        cur_score = _score(current, ref)
-        def assess(effs, start):
-            fr = fitter.fit(tuple(selected) + tuple(effs), start=start, max_nfev=CAND_NFEV)
-            fr.score = _score(fr, ref)
-            fr.bic = _bic(fr, rho)
-            fr.dbic = fr.bic - current.bic
-            fr.gain = 1.0 - fr.score / cur_score
-            fr.worsen = max(fr.rmse[c]["holdout"] / max(current.rmse[c]["holdout"], 1e-300) - 1.0
-                            for c in fitter.channels)
-            why = []
-            if fr.gain < MIN_GAIN:
-                why.append(f"held-out score gain {fr.gain:.1%} < {MIN_GAIN:.0%}")
-            if fr.worsen > MAX_WORSEN:
-                why.append(f"a channel's held-out RMSE rises {fr.worsen:.1%}")
-            if fr.dbic > -MIN_DBIC:
-                why.append(f"dBIC {fr.dbic:+.1f} > -{MIN_DBIC:g}")
-            halved = [c for c in fitter.channels
-                      if fr.rmse[c]["holdout"] <= HALVING * current.rmse[c]["holdout"]]
-            fr.passed = not why or (bool(halved) and fr.worsen <= MAX_WORSEN)
-            if not why:
-                fr.reason = "passes"
-            elif fr.passed:
-                # held-out evidence decides: the autocorrelation-corrected BIC has few effective samples
-                # exactly when a systematic residual (a missing effect) makes the residual autocorrelated
-                fr.reason = (f"passes: halves the held-out RMSE of {', '.join(halved)} (the BIC rule alone would "
-                             f"veto: {'; '.join(why)})")
-            else:
-                fr.reason = "; ".join(why)
-            say(f"round {rnd + 1}: {'+'.join(effs)}: score {fr.score:.3f} gain {fr.gain:+.1%} dBIC {fr.dbic:+.1f} "
-                f"{'PASS' if fr.passed else ''}")
-            return fr
+    def baseline(self):
+        """Fit the nominal model, reweight by its training RMSE, refit; the noise floors of the channels."""
+        f = self.fitter
+        base = f.fit(())
+        f.weights = {c: 1.0 / max(base.rmse[c]["train"], 1e-12) for c in f.channels}
+        base = f.fit((), start=base.params)
+        self.say(f"baseline fitted ({f.nsim} simulations)")
+        base.score = 1.0
+        self.base = base
+        self.ref = {c: base.rmse[c]["holdout"] for c in f.channels}
+        quiet = self.model.quiet_mask(f.ctx)
+        self.noise = {c: sensor_noise_floor(f.meas[c], f.residual(base, c), quiet, self.sensor_noise.get(c))
+                      for c in f.channels}
+        return base
 
-        results = [(e, assess((e,), current.params)) for e in remaining]
-        rounds.append({"round": rnd + 1, "on_top_of": list(selected), "current_score": cur_score,
-                       "candidates": [_cand_json(e, fr, fitter.channels) for e, fr in results]})
-        if rnd == 0:
-            first_round = rounds[0]["candidates"]
-        ok = [((e,), fr) for e, fr in results if fr.passed and math.isfinite(fr.score)]
-        if not ok and not selected and len(remaining) >= 2:
-            # no single effect passes: two effects may each fix part of the residual while spoiling
-            # another part; test pairs of the PAIR_TOP candidates with the best training BIC
-            # (ranked by held-out gain: the BIC can veto each of two effects that only work together)
-            top = [e for e, fr in sorted(results, key=lambda x: x[1].score) if fr.gain > 0.0][:PAIR_TOP]
-            single = dict(results)
-            pairs = []
-            for a_i in range(len(top)):
-                for b_i in range(a_i + 1, len(top)):
-                    a, b = top[a_i], top[b_i]
-                    st = dict(current.params)
-                    for e in (a, b):
-                        st.update({p.name: single[e].params[p.name] for p in model.effects[e].params})
-                    pairs.append(((a, b), assess((a, b), st)))
-            rounds[-1]["pairs"] = [_cand_json("+".join(k), fr, fitter.channels) for k, fr in pairs]
-            ok = [(k, fr) for k, fr in pairs if fr.passed and math.isfinite(fr.score)]
-        if not ok:
-            break
-        best_score = min(fr.score for _, fr in ok)
-        near = [(k, fr) for k, fr in ok if fr.score <= best_score * (1 + TIE)]
-        k, fr = min(near, key=lambda x: (len(x[0]), x[1].bic))
-        selected.extend(k)
-        rounds[-1]["selected"] = "+".join(k)
-        current = fr
-        for e in k:
-            remaining.remove(e)
-    final = current
-    if selected:
-        final = fitter.fit(tuple(selected), start=current.params)
-        final.score = _score(final, ref)
-    # backward elimination: an effect chosen early can become redundant once later ones are in
-    # (its parameters drift back towards neutral); drop it when the model without it is as good
-    dropped = []
-    while len(selected) >= 2:
-        trials = []
-        for e in selected:
-            rest = tuple(x for x in selected if x != e)
-            fr = fitter.fit(rest, start={k: v for k, v in final.params.items()
-                                         if k not in {p.name for p in model.effects[e].params}})
-            fr.score = _score(fr, ref)
-            worse = max(fr.rmse[c]["holdout"] / max(final.rmse[c]["holdout"], 1e-300) - 1.0 for c in fitter.channels)
-            trials.append((fr.score, e, fr, worse))
-        score, e, fr, worse = min(trials, key=lambda x: x[0])
-        if score <= final.score * (1.0 + DROP_TOL) and worse <= DROP_TOL:
-            say(f"backward elimination: dropping {e} (held-out score {final.score:.3f} -> {score:.3f})")
-            selected.remove(e)
-            dropped.append({"effect": e, "score_with": final.score, "score_without": score})
-            final = fr
+    def assess(self, selected, effs, start, current, rho, cur_score, rnd):
+        """Fit ``selected + effs`` and judge it against ``current`` by the selection rule."""
+        f = self.fitter
+        fr = f.fit(tuple(selected) + tuple(effs), start=start, max_nfev=CAND_NFEV)
+        fr.score = _score(fr, self.ref)
+        fr.bic = _bic(fr, rho)
+        fr.dbic = fr.bic - current.bic
+        fr.gain = 1.0 - fr.score / cur_score
+        fr.worsen = max(fr.rmse[c]["holdout"] / max(current.rmse[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
+        why = []
+        if fr.gain < MIN_GAIN:
+            why.append(f"held-out score gain {fr.gain:.1%} < {MIN_GAIN:.0%}")
+        if fr.worsen > MAX_WORSEN:
+            why.append(f"a channel's held-out RMSE rises {fr.worsen:.1%}")
+        if fr.dbic > -MIN_DBIC:
+            why.append(f"dBIC {fr.dbic:+.1f} > -{MIN_DBIC:g}")
+        halved = [c for c in f.channels if fr.rmse[c]["holdout"] <= HALVING * current.rmse[c]["holdout"]]
+        fr.passed = not why or (bool(halved) and fr.worsen <= MAX_WORSEN)
+        if not why:
+            fr.reason = "passes"
+        elif fr.passed:
+            # held-out evidence decides: the autocorrelation-corrected BIC has few effective samples
+            # exactly when a systematic residual (a missing effect) makes the residual autocorrelated
+            fr.reason = (f"passes: halves the held-out RMSE of {', '.join(halved)} (the BIC rule alone would "
+                         f"veto: {'; '.join(why)})")
         else:
-            break
+            fr.reason = "; ".join(why)
+        self.say(f"round {rnd + 1}: {'+'.join(effs)}: score {fr.score:.3f} gain {fr.gain:+.1%} dBIC {fr.dbic:+.1f} "
+                 f"{'PASS' if fr.passed else ''}")
+        return fr
 
-    diag_before, diag_after = diag(base), diag(final)
-    unexplained = []
-    for c in fitter.channels:
-        dh = diag_after[c]["holdout"]
-        nf = dh["noise_floor"]
-        top = dh["correlations"][0] if dh["correlations"] else None
-        if nf > 0 and dh["rmse"] > 3.0 * nf and (not dh["white"]):
-            unexplained.append({"channel": c, "holdout_rmse": dh["rmse"], "noise_floor": nf,
-                                "bias": dh["bias"], "drift_per_hour": dh["drift_per_hour"],
-                                "top_correlation": top,
-                                "note": "residual well above the noise floor and not white: structure the "
-                                        "selected model does not explain"})
-    baseline_failure = []
-    for c in fitter.channels:
-        dh = diag_before[c]["holdout"]
-        nf = dh["noise_floor"]
-        ratio = dh["rmse"] / nf if nf > 0 else float("inf")
-        if ratio > BASELINE_FAILURE_RATIO:
-            baseline_failure.append({
-                "channel": c, "holdout_rmse": dh["rmse"], "noise_floor": nf, "ratio_to_noise_floor": ratio,
-                "bias": dh["bias"], "drift_per_hour": dh["drift_per_hour"],
-                "correlated_signals": dh["correlations"][:4],
-                "likely_causes": model.likely_causes(c, dh, data),
-                "fixed_by_selected_effects": bool(diag_after[c]["holdout"]["rmse"]
-                                                  <= BASELINE_FAILURE_RATIO * max(diag_after[c]["holdout"]["noise_floor"], 1e-300))})
+    def pairs(self, results, selected, current, rho, cur_score, rnd):
+        """No single effect passes: pairs of the PAIR_TOP candidates with the best held-out gain, fitted together
+        (two effects can each fix part of the residual while spoiling another part)."""
+        top = [e for e, fr in sorted(results, key=lambda x: x[1].score) if fr.gain > 0.0][:PAIR_TOP]
+        single = dict(results)
+        out = []
+        for a_i in range(len(top)):
+            for b_i in range(a_i + 1, len(top)):
+                a, b = top[a_i], top[b_i]
+                st = dict(current.params)
+                for e in (a, b):
+                    st.update({p.name: single[e].params[p.name] for p in self.fitter.effects[e].params})
+                out.append(((a, b), self.assess(selected, (a, b), st, current, rho, cur_score, rnd)))
+        return out
+
+    def select(self):
+        """Greedy forward selection (module docstring, step 5)."""
+        f = self.fitter
+        current, selected, rounds, first_round = self.base, [], [], []
+        remaining = list(self.names)
+        for rnd in range(MAX_ROUNDS):
+            if not remaining:
+                break
+            rho = self.rho_of(current)
+            current.bic = _bic(current, rho)
+            cur_score = _score(current, self.ref)
+            results = [(e, self.assess(selected, (e,), current.params, current, rho, cur_score, rnd))
+                       for e in remaining]
+            rounds.append({"round": rnd + 1, "on_top_of": list(selected), "current_score": cur_score,
+                           "candidates": [_cand_json(e, fr, f.channels) for e, fr in results]})
+            if rnd == 0:
+                first_round = rounds[0]["candidates"]
+            ok = [((e,), fr) for e, fr in results if fr.passed and math.isfinite(fr.score)]
+            if not ok and not selected and len(remaining) >= 2:
+                pairs = self.pairs(results, selected, current, rho, cur_score, rnd)
+                rounds[-1]["pairs"] = [_cand_json("+".join(k), fr, f.channels) for k, fr in pairs]
+                ok = [(k, fr) for k, fr in pairs if fr.passed and math.isfinite(fr.score)]
+            if not ok:
+                break
+            best_score = min(fr.score for _, fr in ok)
+            near = [(k, fr) for k, fr in ok if fr.score <= best_score * (1 + TIE)]
+            k, fr = min(near, key=lambda x: (len(x[0]), x[1].bic))
+            selected.extend(k)
+            rounds[-1]["selected"] = "+".join(k)
+            current = fr
+            for e in k:
+                remaining.remove(e)
+        self.rounds, self.first_round = rounds, first_round
+        return selected, current
+
+    def finish(self, selected, current):
+        """Refit the selection to convergence; backward elimination of effects made redundant by later ones."""
+        f = self.fitter
+        final = current
+        if selected:
+            final = f.fit(tuple(selected), start=current.params)
+            final.score = _score(final, self.ref)
+        dropped = []
+        while len(selected) >= 2:
+            trials = []
+            for e in selected:
+                rest = tuple(x for x in selected if x != e)
+                own = {p.name for p in f.effects[e].params}
+                fr = f.fit(rest, start={k: v for k, v in final.params.items() if k not in own})
+                fr.score = _score(fr, self.ref)
+                worse = max(fr.rmse[c]["holdout"] / max(final.rmse[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
+                trials.append((fr.score, e, fr, worse))
+            score, e, fr, worse = min(trials, key=lambda x: x[0])
+            if score <= final.score * (1.0 + DROP_TOL) and worse <= DROP_TOL:
+                self.say(f"backward elimination: dropping {e} (held-out score {final.score:.3f} -> {score:.3f})")
+                selected.remove(e)
+                dropped.append({"effect": e, "score_with": final.score, "score_without": score})
+                final = fr
+            else:
+                break
+        return final, dropped
+
+    def implausible(self, effect: str, values: dict) -> list[dict]:
+        """Parameters of ``effect`` on a bound or outside their plausible range (the evidence)."""
+        f = self.fitter
+        out = []
+        for prm in f.effects[effect].params:
+            v = values.get(prm.name)
+            if v is None:
+                continue
+            lo, hi = f.bounds_override.get(prm.name, (prm.lo, prm.hi))
+            pos = _bound_position(prm, v, lo, hi)
+            if pos <= BOUND_TOL or pos >= 1.0 - BOUND_TOL:
+                out.append({"parameter": prm.name, "value": v, "unit": prm.unit,
+                            "why": f"on its {'lower' if pos <= BOUND_TOL else 'upper'} bound [{lo:.4g}, {hi:.4g}]"})
+            elif prm.plausible is not None and not (prm.plausible[0] <= v <= prm.plausible[1]):
+                out.append({"parameter": prm.name, "value": v, "unit": prm.unit,
+                            "why": f"outside its plausible range [{prm.plausible[0]:.4g}, {prm.plausible[1]:.4g}]"})
+        return out
+
+    def screen_discrepancy(self, selected, final):
+        """Selected effects whose parameters are implausible are not the explanation: removed, refitted,
+        reported as a model-form discrepancy with the evidence."""
+        out = []
+        for e in list(selected):
+            ev = self.implausible(e, final.params)
+            if not ev:
+                continue
+            rest = tuple(x for x in selected if x != e)
+            without = self.fitter.fit(rest, start={k: v for k, v in final.params.items()
+                                                   if k not in {p.name for p in self.fitter.effects[e].params}})
+            without.score = _score(without, self.ref)
+            out.append({"effect": e, "evidence": ev, "holdout_score_with": final.score,
+                        "holdout_score_without": without.score,
+                        "statement": f"'{e}' improved the fit only with {', '.join(x['parameter'] + ' ' + x['why'] for x in ev)}: "
+                                     f"read as a model-form discrepancy, not as the cause"})
+            self.say(f"model-form discrepancy: {out[-1]['statement']}")
+            selected.remove(e)
+            final = without
+        return final, out
+
+    def verdicts(self, diag_before, diag_after, final):
+        """Unexplained residuals and baseline failures, against the channels' sensor-noise floors."""
+        f = self.fitter
+        unexplained, failure = [], []
+        for c in f.channels:
+            nf = self.noise[c]["value"]
+            dh = diag_after[c]["holdout"]
+            top = dh["correlations"][0] if dh["correlations"] else None
+            if nf > 0 and dh["rmse"] > 3.0 * nf and (not dh["white"]):
+                unexplained.append({"channel": c, "holdout_rmse": dh["rmse"], "noise_floor": nf,
+                                    "noise_floor_method": self.noise[c]["method"],
+                                    "bias": dh["bias"], "drift_per_hour": dh["drift_per_hour"], "top_correlation": top,
+                                    "note": "residual well above the noise floor and not white: structure the "
+                                            "selected model does not explain"})
+            db = diag_before[c]["holdout"]
+            ratio = db["rmse"] / nf if nf > 0 else float("inf")
+            if ratio > BASELINE_FAILURE_RATIO:
+                failure.append({
+                    "channel": c, "holdout_rmse": db["rmse"], "noise_floor": nf,
+                    "noise_floor_method": self.noise[c]["method"], "ratio_to_noise_floor": ratio,
+                    "bias": db["bias"], "drift_per_hour": db["drift_per_hour"],
+                    "correlated_signals": db["correlations"][:4], "likely_causes": self.model.likely_causes(c, db, self.data),
+                    "fixed_by_selected_effects": bool(dh["rmse"] <= BASELINE_FAILURE_RATIO * max(nf, 1e-300)),
+                    "ratio_after": dh["rmse"] / nf if nf > 0 else float("inf")})
+        for b in failure:
+            self.say(f"baseline failure: {b['channel']} held-out RMSE {b['holdout_rmse']:.4g} = "
+                     f"{b['ratio_to_noise_floor']:.0f}x the noise floor ({b['noise_floor_method']}); likely: "
+                     f"{'; '.join(b['likely_causes'][:2])}")
+        return unexplained, failure
+
+    def close_loop(self, selected, final, out_dir):
+        """The overlay in the component's own parameters, replayed through the simulator (step 7)."""
+        f, model = self.fitter, self.model
+        full_final = model.full_values({k: v for k, v in final.params.items() if k != "time_shift_s"})
+        own_tmp = out_dir is None
+        odir = Path(tempfile.mkdtemp(prefix="shevsim_calibration_")) if own_tmp else Path(out_dir)
+        odir.mkdir(parents=True, exist_ok=True)
+        replay, overlay = None, None
+        try:
+            overlay = model.overlay(full_final, odir)
+            write_overlay(odir / "params.toml", overlay, meta={
+                "source": f"shevsim calibrate {self.model_name} {self.data.path}",
+                "selected_effects": ", ".join(selected) or "none",
+                "use": "shevsim run SCENARIO --params params.toml (path of this file; each table goes to the "
+                       "component of that name, or --params COMPONENT=params.toml for one table)"})
+            # the logger's timing (convention, fitted shift) belongs to the record, not the component
+            pred = shift_prediction(model.replay(self.data, odir / "params.toml"), self.t, f.shift_of(final.params))
+            replay = {}
+            for c in f.channels:
+                r = pred[c] - f.meas[c]
+                rt, rh = r[self.train], r[self.hold]
+                replay[c] = {"train": float(np.sqrt(np.mean(rt * rt))), "holdout": float(np.sqrt(np.mean(rh * rh)))}
+            self.say("replay through the simulator: " + ", ".join(
+                f"{c} held-out {replay[c]['holdout']:.4g} (fit {final.rmse[c]['holdout']:.4g})" for c in replay))
+        except NotImplementedError:
+            replay = None
+        except ShevsimError as exc:       # e.g. the replayed plant leaves its range (SOC < 0): said, not hidden
+            replay = {"error": f"the replay through the simulator stopped: {exc}"}
+            self.say(replay["error"])
+        finally:
+            if own_tmp:
+                import shutil
+                shutil.rmtree(odir, ignore_errors=True)   # our own temporary folder, nothing of the user's
+        return replay, overlay
+
+    def bounds_and_identifiability(self, selected, final):
+        """Fitted parameters on a bound and the local identifiability of every fitted parameter."""
+        f = self.fitter
+        at_bounds = []
+        for prm in f._params_for(tuple(selected)):
+            lo, hi = f.bounds_override.get(prm.name, (prm.lo, prm.hi))
+            v = final.params.get(prm.name)
+            if v is None:
+                continue
+            pos = _bound_position(prm, v, lo, hi)
+            if pos <= BOUND_TOL or pos >= 1.0 - BOUND_TOL:
+                at_bounds.append({"parameter": prm.name, "value": v, "bound": "lower" if pos <= BOUND_TOL else "upper",
+                                  "bounds": [lo, hi], "unit": prm.unit})
+        ident = identifiability(f, tuple(selected), final.params)
+        by_name = {d["parameter"]: d for d in ident}
+        for b in at_bounds:
+            b["identifiable"] = by_name.get(b["parameter"], {}).get("identifiable")
+            self.say(f"parameter {b['parameter']} = {b['value']:.4g} {b['unit']} sits on its {b['bound']} bound: not "
+                     f"identifiable from this record (or the bound is wrong)")
+        for d in ident:
+            if not d["identifiable"]:
+                self.say(f"parameter {d['parameter']} is not identifiable from this record: its 1-sigma uncertainty "
+                         f"is {d['se_frac']:.3g} of its bound range (> {IDENT_SE_MAX:g}); the record does not excite it"
+                         + (f" or it trades off against {d['partner']['parameter']} (r = {d['partner']['correlation']:+.2f})"
+                            if d["partner"] else ""))
+        return at_bounds, ident
+
+
+BOUND_TOL = 1e-3
+
+
+def _bound_position(prm: Param, v: float, lo: float, hi: float) -> float:
+    """Position of ``v`` between the bounds, 0..1 (log scale where the parameter is fitted in logs)."""
+    span = (math.log(hi) - math.log(lo)) if prm.log else (hi - lo)
+    if span <= 0:
+        return 0.5
+    return ((math.log(max(v, 1e-300)) - math.log(lo)) if prm.log else (v - lo)) / span
+
+
+def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plots, params_where, log, opts):
+    run = _Run(model_name, data, known, holdout, split, effects, params_where, log, opts)
+    base = run.baseline()
+    selected, current = run.select()
+    final, dropped = run.finish(selected, current)
+    final, discrepancy = run.screen_discrepancy(selected, final)
+    diag_before, diag_after = run.diag(base), run.diag(final)
+    unexplained, baseline_failure = run.verdicts(diag_before, diag_after, final)
     for b in baseline_failure:
-        say(f"baseline failure: {b['channel']} held-out RMSE {b['holdout_rmse']:.4g} = {b['ratio_to_noise_floor']:.0f}x "
-            f"the noise floor; likely: {'; '.join(b['likely_causes'][:2])}")
-    # close the loop: the overlay in the component's own parameters, replayed through the simulator
-    full_final = model.full_values(final.params)
-    own_tmp = out_dir is None
-    odir = Path(tempfile.mkdtemp(prefix="shevsim_calibration_")) if own_tmp else Path(out_dir)
-    odir.mkdir(parents=True, exist_ok=True)
-    replay, overlay = None, None
-    try:
-        overlay = model.overlay(full_final, odir)
-        write_overlay(odir / "params.toml", overlay, meta={
-            "source": f"shevsim calibrate {model_name} {data.path}",
-            "selected_effects": ", ".join(selected) or "none",
-            "use": "shevsim run SCENARIO --params params.toml (path of this file; each table goes to the "
-                   "component of that name, or --params COMPONENT=params.toml for one table)"})
-        pred = model.replay(data, odir / "params.toml")
-        replay = {}
-        for c in fitter.channels:
-            r = pred[c] - fitter.meas[c]
-            rt, rh = r[train], r[hold]
-            replay[c] = {"train": float(np.sqrt(np.mean(rt * rt))), "holdout": float(np.sqrt(np.mean(rh * rh)))}
-        say("replay through the simulator: " + ", ".join(
-            f"{c} held-out {replay[c]['holdout']:.4g} (fit {final.rmse[c]['holdout']:.4g})" for c in replay))
-    except NotImplementedError:
-        replay = None
-    except ShevsimError as exc:       # e.g. the replayed plant leaves its range (SOC < 0): said, not hidden
-        replay = {"error": f"the replay through the simulator stopped: {exc}"}
-        say(replay["error"])
-    finally:
-        if own_tmp:
-            import shutil
-            shutil.rmtree(odir, ignore_errors=True)   # our own temporary folder, nothing of the user's
-    # fitted parameters that ended on a bound: not identified by this record (or the bound is wrong)
-    at_bounds = []
-    for prm in fitter._params_for(tuple(selected)):
-        lo, hi = fitter.bounds_override.get(prm.name, (prm.lo, prm.hi))
-        v = final.params.get(prm.name)
-        if v is None:
-            continue
-        span = (math.log(hi) - math.log(lo)) if prm.log else (hi - lo)
-        pos = ((math.log(max(v, 1e-300)) - math.log(lo)) if prm.log else (v - lo)) / span if span > 0 else 0.5
-        if pos <= 1e-4 or pos >= 1.0 - 1e-4:
-            at_bounds.append({"parameter": prm.name, "value": v, "bound": "lower" if pos <= 1e-4 else "upper",
-                              "bounds": [lo, hi], "unit": prm.unit})
-    ident = identifiability(fitter, tuple(selected), final.params)
-    not_ident = [d for d in ident if not d["identifiable"]]
-    by_name = {d["parameter"]: d for d in ident}
-    for b in at_bounds:
-        b["identifiable"] = by_name.get(b["parameter"], {}).get("identifiable")
-        say(f"parameter {b['parameter']} = {b['value']:.4g} {b['unit']} sits on its {b['bound']} bound: not "
-            f"identifiable from this record (or the bound is wrong)")
-    for d in not_ident:
-        say(f"parameter {d['parameter']} is not identifiable from this record: its 1-sigma uncertainty is "
-            f"{d['se_frac']:.3g} of its bound range (> {IDENT_SE_MAX:g}); the record does not excite it"
-            + (f" or it trades off against {d['partner']['parameter']} (r = {d['partner']['correlation']:+.2f})"
-               if d["partner"] else ""))
+        if not b["fixed_by_selected_effects"]:
+            discrepancy.append({"channel": b["channel"], "evidence": [{"ratio_to_noise_floor_after": b["ratio_after"]}],
+                                "statement": f"{b['channel']}: the held-out residual stays {b['ratio_after']:.0f}x the "
+                                             f"noise floor after the selected effects: the model's form does not "
+                                             f"explain this record (read any selected effect as a partial repair)"})
+    replay, overlay = run.close_loop(selected, final, out_dir)
+    at_bounds, ident = run.bounds_and_identifiability(selected, final)
+    report = _report(run, selected, final, dropped, discrepancy, diag_before, diag_after, unexplained,
+                     baseline_failure, replay, overlay, at_bounds, ident, out_dir)
+    if out_dir is not None:
+        write_report(Path(out_dir), report, run.fitter, base, final, run.t, plots)
+    return report
+
+
+def _report(run, selected, final, dropped, discrepancy, diag_before, diag_after, unexplained, baseline_failure,
+            replay, overlay, at_bounds, ident, out_dir) -> dict:
+    f, model, data, base = run.fitter, run.model, run.data, run.base
     replay_dev = (max(abs(replay[c][part] / max(final.rmse[c][part], 1e-300) - 1.0)
                       for c in replay for part in ("train", "holdout")) if replay and "error" not in replay else None)
-    elapsed = time.perf_counter() - t_start
-    report = {
-        "model": model_name,
-        "data": {"path": data.path, "n_samples": int(t.size), "duration_s": float(t[-1] - t[0]),
-                 "channels": fitter.channels, "notes": data.notes,
-                 "extra_columns": data.extra_columns},
+    timing = {"sample_convention": f.sample_convention, "model_convention": model.native_convention,
+              "convention_offset_s": f.conv_offset, "sample_interval_s": f.dt,
+              "time_shift_s": float(final.params.get("time_shift_s", 0.0)) if "timing" in selected else 0.0}
+    return {
+        "model": run.model_name,
+        "data": {"path": data.path, "n_samples": int(run.t.size), "duration_s": float(run.t[-1] - run.t[0]),
+                 "channels": f.channels, "notes": data.notes, "extra_columns": data.extra_columns},
         "known_parameters": {k: (list(v) if isinstance(v, tuple) else v) for k, v in model.known.items()},
-        "split": split_info,
+        "split": run.split_info,
+        "timing": timing,
+        "noise_floor": run.noise,
         "selection_rule": {"min_holdout_gain": MIN_GAIN, "max_channel_worsening": MAX_WORSEN,
                            "min_bic_drop": MIN_DBIC, "tie_fraction": TIE, "bic": "autocorrelation-corrected",
                            "halving_passes": HALVING},
         "baseline_parameters": base.params,
         "selected_effects": selected,
         "final_parameters": final.params,
-        "candidates": first_round,
-        "rounds": rounds,
+        "candidates": run.first_round,
+        "rounds": run.rounds,
         "rmse_before": base.rmse,
         "rmse_after": final.rmse,
         "score_after": final.score,
@@ -654,21 +805,19 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
         "unexplained": unexplained,
         "nothing_found": not selected,
         "dropped_by_backward_elimination": dropped,
+        "model_form_discrepancy": discrepancy,
         "baseline_failure": baseline_failure,
         "parameters_at_bounds": at_bounds,
         "identifiability": ident,
-        "not_identifiable": [d["parameter"] for d in not_ident],
+        "not_identifiable": [d["parameter"] for d in ident if not d["identifiable"]],
         "identifiability_rule": {"se_frac_max": IDENT_SE_MAX, "finite_difference_step": IDENT_STEP},
         "overlay": {"file": "params.toml" if out_dir is not None else None, "component": model.component_name,
                     "tables": overlay},
         "replay": replay,
         "replay_max_relative_deviation": replay_dev,
-        "n_simulations": fitter.nsim,
-        "elapsed_s": elapsed,
+        "n_simulations": f.nsim,
+        "elapsed_s": time.perf_counter() - run.t_start,
     }
-    if out_dir is not None:
-        write_report(Path(out_dir), report, fitter, base, final, t, plots)
-    return report
 
 
 def _cand_json(name, fr: FitResult, channels) -> dict:
@@ -780,6 +929,16 @@ def render_markdown(rep: dict) -> str:
     L += ["", f"Split: `{sp['method']}`, held-out fraction {sp['holdout_fraction']}, held-out intervals (s): "
           + ", ".join(f"{a:.0f}-{b:.0f}" for a, b in sp["holdout_intervals_s"])
           + f" ({sp['n_train']} training / {sp['n_holdout']} held-out samples).", ""]
+    tm = rep.get("timing")
+    if tm:
+        L.append(f"Sample timing: the record is read as `{tm['sample_convention']}` (declared; the model's "
+                 f"prediction is `{tm['model_convention']}`, read {tm['convention_offset_s']:+.3g} s later); "
+                 f"sample interval {_g(tm['sample_interval_s'])} s; fitted time shift {_g(tm['time_shift_s'])} s "
+                 f"(> 0: the output lags).")
+    for c, nf in (rep.get("noise_floor") or {}).items():
+        L.append(f"Noise floor of `{c}`: {_g(nf['value'])} ({nf['method']}; estimates: "
+                 + ", ".join(f"{k} {_g(v)}" for k, v in nf["estimates"].items()) + ").")
+    L.append("")
     sel = rep["selected_effects"]
     L.append("## Result")
     L.append("")
@@ -800,6 +959,10 @@ def render_markdown(rep: dict) -> str:
                      f"noise floor {_g(b['noise_floor'])}; most correlated with {cs or 'nothing'}; likely causes: "
                      + "; ".join(b["likely_causes"])
                      + (" (the selected effects bring it within range)" if b["fixed_by_selected_effects"] else ""))
+    if rep.get("model_form_discrepancy"):
+        L += ["", "**Model-form discrepancy** (not explained by any effect of the library; the evidence):"]
+        for d in rep["model_form_discrepancy"]:
+            L.append(f"- {d['statement']}")
     if rep.get("parameters_at_bounds"):
         L += ["", "Parameters that ended on a bound (not identifiable from this record, or the bound is wrong): "
               + ", ".join(f"`{b['parameter']}` = {_g(b['value'])} {b['unit']} ({b['bound']})"

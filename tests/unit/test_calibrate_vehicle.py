@@ -59,8 +59,10 @@ def _replay_rmse(data, rep, tmp_path):
     ov = model.overlay(model.full_values(rep["final_parameters"]), tmp_path)
     f = tmp_path / "params.toml"
     _toml(f, ov)
-    pred = model.replay(data, f)["power_w"]
     t = data.df["time_s"].to_numpy(float)
+    # the record's timing (declared convention, fitted time shift) belongs to the logger, not the components
+    tm = rep["timing"]
+    pred = np.interp(t + tm["convention_offset_s"] - tm["time_shift_s"], t, model.replay(data, f)["power_w"])
     train, hold, _ = make_split(t, 0.3)
     r = pred - data.df["power_w"].to_numpy(float)
     return {"train": float(np.sqrt(np.mean(r[train] ** 2))), "holdout": float(np.sqrt(np.mean(r[hold] ** 2)))}, ov

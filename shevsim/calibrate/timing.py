@@ -1,0 +1,127 @@
+"""timing.py - a record's sample timing (declared convention, fitted time shift) and its sensor-noise floor.
+
+Sample convention
+-----------------
+What a logged value at sample time ``t_k`` stands for (``--sample-convention`` of ``shevsim calibrate``):
+
+* ``instantaneous`` (default; a CAN snapshot, a DAQ reading): the value at ``t_k``;
+* ``mean-ending``: the mean over the period ending at the sample, ``(t_k - dt, t_k]`` (an energy-integrating
+  logger);
+* ``mean-starting``: the mean over the period starting at it, ``[t_k, t_k + dt)``.
+
+Each calibration model declares the convention of its own prediction (``native_convention``: the vehicle
+model's power is the mean over the grid period ending at the sample; the cell and engine models are
+instantaneous).  A value averaged over a period of length ``dt`` is, to second order in ``dt``, the
+instantaneous value at the period's centre, so the prediction is moved to the record's convention by
+reading it (linear interpolation between samples) at ``t + (c_record - c_model) dt`` with the centres
+``c`` = 0 (instantaneous), -1/2 (ending), +1/2 (starting).  Reading an ending-mean prediction half a sample
+later averages two neighbouring periods: the central difference of the inertial term that an
+instantaneous logger records.
+
+Time shift (the ``timing`` effect of every model)
+-------------------------------------------------
+A logger or CAN latency between the model's input channels and its output channels (a fraction of a
+sample or several samples) is an effect of every calibration model: ``time_shift_s`` > 0 means the logged
+output lags the logged input by that time (prediction read at ``t - time_shift_s``), bounds
++-``MAX_SHIFT_SAMPLES`` samples.  It is fitted like any effect, so a timing artefact is named as timing.
+
+Sensor-noise floor (the honest baseline)
+----------------------------------------
+The noise floor of a measured channel is the smallest of (each estimate is inflated, never deflated, by
+the signal's own dynamics):
+
+* ``declared``: a sensor noise given by the user (``--sensor-noise CHANNEL=VALUE``), used alone when given;
+* ``quiet``: robust std of first differences / sqrt 2 within quiet segments (the model's ``quiet_mask``:
+  the vehicle at standstill, the cell at rest), at least ``MIN_QUIET`` differences;
+* ``smoother``: robust std of the residual of a local quadratic (Savitzky-Golay, 7 samples) through the
+  measured channel, divided by sqrt(1 - h0) (h0 = 1/3, the smoother's own weight on the sample) - the
+  part a local quadratic cannot follow;
+* ``first-difference``: robust std of the first differences of the model residual / sqrt 2 (the former
+  estimate, kept as one candidate).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..core.errors import DataError
+from .models import Effect, Param
+
+CONVENTIONS = {"instantaneous": 0.0, "mean-ending": -0.5, "mean-starting": 0.5}
+DEFAULT_CONVENTION = "instantaneous"
+MAX_SHIFT_SAMPLES = 4.0
+MIN_QUIET = 30
+SG_WINDOW = 7
+
+
+def median_dt(t: np.ndarray) -> float:
+    return float(np.median(np.diff(np.asarray(t, float))))
+
+
+def convention_offset_s(record: str, native: str, dt: float) -> float:
+    """Time offset [s] at which a prediction in convention ``native`` is read to give convention ``record``."""
+    for name in (record, native):
+        if name not in CONVENTIONS:
+            raise DataError(f"sample convention '{name}': expected one of {', '.join(CONVENTIONS)}")
+    return (CONVENTIONS[record] - CONVENTIONS[native]) * dt
+
+
+def timing_effect(channels, dt: float) -> Effect:
+    """The ``timing`` effect: a time shift between the model's inputs and its output channels."""
+    def starts(ctx, base):
+        return [{"time_shift_s": k * dt} for k in (-2.0, -1.0, -0.5, 0.5, 1.0, 2.0)]
+    lim = MAX_SHIFT_SAMPLES * dt
+    return Effect("timing", "time shift between the logged inputs and outputs (logger or CAN latency, "
+                  "a sample convention other than the declared one); > 0: the output lags",
+                  (Param("time_shift_s", "s", -lim, lim, 0.0, "output lag behind the inputs"),),
+                  {"time_shift_s": 0.0}, tuple(channels), starts)
+
+
+def shift_prediction(pred: dict, t: np.ndarray, offset_s: float) -> dict:
+    """Every array channel of ``pred`` read at ``t + offset_s`` (linear interpolation, held at the ends)."""
+    if offset_s == 0.0:
+        return pred
+    ts = t + offset_s
+    return {c: (np.interp(ts, t, y) if isinstance(y, np.ndarray) and y.shape == t.shape else y)
+            for c, y in pred.items()}
+
+
+def _robust_std(x: np.ndarray) -> float:
+    if x.size < 3:
+        return float("nan")
+    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
+def smoother_noise(y: np.ndarray) -> float:
+    """Robust std of the residual of a local quadratic (Savitzky-Golay) through ``y`` / sqrt(1 - h0)."""
+    if y.size < 3 * SG_WINDOW:
+        return float("nan")
+    from scipy.signal import savgol_filter
+    r = y - savgol_filter(y, SG_WINDOW, 2, mode="interp")
+    h0 = savgol_filter(np.eye(SG_WINDOW)[SG_WINDOW // 2], SG_WINDOW, 2, mode="constant")[SG_WINDOW // 2]
+    return _robust_std(r[SG_WINDOW:-SG_WINDOW]) / math.sqrt(max(1.0 - h0, 1e-6))
+
+
+def quiet_noise(y: np.ndarray, quiet: np.ndarray | None) -> float:
+    """Robust std of first differences / sqrt 2 between consecutive quiet samples."""
+    if quiet is None:
+        return float("nan")
+    q = np.asarray(quiet, bool)
+    both = q[1:] & q[:-1]
+    if int(both.sum()) < MIN_QUIET:
+        return float("nan")
+    return _robust_std(np.diff(y)[both]) / math.sqrt(2.0)
+
+
+def sensor_noise_floor(meas: np.ndarray, residual: np.ndarray, quiet, declared: float | None = None) -> dict:
+    """``{"value", "method", "estimates"}``: the channel's noise floor (module docstring)."""
+    if declared is not None:
+        return {"value": float(declared), "method": "declared", "estimates": {"declared": float(declared)}}
+    est = {"quiet": quiet_noise(meas, quiet), "smoother": smoother_noise(meas),
+           "first-difference": _robust_std(np.diff(residual)) / math.sqrt(2.0) if residual.size > 3 else float("nan")}
+    ok = {k: v for k, v in est.items() if math.isfinite(v) and v > 0}
+    if not ok:
+        return {"value": float("nan"), "method": "none", "estimates": est}
+    k = min(ok, key=ok.get)
+    return {"value": ok[k], "method": k, "estimates": est}

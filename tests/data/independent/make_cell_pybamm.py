@@ -1,0 +1,126 @@
+"""Cell records for the calibration tests, made by PyBaMM (not by shevsim).
+
+    python tests/data/independent/make_cell_pybamm.py        # PyBaMM 26.x (a test/benchmark dependency)
+
+PyBaMM's SPMe with a lumped thermal model and the published ``Chen2020`` parameter set (LG M50, NMC811 /
+graphite-SiOx 21700, 5 A.h) runs a seeded drive-like current (1 Hz levels linearly interpolated: pulses
+from -1C to +2C held 5-40 s, rests; a 60 s rest first) from 80 % initial SOC for ``DURATION_S``.  A
+logger samples current, voltage and the cell temperature (the lumped model's volume-averaged temperature
+as the surface reading) at 1 Hz, instantaneously, with white noise (voltage 1 mV, temperature 0.05 K,
+current 5 mA) and writes ``cell_<case>.csv``.  Effects in PyBaMM's own parameters:
+
+* ``none``: the published cell;
+* ``capacity``: both electrodes' active-material volume fractions x 0.85 (lost active material: the same
+  OCV-vs-SOC shape at 85 % capacity);
+* ``current_offset``: the logged current is the true one + 0.1 A (a current-sensor offset);
+* ``cooling_change``: ``Total heat transfer coefficient`` 10 -> 2.5 W/(m2.K) from t = 1200 s (a smooth
+  step of 10 s).
+
+The user's nominal (``cell_nominal.toml``, the calibration's ``--params``): the rated capacity 5 A.h, a
+pseudo-OCV measured by PyBaMM at C/50 on the nominal cell (SOC = 1 - discharged A.h / 5 A.h, 41 points),
+and the initial SOC from the first rest voltage (``soc0_frac = -1``).  ``cell_truth.json``: seeds, PyBaMM
+inputs and the truth in shevsim's names (``capacity_ah``, ``current_offset_a``, ``h_change_factor``,
+``h_change_time_s``).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pybamm
+
+HERE = Path(__file__).resolve().parent
+DURATION_S = 2400.0
+NOISE = {"voltage_v": 1e-3, "t_surface_c": 0.05, "current_a": 5e-3}
+CASES = {
+    "none": {"seed": 21},
+    "capacity": {"seed": 22, "am_factor": 0.85},
+    "current_offset": {"seed": 23, "offset_a": 0.1},
+    "cooling_change": {"seed": 24, "h_after": 2.5, "t_change_s": 1200.0},
+}
+
+
+def params():
+    p = pybamm.ParameterValues("Chen2020")
+    p["Upper voltage cut-off [V]"] = 4.4      # regen pulses near full charge pass 4.2 V briefly
+    return p
+
+
+def current_profile(rng):
+    n = int(DURATION_S) + 1
+    i = np.zeros(n)
+    k = 60
+    while k < n:
+        seg = int(rng.uniform(5, 40))
+        i[k:k + seg] = rng.choice([0.0, rng.uniform(-5.0, 0.0), rng.uniform(0.0, 10.0)], p=[0.2, 0.3, 0.5])
+        k += seg
+    return np.arange(n, dtype=float), i
+
+
+def simulate(case: dict, t, i_true):
+    p = params()
+    if "am_factor" in case:
+        for e in ("Negative", "Positive"):
+            k = f"{e} electrode active material volume fraction"
+            p[k] = p[k] * case["am_factor"]
+    if "h_after" in case:
+        h0 = p["Total heat transfer coefficient [W.m-2.K-1]"]
+        p["Total heat transfer coefficient [W.m-2.K-1]"] = (
+            h0 + (case["h_after"] - h0) * pybamm.sigmoid(case["t_change_s"], pybamm.t, 0.5))
+    p["Current function [A]"] = pybamm.Interpolant(t, i_true, pybamm.t)
+    model = pybamm.lithium_ion.SPMe({"thermal": "lumped"})
+    sim = pybamm.Simulation(model, parameter_values=p, solver=pybamm.IDAKLUSolver())
+    sol = sim.solve(t_eval=[t[0], t[-1]], t_interp=t, initial_soc=0.8)
+    if sol.t.size != t.size:
+        raise SystemExit(f"PyBaMM stopped at t = {sol.t[-1]:.0f} s: {sol.termination}")
+    return sol["Voltage [V]"].entries, sol["Volume-averaged cell temperature [C]"].entries
+
+
+def pseudo_ocv():
+    p = params()
+    model = pybamm.lithium_ion.SPMe({"thermal": "lumped"})
+    exp = pybamm.Experiment(["Discharge at C/50 until 2.5 V"])
+    sol = pybamm.Simulation(model, parameter_values=p, experiment=exp).solve(initial_soc=1.0)
+    ah = sol["Discharge capacity [A.h]"].entries
+    v = sol["Voltage [V]"].entries
+    soc = 1.0 - ah / 5.0
+    grid = np.linspace(max(soc.min(), 0.0), 1.0, 41)
+    order = np.argsort(soc)
+    return grid, np.interp(grid, soc[order], v[order]), float(ah[-1])
+
+
+def main() -> int:
+    grid, ocv, cap = pseudo_ocv()
+    grid[0] = 0.0   # the table's lowest point (the C/50 run ends at 2.5 V near SOC 0)
+    nom = ["[meta]", f'source = "PyBaMM {pybamm.__version__} Chen2020 (LG M50): rated 5 A.h; pseudo-OCV at C/50 '
+           f'(measured {cap:.3f} A.h); make_cell_pybamm.py"', "[params]", "capacity_ah = 5.0", "soc0_frac = -1.0",
+           "radius_m = 0.0105", "length_m = 0.07", "h_conv_w_m2k = 10.0",
+           "[ocv]", "soc_frac = [" + ", ".join(f"{x:.4f}" for x in grid) + "]",
+           "ocv_v = [" + ", ".join(f"{x:.5f}" for x in ocv) + "]"]
+    (HERE / "cell_nominal.toml").write_text("\n".join(nom) + "\n")
+    truth = {"generator": f"PyBaMM {pybamm.__version__} SPMe + lumped thermal, Chen2020, 1 Hz instantaneous",
+             "noise": NOISE, "pseudo_ocv_capacity_ah": cap, "cases": {}}
+    for name, case in CASES.items():
+        rng = np.random.default_rng(case["seed"])
+        t, i_true = current_profile(rng)
+        v, temp = simulate(case, t, i_true)
+        i_log = i_true + case.get("offset_a", 0.0) + rng.normal(0.0, NOISE["current_a"], t.size)
+        v_log = v + rng.normal(0.0, NOISE["voltage_v"], t.size)
+        ts_log = temp + rng.normal(0.0, NOISE["t_surface_c"], t.size)
+        lines = [f"# PyBaMM {pybamm.__version__} SPMe/Chen2020 record, case '{name}' (make_cell_pybamm.py)",
+                 "time_s,current_a,voltage_v,t_surface_c,t_ambient_c"]
+        lines += [f"{a:.1f},{b:.4f},{c:.5f},{d:.3f},25.0" for a, b, c, d in zip(t, i_log, v_log, ts_log)]
+        (HERE / f"cell_{name}.csv").write_text("\n".join(lines) + "\n")
+        tr = {"capacity_ah": 5.0 * case.get("am_factor", 1.0), "current_offset_a": case.get("offset_a", 0.0),
+              "h_change_factor": case.get("h_after", 10.0) / 10.0, "h_change_time_s": case.get("t_change_s")}
+        truth["cases"][name] = {"pybamm_inputs": {k: x for k, x in case.items() if k != "seed"}, "seed": case["seed"],
+                                "truth": tr, "file": f"cell_{name}.csv", "v_min": float(v.min()), "v_max": float(v.max()),
+                                "t_max_c": float(temp.max())}
+        print(name, f"V {v.min():.3f}-{v.max():.3f}  T max {temp.max():.2f} C")
+    (HERE / "cell_truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
