@@ -84,7 +84,8 @@ def ocv_hysteresis(model) -> Effect:
     def starts(ctx, base):
         return [{"hyst_max_v": 0.01, "hyst_rate": g} for g in (3.0, 30.0, 300.0)]
     return Effect("ocv_hysteresis", "one-state OCV hysteresis M h, h driven by the charge passed (Plett)",
-                  (Param("hyst_max_v", "V", -0.1, 0.1, 0.01, "maximum hysteresis voltage"),
+                  (Param("hyst_max_v", "V", -0.1, 0.1, 0.01, "maximum hysteresis voltage",
+                         plausible=(-0.05, 0.05)),     # Li-ion OCV hysteresis: a few mV (NMC) to some 40 mV (LFP)
                    Param("hyst_rate", "1", 0.1, 3000.0, 30.0, "rate per unit SOC", log=True)),
                   {"hyst_max_v": 0.0, "hyst_rate": 30.0}, ("voltage_v",), starts)
 
@@ -120,9 +121,32 @@ def second_rc_branch(model) -> Effect | None:
                   {"r2_scale": 0.0, "c2_scale": 1.0}, ("voltage_v",), starts)
 
 
+def initial_soc(model) -> Effect:
+    """The initial SOC differs from the OCV inverse of the first rest voltage (a flat OCV - LFP - cannot give
+    it, or the record does not start at rest): battery ``soc_init_pct`` fitted."""
+    s0 = 100.0 * min(max(getattr(model, "soc0", 0.5), 0.0), 1.0)
+
+    def starts(ctx, base):
+        return [{"soc_init_pct": min(max(s0 + d, 2.0), 100.0)} for d in (-20.0, -8.0, 8.0, 20.0)]
+    return Effect("initial_soc", "initial SOC other than the OCV inverse of the first rest voltage (flat OCV)",
+                  (Param("soc_init_pct", "%", 2.0, 100.0, s0, "initial state of charge"),),
+                  {"soc_init_pct": s0}, ("voltage_v",), starts)
+
+
+def ocv_correction(model) -> Effect:
+    """Corrections added to the given OCV curve at knots over the SOC range the record visits (a user's OCV
+    table rarely belongs to the very cell measured); the corrected curve travels as ``ocv.csv``."""
+    ks = model.ocv_knots
+    ps = tuple(Param(f"ocv_delta_v[{k}]", "V", -0.05, 0.05, 0.0, f"OCV correction at SOC {s:.3f}")
+               for k, s in enumerate(ks))
+    return Effect("ocv_correction", f"the given OCV curve corrected at {len(ks)} knots (linear in between, held "
+                  "beyond)", ps, {p.name: 0.0 for p in ps}, ("voltage_v",))
+
+
 #: the cell effect library: functions model -> Effect (or None when it does not apply); extend with one entry
 CELL_EFFECTS = [entropic_heat, arrhenius_resistance, cooling_change, ocv_hysteresis, capacity, current_offset,
-                low_soc_resistance, second_rc_branch]
+                low_soc_resistance, second_rc_branch, initial_soc, ocv_correction]
+N_OCV_KNOTS = 5
 
 
 # ------------------------------------------------------------------------------------------ model
@@ -224,6 +248,7 @@ class CellModel(CalibrationModel):
                 raise
             raise DataError(f"{where}: {exc}") from exc
         self.dudt_knots = tuple(np.linspace(0.1, 0.9, N_DUDT_KNOTS))
+        self.ocv_knots = tuple(np.linspace(0.1, 0.9, N_OCV_KNOTS))
         self.declared = self._declared_for(self.known)
         self.effects = self._make_effects()
 
@@ -281,6 +306,8 @@ class CellModel(CalibrationModel):
         if hi - lo < 0.05:
             lo, hi = max(0.0, lo - 0.025), min(1.0, hi + 0.025)
         self.dudt_knots = tuple(float(x) for x in np.linspace(lo, hi, N_DUDT_KNOTS))
+        self.ocv_knots = tuple(float(x) for x in np.linspace(lo, hi, N_OCV_KNOTS))
+        self.ocv_base = (np.array(tables._ocv.xs, float), np.array(tables._ocv.ys, float))
         self.effects = self._make_effects()
         tg, (ig, tag), _h, resampled = sampling_grid(t, i, ta)
         return {"t": t, "i": i, "ta": ta, "tg": tg, "ig": ig, "tag": tag, "resampled": resampled, "d": d, "ix": ix, "n": t.size, "df": df,
@@ -322,6 +349,27 @@ class CellModel(CalibrationModel):
                 kw[k] = v
         return dataclasses.replace(self.base, **kw)
 
+    def ocv_corrected(self, values):
+        """The OCV table (soc, v) with the ``ocv_correction`` knots added, or None when they are all zero."""
+        dv = [float(values.get(f"ocv_delta_v[{k}]", 0.0)) for k in range(len(getattr(self, "ocv_knots", ())))]
+        if not any(dv):
+            return None
+        xs, ys = self.ocv_base
+        return xs, ys + np.interp(xs, self.ocv_knots, dv)
+
+    def _packed_tables(self, ctx, values):
+        """The packed tables of ``ctx`` with the OCV part (xs, ys, slopes, cum) corrected when asked."""
+        cor = self.ocv_corrected(values)
+        if cor is None:
+            return ctx["d"]
+        xs, ys = cor
+        o, n = int(ctx["ix"][0]), int(ctx["ix"][1])
+        d = ctx["d"].copy()
+        d[o + n:o + 2 * n] = ys
+        d[o + 2 * n:o + 3 * n - 1] = np.diff(ys) / np.diff(xs)
+        d[o + 3 * n - 1:o + 4 * n - 1] = np.concatenate([[0.0], np.cumsum(0.5 * (ys[1:] + ys[:-1]) * np.diff(xs))])
+        return d
+
     def simulate(self, ctx, values):
         # the very parameter vector the component packs (every effect / declared parameter is a battery field)
         p = self._component_params(values)
@@ -332,7 +380,8 @@ class CellModel(CalibrationModel):
         st[bm.S_SOC] = p.soc_init_pct / 100.0
         st[bm.S_X0] = p.t_init_c
         ov, ots, otc = np.empty(n), np.empty(n), np.empty(n)
-        bm.run_profile(ctx["d"], ctx["ix"], c, st, tg, ctx["ig"], ctx["tag"], ctx["h_conv"], ov, ots, otc)
+        bm.run_profile(self._packed_tables(ctx, values), ctx["ix"], c, st, tg, ctx["ig"], ctx["tag"], ctx["h_conv"],
+                       ov, ots, otc)
         if ctx["resampled"]:
             t = ctx["t"]
             ov, ots, otc = np.interp(t, tg, ov), np.interp(t, tg, ots), np.interp(t, tg, otc)
@@ -368,6 +417,8 @@ class CellModel(CalibrationModel):
         for name, e in self.effects.items():
             for prm in e.params:
                 key = prm.name.split("[")[0]
+                if key == "ocv_delta_v":
+                    continue
                 if key == "dudt_v_k":
                     if p.dudt_v_k:
                         ov["dudt_soc_frac"] = list(p.dudt_soc_frac)
@@ -387,7 +438,11 @@ class CellModel(CalibrationModel):
         for k in ("entropy_file", "discharge_file", "charge_file"):
             if k in self.user_params:
                 ov[k] = self.user_params[k]
-        if self.ocv_table is not None:
+        cor = self.ocv_corrected(self.full_values(values))
+        if cor is not None:          # the given curve with the fitted correction, as the component's table
+            (Path(out_dir) / "ocv.csv").write_text(_ocv_csv_text(*(tuple(float(x) for x in a) for a in cor)))
+            ov["ocv_file"] = "ocv.csv"
+        elif self.ocv_table is not None:
             (Path(out_dir) / "ocv.csv").write_text(_ocv_csv_text(*self.ocv_table))
             ov["ocv_file"] = "ocv.csv"
         elif "ocv_file" in self.user_params:

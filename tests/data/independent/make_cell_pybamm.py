@@ -18,7 +18,8 @@ current 5 mA) and writes ``cell_<case>.csv``.  Effects in PyBaMM's own parameter
 
 The user's nominal (``cell_nominal.toml``, the calibration's ``--params``): the rated capacity 5 A.h, a
 pseudo-OCV measured by PyBaMM at C/50 on the nominal cell (SOC = 1 - discharged A.h / 5 A.h, 41 points),
-and the initial SOC from the first rest voltage (``soc0_frac = -1``).  ``cell_truth.json``: seeds, PyBaMM
+the initial SOC from the first rest voltage (``soc0_frac = -1``) and a two-RC equivalent circuit
+(``rc_pairs = 2``: solid diffusion in an NMC cell has a slow time constant that one RC branch misses).  ``cell_truth.json``: seeds, PyBaMM
 inputs and the truth in shevsim's names (``capacity_ah``, ``current_offset_a``, ``h_change_factor``,
 ``h_change_time_s``).
 """
@@ -94,7 +95,7 @@ def main() -> int:
     grid, ocv, cap = pseudo_ocv()
     grid[0] = 0.0   # the table's lowest point (the C/50 run ends at 2.5 V near SOC 0)
     nom = ["[meta]", f'source = "PyBaMM {pybamm.__version__} Chen2020 (LG M50): rated 5 A.h; pseudo-OCV at C/50 '
-           f'(measured {cap:.3f} A.h); make_cell_pybamm.py"', "[params]", "capacity_ah = 5.0", "soc0_frac = -1.0",
+           f'(measured {cap:.3f} A.h); make_cell_pybamm.py"', "[params]", "capacity_ah = 5.0", "soc0_frac = -1.0", "rc_pairs = 2",
            "radius_m = 0.0105", "length_m = 0.07", "h_conv_w_m2k = 10.0",
            "[ocv]", "soc_frac = [" + ", ".join(f"{x:.4f}" for x in grid) + "]",
            "ocv_v = [" + ", ".join(f"{x:.5f}" for x in ocv) + "]"]
