@@ -1,5 +1,10 @@
 """cli.py - ``shevsim calibrate MODEL DATA.csv --out DIR [--params PARAMS.toml] [--map canonical=column ...]
-[--holdout FRACTION]``.
+[--holdout FRACTION] [--sample-convention instantaneous|mean-ending|mean-starting] [--sensor-noise CHANNEL=VALUE]``.
+
+``--sample-convention`` says what a logged value stands for (default ``instantaneous``: the value at the
+sample time); a time shift between inputs and outputs is fitted as the ``timing`` effect of every model.
+``--sensor-noise`` declares a channel's sensor noise (1 sigma, SI) as its noise floor; otherwise it is
+estimated (quiet segments, a local smoother; :mod:`shevsim.calibrate.timing`) and the method is reported.
 
 ``--params`` TOML::
 

@@ -949,6 +949,21 @@ def _g(x):
     return f"{x:.4g}" if isinstance(x, (int, float)) and math.isfinite(x) else str(x)
 
 
+def _md_timing_noise(rep: dict) -> list[str]:
+    """The report's sample-timing and noise-floor lines."""
+    L = []
+    tm = rep.get("timing")
+    if tm:
+        L.append(f"Sample timing: the record is read as `{tm['sample_convention']}` (declared; the model's "
+                 f"prediction is `{tm['model_convention']}`, read {tm['convention_offset_s']:+.3g} s later); "
+                 f"sample interval {_g(tm['sample_interval_s'])} s; fitted time shift {_g(tm['time_shift_s'])} s "
+                 f"(> 0: the output lags).")
+    for c, nf in (rep.get("noise_floor") or {}).items():
+        L.append(f"Noise floor of `{c}`: {_g(nf['value'])} ({nf['method']}; estimates: "
+                 + ", ".join(f"{k} {_g(v)}" for k, v in nf["estimates"].items()) + ").")
+    return L + [""]
+
+
 def render_markdown(rep: dict) -> str:
     L = [f"# Calibration report: model `{rep['model']}`", "",
          f"Data: `{rep['data']['path']}` ({rep['data']['n_samples']} samples, {rep['data']['duration_s']:.0f} s); "
@@ -959,16 +974,7 @@ def render_markdown(rep: dict) -> str:
     L += ["", f"Split: `{sp['method']}`, held-out fraction {sp['holdout_fraction']}, held-out intervals (s): "
           + ", ".join(f"{a:.0f}-{b:.0f}" for a, b in sp["holdout_intervals_s"])
           + f" ({sp['n_train']} training / {sp['n_holdout']} held-out samples).", ""]
-    tm = rep.get("timing")
-    if tm:
-        L.append(f"Sample timing: the record is read as `{tm['sample_convention']}` (declared; the model's "
-                 f"prediction is `{tm['model_convention']}`, read {tm['convention_offset_s']:+.3g} s later); "
-                 f"sample interval {_g(tm['sample_interval_s'])} s; fitted time shift {_g(tm['time_shift_s'])} s "
-                 f"(> 0: the output lags).")
-    for c, nf in (rep.get("noise_floor") or {}).items():
-        L.append(f"Noise floor of `{c}`: {_g(nf['value'])} ({nf['method']}; estimates: "
-                 + ", ".join(f"{k} {_g(v)}" for k, v in nf["estimates"].items()) + ").")
-    L.append("")
+    L += _md_timing_noise(rep)
     sel = rep["selected_effects"]
     L.append("## Result")
     L.append("")
