@@ -50,6 +50,9 @@ VEHICLE = {
     "grade": (["road_grade"], "grade amplitude", lambda p, r: _grade_amp(p), lambda t: t["grade_amplitude_frac"], 0.25, True),
     "shift_half": (["timing"], "time_shift_s", lambda p, r: r["timing"]["time_shift_s"], lambda t: t["time_shift_s"], 0.25, False),
     "latency_2": (["timing"], "time_shift_s", lambda p, r: r["timing"]["time_shift_s"], lambda t: t["time_shift_s"], 0.25, False),
+    "none_2": ([], None, None, None, None, None),
+    "none_3": ([], None, None, None, None, None),
+    "none_4": ([], None, None, None, None, None),
 }
 CELL = {
     "none": ([], None, None, None, None, None),

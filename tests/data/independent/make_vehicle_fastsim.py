@@ -20,7 +20,9 @@ sampling alone leaves a 1.8 kW error in any model that sees only the 1 Hz speed,
 * ``grade``: the cycle's ``grade`` 0 -> ``0.03 sin(2 pi d / D)`` along the distance ``d`` (``D`` the trace's
   distance: a hill up, then down; a constant grade is indistinguishable from rolling resistance);
 * ``shift_half``: the ``none`` vehicle, the power channel logged 0.5 s late (CAN latency of half a sample);
-* ``latency_2``: the ``none`` vehicle, the power channel logged 2 s late.
+* ``latency_2``: the ``none`` vehicle, the power channel logged 2 s late;
+* ``none_2``, ``none_3``, ``none_4``: no effect, on HD-UDDS from its first standstill after 300 s, the Orange County bus cycle and the
+  WVU interstate cycle (first 700 s), other noise seeds (the false-selection rate).
 
 The user's nominal (``vehicle_nominal.toml``, the calibration's ``--params``) is the published data of
 that vehicle in shevsim's terms: mass, frontal area, drag and rolling coefficients, wheel radius, base
@@ -55,6 +57,10 @@ CASES = {
     "grade": {"seed": 14, "grade_amplitude": 0.03},
     "shift_half": {"seed": 15, "lag_s": 0.5},
     "latency_2": {"seed": 16, "lag_s": 2.0},
+    # more no-effect records (the false-selection rate): another window, other cycles, other noise
+    "none_2": {"seed": 17, "start_s": 300.0},
+    "none_3": {"seed": 18, "cycle": "orange_county_bus.csv"},
+    "none_4": {"seed": 19, "cycle": "wvu_interstate.csv"},
 }
 
 
@@ -75,8 +81,11 @@ def _pchip(x, y, xi):
 
 
 def run_case(case: dict):
-    cyc_raw = np.loadtxt(ROOT / "cycles" / "hd_udds.csv", delimiter=",", skiprows=1, comments="#")
-    t1 = cyc_raw[cyc_raw[:, 0] <= DURATION_S]
+    cyc_raw = np.loadtxt(ROOT / "cycles" / case.get("cycle", "hd_udds.csv"), delimiter=",", skiprows=1, comments="#")
+    t0 = float(case.get("start_s", 0.0))
+    t0 = float(cyc_raw[(cyc_raw[:, 0] >= t0) & (cyc_raw[:, 1] <= 0.0), 0][0])     # from a standstill
+    t1 = cyc_raw[(cyc_raw[:, 0] >= t0) & (cyc_raw[:, 0] <= t0 + DURATION_S)].copy()
+    t1[:, 0] -= t0
     t = np.round(np.arange(0.0, DURATION_S + 1e-9, H_S), 10)
     k = np.arange(-6, 7) * 1.0
     w = np.exp(-0.5 * (k / SMOOTH_S) ** 2)
