@@ -37,6 +37,8 @@ CELL_EFFECTS = {
     "current_offset": {"offset_a": 0.15},
     "low_soc_resistance": {"lowsoc_r_gain": 3.0, "lowsoc_r_scale_frac": 0.08},
     "second_rc_branch": {"r2_scale": 1.0, "c2_scale": 1.0},
+    "initial_soc": {"soc_init_pct": 80.0},           # the plant starts there; the nominal says soc0
+    "ocv_correction": {"bump_v": 0.025, "at_soc": 0.6, "width_soc": 0.15},   # the plant's OCV differs
 }
 VEHICLE_TRUTH = {"efficiency_scale_frac": 0.96}
 VEHICLE_EFFECTS = {   # component parameters of the plant (vehicle / motor / bus), see synth_vehicle
@@ -66,6 +68,19 @@ def _cell_current(duration_s: float, dt: float, rng, quantum_s: float) -> np.nda
         i[k:k + seg] = val
         k += seg
     return i
+
+
+def _bumped_ocv_file(e: dict) -> str:
+    """The default OCV table plus a Gaussian bump (``bump_v`` at ``at_soc``, ``width_soc``) in a temporary file."""
+    import tempfile
+    from ..battery.cell import CellTables
+    tab = CellTables()._ocv
+    xs = np.asarray(tab.xs, float)
+    ys = np.asarray(tab.ys, float) + e["bump_v"] * np.exp(-0.5 * ((xs - e["at_soc"]) / e["width_soc"]) ** 2)
+    fd, path = tempfile.mkstemp(suffix="_ocv.csv", prefix="shevsim_synth_")
+    with open(fd, "w") as fh:
+        fh.write("soc_frac,ocv_v\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(xs, ys)))
+    return path
 
 
 def synth_cell(effects: dict | None = None, duration_s: float = 2400.0, dt_s: float = 1.0,
@@ -124,6 +139,9 @@ def synth_cell(effects: dict | None = None, duration_s: float = 2400.0, dt_s: fl
         elif name == "current_offset":
             offset = e["offset_a"]
             vals["_current_offset_a"] = offset
+        elif name == "ocv_correction":
+            vals["ocv_file"] = _bumped_ocv_file(e)
+            vals["_ocv_correction"] = e
         else:
             vals.update(e)
     plant = {k: v for k, v in vals.items() if not k.startswith("_")}
@@ -137,6 +155,9 @@ def synth_cell(effects: dict | None = None, duration_s: float = 2400.0, dt_s: fl
              Connection("profile", "t_ambient_c", "battery", "t_ambient_c")]
     res = Master([src, BatteryPack("battery", prm)], conns, MasterSettings(step_s=fine), faults=faults,
                  order=["profile", "battery"]).run(float(t[-1]) + fine)
+    if "_ocv_correction" in vals:                # our own temporary table (read when the battery was built)
+        import os
+        os.unlink(vals["ocv_file"])
     step = int(round(dt_s / fine))
     ks = np.arange(0, n, step)
     m = ks.size

@@ -27,6 +27,8 @@ CASES = {
     "current_offset": ("voltage_v", {}),
     "low_soc_resistance": ("voltage_v", {"soc0": 0.5, "discharge_frac": 0.45}),
     "second_rc_branch": ("voltage_v", {}),
+    "initial_soc": ("voltage_v", {}),
+    "ocv_correction": ("voltage_v", {}),
 }
 
 
