@@ -38,7 +38,7 @@ CELL_EFFECTS = {
     "low_soc_resistance": {"lowsoc_r_gain": 3.0, "lowsoc_r_scale_frac": 0.08},
     "second_rc_branch": {"r2_scale": 1.0, "c2_scale": 1.0},
     "initial_soc": {"soc_init_pct": 80.0},           # the plant starts there; the nominal says soc0
-    "ocv_correction": {"bump_v": 0.025, "at_soc": 0.6, "width_soc": 0.15},   # the plant's OCV differs
+    "ocv_correction": {"tilt_v": 0.03},      # the plant's OCV: the given curve + tilt (SOC - 0.5) (stays increasing)
 }
 VEHICLE_TRUTH = {"efficiency_scale_frac": 0.96}
 VEHICLE_EFFECTS = {   # component parameters of the plant (vehicle / motor / bus), see synth_vehicle
@@ -71,15 +71,16 @@ def _cell_current(duration_s: float, dt: float, rng, quantum_s: float) -> np.nda
 
 
 def _bumped_ocv_file(e: dict) -> str:
-    """The default OCV table plus a Gaussian bump (``bump_v`` at ``at_soc``, ``width_soc``) in a temporary file."""
+    """The default OCV table plus ``tilt_v (SOC - 0.5)`` (an increasing correction: the table stays strictly
+    increasing) in a temporary file."""
     import tempfile
     from ..battery.cell import CellTables
     tab = CellTables()._ocv
     xs = np.asarray(tab.xs, float)
-    ys = np.asarray(tab.ys, float) + e["bump_v"] * np.exp(-0.5 * ((xs - e["at_soc"]) / e["width_soc"]) ** 2)
+    ys = np.asarray(tab.ys, float) + e["tilt_v"] * (xs - 0.5)
     fd, path = tempfile.mkstemp(suffix="_ocv.csv", prefix="shevsim_synth_")
     with open(fd, "w") as fh:
-        fh.write("soc_frac,ocv_v\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(xs, ys)))
+        fh.write("soc_frac,ocv_v\n" + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in zip(xs, ys)))
     return path
 
 
