@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 D = ROOT / "tests" / "data" / "independent"
 
-from shevsim.calibrate.cli import load_params_toml  # noqa: E402
+from shevsim.calibrate.known import load_params_toml  # noqa: E402
 from shevsim.calibrate.data import load_measured  # noqa: E402
 from shevsim.calibrate.workflow import run_workflow  # noqa: E402
 

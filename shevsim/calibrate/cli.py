@@ -31,6 +31,7 @@ from pathlib import Path
 
 from ..core.errors import DataError, ShevsimError
 from .data import CURRENT_SIGNS, POWER_SIGNS
+from .known import load_params_toml  # noqa: F401  (re-exported: tests and scripts import it from here)
 from .models import MODELS
 from .report import MAX_RECORD_ROWS
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from shevsim.calibrate.cli import load_params_toml
+from shevsim.calibrate.known import load_params_toml
 from shevsim.calibrate.data import load_measured
 from shevsim.calibrate.timing import sensor_noise_floor, smoother_noise
 from shevsim.calibrate.workflow import run_workflow
