@@ -56,3 +56,11 @@ def test_the_main_run_recomputed_matches_the_committed_numbers():
 @pytest.mark.parametrize("section", ["runs", "table_3_3", "bms", "tradeoff"])
 def test_every_section_recomputed_matches_the_committed_numbers(section):
     _close(sn.compute([section])[section], NUMBERS[section], section)
+
+
+def test_app_a_numbers_are_the_committed_full_study_summary():
+    """App. A at full size takes minutes: its numbers come from the study's committed summary.json, unchanged."""
+    from shevsim.core.paths import DATA_ROOT
+    summary = DATA_ROOT / "docs" / "figures" / "app_a_full_summary.json"
+    _close(sn.compute([], app_a_summary=summary)["app_a"], NUMBERS["app_a"], "app_a")
+    assert NUMBERS["app_a"]["config"]["ga"]["population"] == 30 and NUMBERS["app_a"]["config"]["ga"]["generations"] == 50
