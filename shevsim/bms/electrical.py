@@ -325,7 +325,7 @@ def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     return (1, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, sden, heat, v2, r2n)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def store_update(xe, r):
     """Write a :func:`dekf_step` result ``r`` into the state array ``xe`` (:data:`E`); returns ``(ok, heat [W])``.
     When the innovation variance is unusable (``ok = 0``) only the innovation and its variance are written."""
@@ -340,7 +340,7 @@ def store_update(xe, r):
     return 1, r[20]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def dekf_update(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     """:func:`dekf_step` on the state array ``xe`` (:data:`E`), in place (:func:`store_update`); returns
     ``(ok, heat [W])``."""

@@ -326,7 +326,7 @@ D = field_index(("dd", "dix", "dk", "xe", "tst", "tc", "pd", "pix", "pk", "tp", 
 BMS.DATA_MUTABLE = (D.xe, D.tst, D.xb)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _thermal_filter(code, tst, tc, ts, ta, q):
     if code == 1:
         return dkf_step(tst, tc, ts, ta, q)

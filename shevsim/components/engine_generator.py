@@ -288,7 +288,8 @@ def engine_generator_step(data, u, y, t, h):
     floor = u[U.elec_power_min_w]
     if pc != pc or rate != rate or lim != lim or floor != floor:
         return ERR_NAN_INPUT
-    prev[:] = x
+    for j in range(x.shape[0]):
+        prev[j] = x[j]
     _eng.step(md, mi, c, p_max[0], x, pc, rate, h, lim, floor, tot)
     if not math.isfinite(tot[T.e_el] + tot[T.fuel] + tot[T.soot_meas] + x[S.w] + x[S.tau_e]):
         x[:] = prev

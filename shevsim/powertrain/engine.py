@@ -246,7 +246,7 @@ C = field_index(PRM_FIELDS, "C")
 T = field_index(("e_el", "fuel", "soot", "soot_meas"), "T")
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")   # inlined into step: its locals stay in registers
 def _coefficients(md, mi, c, p_max, dt, p_cmd_w, rate_up_wps, elec_max_w, elec_min_w):
     """The sub-steps' constants ``k = (dt, target, r_up, r_dn, a_w, dw_max, a_up, a_dn, a_a, p_shed, e_shed,
     e_floor, w_idle)``."""
@@ -266,7 +266,7 @@ def _coefficients(md, mi, c, p_max, dt, p_cmd_w, rate_up_wps, elec_max_w, elec_m
     return (dt, target, r_up, r_dn, a_w, dw_max, a_up, a_dn, a_a, p_shed, e_shed, e_floor, w_idle)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")   # inlined into step: its locals stay in registers
 def _rack_and_fuel(md, mi, c, k, x):
     """Items 1-6 of a sub-step: rate limit and cut (``x[p_lim]``), speed response, torque demand, PI rack
     (``x[integ]``, ``x[rack]``), fuel command and turbo lag.  Returns ``(cut, w0, w1, m_c, m1, dm, fl)``."""
@@ -325,7 +325,7 @@ def _rack_and_fuel(md, mi, c, k, x):
     return cut, w0, w1, m_c, m1, dm, fl
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")   # inlined into step: its locals stay in registers
 def _shaft_and_generator(md, mi, c, k, x, cut, w0, w1, m1):
     """Items 7, 10b, 10d of a sub-step: engine torque, shaft energy, generator work and its cut to the bus limit
     or raise to the floor (``x[gen_sat]``, the shedding counters).  Returns ``(w1, tau1, w_avg, tau_avg,
@@ -382,7 +382,7 @@ def _shaft_and_generator(md, mi, c, k, x, cut, w0, w1, m1):
     return w1, tau1, w_avg, tau_avg, w_e, dke, w_g, el
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")   # inlined into step: its locals stay in registers
 def _soot(md, mi, c, k, x, w_avg, tau_avg, m_c, dm, fl):
     """Items 8 and 11 of a sub-step: quasi-static and transient soot, the analyser's lag (``x[soot_lag]``).
     Returns ``(s_sub, s_tr, analyser reading integral)``."""
