@@ -218,22 +218,31 @@ def per_cycle_summary(df, cycle_duration_s: float, density_kg_per_l: float = DIE
     dist = cumulative_distance_m(df)
     fuel = _col(df, fuel_col) if fuel_col in df.columns else None
     soc = _col(df, soc_col) if soc_col in df.columns else None
-    out = []
-    k = 0
     eps = 1e-9 * max(1.0, abs(t[-1]))
-    while t[0] + (k + 1) * T <= t[-1] + eps:
-        a, b = t[0] + k * T, min(t[0] + (k + 1) * T, t[-1])
-        row: dict[str, Any] = {"index": k, "start_s": a, "end_s": b,
-                               "distance_km": float(np.interp(b, t, dist) - np.interp(a, t, dist)) / 1000.0}
+    n = 0
+    while t[0] + (n + 1) * T <= t[-1] + eps:
+        n += 1
+    if n == 0:
+        return []
+    # every boundary interpolated in one call per signal (np.interp on the whole record is O(len) per call:
+    # a long run has thousands of cycles)
+    a = t[0] + T * np.arange(n, dtype=float)
+    b = np.minimum(t[0] + T * np.arange(1, n + 1, dtype=float), t[-1])
+    d_a, d_b = np.interp(a, t, dist), np.interp(b, t, dist)
+    f_a, f_b = (np.interp(a, t, fuel), np.interp(b, t, fuel)) if fuel is not None else (None, None)
+    s_a, s_b = (np.interp(a, t, soc), np.interp(b, t, soc)) if soc is not None else (None, None)
+    out = []
+    for k in range(n):
+        row: dict[str, Any] = {"index": k, "start_s": float(a[k]), "end_s": float(b[k]),
+                               "distance_km": float(d_b[k] - d_a[k]) / 1000.0}
         if fuel is not None:
-            fg = float(np.interp(b, t, fuel) - np.interp(a, t, fuel))
+            fg = float(f_b[k] - f_a[k])
             row["fuel_mass_g"] = fg
             row["fuel_economy_kmpl"] = row["distance_km"] / (fg / 1000.0 / density_kg_per_l) if fg > 0 else None
         if soc is not None:
-            row["soc_start_pct"] = float(np.interp(a, t, soc))
-            row["delta_soc_pct"] = float(np.interp(b, t, soc)) - row["soc_start_pct"]
+            row["soc_start_pct"] = float(s_a[k])
+            row["delta_soc_pct"] = float(s_b[k]) - row["soc_start_pct"]
         out.append(row)
-        k += 1
     return out
 
 
