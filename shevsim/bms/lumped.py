@@ -15,6 +15,10 @@ horizon, ``gamma u^2 + beta_bar u + eta - v_bar/dt = 0`` gives the discharge and
 If the discriminant is negative no current keeps T at the limit; both limits collapse to the
 least-heating current ``-beta_bar / (2 gamma)``.
 
+The electrical limits of Fig. 4.10 (4.16a/b) and the power capability (4.17a, 4.18a, 4.19a) are given here for an
+OCV-R cell: the thesis's eq. 4.6 with its two RC branches left out (the lumped R_e above is the only resistance),
+so the state is SOC alone and 4.19a loses its RC sums: ``V_{k+N} = V_oc(SOC_k - I N dt / (3600 C_b)) - R_e I``.
+
 The plant (:func:`step_exact`) integrates 4.2 exactly over a step with the current held (the equation is
 linear in T for a held current), so the limiter's Euler model and the plant differ as they would on a
 real cell's controller.
@@ -23,11 +27,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
 
 from shevsim.battery.cell import FARADAY_C_MOL
 from shevsim.core.errors import ScenarioError
 
-__all__ = ["LumpedCell", "step_exact", "thermal_current_limits"]
+__all__ = ["LumpedCell", "OcvTable", "step_exact", "thermal_current_limits", "soc_current_limit",
+           "voltage_current_limit", "predicted_voltage"]
 
 KELVIN = 273.15
 
@@ -106,3 +114,58 @@ def thermal_current_limits(cell: LumpedCell, t_c: float, t_max_c: float, horizon
         return least, least
     root = math.sqrt(disc)
     return (-beta_bar + root) / (2.0 * gamma), (-beta_bar - root) / (2.0 * gamma)   # 4.13a, 4.13b
+
+
+class OcvTable:
+    """OCV(SOC) as a piecewise-linear table read from a CSV with columns ``soc_frac``, ``ocv_v``.
+
+    The SOC column must rise strictly and the OCV must not fall with SOC (a clear error names the file).
+    Outside the table the end values are held.
+    """
+
+    def __init__(self, path: str | Path):
+        from shevsim.battery.cell import _read_csv
+        from shevsim.core.errors import DataError
+        rows = _read_csv(Path(path), ("soc_frac", "ocv_v"))
+        soc = np.array([r[0] for r in rows], dtype=float)
+        ocv = np.array([r[1] for r in rows], dtype=float)
+        if soc.size < 2 or np.any(np.diff(soc) <= 0.0):
+            raise DataError(f"{path}: column 'soc_frac' must rise strictly over at least two rows")
+        if np.any(np.diff(ocv) < 0.0):
+            raise DataError(f"{path}: column 'ocv_v' must not fall as SOC rises")
+        self.path = Path(path)
+        self.soc_frac, self.ocv_v = soc, ocv
+
+    def __call__(self, soc_frac: float) -> float:
+        return float(np.interp(soc_frac, self.soc_frac, self.ocv_v))
+
+    def slope(self, soc_frac: float) -> float:
+        """dV_oc/dSOC [V] of the table segment that a discharge from ``soc_frac`` enters (the one below it)."""
+        j = int(np.clip(np.searchsorted(self.soc_frac, soc_frac, side="left"), 1, self.soc_frac.size - 1))
+        return float((self.ocv_v[j] - self.ocv_v[j - 1]) / (self.soc_frac[j] - self.soc_frac[j - 1]))
+
+    def mean_v(self) -> float:
+        """The table's mean OCV over its SOC range [V] (rest energy per charge)."""
+        return float(np.trapezoid(self.ocv_v, self.soc_frac) / (self.soc_frac[-1] - self.soc_frac[0]))
+
+
+def soc_current_limit(soc_frac: float, soc_min_frac: float, capacity_ah: float, horizon_steps: int,
+                      dt_s: float) -> float:
+    """Discharge limit [A] of 4.16a: the current that puts SOC on ``soc_min_frac`` after N steps."""
+    return (soc_frac - soc_min_frac) * 3600.0 * capacity_ah / (horizon_steps * dt_s)
+
+
+def voltage_current_limit(ocv: OcvTable, soc_frac: float, r_ohm: float, v_min_v: float, capacity_ah: float,
+                          horizon_steps: int, dt_s: float) -> float:
+    """Discharge limit [A] of 4.16b for an OCV-R cell, the OCV linearised at ``soc_frac``.
+
+    ``V_{k+N} = V_oc(SOC_k) - (dV_oc/dSOC N dt / (3600 C_b) + R) I`` set equal to ``v_min_v``.
+    """
+    gain = ocv.slope(soc_frac) * horizon_steps * dt_s / (3600.0 * capacity_ah) + r_ohm
+    return (ocv(soc_frac) - v_min_v) / gain
+
+
+def predicted_voltage(ocv: OcvTable, soc_frac: float, i_a: float, r_ohm: float, capacity_ah: float,
+                      horizon_steps: int, dt_s: float) -> float:
+    """Terminal voltage [V] after N steps at the held current ``i_a``: 4.19a without the RC terms."""
+    return ocv(soc_frac - i_a * horizon_steps * dt_s / (3600.0 * capacity_ah)) - i_a * r_ohm

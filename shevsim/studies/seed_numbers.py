@@ -12,6 +12,7 @@ Sections (``python -m shevsim.studies.seed_numbers --only NAME ...``; all by def
 ``runs``       whole-vehicle runs of the bundled scenarios (A.1, ΔSOC-corrected fuel economy, soot,      ~30 s
                Ah-processed, SOC, speed miss, closure, max core temperature)
 ``fig_4_9``    Ch. IV Fig. 4.9 analogue (:mod:`shevsim.studies.ch4_study`)                              ~5 s
+``fig_4_10``   Ch. IV Fig. 4.10 analogue: power capability on a pulse train (:func:`ch4_study.fig_4_10`)  ~3 s
 ``table_3_3``  Table 3.3 at 1 s and 0.1 s with the converted tuning, three seeds                       ~2 min
                (:func:`shevsim.studies.bms_study.table_3_3_rates`)
 ``a1_gap``     the A.1 fuel-economy gap by factor (:mod:`shevsim.studies.a1_gap`)                       ~20 s
@@ -75,6 +76,13 @@ def _fig_4_9() -> dict:
     return fig_4_9(None)
 
 
+def _fig_4_10() -> dict:
+    from shevsim.studies.ch4_study import fig_4_10
+    res = fig_4_10(None)
+    res.pop("_traces")
+    return res
+
+
 def _table_3_3() -> dict:
     from shevsim.studies.bms_study import table_3_3_rates
     r = table_3_3_rates(None, seeds=(0, 1, 2), duration_s=3600.0, dt_values=(1.0, 0.1), wrong_h0_factors=(2.0, 0.5),
@@ -131,8 +139,8 @@ def _app_a(summary_path: str | Path | None) -> dict | None:
     return keep
 
 
-SECTIONS = {"runs": _runs, "fig_4_9": _fig_4_9, "table_3_3": _table_3_3, "a1_gap": _a1_gap, "bms": _bms,
-            "tradeoff": _tradeoff}
+SECTIONS = {"runs": _runs, "fig_4_9": _fig_4_9, "fig_4_10": _fig_4_10, "table_3_3": _table_3_3, "a1_gap": _a1_gap,
+            "bms": _bms, "tradeoff": _tradeoff}
 
 
 def compute(only=None, app_a_summary=None, base: dict | None = None) -> dict:
@@ -199,6 +207,36 @@ def _block_fig_4_9(n: dict) -> str:
     rows.append(f"| completion with the limit [s] (the prediction) | {th['completion_limited_s']:g} | "
                 f"**{_f(r0['completion_limited_s'], 0)}** ({_f(r1['completion_limited_s'], 0)} / "
                 f"{_f(r2['completion_limited_s'], 0)}); {_f(f['completion_limited_error_pct'], 1, True)} % |")
+    return "\n".join(rows)
+
+
+def _block_fig_4_10(n: dict) -> str:
+    f = n["fig_4_10"]
+    th, st, sp = f["thesis"], f["settings"], f["spans"]
+
+    def eps(name):
+        e = sp[name]["episodes"]
+        return "; ".join(f"{a:.0f}–{b:.0f}" if b > a else f"{a:.0f}" for a, b in e) if e else "never"
+
+    rows = ["| | thesis (Fig. 4.10) | ours (analogue) |", "|---|---|---|",
+            f"| cell | e-Moli ICR18650J, OCV-R-RC-RC (tables not published) | the Fig. 4.9 cell as OCV-R: R_e "
+            f"{_f(1e3 * st['r_e_ohm'], 1)} mΩ, {st['mass_kg'] * 1e3:g} g, c_p {st['cp_j_kgk']:g} J/kg/K; LCO/graphite OCV "
+            f"(PyBaMM Ramadass 2004) |",
+            f"| request | robot duty cycles (ref. [93], not published) | {st['pulse_period_s']:g} s period, "
+            f"{100 * st['pulse_duty']:g} % on at {_f(st['pulse_w'], 2)} W: mean = 1C power 2.3 A × mean OCV "
+            f"{_f(st['ocv_mean_v'], 3)} V = {_f(st['p_1c_w'], 2)} W |",
+            f"| ambient, convection, horizon | {th['t_amb_c']:g} °C, 6 W/m²K, 10 s at 10 Hz | {st['t_amb_c']:g} °C, "
+            f"{st['h_w_m2k']:g} W/m²K, {st['horizon_steps'] * st['dt_s']:g} s at {1 / st['dt_s']:g} Hz |",
+            f"| limits | V_min {th['v_min_v']:g} V, T_max {th['t_max_c']:g} °C, SOC_min not given | V_min "
+            f"{st['v_min_v']:g} V, T_max {st['t_max_c']:g} °C, SOC_min {st['soc_min_frac']:g} (assumed) |",
+            f"| all constraints inactive until [s] | 4705 | {_f(min(v['first_s'] for v in sp.values() if v['first_s'] is not None), 0)} |",
+            f"| voltage limit sets the power [s] | {th['voltage_active_from_s']:g}–{th['voltage_active_to_s']:g} | {eps('voltage')} |",
+            f"| temperature limit sets the power [s] | after 5740, until SOC | {eps('temperature')} |",
+            f"| SOC limit sets the power [s] | at the end | {eps('soc')} |",
+            f"| order in which they first act | {' → '.join(th['order'])} | {' → '.join(f['order'])} |",
+            f"| min voltage / max temperature / end SOC | ≥ 3.2 V / ≤ 45 °C / – | {_f(f['v_min_run_v'], 3)} V / "
+            f"{_f(f['t_max_run_c'], 2)} °C / {_f(100 * f['soc_end_frac'], 2)} % at {_f(f['end_s'], 0)} s |",
+            f"| energy drawn / requested [Wh] | – | {_f(f['energy_drawn_wh'], 2)} / {_f(f['energy_requested_wh'], 2)} |"]
     return "\n".join(rows)
 
 
@@ -315,8 +353,8 @@ def _block_app_a(n: dict) -> str:
     return "\n".join(rows)
 
 
-BLOCKS = {"runs": _block_runs, "fig_4_9": _block_fig_4_9, "table_3_3": _block_table_3_3, "a1_gap": _block_a1_gap,
-          "bms": _block_bms, "tradeoff": _block_tradeoff, "app_a": _block_app_a}
+BLOCKS = {"runs": _block_runs, "fig_4_9": _block_fig_4_9, "fig_4_10": _block_fig_4_10, "table_3_3": _block_table_3_3,
+          "a1_gap": _block_a1_gap, "bms": _block_bms, "tradeoff": _block_tradeoff, "app_a": _block_app_a}
 _BLOCK_RE = re.compile(r"(<!-- BEGIN seed:(?P<name>[a-z0-9_]+) -->\n)(?P<body>.*?)(<!-- END seed:(?P=name) -->)", re.S)
 
 

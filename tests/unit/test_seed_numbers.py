@@ -21,7 +21,7 @@ def test_every_marked_block_is_the_rendering_of_the_committed_numbers():
             assert body == want[name], (f"{path.name}: block seed:{name} differs from its rendering: run "
                                         "python -m shevsim.studies.seed_numbers --write-docs")
             seen.add(name)
-    assert {"runs", "fig_4_9", "table_3_3", "a1_gap", "bms", "tradeoff"} <= seen
+    assert {"runs", "fig_4_9", "fig_4_10", "table_3_3", "a1_gap", "bms", "tradeoff"} <= seen
 
 
 def _close(a, b, path=""):
@@ -39,7 +39,7 @@ def _close(a, b, path=""):
         assert a == b, path
 
 
-@pytest.mark.parametrize("section", ["fig_4_9", "a1_gap"])
+@pytest.mark.parametrize("section", ["fig_4_9", "fig_4_10", "a1_gap"])
 def test_cheap_sections_recomputed_from_the_code_match_the_committed_numbers(section):
     _close(sn.compute([section])[section], NUMBERS[section], section)
 
