@@ -31,6 +31,7 @@ import os
 import sys
 from pathlib import Path
 
+from .core.argtypes import positive_int as _positive_int
 from .core.errors import ShevsimError, SimulationError
 
 EXIT_OK, EXIT_STOPPED, EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
@@ -274,16 +275,6 @@ def _cmd_report(a) -> int:
     path = write_report(a.folders, out=a.out)
     _say(a, f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB; open it in a browser, it works offline)")
     return EXIT_OK
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
-    return v
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -29,21 +29,12 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..core.argtypes import positive_int as _at_least_one
 from ..core.errors import DataError, ShevsimError
 from .data import CURRENT_SIGNS, POWER_SIGNS
 from .known import load_params_toml  # noqa: F401  (re-exported: tests and scripts import it from here)
 from .models import MODELS
 from .report import MAX_RECORD_ROWS
-
-
-def _at_least_one(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
-    return v
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -19,20 +19,14 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..core.argtypes import positive_int
 from ..core.errors import ShevsimError
 
 
 
 def _at_least_one(text: str) -> int:
     """argparse type: an integer >= 1 (a usage error, exit 2, otherwise)."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v} (to evaluate nothing, do not run "
-                                         f"the study; a study resumes from its cache)")
-    return v
+    return positive_int(text, "to evaluate nothing, do not run the study; a study resumes from its cache")
 
 
 def _workers(text: str):
