@@ -4,7 +4,8 @@
 
 PyBaMM's SPMe with a lumped thermal model and the published ``Chen2020`` parameter set (LG M50, NMC811 /
 graphite-SiOx 21700, 5 A.h) runs a seeded drive-like current (1 Hz levels linearly interpolated: pulses
-from -1C to +2C held 5-40 s, rests; a 60 s rest first) from 80 % initial SOC for ``DURATION_S``.  A
+from -1C to +2C held 5-40 s, rests; a 60 s rest first) from 80 % initial SOC for ``DURATION_S`` (one hour: about 25 % of SOC swing, so that a
+capacity or current-offset error moves the OCV by tens of mV by the end).  A
 logger samples current, voltage and the cell temperature (the lumped model's volume-averaged temperature
 as the surface reading) at 1 Hz, instantaneously, with white noise (voltage 1 mV, temperature 0.05 K,
 current 5 mA) and writes ``cell_<case>.csv``.  Effects in PyBaMM's own parameters:
@@ -17,7 +18,11 @@ current 5 mA) and writes ``cell_<case>.csv``.  Effects in PyBaMM's own parameter
   step of 10 s).
 
 The user's nominal (``cell_nominal.toml``, the calibration's ``--params``): the rated capacity 5 A.h, a
-pseudo-OCV measured by PyBaMM at C/50 on the nominal cell (SOC = 1 - discharged A.h / 5 A.h, 41 points),
+pseudo-OCV measured by PyBaMM at C/50 on the nominal cell, logged every 60 s as a cycler would (SOC = 1 -
+discharged A.h / 5 A.h, 41 points; without the 60 s period PyBaMM returns only its adaptive solver steps,
+a few dozen over the 50 h discharge, and the table interpolated linearly between them was off by up to
+11 mV over the SOC range the records visit and 130 mV near empty - an error of the generator, not of the
+cell),
 the initial SOC from the first rest voltage (``soc0_frac = -1``) and a two-RC equivalent circuit
 (``rc_pairs = 2``: solid diffusion in an NMC cell has a slow time constant that one RC branch misses).  ``cell_truth.json``: seeds, PyBaMM
 inputs and the truth in shevsim's names (``capacity_ah``, ``current_offset_a``, ``h_change_factor``,
@@ -26,13 +31,15 @@ inputs and the truth in shevsim's names (``capacity_ah``, ``current_offset_a``, 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
 import pybamm
 
 HERE = Path(__file__).resolve().parent
-DURATION_S = 2400.0
+OUT = Path(os.environ.get("SHEVSIM_GEN_OUT", HERE))     # where to write (default: beside this script)
+DURATION_S = 3600.0
 NOISE = {"voltage_v": 1e-3, "t_surface_c": 0.05, "current_a": 5e-3}
 CASES = {
     "none": {"seed": 21},
@@ -81,7 +88,7 @@ def simulate(case: dict, t, i_true):
 def pseudo_ocv():
     p = params()
     model = pybamm.lithium_ion.SPMe({"thermal": "lumped"})
-    exp = pybamm.Experiment(["Discharge at C/50 until 2.5 V"])
+    exp = pybamm.Experiment(["Discharge at C/50 until 2.5 V (60 second period)"])
     sol = pybamm.Simulation(model, parameter_values=p, experiment=exp).solve(initial_soc=1.0)
     ah = sol["Discharge capacity [A.h]"].entries
     v = sol["Voltage [V]"].entries
@@ -99,7 +106,7 @@ def main() -> int:
            "radius_m = 0.0105", "length_m = 0.07", "h_conv_w_m2k = 10.0",
            "[ocv]", "soc_frac = [" + ", ".join(f"{x:.4f}" for x in grid) + "]",
            "ocv_v = [" + ", ".join(f"{x:.5f}" for x in ocv) + "]"]
-    (HERE / "cell_nominal.toml").write_text("\n".join(nom) + "\n")
+    (OUT / "cell_nominal.toml").write_text("\n".join(nom) + "\n")
     truth = {"generator": f"PyBaMM {pybamm.__version__} SPMe + lumped thermal, Chen2020, 1 Hz instantaneous",
              "noise": NOISE, "pseudo_ocv_capacity_ah": cap, "cases": {}}
     for name, case in CASES.items():
@@ -112,14 +119,14 @@ def main() -> int:
         lines = [f"# PyBaMM {pybamm.__version__} SPMe/Chen2020 record, case '{name}' (make_cell_pybamm.py)",
                  "time_s,current_a,voltage_v,t_surface_c,t_ambient_c"]
         lines += [f"{a:.1f},{b:.4f},{c:.5f},{d:.3f},25.0" for a, b, c, d in zip(t, i_log, v_log, ts_log)]
-        (HERE / f"cell_{name}.csv").write_text("\n".join(lines) + "\n")
+        (OUT / f"cell_{name}.csv").write_text("\n".join(lines) + "\n")
         tr = {"capacity_ah": 5.0 * case.get("am_factor", 1.0), "current_offset_a": case.get("offset_a", 0.0),
               "h_change_factor": case.get("h_after", 10.0) / 10.0, "h_change_time_s": case.get("t_change_s")}
         truth["cases"][name] = {"pybamm_inputs": {k: x for k, x in case.items() if k != "seed"}, "seed": case["seed"],
                                 "truth": tr, "file": f"cell_{name}.csv", "v_min": float(v.min()), "v_max": float(v.max()),
                                 "t_max_c": float(temp.max())}
         print(name, f"V {v.min():.3f}-{v.max():.3f}  T max {temp.max():.2f} C")
-    (HERE / "cell_truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    (OUT / "cell_truth.json").write_text(json.dumps(truth, indent=2) + "\n")
     return 0
 
 
