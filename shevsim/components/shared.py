@@ -318,8 +318,43 @@ def resolve(scenario, file_params) -> Resolution | None:
     shared = getattr(scenario, "shared", None)
     if not shared and not getattr(scenario, "shared_base", None):
         return None
-    shared = dict(shared or {})
     where = f"{scenario.path or '<scenario>'}"
+    values, explicit, veh = _collect_shared(scenario, dict(shared or {}), where)
+    lifted = _lift_component_values(scenario, values, explicit, where)
+    k_engine, p_max_w = _engine_scale(scenario, values, file_params)
+    # per component
+    params: dict[str, dict[str, Any]] = {}
+    sources: dict[str, dict[str, str]] = {}
+    for spec in scenario.components:
+        own = set(getattr(spec, "own", ()) or ())
+        inj: dict[str, Any] = {}
+        src: dict[str, str] = {}
+        if veh is not None:
+            for k, v in veh.components.get(spec.type, {}).items():
+                inj[k] = v
+                src[k] = f"vehicle '{veh.name}' [{spec.type}] {k}"
+        for param, q in IDENTITY.get(spec.type, {}).items():
+            if q in values and not _owned(own, param, q):
+                inj[param] = values[q][0]
+                src[param] = f"shared {q} ({values[q][1]})"
+        for param, (v, why) in _derived(spec, values, k_engine, p_max_w, file_params).items():
+            if not _owned(own, param, None):
+                inj[param] = v
+                src[param] = why
+        if not inj:
+            continue
+        _check_injected(spec, inj, src, file_params(spec), where)
+        params[spec.name] = bms_params_for(inj) if spec.type == "bms" else inj
+        sources[spec.name] = src
+    metrics = {}
+    if "fuel_density_kg_per_l" in values:
+        metrics["fuel_density_kg_per_l"] = values["fuel_density_kg_per_l"]   # (value, origin)
+    return Resolution(values, params, metrics, veh, sources, set(explicit), set(lifted))
+
+
+def _collect_shared(scenario, shared: dict, where: str):
+    """The shared quantities in order of precedence (a study's captured vehicle, the named vehicle, the
+    scenario's ``[shared]`` table, cell and fuel expansions first): ``(values, explicit, vehicle)``."""
     origins = getattr(scenario, "shared_origins", {})
     base_dir = scenario.path.parent if scenario.path is not None else None
     values: dict[str, tuple[Any, str]] = {}
@@ -353,8 +388,12 @@ def resolve(scenario, file_params) -> Resolution | None:
         put(veh.shared, f"vehicle '{shared['vehicle']}' ({veh.path.name})", False, str(veh.path))
     for key in [k for k in ("cell", "fuel") if k in shared] + [k for k in shared if k not in ("cell", "fuel", "vehicle")]:
         put({key: shared[key]}, origins.get(key, f"{where}: [shared] {key}"), True, origins.get(key, where))
+    return values, explicit, veh
 
-    # lift component-level values of identity-bound parameters (--set, overrides, set tables, overlays)
+
+def _lift_component_values(scenario, values: dict, explicit: set, where: str) -> dict[str, str]:
+    """Lift component-level values of identity-bound parameters (--set, overrides, set tables, overlays)
+    into ``values``; a contradiction of a declared or already lifted quantity is an error."""
     lifted: dict[str, str] = {}
     for spec in scenario.components:
         ident = IDENTITY.get(spec.type, {})
@@ -377,12 +416,14 @@ def resolve(scenario, file_params) -> Resolution | None:
                 pass      # the component's own check names it better (when it is built)
             values[q] = (v, desc)
             lifted[q] = desc
+    return lifted
 
-    # per component
-    params: dict[str, dict[str, Any]] = {}
-    sources: dict[str, dict[str, str]] = {}
+
+def _engine_scale(scenario, values: dict, file_params) -> tuple[float, float | None]:
+    """The engine-generator's map scale ``k_engine`` (rated / map-rated power) and its scaled maximum
+    electric power [W] (None without engine or with an unreadable optimal-operating-line file)."""
     eg = next((s for s in scenario.components if s.type == "engine_generator"), None)
-    k_engine, p_max_w, eg_rated = 1.0, None, None
+    k_engine, p_max_w = 1.0, None
     if eg is not None:
         eg_vals = {**file_params(eg), **eg.overrides}
         from .engine_generator import EngineGeneratorParams
@@ -397,46 +438,26 @@ def resolve(scenario, file_params) -> Resolution | None:
             p_max_w = float(load_curve_csv(ool, "elec_power_w", "speed_radps").x[-1]) * k_engine
         except Exception:       # the engine component's own check names a bad file when it is built
             p_max_w = None
-    for spec in scenario.components:
-        own = set(getattr(spec, "own", ()) or ())
-        inj: dict[str, Any] = {}
-        src: dict[str, str] = {}
-        if veh is not None:
-            for k, v in veh.components.get(spec.type, {}).items():
-                inj[k] = v
-                src[k] = f"vehicle '{veh.name}' [{spec.type}] {k}"
-        for param, q in IDENTITY.get(spec.type, {}).items():
-            if q in values and not _owned(own, param, q):
-                inj[param] = values[q][0]
-                src[param] = f"shared {q} ({values[q][1]})"
-        for param, (v, why) in _derived(spec, values, k_engine, p_max_w, file_params).items():
-            if not _owned(own, param, None):
-                inj[param] = v
-                src[param] = why
-        if not inj:
-            continue
-        # a component-level value that contradicts: its file, or an override of a derived parameter
-        fvals = file_params(spec)
-        for param, v in inj.items():
-            if param not in src or src[param].startswith("vehicle '") or param in _FOLLOWS:
-                continue          # a vehicle's own value for this component type: above the file
-            if param in spec.overrides and not _same(spec.overrides[param], v) and \
-                    param not in IDENTITY.get(spec.type, {}):
-                origin = spec.origins.get(param) or getattr(spec, "sources", {}).get(param) or \
-                    f"{where}: [components.{spec.name}] {param}"
-                raise ScenarioError(f"{spec.name}.{param} = {spec.overrides[param]!r} ({origin}) contradicts "
-                                    f"{src[param]} = {v!r}; to keep the component's own value list it in "
-                                    f"[components.{spec.name}] own = [\"{param}\"]")
-            if param in fvals and param not in spec.overrides and not _same(fvals[param], v):
-                raise ScenarioError(f"{spec.name}.{param} = {fvals[param]!r} ({spec.params_file}: [params] {param}) "
-                                    f"contradicts {src[param]} = {v!r}; remove it from the parameter file, or "
-                                    f"list it in [components.{spec.name}] own = [\"{param}\"]")
-        params[spec.name] = bms_params_for(inj) if spec.type == "bms" else inj
-        sources[spec.name] = src
-    metrics = {}
-    if "fuel_density_kg_per_l" in values:
-        metrics["fuel_density_kg_per_l"] = values["fuel_density_kg_per_l"]   # (value, origin)
-    return Resolution(values, params, metrics, veh, sources, set(explicit), set(lifted))
+    return k_engine, p_max_w
+
+
+def _check_injected(spec, inj: dict, src: dict, fvals: dict, where: str) -> None:
+    """A component-level value that contradicts an injected one (its parameter file, or an override of a
+    derived parameter) is an error telling how to keep it (``own = [...]``)."""
+    for param, v in inj.items():
+        if param not in src or src[param].startswith("vehicle '") or param in _FOLLOWS:
+            continue          # a vehicle's own value for this component type: above the file
+        if param in spec.overrides and not _same(spec.overrides[param], v) and \
+                param not in IDENTITY.get(spec.type, {}):
+            origin = spec.origins.get(param) or getattr(spec, "sources", {}).get(param) or \
+                f"{where}: [components.{spec.name}] {param}"
+            raise ScenarioError(f"{spec.name}.{param} = {spec.overrides[param]!r} ({origin}) contradicts "
+                                f"{src[param]} = {v!r}; to keep the component's own value list it in "
+                                f"[components.{spec.name}] own = [\"{param}\"]")
+        if param in fvals and param not in spec.overrides and not _same(fvals[param], v):
+            raise ScenarioError(f"{spec.name}.{param} = {fvals[param]!r} ({spec.params_file}: [params] {param}) "
+                                f"contradicts {src[param]} = {v!r}; remove it from the parameter file, or "
+                                f"list it in [components.{spec.name}] own = [\"{param}\"]")
 
 
 def _derived(spec, values, k_engine: float, p_max_w: float | None, file_params) -> dict[str, tuple[Any, str]]:
