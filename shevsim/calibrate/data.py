@@ -367,31 +367,18 @@ def _sniff_format(path: Path) -> dict:
     return {}
 
 
-def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
-                  current_sign: str = "discharge-positive", power_sign: str = "drawn-positive",
-                  drop_duplicate_rows: bool = False, check_sign: bool = True,
-                  units: Mapping[str, str] | None = None, check_units: bool = True) -> MeasuredData:
-    """Load and check a measured CSV for calibration model ``model`` (``cell`` or ``vehicle``).
-
-    Columns in other units are converted when the unit is declared: by the header (``time_ms``,
-    ``current_ma``, ``speed_kmh``, ``power_kw``, ``t_surface_k`` ...) or by ``units`` (``{"time_s": "ms"}``,
-    CLI ``--unit time_s=ms``).  Undeclared units that look wrong (time in ms, current in mA, speed in km/h,
-    power in kW, temperature in K, voltage in mV) are refused with what was detected and how to declare
-    it.  Spreadsheet quirks are read as they come: UTF-8 byte-order mark, CRLF, ``;`` with decimal commas,
-    tabs, trailing empty columns.
-
-    Returns
-    -------
-    MeasuredData
-        canonical columns (SI, signs as documented in the module docstring) plus all extra numeric columns.
-    """
-    path = Path(path)
+def _check_options(model: str, current_sign: str, power_sign: str) -> None:
+    """Refuse an unknown model or sign convention before the file is opened."""
     if model not in REQUIRED:
         raise DataError(f"unknown model '{model}'; available: {', '.join(REQUIRED)}")
     if current_sign not in CURRENT_SIGNS + ("auto",):
         raise DataError(f"current sign '{current_sign}': expected one of {CURRENT_SIGNS + ('auto',)}")
     if power_sign not in POWER_SIGNS:
         raise DataError(f"power sign '{power_sign}': expected one of {POWER_SIGNS}")
+
+
+def _read_table(path: Path) -> tuple[pd.DataFrame, np.ndarray]:
+    """Parse the CSV as written (no conversion yet); return it and each data row's file line number."""
     from ..core.errors import file_problem
     why = file_problem(path, "data file")
     if why is not None:
@@ -420,6 +407,11 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
     line_of = _file_lines(path)
     if line_of.size != raw.shape[0]:  # blank lines inside etc.: fall back to header offset
         line_of = np.arange(raw.shape[0]) + 2
+    return raw, line_of
+
+
+def _column_mapping(raw: pd.DataFrame, model: str, mapping, units, path: Path) -> tuple[dict, dict]:
+    """The file column of each canonical name (``--map`` plus unit-suffixed headers) and the declared units."""
     mapping = dict(mapping or {})
     canon_all = REQUIRED[model] + OPTIONAL[model]
     declared = _declared_units(list(raw.columns), canon_all, dict(units or {}), path)
@@ -430,18 +422,11 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
         if canon not in canon_all:
             raise DataError(f"--map {canon}={col}: '{canon}' is not a canonical column of model '{model}' "
                             f"({', '.join(canon_all)})")
-    guessed = _precheck(path, raw, model, mapping, canon_all, current_sign if check_sign or current_sign == "auto"
-                        else "auto-skip", drop_duplicate_rows, line_of)
-    notes = []
-    sign_how = "guessed" if current_sign == "auto" else "stated"
-    if current_sign == "auto":
-        if guessed is None:         # no current/voltage (not a cell): the canonical convention
-            current_sign = "discharge-positive"
-        else:
-            current_sign = guessed
-            notes.append(f"current sign guessed from the data: {guessed} (the voltage "
-                         f"{'rises' if guessed == 'charge-positive' else 'falls'} as the file's current rises); "
-                         f"pass --current-sign to state it")
+    return mapping, declared
+
+
+def _rename_to_canonical(raw: pd.DataFrame, model: str, mapping: dict, path: Path) -> pd.DataFrame:
+    """Rename mapped columns to their canonical names; refuse a missing required column with a best match."""
     rename = {col: canon for canon, col in mapping.items()}
     # a canonical name already present in the file and also mapped from another column: the mapped wins
     df = raw.drop(columns=[c for c in raw.columns if c in mapping and c not in rename]).rename(columns=rename)
@@ -451,7 +436,12 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
             hint = f"; use --map {col}={best[0]} if that is it" if best else ""
             raise DataError(f"{path}: missing required column '{col}' for model '{model}'{hint}; "
                             f"columns: {', '.join(df.columns)}")
-    # numeric check
+    return df
+
+
+def _numeric_columns(df: pd.DataFrame, canon_all, path: Path, line_of: np.ndarray, notes: list) -> pd.DataFrame:
+    """Every column as float: a non-numeric or NaN canonical value is an error naming the line; an extra
+    column with either is dropped (said in ``notes``)."""
     for col in list(df.columns):
         conv = pd.to_numeric(df[col], errors="coerce")
         bad = conv.isna() & df[col].notna() & (df[col].astype(str).str.strip().str.lower() != "nan")
@@ -479,13 +469,12 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
         if col not in canon_all and df[col].isna().any():
             notes.append(f"extra column '{col}' has NaN values and was dropped from the candidate signals")
             df = df.drop(columns=[col])
-    # declared units: converted to SI before any check
-    for col, (canon, sc, off, unit) in declared.items():
-        if canon in df.columns and (sc != 1.0 or off != 0.0):
-            df[canon] = df[canon] * sc + off
-            notes.append(f"column '{canon}' converted from {unit} (declared by "
-                         f"{'the header' if col != canon else '--unit'})")
-    # time
+    return df
+
+
+def _check_time(df: pd.DataFrame, path: Path, line_of: np.ndarray, drop_duplicate_rows: bool,
+                notes: list) -> tuple[pd.DataFrame, np.ndarray]:
+    """Time must increase strictly; identical duplicate rows are dropped only when asked."""
     t = df["time_s"].to_numpy()
     dt = np.diff(t)
     dup = np.flatnonzero(dt == 0)
@@ -512,6 +501,67 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
         k = int(back[0])
         raise DataError(f"{path}: column 'time_s': time goes backwards at line {_row_of(k + 1, line_of)} "
                         f"({t[k]} -> {t[k + 1]} s); time must increase strictly")
+    return df, line_of
+
+
+def _check_current_sign(df: pd.DataFrame, path: Path, current_sign: str) -> None:
+    """After conversion, the voltage of a cell must fall as the (discharge-positive) current rises."""
+    di = np.diff(df["current_a"].to_numpy())
+    dv = np.diff(df["voltage_v"].to_numpy())
+    big = np.abs(di) > 0.05 * max(np.abs(df["current_a"]).max(), 1e-9)
+    if big.sum() >= 5:
+        c = np.corrcoef(di[big], dv[big])[0, 1]
+        if c > 0.3:
+            other = [s for s in CURRENT_SIGNS if s != current_sign][0]
+            raise DataError(f"{path}: column 'current_a': voltage rises when current rises (corr(dI, dV) = "
+                            f"{c:+.2f}) - the current sign looks inverted for '{current_sign}'; "
+                            f"pass --current-sign {other}")
+
+
+def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
+                  current_sign: str = "discharge-positive", power_sign: str = "drawn-positive",
+                  drop_duplicate_rows: bool = False, check_sign: bool = True,
+                  units: Mapping[str, str] | None = None, check_units: bool = True) -> MeasuredData:
+    """Load and check a measured CSV for calibration model ``model`` (``cell`` or ``vehicle``).
+
+    Columns in other units are converted when the unit is declared: by the header (``time_ms``,
+    ``current_ma``, ``speed_kmh``, ``power_kw``, ``t_surface_k`` ...) or by ``units`` (``{"time_s": "ms"}``,
+    CLI ``--unit time_s=ms``).  Undeclared units that look wrong (time in ms, current in mA, speed in km/h,
+    power in kW, temperature in K, voltage in mV) are refused with what was detected and how to declare
+    it.  Spreadsheet quirks are read as they come: UTF-8 byte-order mark, CRLF, ``;`` with decimal commas,
+    tabs, trailing empty columns.
+
+    Returns
+    -------
+    MeasuredData
+        canonical columns (SI, signs as documented in the module docstring) plus all extra numeric columns.
+    """
+    path = Path(path)
+    _check_options(model, current_sign, power_sign)
+    raw, line_of = _read_table(path)
+    mapping, declared = _column_mapping(raw, model, mapping, units, path)
+    canon_all = REQUIRED[model] + OPTIONAL[model]
+    guessed = _precheck(path, raw, model, mapping, canon_all, current_sign if check_sign or current_sign == "auto"
+                        else "auto-skip", drop_duplicate_rows, line_of)
+    notes = []
+    sign_how = "guessed" if current_sign == "auto" else "stated"
+    if current_sign == "auto":
+        if guessed is None:         # no current/voltage (not a cell): the canonical convention
+            current_sign = "discharge-positive"
+        else:
+            current_sign = guessed
+            notes.append(f"current sign guessed from the data: {guessed} (the voltage "
+                         f"{'rises' if guessed == 'charge-positive' else 'falls'} as the file's current rises); "
+                         f"pass --current-sign to state it")
+    df = _rename_to_canonical(raw, model, mapping, path)
+    df = _numeric_columns(df, canon_all, path, line_of, notes)
+    # declared units: converted to SI before any check
+    for col, (canon, sc, off, unit) in declared.items():
+        if canon in df.columns and (sc != 1.0 or off != 0.0):
+            df[canon] = df[canon] * sc + off
+            notes.append(f"column '{canon}' converted from {unit} (declared by "
+                         f"{'the header' if col != canon else '--unit'})")
+    df, line_of = _check_time(df, path, line_of, drop_duplicate_rows, notes)
     if check_units:
         _check_units(df, model, path, line_of, {d[0] for d in declared.values()})
     if model == "cell" and current_sign == "charge-positive":
@@ -525,16 +575,7 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
         checks["current_sign"] = {"file": current_sign, "how": sign_how,
                                   "corr_dI_dV": _sign_corr(df["current_a"].to_numpy(), df["voltage_v"].to_numpy())}
     if model == "cell" and check_sign:
-        di = np.diff(df["current_a"].to_numpy())
-        dv = np.diff(df["voltage_v"].to_numpy())
-        big = np.abs(di) > 0.05 * max(np.abs(df["current_a"]).max(), 1e-9)
-        if big.sum() >= 5:
-            c = np.corrcoef(di[big], dv[big])[0, 1]
-            if c > 0.3:
-                other = [s for s in CURRENT_SIGNS if s != current_sign][0]
-                raise DataError(f"{path}: column 'current_a': voltage rises when current rises (corr(dI, dV) = "
-                                f"{c:+.2f}) - the current sign looks inverted for '{current_sign}'; "
-                                f"pass --current-sign {other}")
+        _check_current_sign(df, path, current_sign)
     return MeasuredData(df=df, path=str(path), model=model, notes=notes, checks=checks)
 
 
