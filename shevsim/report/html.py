@@ -456,118 +456,14 @@ def _kw(x):
 def study_page(summary: dict, tables: dict | None = None, title: str | None = None) -> Page:
     """The report of a study from its ``summary.json`` (and, for a power-rate map, its CSV tables:
     ``constant_limits``, ``exhaustive``, ``top_solutions``, ``ga_history`` as DataFrames)."""
-    import plotly.graph_objects as go
     tables = tables or {}
     kind = summary.get("study", "study")
     page = Page(title or f"Study report: {kind.replace('_', ' ')}", str(summary.get("problem", "")))
     base = summary.get("baseline") or {}
     if kind == "tradeoff":
-        rows = sorted(summary.get("rows", []), key=lambda r: r["rate_wps"])
-        ok = [r for r in rows if not r.get("error")]
-        x = [r["rate_wps"] / 1e3 for r in ok]
-        best = summary.get("best_within_loss")
-        lim = -100 * float(summary.get("fe_loss_max_frac", 0.0))
-        fig = _xy_figure([
-            go.Scatter(x=x, y=[r["fe_change_pct"] for r in ok], mode="lines+markers", name="Fuel economy change",
-                       hovertemplate="%{y:.3f} % at %{x:g} kW/s<extra>fuel economy</extra>"),
-            go.Scatter(x=x, y=[r["soot_change_pct"] for r in ok], mode="lines+markers", name="Soot change",
-                       hovertemplate="%{y:.3f} % at %{x:g} kW/s<extra>soot</extra>"),
-            go.Scatter(x=[min(x or [0]), max(x or [1])], y=[lim, lim], mode="lines", name="Accepted fuel-economy loss",
-                       line={"dash": "dot", "color": "#555"}, hoverinfo="skip")],
-            "Maximum engine-generator power rate (kW/s)", "Change from the baseline (%)")
-        if best:
-            fig.add_vline(x=best["rate_wps"] / 1e3, line_dash="dash", line_color="#888",
-                          annotation_text=f"chosen: {best['rate_wps'] / 1e3:g} kW/s")
-        page.section("Result", table(["", ""], [
-            ("Baseline fuel economy (km/l)", fmt(base.get("fuel_economy_kmpl"))),
-            ("Baseline soot (g/km)", fmt(base.get("soot_g_per_km"))),
-            ("Accepted fuel-economy loss (%)", fmt(-lim)),
-            ("Tightest rate within that loss (kW/s)", fmt(_kw(best["rate_wps"])) if best else "none"),
-            ("Its soot change (%)", fmt(best["soot_change_pct"]) if best else "—"),
-            ("Its fuel-economy change (%)", fmt(best["fe_change_pct"]) if best else "—")]))
-        page.figure(fig, "Trade-off: fuel economy and soot against the power-rate limit",
-                    note="Each point is one run with a constant maximum engine-generator power rate "
-                         "(dP_g/dt max in the thesis, Fig. A.2).")
-        page.figure(_xy_figure([
-            go.Scatter(x=[r["fuel_economy_kmpl"] for r in ok], y=[r["soot_g_per_km"] for r in ok],
-                       mode="markers+text", text=[f"{v:g}" for v in x], textposition="top center",
-                       name="Constant limit (kW/s)",
-                       hovertemplate="%{x:.4g} km/l, %{y:.4g} g/km<extra>%{text} kW/s</extra>"),
-            go.Scatter(x=[base.get("fuel_economy_kmpl")], y=[base.get("soot_g_per_km")], mode="markers",
-                       marker={"symbol": "star", "size": 14, "color": "#222"}, name="Baseline")],
-            "Fuel economy (km/l)", "Soot (g/km)"), "Soot against fuel economy")
-        page.section("Runs", table(["Rate limit (kW/s)", "Fuel economy (km/l)", "Change (%)", "Soot (g/km)",
-                                    "Change (%)", "Error"],
-                                   [(fmt(r["rate_wps"] / 1e3), fmt(r["fuel_economy_kmpl"]), fmt(r["fe_change_pct"]),
-                                     fmt(r["soot_g_per_km"]), fmt(r["soot_change_pct"]), r.get("error") or "")
-                                    for r in rows], num_cols=range(5)))
+        _tradeoff_sections(page, summary, base)
     elif kind == "powerrate_map":
-        ga = summary.get("ga") or {}
-        hist = ga.get("history") or []
-        if hist:
-            from plotly.subplots import make_subplots
-            fig = make_subplots(rows=2, cols=1, shared_xaxes=True, vertical_spacing=0.08)
-            g = [h["generation"] for h in hist]
-            fig.add_trace(go.Scatter(x=g, y=[h["best_objective"] for h in hist], mode="lines+markers",
-                                     name="Best soot (g/km)", hovertemplate="%{y:.5g} g/km<extra>generation %{x}</extra>"),
-                          row=1, col=1)
-            fig.add_trace(go.Scatter(x=g, y=[h["n_feasible"] for h in hist], mode="lines+markers",
-                                     name="Feasible maps in the population"), row=2, col=1)
-            fig.add_trace(go.Scatter(x=g, y=[h["total_evaluations"] for h in hist], mode="lines+markers",
-                                     name="Evaluations so far"), row=2, col=1)
-            ys = [h["best_objective"] for h in hist if finite(h["best_objective"])]
-            if ys and max(ys) - min(ys) <= 1e-9 * max(abs(max(ys)), 1e-30):   # flat: Plotly would show +-1
-                pad = 0.02 * abs(ys[0]) or 1.0
-                fig.update_yaxes(range=[ys[0] - pad, ys[0] + pad], row=1, col=1)
-            fig.update_yaxes(title_text="Best soot (g/km)", row=1, col=1)
-            fig.update_yaxes(title_text="Count", row=2, col=1)
-            fig.update_xaxes(title_text="Generation", row=2, col=1)
-            fig.update_layout(template="plotly_white", height=520, margin={"l": 70, "r": 20, "t": 30, "b": 50})
-            page.figure(fig, "Genetic algorithm history",
-                        note="Best objective: soot of the best map that keeps the fuel-economy loss within the limit.")
-        traces = []
-        for key, name, sym in (("exhaustive", "Exhaustive search", "circle"), ("top_solutions", "Best GA maps", "diamond"),
-                               ("constant_limits", "Constant limits", "square")):
-            df = tables.get(key)
-            if df is not None and len(df):
-                d = df[df["error"].fillna("") == ""] if "error" in df else df
-                traces.append(go.Scatter(x=d["fuel_economy_kmpl"], y=d["soot_g_per_km"], mode="markers", name=name,
-                                         marker={"symbol": sym, "size": 7, "opacity": 0.75},
-                                         hovertemplate="%{x:.4g} km/l, %{y:.4g} g/km<extra>" + name + "</extra>"))
-        bm = summary.get("best_map")
-        if bm:
-            traces.append(go.Scatter(x=[bm["fuel_economy_kmpl"]], y=[bm["soot_g_per_km"]], mode="markers",
-                                     name="Chosen map", marker={"symbol": "star", "size": 16, "color": "#d62728"}))
-        if base:
-            traces.append(go.Scatter(x=[base.get("fuel_economy_kmpl")], y=[base.get("soot_g_per_km")], mode="markers",
-                                     name="Baseline", marker={"symbol": "x", "size": 12, "color": "#222"}))
-        if traces:
-            page.figure(_xy_figure(traces, "Fuel economy (km/l)", "Soot (g/km)"), "Trade-off: soot against fuel economy")
-        if bm and bm.get("edges_w"):
-            e = bm["edges_w"]
-            parts = [f"{e[i] / 1e3:g}–{e[i + 1] / 1e3:g} kW" for i in range(len(e) - 1)]
-            bars = [go.Bar(x=parts, y=[r / 1e3 for r in bm["rates_wps"]], name="Chosen map",
-                           hovertemplate="%{y:g} kW/s<extra>%{x}</extra>")]
-            bc = summary.get("best_constant")
-            if bc:
-                bars.append(go.Scatter(x=parts, y=[bc["rate_wps"] / 1e3] * len(parts), mode="lines",
-                                       name="Best constant limit", line={"dash": "dash"}))
-            page.figure(_xy_figure(bars, "Engine-generator power (partition)", "Maximum power rate (kW/s)", 380),
-                        "Chosen power-rate map",
-                        note="The limit on the engine-generator power rate in each power partition "
-                             "(the thesis' constraint map dP_g/dt max(P_g)).")
-        res_rows = [("Baseline fuel economy (km/l)", fmt(base.get("fuel_economy_kmpl"))),
-                    ("Baseline soot (g/km)", fmt(base.get("soot_g_per_km")))]
-        if bm:
-            res_rows += [("Chosen map: fuel-economy change (%)", fmt(bm.get("fe_change_pct"))),
-                         ("Chosen map: soot change (%)", fmt(bm.get("soot_change_pct")))]
-        bc = summary.get("best_constant")
-        if bc:
-            res_rows += [("Best constant limit (kW/s)", fmt(bc["rate_wps"] / 1e3)),
-                         ("Best constant limit: soot change (%)", fmt(bc.get("soot_change_pct")))]
-        if summary.get("soot_reduction_ratio_map_vs_constant") is not None:
-            res_rows.append(("Soot reduction, map / constant", fmt(summary["soot_reduction_ratio_map_vs_constant"])))
-        page.parts.insert(0, f'<section id="result"><h2>Result</h2>{table(["", ""], res_rows)}</section>')
+        _powerrate_map_sections(page, summary, tables, base)
     else:
         page.section("Summary", table(["Key", "Value"], _config_rows({k: v for k, v in summary.items()
                                                                           if k not in ("rows",)})))
@@ -576,6 +472,126 @@ def study_page(summary: dict, tables: dict | None = None, title: str | None = No
     if cfg:
         page.section("Parameters", table(["Parameter", "Value"], _config_rows(cfg)))
     return page
+
+
+def _tradeoff_sections(page: Page, summary: dict, base: dict) -> None:
+    """Result, trade-off figures and run table of a constant-limit trade-off study."""
+    import plotly.graph_objects as go
+    rows = sorted(summary.get("rows", []), key=lambda r: r["rate_wps"])
+    ok = [r for r in rows if not r.get("error")]
+    x = [r["rate_wps"] / 1e3 for r in ok]
+    best = summary.get("best_within_loss")
+    lim = -100 * float(summary.get("fe_loss_max_frac", 0.0))
+    fig = _xy_figure([
+        go.Scatter(x=x, y=[r["fe_change_pct"] for r in ok], mode="lines+markers", name="Fuel economy change",
+                   hovertemplate="%{y:.3f} % at %{x:g} kW/s<extra>fuel economy</extra>"),
+        go.Scatter(x=x, y=[r["soot_change_pct"] for r in ok], mode="lines+markers", name="Soot change",
+                   hovertemplate="%{y:.3f} % at %{x:g} kW/s<extra>soot</extra>"),
+        go.Scatter(x=[min(x or [0]), max(x or [1])], y=[lim, lim], mode="lines", name="Accepted fuel-economy loss",
+                   line={"dash": "dot", "color": "#555"}, hoverinfo="skip")],
+        "Maximum engine-generator power rate (kW/s)", "Change from the baseline (%)")
+    if best:
+        fig.add_vline(x=best["rate_wps"] / 1e3, line_dash="dash", line_color="#888",
+                      annotation_text=f"chosen: {best['rate_wps'] / 1e3:g} kW/s")
+    page.section("Result", table(["", ""], [
+        ("Baseline fuel economy (km/l)", fmt(base.get("fuel_economy_kmpl"))),
+        ("Baseline soot (g/km)", fmt(base.get("soot_g_per_km"))),
+        ("Accepted fuel-economy loss (%)", fmt(-lim)),
+        ("Tightest rate within that loss (kW/s)", fmt(_kw(best["rate_wps"])) if best else "none"),
+        ("Its soot change (%)", fmt(best["soot_change_pct"]) if best else "—"),
+        ("Its fuel-economy change (%)", fmt(best["fe_change_pct"]) if best else "—")]))
+    page.figure(fig, "Trade-off: fuel economy and soot against the power-rate limit",
+                note="Each point is one run with a constant maximum engine-generator power rate "
+                     "(dP_g/dt max in the thesis, Fig. A.2).")
+    page.figure(_xy_figure([
+        go.Scatter(x=[r["fuel_economy_kmpl"] for r in ok], y=[r["soot_g_per_km"] for r in ok],
+                   mode="markers+text", text=[f"{v:g}" for v in x], textposition="top center",
+                   name="Constant limit (kW/s)",
+                   hovertemplate="%{x:.4g} km/l, %{y:.4g} g/km<extra>%{text} kW/s</extra>"),
+        go.Scatter(x=[base.get("fuel_economy_kmpl")], y=[base.get("soot_g_per_km")], mode="markers",
+                   marker={"symbol": "star", "size": 14, "color": "#222"}, name="Baseline")],
+        "Fuel economy (km/l)", "Soot (g/km)"), "Soot against fuel economy")
+    page.section("Runs", table(["Rate limit (kW/s)", "Fuel economy (km/l)", "Change (%)", "Soot (g/km)",
+                                "Change (%)", "Error"],
+                               [(fmt(r["rate_wps"] / 1e3), fmt(r["fuel_economy_kmpl"]), fmt(r["fe_change_pct"]),
+                                 fmt(r["soot_g_per_km"]), fmt(r["soot_change_pct"]), r.get("error") or "")
+                                for r in rows], num_cols=range(5)))
+
+
+def _powerrate_map_sections(page: Page, summary: dict, tables: dict, base: dict) -> None:
+    """GA history, trade-off cloud, chosen map and result table of a power-rate map study."""
+    import plotly.graph_objects as go
+    hist = (summary.get("ga") or {}).get("history") or []
+    if hist:
+        page.figure(_ga_history_figure(hist), "Genetic algorithm history",
+                    note="Best objective: soot of the best map that keeps the fuel-economy loss within the limit.")
+    traces = []
+    for key, name, sym in (("exhaustive", "Exhaustive search", "circle"), ("top_solutions", "Best GA maps", "diamond"),
+                           ("constant_limits", "Constant limits", "square")):
+        df = tables.get(key)
+        if df is not None and len(df):
+            d = df[df["error"].fillna("") == ""] if "error" in df else df
+            traces.append(go.Scatter(x=d["fuel_economy_kmpl"], y=d["soot_g_per_km"], mode="markers", name=name,
+                                     marker={"symbol": sym, "size": 7, "opacity": 0.75},
+                                     hovertemplate="%{x:.4g} km/l, %{y:.4g} g/km<extra>" + name + "</extra>"))
+    bm = summary.get("best_map")
+    if bm:
+        traces.append(go.Scatter(x=[bm["fuel_economy_kmpl"]], y=[bm["soot_g_per_km"]], mode="markers",
+                                 name="Chosen map", marker={"symbol": "star", "size": 16, "color": "#d62728"}))
+    if base:
+        traces.append(go.Scatter(x=[base.get("fuel_economy_kmpl")], y=[base.get("soot_g_per_km")], mode="markers",
+                                 name="Baseline", marker={"symbol": "x", "size": 12, "color": "#222"}))
+    if traces:
+        page.figure(_xy_figure(traces, "Fuel economy (km/l)", "Soot (g/km)"), "Trade-off: soot against fuel economy")
+    if bm and bm.get("edges_w"):
+        e = bm["edges_w"]
+        parts = [f"{e[i] / 1e3:g}–{e[i + 1] / 1e3:g} kW" for i in range(len(e) - 1)]
+        bars = [go.Bar(x=parts, y=[r / 1e3 for r in bm["rates_wps"]], name="Chosen map",
+                       hovertemplate="%{y:g} kW/s<extra>%{x}</extra>")]
+        bc = summary.get("best_constant")
+        if bc:
+            bars.append(go.Scatter(x=parts, y=[bc["rate_wps"] / 1e3] * len(parts), mode="lines",
+                                   name="Best constant limit", line={"dash": "dash"}))
+        page.figure(_xy_figure(bars, "Engine-generator power (partition)", "Maximum power rate (kW/s)", 380),
+                    "Chosen power-rate map",
+                    note="The limit on the engine-generator power rate in each power partition "
+                         "(the thesis' constraint map dP_g/dt max(P_g)).")
+    res_rows = [("Baseline fuel economy (km/l)", fmt(base.get("fuel_economy_kmpl"))),
+                ("Baseline soot (g/km)", fmt(base.get("soot_g_per_km")))]
+    if bm:
+        res_rows += [("Chosen map: fuel-economy change (%)", fmt(bm.get("fe_change_pct"))),
+                     ("Chosen map: soot change (%)", fmt(bm.get("soot_change_pct")))]
+    bc = summary.get("best_constant")
+    if bc:
+        res_rows += [("Best constant limit (kW/s)", fmt(bc["rate_wps"] / 1e3)),
+                     ("Best constant limit: soot change (%)", fmt(bc.get("soot_change_pct")))]
+    if summary.get("soot_reduction_ratio_map_vs_constant") is not None:
+        res_rows.append(("Soot reduction, map / constant", fmt(summary["soot_reduction_ratio_map_vs_constant"])))
+    page.parts.insert(0, f'<section id="result"><h2>Result</h2>{table(["", ""], res_rows)}</section>')
+
+
+def _ga_history_figure(hist: list):
+    """Best soot, feasible maps and evaluations per GA generation (two stacked panels)."""
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+    fig = make_subplots(rows=2, cols=1, shared_xaxes=True, vertical_spacing=0.08)
+    g = [h["generation"] for h in hist]
+    fig.add_trace(go.Scatter(x=g, y=[h["best_objective"] for h in hist], mode="lines+markers",
+                             name="Best soot (g/km)", hovertemplate="%{y:.5g} g/km<extra>generation %{x}</extra>"),
+                  row=1, col=1)
+    fig.add_trace(go.Scatter(x=g, y=[h["n_feasible"] for h in hist], mode="lines+markers",
+                             name="Feasible maps in the population"), row=2, col=1)
+    fig.add_trace(go.Scatter(x=g, y=[h["total_evaluations"] for h in hist], mode="lines+markers",
+                             name="Evaluations so far"), row=2, col=1)
+    ys = [h["best_objective"] for h in hist if finite(h["best_objective"])]
+    if ys and max(ys) - min(ys) <= 1e-9 * max(abs(max(ys)), 1e-30):   # flat: Plotly would show +-1
+        pad = 0.02 * abs(ys[0]) or 1.0
+        fig.update_yaxes(range=[ys[0] - pad, ys[0] + pad], row=1, col=1)
+    fig.update_yaxes(title_text="Best soot (g/km)", row=1, col=1)
+    fig.update_yaxes(title_text="Count", row=2, col=1)
+    fig.update_xaxes(title_text="Generation", row=2, col=1)
+    fig.update_layout(template="plotly_white", height=520, margin={"l": 70, "r": 20, "t": 30, "b": 50})
+    return fig
 
 
 # ------------------------------------------------------------------------------------------ calibration
@@ -594,8 +610,6 @@ def _channel_axis(c: str) -> tuple[str, str, float, float]:
 def calibration_page(rep: dict, traces=None, title: str | None = None) -> Page:
     """The report of a calibration from its ``report.json`` (and ``fit_traces.csv`` as a DataFrame with
     ``time_s``, ``holdout`` and per channel ``C_measured``, ``C_before``, ``C_after``)."""
-    import plotly.graph_objects as go
-    from plotly.subplots import make_subplots
     model = rep.get("model", "?")
     d = rep.get("data", {})
     page = Page(title or f"Calibration report: {model}",
@@ -622,34 +636,7 @@ def calibration_page(rep: dict, traces=None, title: str | None = None) -> Page:
     if traces is not None and len(traces) and chans:
         t = traces["time_s"].to_numpy()
         for kind in ("fit", "residual"):
-            fig = make_subplots(rows=len(chans), cols=1, shared_xaxes=True, vertical_spacing=0.07)
-            for i, c in enumerate(chans, start=1):
-                lab, du, f, o = _channel_axis(c)
-                if f"{c}_measured" not in traces:
-                    continue
-                m = traces[f"{c}_measured"].to_numpy()
-                b = traces[f"{c}_before"].to_numpy()
-                a = traces[f"{c}_after"].to_numpy()
-                if kind == "fit":
-                    series = [("Measured", m * f + o, "#222", "solid"), ("Model before", b * f + o, "#1f77b4", "solid"),
-                              ("Model after", a * f + o, "#d62728", "dash")]
-                    ytitle = f"{lab} ({du})"
-                else:
-                    series = [("Residual before (measured - model)", (m - b) * f, "#1f77b4", "solid"),
-                              ("Residual after (measured - model)", (m - a) * f, "#d62728", "solid")]
-                    ytitle = f"{lab} residual ({du})"
-                for name, y, col, dash in series:
-                    fig.add_trace(go.Scatter(x=t, y=y, mode="lines", name=name, legendgroup=name, showlegend=(i == 1),
-                                             line={"width": 1.1, "color": col, "dash": dash},
-                                             hovertemplate=f"%{{y:.4g}} {du}<br>t = %{{x:.1f}} s<extra>{esc(name)}</extra>"),
-                                  row=i, col=1)
-                fig.update_yaxes(title_text=ytitle, row=i, col=1)
-            for a0, b0 in hold:
-                fig.add_vrect(x0=a0, x1=b0, fillcolor="#999", opacity=0.15, line_width=0, layer="below")
-            fig.update_xaxes(title_text="Time (s)", row=len(chans), col=1)
-            fig.update_layout(template="plotly_white", height=160 + 260 * len(chans),
-                              margin={"l": 70, "r": 20, "t": 30, "b": 50},
-                              legend={"orientation": "h", "y": 1.02, "yanchor": "bottom"}, hovermode="x unified")
+            fig = _fit_figure(traces, t, chans, hold, kind)
             page.figure(fig, "Fit before and after" if kind == "fit" else "Residuals before and after", time_axis=True,
                         note="Grey bands: held-out data (not used in the fit). Drag to zoom, double-click to reset.")
     else:
@@ -657,42 +644,85 @@ def calibration_page(rep: dict, traces=None, title: str | None = None) -> Page:
                                               '(written by newer versions): see the PNG figures beside it.</p>')
     rounds = rep.get("rounds") or []
     if rounds:
-        fig = make_subplots(rows=len(rounds), cols=1, vertical_spacing=0.12,
-                            subplot_titles=[f"Round {rd['round']}: on top of {', '.join(rd['on_top_of']) or 'the baseline'}"
-                                            f" — selected {rd.get('selected') or 'none'}" for rd in rounds])
-        n = 0
-        for i, rd in enumerate(rounds, start=1):
-            cs = sorted(rd["candidates"], key=lambda c: c["score"]) + rd.get("pairs", [])
-            n += len(cs)
-            fig.add_trace(go.Bar(y=[c["name"] for c in cs], x=[c["score"] for c in cs], orientation="h",
-                                 marker={"color": ["#2ca02c" if c["passed"] else "#b0b0b0" for c in cs]},
-                                 name=f"round {rd['round']}", showlegend=False,
-                                 customdata=[c["reason"] or "passes" for c in cs],
-                                 hovertemplate="score %{x:.3f}<br>%{customdata}<extra>%{y}</extra>"), row=i, col=1)
-            fig.add_vline(x=rd["current_score"], line_color="#222", row=i, col=1)
-            fig.update_xaxes(title_text="Held-out score (current model = its line; lower is better)", row=i, col=1)
-        fig.update_layout(template="plotly_white", height=120 + 28 * n + 90 * len(rounds),
-                          margin={"l": 150, "r": 20, "t": 40, "b": 50})
-        page.figure(fig, "Evidence: candidate effects", note="Green: passes the selection rule. Hover a bar for "
-                                                               "the reason.")
-        ev = []
-        for rd in rounds:
-            for c in sorted(rd["candidates"], key=lambda c: c["score"]) + rd.get("pairs", []):
-                own = {k: v for k, v in c["parameters"].items() if k not in rep.get("baseline_parameters", {})}
-                ev.append((rd["round"], c["name"], fmt(c["score"], 3), f"{c['gain']:+.1%}", f"{c['delta_bic']:+.1f}",
-                           ", ".join(f"{k} = {fmt(v)}" for k, v in own.items()),
-                           "selected" if rd.get("selected") == c["name"] else (c.get("reason") or "passes")))
-        r = rep.get("selection_rule") or {}
-        rule = (f"Rule: held-out score gain ≥ {r.get('min_holdout_gain', 0):.0%}, no channel worse by more than "
-                f"{r.get('max_channel_worsening', 0):.0%}, BIC drop ≥ {fmt(r.get('min_bic_drop'))}.") if r else ""
-        page.section("Evidence table", f'<p class="note">{esc(rule)}</p>' + table(
-            ["Round", "Effect", "Held-out score", "Gain", "ΔBIC", "Parameters", "Verdict"], ev, num_cols=[2, 3, 4]))
+        _evidence_sections(page, rep, rounds)
     prm = [(k, fmt(rep.get("baseline_parameters", {}).get(k)), fmt(v), split_unit_text(k))
            for k, v in (rep.get("final_parameters") or {}).items()]
     page.section("Parameters", table(["Parameter", "Baseline", "Final", "Unit (SI)"], prm, num_cols=[1, 2])
                  + (f'<p class="note">Use them with: <code>shevsim run SCENARIO --params '
                     f'{esc(rep["overlay"]["file"])}</code></p>' if rep.get("overlay") else ""))
     return page
+
+
+def _fit_figure(traces, t, chans: list, hold: list, kind: str):
+    """Measured and model channels before/after (``kind`` "fit") or their residuals ("residual"), one
+    panel a channel, held-out intervals shaded."""
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+    fig = make_subplots(rows=len(chans), cols=1, shared_xaxes=True, vertical_spacing=0.07)
+    for i, c in enumerate(chans, start=1):
+        lab, du, f, o = _channel_axis(c)
+        if f"{c}_measured" not in traces:
+            continue
+        m = traces[f"{c}_measured"].to_numpy()
+        b = traces[f"{c}_before"].to_numpy()
+        a = traces[f"{c}_after"].to_numpy()
+        if kind == "fit":
+            series = [("Measured", m * f + o, "#222", "solid"), ("Model before", b * f + o, "#1f77b4", "solid"),
+                      ("Model after", a * f + o, "#d62728", "dash")]
+            ytitle = f"{lab} ({du})"
+        else:
+            series = [("Residual before (measured - model)", (m - b) * f, "#1f77b4", "solid"),
+                      ("Residual after (measured - model)", (m - a) * f, "#d62728", "solid")]
+            ytitle = f"{lab} residual ({du})"
+        for name, y, col, dash in series:
+            fig.add_trace(go.Scatter(x=t, y=y, mode="lines", name=name, legendgroup=name, showlegend=(i == 1),
+                                     line={"width": 1.1, "color": col, "dash": dash},
+                                     hovertemplate=f"%{{y:.4g}} {du}<br>t = %{{x:.1f}} s<extra>{esc(name)}</extra>"),
+                          row=i, col=1)
+        fig.update_yaxes(title_text=ytitle, row=i, col=1)
+    for a0, b0 in hold:
+        fig.add_vrect(x0=a0, x1=b0, fillcolor="#999", opacity=0.15, line_width=0, layer="below")
+    fig.update_xaxes(title_text="Time (s)", row=len(chans), col=1)
+    fig.update_layout(template="plotly_white", height=160 + 260 * len(chans),
+                      margin={"l": 70, "r": 20, "t": 30, "b": 50},
+                      legend={"orientation": "h", "y": 1.02, "yanchor": "bottom"}, hovermode="x unified")
+    return fig
+
+
+def _evidence_sections(page: Page, rep: dict, rounds: list) -> None:
+    """The candidate effects of each selection round: score bars and the evidence table."""
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+    fig = make_subplots(rows=len(rounds), cols=1, vertical_spacing=0.12,
+                        subplot_titles=[f"Round {rd['round']}: on top of {', '.join(rd['on_top_of']) or 'the baseline'}"
+                                        f" — selected {rd.get('selected') or 'none'}" for rd in rounds])
+    n = 0
+    for i, rd in enumerate(rounds, start=1):
+        cs = sorted(rd["candidates"], key=lambda c: c["score"]) + rd.get("pairs", [])
+        n += len(cs)
+        fig.add_trace(go.Bar(y=[c["name"] for c in cs], x=[c["score"] for c in cs], orientation="h",
+                             marker={"color": ["#2ca02c" if c["passed"] else "#b0b0b0" for c in cs]},
+                             name=f"round {rd['round']}", showlegend=False,
+                             customdata=[c["reason"] or "passes" for c in cs],
+                             hovertemplate="score %{x:.3f}<br>%{customdata}<extra>%{y}</extra>"), row=i, col=1)
+        fig.add_vline(x=rd["current_score"], line_color="#222", row=i, col=1)
+        fig.update_xaxes(title_text="Held-out score (current model = its line; lower is better)", row=i, col=1)
+    fig.update_layout(template="plotly_white", height=120 + 28 * n + 90 * len(rounds),
+                      margin={"l": 150, "r": 20, "t": 40, "b": 50})
+    page.figure(fig, "Evidence: candidate effects", note="Green: passes the selection rule. Hover a bar for "
+                                                           "the reason.")
+    ev = []
+    for rd in rounds:
+        for c in sorted(rd["candidates"], key=lambda c: c["score"]) + rd.get("pairs", []):
+            own = {k: v for k, v in c["parameters"].items() if k not in rep.get("baseline_parameters", {})}
+            ev.append((rd["round"], c["name"], fmt(c["score"], 3), f"{c['gain']:+.1%}", f"{c['delta_bic']:+.1f}",
+                       ", ".join(f"{k} = {fmt(v)}" for k, v in own.items()),
+                       "selected" if rd.get("selected") == c["name"] else (c.get("reason") or "passes")))
+    r = rep.get("selection_rule") or {}
+    rule = (f"Rule: held-out score gain ≥ {r.get('min_holdout_gain', 0):.0%}, no channel worse by more than "
+            f"{r.get('max_channel_worsening', 0):.0%}, BIC drop ≥ {fmt(r.get('min_bic_drop'))}.") if r else ""
+    page.section("Evidence table", f'<p class="note">{esc(rule)}</p>' + table(
+        ["Round", "Effect", "Held-out score", "Gain", "ΔBIC", "Parameters", "Verdict"], ev, num_cols=[2, 3, 4]))
 
 
 def split_unit_text(key: str) -> str:
