@@ -254,6 +254,34 @@ def load_cycle(path: str | Path, name: str | None = None, check_units: bool = Tr
         The message names the file, the line (1-based, as in an editor) and the column.
     """
     path = Path(path)
+    text = _read_text(path)
+    rows: list[tuple[int, str]] = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        rows.append((lineno, s))
+    if not rows:
+        raise _fail(path, None, None, "no header and no data (file empty or only comments)")
+    header_line, hs = rows[0]
+    sep = ";" if (";" in hs and "," not in hs) else ("\t" if ("\t" in hs and "," not in hs) else ",")
+    header = [h.strip() for h in _split_row(hs, sep)]
+    idx, factor, declared = _cycle_columns(path, header_line, header)
+    data = rows[1:]
+    if len(data) < 2:
+        raise _fail(path, None, None, f"needs at least 2 data rows, found {len(data)}")
+    t, v, lines = _parse_rows(path, data, sep, idx, factor, declared)
+    step = _check_time_grid(path, t, lines, declared["time_s"])
+    if check_units:
+        check_plausible(path, t, v, lines, declared)
+    offset = float(t[0])
+    # rebuild a clean uniform grid (removes accumulated rounding of the file's times)
+    tt = np.arange(len(t)) * step
+    return Cycle(name=name or path.stem, time_s=tt, speed_mps=v, source=str(path), time_offset_s=offset)
+
+
+def _read_text(path: Path) -> str:
+    """The cycle file as text (UTF-8, byte-order mark dropped); unreadable, binary or too large: an error."""
     from .core.errors import file_problem
     why = file_problem(path, "cycle file", MAX_CYCLE_BYTES)
     if why is not None:
@@ -267,19 +295,12 @@ def load_cycle(path: str | Path, name: str | None = None, check_units: bool = Tr
         raise _fail(path, None, None, f"cannot read cycle file: {exc}") from exc
     if "\x00" in text:
         raise _fail(path, None, None, "contains NUL bytes: not a text CSV (UTF-16 or binary?)")
+    return text
 
-    rows: list[tuple[int, str]] = []
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
-        rows.append((lineno, s))
-    if not rows:
-        raise _fail(path, None, None, "no header and no data (file empty or only comments)")
-    header_line, hs = rows[0]
-    sep = ";" if (";" in hs and "," not in hs) else ("\t" if ("\t" in hs and "," not in hs) else ",")
-    decimal_comma = sep == ";"
-    header = [h.strip() for h in _split_row(hs, sep)]
+
+def _cycle_columns(path: Path, header_line: int, header: list[str]):
+    """Where time and speed stand in the header and the factor to SI of the unit each declares:
+    ``(index, factor, declared column name)`` by canonical name."""
     idx: dict[str, int] = {}
     factor: dict[str, float] = {}
     declared: dict[str, str] = {}
@@ -297,10 +318,13 @@ def load_cycle(path: str | Path, name: str | None = None, check_units: bool = Tr
             raise _fail(path, header_line, col,
                         f"missing column (header is {header}; required: {', '.join(REQUIRED_COLUMNS)}, a unit "
                         f"may be declared instead: {', '.join(alts)}){hint}")
-    data = rows[1:]
-    if len(data) < 2:
-        raise _fail(path, None, None, f"needs at least 2 data rows, found {len(data)}")
+    return idx, factor, declared
 
+
+def _parse_rows(path: Path, data, sep: str, idx: dict, factor: dict, declared: dict):
+    """Time [s] and speed [m/s] of each data row (``(line number, text)``) and the file line numbers;
+    a missing, non-numeric or non-finite value or a negative speed is an error naming line and column."""
+    decimal_comma = sep == ";"
     t = np.empty(len(data))
     v = np.empty(len(data))
     lines = np.empty(len(data), dtype=int)
@@ -324,28 +348,27 @@ def load_cycle(path: str | Path, name: str | None = None, check_units: bool = Tr
             if v[k] < -NEG_SPEED_TOL_MPS:
                 raise _fail(path, lineno, declared["speed_mps"], f"negative speed {float(v[k])!r} m/s")
             v[k] = 0.0
+    return t, v, lines
 
+
+def _check_time_grid(path: Path, t: np.ndarray, lines: np.ndarray, time_col: str) -> float:
+    """Time must increase strictly with a uniform step; returns the step [s]."""
     dt = np.diff(t)
     bad = np.nonzero(dt <= 0)[0]
     if bad.size:
         k = int(bad[0]) + 1
         kind = "duplicate time" if dt[k - 1] == 0 else "time decreases (non-monotonic)"
-        raise _fail(path, int(lines[k]), declared["time_s"],
+        raise _fail(path, int(lines[k]), time_col,
                     f"{kind}: {float(t[k])!r} s after {float(t[k - 1])!r} s on line {int(lines[k - 1])}")
     step = float(dt[0])
     tol = DT_REL_TOL * step + 1e-9
     bad = np.nonzero(np.abs(dt - step) > tol)[0]
     if bad.size:
         k = int(bad[0]) + 1
-        raise _fail(path, int(lines[k]), declared["time_s"],
+        raise _fail(path, int(lines[k]), time_col,
                     f"non-uniform time step (gap?): {dt[k - 1]:.6g} s from {float(t[k - 1])!r} s, "
                     f"the cycle's step is {step:.6g} s")
-    if check_units:
-        check_plausible(path, t, v, lines, declared)
-    offset = float(t[0])
-    # rebuild a clean uniform grid (removes accumulated rounding of the file's times)
-    tt = np.arange(len(t)) * step
-    return Cycle(name=name or path.stem, time_s=tt, speed_mps=v, source=str(path), time_offset_s=offset)
+    return step
 
 
 def cycle_from_arrays(name: str, time_s, speed_mps, source: str = "<arrays>", check_units: bool = True) -> Cycle:
