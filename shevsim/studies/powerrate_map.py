@@ -117,45 +117,12 @@ def run_powerrate_map(problem, runner, cfg: MapStudyConfig | None = None, out_di
     t_start = time.perf_counter()
     stats0 = runner.stats.as_dict()
 
-    # baseline and constant limits (also the comparison of the seed: best constant at the same loss)
-    base_out = runner.evaluate([problem.item(edges, None)], desc="baseline")[0]
-    if is_failed(base_out, cfg.fe_key, cfg.soot_key):
-        raise ShevsimError(f"{problem.describe()}: baseline run failed or lacks "
-                           f"{cfg.fe_key}/{cfg.soot_key}: {base_out}")
-    obj = Objective(base_out[cfg.fe_key], base_out[cfg.soot_key], cfg)
-    log(f"baseline: fuel economy {obj.fe0:.5g} km/l, soot {obj.soot0:.5g} g/km; "
-        f"constraint fuel economy >= {obj.alpha_star:.5g} km/l (-{100 * cfg.fe_loss_max_frac:.2f} %)")
-    const_genomes = [tuple([j] * n_var) for j in range(n_lev)]
-    const_outs = runner.evaluate([problem.item(edges, _rates(levels, g)) for g in const_genomes],
-                                 desc="constant limits")
-    constants = []
-    for j, out in enumerate(const_outs):
-        o, v = obj(out)
-        constants.append({"rate_wps": levels[j], "feasible": v <= 0.0, **obj.changes(out),
-                          "error": failure_reason(out, cfg.fe_key, cfg.soot_key)})
-    feas_const = [(c, g) for c, g in zip(constants, const_genomes) if c["feasible"]]
-    best_const = min(feas_const, key=lambda cg: (cg[0]["soot_g_per_km"], cg[1]))[0] if feas_const else None
+    def items(genomes):
+        return [problem.item(edges, _rates(levels, g)) for g in genomes]
 
-    # step 1: GA
-    def evaluate_batch(genomes, _gen=[0]):
-        outs = runner.evaluate([problem.item(edges, _rates(levels, g)) for g in genomes],
-                               desc=f"GA generation {_gen[0] + 1}/{cfg.ga.generations}")
-        _gen[0] += 1
-        return [obj(o) for o in outs]
-
-    # the first population holds the best feasible constant maps (lowest soot first), so the GA starts
-    # from the comparison it must beat; a quarter of the population at most
-    by_soot = sorted(feas_const, key=lambda cg: (cg[0]["soot_g_per_km"], cg[1]))
-    initial = [g for _, g in by_soot][:max(1, cfg.ga.population // 4)] if cfg.seed_constants else []
-    ga = run_ga([n_lev] * n_var, evaluate_batch, cfg.ga, initial=initial)
-    ranked = [g for g, _, _ in ga.ranked(feasible_only=True)]
-    if not ranked and best_const is not None:   # the GA found nothing feasible: the best constant is the answer
-        ranked = [tuple([levels.index(best_const["rate_wps"])] * n_var)]
-    if not ranked:
-        raise ShevsimError(f"{problem.describe()}: the GA found no map with fuel economy >= {obj.alpha_star:.5g} km/l;"
-                           " widen the levels or relax the fuel-economy constraint")
-    log(f"step 1 GA: {len(ga.evaluated)} distinct maps evaluated, best soot {ga.best_objective:.5g} g/km "
-        f"({100 * (ga.best_objective / obj.soot0 - 1):+.2f} %), map {_rates(levels, ga.best)} W/s")
+    base_out, obj = _baseline(problem, runner, cfg, edges, log)
+    constants, feas_const, best_const = _constant_limits(runner, items, obj, cfg, levels, n_var)
+    ga, ranked = _ga_step(problem, runner, items, obj, cfg, levels, n_var, feas_const, best_const, log)
 
     # step 2: narrowed bounds
     bounds, k_used = narrow_bounds(ranked, [n_lev] * n_var, cfg.top_k, cfg.max_cases, grow=cfg.fill_cases)
@@ -165,23 +132,10 @@ def run_powerrate_map(problem, runner, cfg: MapStudyConfig | None = None, out_di
 
     # step 3: exhaustive search
     es_genomes = exhaustive_genomes(bounds)
-    es_outs = runner.evaluate([problem.item(edges, _rates(levels, g)) for g in es_genomes], desc="exhaustive search")
+    es_outs = runner.evaluate(items(es_genomes), desc="exhaustive search")
     es_scored = [(g, *obj(o), o) for g, o in zip(es_genomes, es_outs)]
     es_ranked = sorted(es_scored, key=lambda r: rank_key(r[1], r[2], r[0]))
-    best_g, best_o, best_v, best_out = es_ranked[0]
-    if best_v > 0:
-        raise ShevsimError(f"{problem.describe()}: no feasible map in the narrowed space (unexpected: it holds the GA's best)")
-    best = {"rates_wps": _rates(levels, best_g), "genome": list(best_g),
-            "kind": "constant" if len(set(best_g)) == 1 else "map", **obj.changes(best_out)}
-    if best_const is not None and best_const["soot_g_per_km"] < best["soot_g_per_km"]:
-        # never report a map worse than the best constant limit it was compared with: the constant is the
-        # answer then, labelled as such
-        j = levels.index(best_const["rate_wps"])
-        best = {"rates_wps": [levels[j]] * n_var, "genome": [j] * n_var, "kind": "constant",
-                **{k: best_const[k] for k in ("fuel_economy_kmpl", "soot_g_per_km", "fe_change_pct",
-                                               "soot_change_pct", "ah_effective_cell_ah")}}
-        log(f"the best constant limit ({best_const['rate_wps'] / 1e3:g} kW/s) beats every map searched: reported as"
-            " the best (kind = constant)")
+    best = _best_of_search(problem, es_ranked, best_const, obj, levels, n_var, log)
     top = [{"rank": i + 1, "rates_wps": _rates(levels, g), **obj.changes(out)}
            for i, (g, o, v, out) in enumerate([r for r in es_ranked if r[2] <= 0][:cfg.n_top])]
     log(f"step 3 exhaustive: best map {best['rates_wps']} W/s: soot {best['soot_change_pct']:+.2f} %, "
@@ -190,17 +144,7 @@ def run_powerrate_map(problem, runner, cfg: MapStudyConfig | None = None, out_di
         log(f"best constant limit at the same constraint: {best_const['rate_wps'] / 1e3:g} kW/s: soot "
             f"{best_const['soot_change_pct']:+.2f} %, fuel economy {best_const['fe_change_pct']:+.3f} %")
     wall = time.perf_counter() - t_start
-    st = runner.stats.as_dict()
-    new = st["new"] - stats0["new"]
-    run_wall = st["wall_s"] - stats0["wall_s"]
-    busy = st["busy_s"] - stats0["busy_s"]
-    perf = {"wall_s": wall, "new_evaluations": new, "cached_evaluations": st["cached"] - stats0["cached"],
-            "evals_per_s": new / run_wall if run_wall > 0 else math.nan, "slots": st["slots"],
-            "parallel_efficiency": busy / (st["slots"] * run_wall) if run_wall > 0 else math.nan,
-            "code_changed_mid_study": st["code_changed_mid_study"],
-            "not_cached_code_mismatch": st["not_cached_code_mismatch"]}
-    log(f"{new} new evaluations in {wall:.1f} s: {perf['evals_per_s']:.3g} evaluations/s, "
-        f"parallel efficiency {perf['parallel_efficiency']:.2f} on {st['slots']} slot(s)")
+    perf = _performance(runner.stats.as_dict(), stats0, wall, log)
     summary = {
         "study": "powerrate_map", "problem": problem.describe(), "config": _cfg_dict(cfg),
         "shevsim_version": shevsim_version(), "code_sha256": code_version(),
@@ -220,6 +164,90 @@ def run_powerrate_map(problem, runner, cfg: MapStudyConfig | None = None, out_di
     if out_dir is not None:
         _write_outputs(Path(out_dir), summary, es_scored, obj, levels, plots)
     return summary
+
+
+def _baseline(problem, runner, cfg: MapStudyConfig, edges, log) -> tuple[dict, Objective]:
+    """Run the baseline map; its fuel economy and soot fix the objective and the constraint."""
+    base_out = runner.evaluate([problem.item(edges, None)], desc="baseline")[0]
+    if is_failed(base_out, cfg.fe_key, cfg.soot_key):
+        raise ShevsimError(f"{problem.describe()}: baseline run failed or lacks "
+                           f"{cfg.fe_key}/{cfg.soot_key}: {base_out}")
+    obj = Objective(base_out[cfg.fe_key], base_out[cfg.soot_key], cfg)
+    log(f"baseline: fuel economy {obj.fe0:.5g} km/l, soot {obj.soot0:.5g} g/km; "
+        f"constraint fuel economy >= {obj.alpha_star:.5g} km/l (-{100 * cfg.fe_loss_max_frac:.2f} %)")
+    return base_out, obj
+
+
+def _constant_limits(runner, items, obj: Objective, cfg: MapStudyConfig, levels, n_var: int):
+    """Every constant limit (the seed's comparison): ``(rows, feasible (row, genome) pairs, best feasible row)``."""
+    const_genomes = [tuple([j] * n_var) for j in range(len(levels))]
+    const_outs = runner.evaluate(items(const_genomes), desc="constant limits")
+    constants = []
+    for j, out in enumerate(const_outs):
+        o, v = obj(out)
+        constants.append({"rate_wps": levels[j], "feasible": v <= 0.0, **obj.changes(out),
+                          "error": failure_reason(out, cfg.fe_key, cfg.soot_key)})
+    feas_const = [(c, g) for c, g in zip(constants, const_genomes) if c["feasible"]]
+    best_const = min(feas_const, key=lambda cg: (cg[0]["soot_g_per_km"], cg[1]))[0] if feas_const else None
+    return constants, feas_const, best_const
+
+
+def _ga_step(problem, runner, items, obj: Objective, cfg: MapStudyConfig, levels, n_var: int, feas_const,
+             best_const, log):
+    """Step 1: the GA over level indices; returns it and its feasible maps ranked (best first)."""
+    def evaluate_batch(genomes, _gen=[0]):
+        outs = runner.evaluate(items(genomes), desc=f"GA generation {_gen[0] + 1}/{cfg.ga.generations}")
+        _gen[0] += 1
+        return [obj(o) for o in outs]
+
+    # the first population holds the best feasible constant maps (lowest soot first), so the GA starts
+    # from the comparison it must beat; a quarter of the population at most
+    by_soot = sorted(feas_const, key=lambda cg: (cg[0]["soot_g_per_km"], cg[1]))
+    initial = [g for _, g in by_soot][:max(1, cfg.ga.population // 4)] if cfg.seed_constants else []
+    ga = run_ga([len(levels)] * n_var, evaluate_batch, cfg.ga, initial=initial)
+    ranked = [g for g, _, _ in ga.ranked(feasible_only=True)]
+    if not ranked and best_const is not None:   # the GA found nothing feasible: the best constant is the answer
+        ranked = [tuple([levels.index(best_const["rate_wps"])] * n_var)]
+    if not ranked:
+        raise ShevsimError(f"{problem.describe()}: the GA found no map with fuel economy >= {obj.alpha_star:.5g} km/l;"
+                           " widen the levels or relax the fuel-economy constraint")
+    log(f"step 1 GA: {len(ga.evaluated)} distinct maps evaluated, best soot {ga.best_objective:.5g} g/km "
+        f"({100 * (ga.best_objective / obj.soot0 - 1):+.2f} %), map {_rates(levels, ga.best)} W/s")
+    return ga, ranked
+
+
+def _best_of_search(problem, es_ranked, best_const, obj: Objective, levels, n_var: int, log) -> dict:
+    """The best map of the exhaustive search, or the best constant limit where that is better."""
+    best_g, best_o, best_v, best_out = es_ranked[0]
+    if best_v > 0:
+        raise ShevsimError(f"{problem.describe()}: no feasible map in the narrowed space (unexpected: it holds the GA's best)")
+    best = {"rates_wps": _rates(levels, best_g), "genome": list(best_g),
+            "kind": "constant" if len(set(best_g)) == 1 else "map", **obj.changes(best_out)}
+    if best_const is not None and best_const["soot_g_per_km"] < best["soot_g_per_km"]:
+        # never report a map worse than the best constant limit it was compared with: the constant is the
+        # answer then, labelled as such
+        j = levels.index(best_const["rate_wps"])
+        best = {"rates_wps": [levels[j]] * n_var, "genome": [j] * n_var, "kind": "constant",
+                **{k: best_const[k] for k in ("fuel_economy_kmpl", "soot_g_per_km", "fe_change_pct",
+                                               "soot_change_pct", "ah_effective_cell_ah")}}
+        log(f"the best constant limit ({best_const['rate_wps'] / 1e3:g} kW/s) beats every map searched: reported as"
+            " the best (kind = constant)")
+    return best
+
+
+def _performance(st: dict, stats0: dict, wall: float, log) -> dict:
+    """Evaluations, cache hits and parallel efficiency of this study (runner statistics since ``stats0``)."""
+    new = st["new"] - stats0["new"]
+    run_wall = st["wall_s"] - stats0["wall_s"]
+    busy = st["busy_s"] - stats0["busy_s"]
+    perf = {"wall_s": wall, "new_evaluations": new, "cached_evaluations": st["cached"] - stats0["cached"],
+            "evals_per_s": new / run_wall if run_wall > 0 else math.nan, "slots": st["slots"],
+            "parallel_efficiency": busy / (st["slots"] * run_wall) if run_wall > 0 else math.nan,
+            "code_changed_mid_study": st["code_changed_mid_study"],
+            "not_cached_code_mismatch": st["not_cached_code_mismatch"]}
+    log(f"{new} new evaluations in {wall:.1f} s: {perf['evals_per_s']:.3g} evaluations/s, "
+        f"parallel efficiency {perf['parallel_efficiency']:.2f} on {st['slots']} slot(s)")
+    return perf
 
 
 def _cfg_dict(cfg: MapStudyConfig) -> dict:
