@@ -610,7 +610,7 @@ class FMUComponent(Component):
                  parameters: Mapping[str, Any] | None = None,
                  start_values: Mapping[str, Any] | None = None,
                  expected_units: type | Mapping[str, str] | None = None,
-                 feedthrough: Mapping[str, Sequence[str]] | None = None,
+                 feedthrough: Mapping[str, Sequence[str]] | None = None, *,
                  validate: bool = True, tolerance: float | None = None,
                  interface: str = "auto", solver: str = "cvode", max_step_s: float | None = None,
                  step_timeout_s: float | None = DEFAULT_STEP_TIMEOUT_S):
@@ -674,21 +674,10 @@ class FMUComponent(Component):
 
     # ------------------------------------------------------------------ ports
     def _build_ports(self, name: str, mapping: Mapping[str, str], expected, feedthrough) -> None:
-        from ..core.units import convertible
-
         md = self.model_description
         by_name = {v.name: v for v in md.modelVariables}
         self._vars_by_name = by_name
-        for fmu_name in mapping:
-            if fmu_name not in by_name:
-                raise FMUMappingError(
-                    f"{self.path}: mapping for component '{name}' names FMU variable '{fmu_name}', "
-                    f"which the FMU does not have{_suggest(fmu_name, by_name)}; FMU inputs/outputs: "
-                    f"{', '.join(v.name for v in md.modelVariables if v.causality in ('input', 'output'))}")
-            if by_name[fmu_name].causality not in ("input", "output", "parameter"):
-                raise FMUMappingError(
-                    f"{self.path}: mapping for component '{name}': FMU variable '{fmu_name}' has causality "
-                    f"'{by_name[fmu_name].causality}'; only inputs, outputs and parameters can be mapped")
+        self._check_mapping(name, mapping, by_name)
         expected_units = expected_units_of(expected)
         #: String/Binary/Clock inputs, outputs and parameters: settable start values, never ports
         self.value_variables: dict[str, dict] = {}
@@ -701,53 +690,92 @@ class FMUComponent(Component):
         inputs: list = []
         outputs: list = []
         for v in md.modelVariables:
-            if v.causality not in ("input", "output", "parameter"):
-                continue
-            if v.type not in PORT_TYPES:
-                # String/Binary/Clock: not a port; its start value is settable (`parameters`), a connection
-                # to or from it is refused by name (Master: `not_connectable`)
-                self.value_variables[v.name] = {"causality": v.causality, "type": v.type, "start": v.start,
-                                                "description": v.description or ""}
-                continue
-            try:
-                shape = variable_shape(v)
-            except FMUUnsupportedError as exc:
-                raise FMUUnsupportedError(f"{self.path}: {exc}") from None
-            port = mapping.get(v.name, v.name)
-            ports = element_names(port, shape)
-            for p in ports + ((port,) if shape else ()):
-                if p in self._fmu_of:
-                    raise FMUMappingError(f"{self.path}: component '{name}': port name '{p}' used twice "
-                                          f"(FMU variables '{self._fmu_of[p]}' and '{v.name}')")
-            self._port_of[v.name] = port
-            self._ports_of[v.name] = ports
-            self._fmu_of[port] = v.name
-            for i, p in enumerate(ports):
-                self._fmu_of[p] = v.name
-                self._elem_of[p] = i
-            unit = var_unit(v)
-            if port in expected_units and v.causality != "parameter":
-                want = expected_units[port]
-                if not unit:
-                    unit = want
-                elif canonical_unit(unit) != canonical_unit(want) and \
-                        not convertible(unit, want, self.unit_definitions):
-                    raise FMUUnitError(
-                        f"{self.path}: component '{name}': FMU variable '{v.name}' (port '{port}') has unit "
-                        f"'{unit}' but the port it replaces declares '{want}' "
-                        f"(canonical '{canonical_unit(unit)}' vs '{canonical_unit(want)}': another dimension)")
-            starts = _starts(v.start, len(ports))
-            entry = (v, ports, unit, starts)
-            for p in ports:
-                self.port_units[p] = unit or "1"
-            if v.causality == "input":
-                inputs.append(entry)
-            elif v.causality == "output":
-                outputs.append(entry)
-            else:
-                for p, s in zip(ports, starts):
-                    variables.append(Variable(p, "parameter", unit or "1", s, v.description or ""))
+            self._add_variable(name, v, mapping, expected_units, (inputs, outputs, variables))
         input_ports = [p for _, ps, _, _ in inputs for p in ps]
+        deps = self._output_dependencies(name, inputs, outputs, input_ports, feedthrough)
+        for v, ports, unit, starts in inputs:
+            for p, s in zip(ports, starts):
+                variables.append(Variable(p, "input", unit or "1", s, v.description or ""))
+        for v, ports, unit, starts in outputs:
+            for p, s in zip(ports, starts):
+                variables.append(Variable(p, "output", unit or "1", s, v.description or "",
+                                          deps.get(p, tuple(input_ports))))
+        self._variables = tuple(variables)
+        self._inputs = inputs
+        self._outputs = outputs
+
+    def _check_mapping(self, name: str, mapping: Mapping[str, str], by_name: dict) -> None:
+        """Every mapped FMU variable exists and is an input, output or parameter."""
+        md = self.model_description
+        for fmu_name in mapping:
+            if fmu_name not in by_name:
+                raise FMUMappingError(
+                    f"{self.path}: mapping for component '{name}' names FMU variable '{fmu_name}', "
+                    f"which the FMU does not have{_suggest(fmu_name, by_name)}; FMU inputs/outputs: "
+                    f"{', '.join(v.name for v in md.modelVariables if v.causality in ('input', 'output'))}")
+            if by_name[fmu_name].causality not in ("input", "output", "parameter"):
+                raise FMUMappingError(
+                    f"{self.path}: mapping for component '{name}': FMU variable '{fmu_name}' has causality "
+                    f"'{by_name[fmu_name].causality}'; only inputs, outputs and parameters can be mapped")
+
+    def _add_variable(self, name: str, v, mapping: Mapping[str, str], expected_units: dict, into) -> None:
+        """Register one model variable: its port names (array elements as ``name[i]``), unit (checked
+        against the expected one) and start values; appended to ``into = (inputs, outputs, parameters)``.
+        String/Binary/Clock variables become :attr:`value_variables` instead."""
+        from ..core.units import convertible
+        inputs, outputs, variables = into
+        if v.causality not in ("input", "output", "parameter"):
+            return
+        if v.type not in PORT_TYPES:
+            # String/Binary/Clock: not a port; its start value is settable (`parameters`), a connection
+            # to or from it is refused by name (Master: `not_connectable`)
+            self.value_variables[v.name] = {"causality": v.causality, "type": v.type, "start": v.start,
+                                            "description": v.description or ""}
+            return
+        try:
+            shape = variable_shape(v)
+        except FMUUnsupportedError as exc:
+            raise FMUUnsupportedError(f"{self.path}: {exc}") from None
+        port = mapping.get(v.name, v.name)
+        ports = element_names(port, shape)
+        for p in ports + ((port,) if shape else ()):
+            if p in self._fmu_of:
+                raise FMUMappingError(f"{self.path}: component '{name}': port name '{p}' used twice "
+                                      f"(FMU variables '{self._fmu_of[p]}' and '{v.name}')")
+        self._port_of[v.name] = port
+        self._ports_of[v.name] = ports
+        self._fmu_of[port] = v.name
+        for i, p in enumerate(ports):
+            self._fmu_of[p] = v.name
+            self._elem_of[p] = i
+        unit = var_unit(v)
+        if port in expected_units and v.causality != "parameter":
+            want = expected_units[port]
+            if not unit:
+                unit = want
+            elif canonical_unit(unit) != canonical_unit(want) and \
+                    not convertible(unit, want, self.unit_definitions):
+                raise FMUUnitError(
+                    f"{self.path}: component '{name}': FMU variable '{v.name}' (port '{port}') has unit "
+                    f"'{unit}' but the port it replaces declares '{want}' "
+                    f"(canonical '{canonical_unit(unit)}' vs '{canonical_unit(want)}': another dimension)")
+        starts = _starts(v.start, len(ports))
+        entry = (v, ports, unit, starts)
+        for p in ports:
+            self.port_units[p] = unit or "1"
+        if v.causality == "input":
+            inputs.append(entry)
+        elif v.causality == "output":
+            outputs.append(entry)
+        else:
+            for p, s in zip(ports, starts):
+                variables.append(Variable(p, "parameter", unit or "1", s, v.description or ""))
+
+    def _output_dependencies(self, name: str, inputs, outputs, input_ports: list,
+                             feedthrough) -> dict[str, tuple[str, ...]]:
+        """Direct dependencies of each output port: ``<ModelStructure>`` (absent: every input), then the
+        ``feedthrough`` overrides, checked."""
+        md = self.model_description
         # direct dependencies of outputs (ModelStructure); absent => depends on all inputs
         deps: dict[str, tuple[str, ...]] = {}
         for unknown in md.outputs:
@@ -771,16 +799,7 @@ class FMUComponent(Component):
                 raise FMUMappingError(f"{self.path}: component '{name}': feedthrough of '{out_port}' names "
                                       f"unknown input port(s) {bad}")
             deps[out_port] = tuple(ins)
-        for v, ports, unit, starts in inputs:
-            for p, s in zip(ports, starts):
-                variables.append(Variable(p, "input", unit or "1", s, v.description or ""))
-        for v, ports, unit, starts in outputs:
-            for p, s in zip(ports, starts):
-                variables.append(Variable(p, "output", unit or "1", s, v.description or "",
-                                          deps.get(p, tuple(input_ports))))
-        self._variables = tuple(variables)
-        self._inputs = inputs
-        self._outputs = outputs
+        return deps
 
     def variables(self) -> tuple[Variable, ...]:
         """Ports built from the model description (inputs, outputs and parameters)."""
