@@ -173,34 +173,13 @@ def export_component(type_name_or_class: Any, params_path: str | Path | None, ou
     if params is None and params_path is not None:
         raise ScenarioError(f"{params_path}: component {target} takes no parameters")
     # instantiate once here: a component that cannot even be built fails now, not inside the FMU
-    probe = cls("probe", params)
-    ports = [v for v in probe.variables() if v.causality in ("input", "output")]
-    bad = [k for k in (start_values or {}) if k not in {v.name for v in ports if v.causality == "input"}]
-    if bad:
-        raise FMUError(f"fmu export: start values for unknown input(s) {bad} of {target}")
-    if not ports:
-        raise FMUError(f"fmu export: {target} declares no inputs or outputs")
+    _check_ports(cls, params, start_values, target)
     model = model_name or _model_name(cls)
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", model):
         raise FMUError(f"fmu export: model name {model!r} must be a Python identifier")
     with tempfile.TemporaryDirectory(prefix="shevsim_export_") as tmp:
         tmp = Path(tmp)
-        values: dict[str, Any] = {}
-        resource_files: list[str] = []
-        extra: list[Path] = []
-        if params is not None:
-            for f in dataclasses.fields(params):
-                v = getattr(params, f.name)
-                if f.name.endswith("_file") and isinstance(v, str) and v and Path(v).is_file():
-                    dest = tmp / "shevsim_data" / Path(v).name
-                    dest.parent.mkdir(exist_ok=True)
-                    shutil.copy2(v, dest)
-                    values[f.name] = f"shevsim_data/{Path(v).name}"
-                    resource_files.append(f.name)
-                else:
-                    values[f.name] = _jsonable(v)
-        if resource_files:
-            extra.append(tmp / "shevsim_data")
+        values, resource_files, extra = _stage_parameters(params, tmp)
         requires = sorted(set(required_packages(module)) | set(extra_requires))  # (cached per module)
         if isinstance(step_multiple, bool) or not isinstance(step_multiple, int) or step_multiple < 1:
             raise FMUError(f"fmu export: step_multiple must be an integer >= 1, got {step_multiple!r}")
@@ -217,13 +196,54 @@ def export_component(type_name_or_class: Any, params_path: str | Path | None, ou
         script.write_text(slave_script(target, model, fmi_version, requires))
         # keep the script's folder out of the project files (pythonfmu copies project files
         # into resources/); put them in a sibling folder
-        proj = tmp / "project"
-        proj.mkdir()
-        moved = []
-        for p in extra:
-            dest = proj / p.name
-            shutil.move(str(p), dest)
-            moved.append(dest)
-        moved += _bundle_sources(proj)
+        moved = _stage_project(tmp, extra)
         return build_python_fmu(script, out_path, fmi_version=fmi_version, handle_state=True,
                                 project_files=tuple(moved))
+
+
+def _check_ports(cls, params, start_values, target: str) -> None:
+    """Build the component once (a component that cannot be built fails here, not inside the FMU): it must
+    have ports, and the start values must name its inputs."""
+    probe = cls("probe", params)
+    ports = [v for v in probe.variables() if v.causality in ("input", "output")]
+    bad = [k for k in (start_values or {}) if k not in {v.name for v in ports if v.causality == "input"}]
+    if bad:
+        raise FMUError(f"fmu export: start values for unknown input(s) {bad} of {target}")
+    if not ports:
+        raise FMUError(f"fmu export: {target} declares no inputs or outputs")
+
+
+def _stage_parameters(params, tmp: Path) -> tuple[dict[str, Any], list[str], list[Path]]:
+    """The parameters as JSON values, their ``*_file`` data copied into ``tmp/shevsim_data``:
+    ``(values, names of file parameters, files to bundle)``."""
+    values: dict[str, Any] = {}
+    resource_files: list[str] = []
+    extra: list[Path] = []
+    if params is not None:
+        for f in dataclasses.fields(params):
+            v = getattr(params, f.name)
+            if f.name.endswith("_file") and isinstance(v, str) and v and Path(v).is_file():
+                dest = tmp / "shevsim_data" / Path(v).name
+                dest.parent.mkdir(exist_ok=True)
+                shutil.copy2(v, dest)
+                values[f.name] = f"shevsim_data/{Path(v).name}"
+                resource_files.append(f.name)
+            else:
+                values[f.name] = _jsonable(v)
+    if resource_files:
+        extra.append(tmp / "shevsim_data")
+    return values, resource_files, extra
+
+
+def _stage_project(tmp: Path, extra: list[Path]) -> list[Path]:
+    """Move the files to bundle into a folder beside the slave script (pythonfmu copies project files into
+    ``resources/``: the script's own folder stays out), plus shevsim's sources."""
+    proj = tmp / "project"
+    proj.mkdir()
+    moved = []
+    for p in extra:
+        dest = proj / p.name
+        shutil.move(str(p), dest)
+        moved.append(dest)
+    moved += _bundle_sources(proj)
+    return moved
