@@ -210,24 +210,7 @@ def import_ssp(ssp_path: str | Path, out_dir: str | Path, step_s: float | None =
         if system is None:
             raise ScenarioError(f"{ssp_path}: SystemStructure.ssd has no <ssd:System>")
         sysname = system.get("name") or root.get("name") or ssp_path.stem
-        comps = []
-        for el in system.findall("ssd:Elements/ssd:Component", NS):
-            name, source = el.get("name"), el.get("source") or ""
-            if not name or not source.endswith(".fmu"):
-                raise ScenarioError(f"{ssp_path}: component '{name}': only FMU components are supported "
-                                    f"(source '{source}')")
-            if source not in names:
-                raise ScenarioError(f"{ssp_path}: component '{name}': source '{source}' is not in the package")
-            params = {}
-            for p in el.findall("ssd:ParameterBindings/ssd:ParameterBinding/ssd:ParameterValues/"
-                                "ssv:ParameterSet/ssv:Parameters/ssv:Parameter", NS):
-                for typ in ("Real", "Integer", "Boolean"):
-                    node = p.find(f"ssv:{typ}", NS)
-                    if node is not None:
-                        val = node.get("value")
-                        params[p.get("name")] = (float(val) if typ == "Real" else int(val) if typ == "Integer"
-                                                 else val.strip().lower() == "true")
-            comps.append((name, source, params))
+        comps = _ssp_components(system, names, ssp_path)
         if not comps:
             raise ScenarioError(f"{ssp_path}: the system has no components")
         conns = []
@@ -241,21 +224,58 @@ def import_ssp(ssp_path: str | Path, out_dir: str | Path, step_s: float | None =
         de = root.find("ssd:DefaultExperiment", NS)
         t0 = float(de.get("startTime", 0.0)) if de is not None else 0.0
         stop = float(de.get("stopTime")) if de is not None and de.get("stopTime") else None
-        out_dir.mkdir(parents=True, exist_ok=True)
-        # never overwrite what a user wrote: files of the same names are replaced only when the
-        # folder holds a previous import (its scenario file starts with our header)
-        scen_file = out_dir / f"{sysname}.toml"
-        ours = scen_file.is_file() and scen_file.read_text(errors="replace").startswith(_HEADER)
-        clash = [f.name for f in [scen_file] + [out_dir / f"{n}.fmu" for n, _, _ in comps] if f.exists()]
-        if clash and not ours:
-            raise ScenarioError(f"{ssp_path}: {out_dir} already holds {', '.join(clash)} (not from an earlier "
-                                f"import); choose another folder")
-        for name, source, _ in comps:
-            (out_dir / f"{name}.fmu").write_bytes(zf.read(source))
+        _extract_fmus(zf, ssp_path, out_dir, sysname, comps)
     step = step_s or meta.get("step_s") or ((stop - t0) / 100.0 if stop else None)
     if not step:
         raise ScenarioError(f"{ssp_path}: no communication step (no shevsim annotation and no stop time): "
                             f"give step_s")
+    lines = _scenario_lines(sysname, step, t0, stop, meta, comps, conns)
+    scen = out_dir / f"{sysname}.toml"
+    scen.write_text("\n".join(lines) + "\n")
+    return scen
+
+
+def _ssp_components(system, names: list[str], ssp_path: Path) -> list[tuple[str, str, dict]]:
+    """The system's FMU components: ``(name, source in the package, bound parameter values)``."""
+    comps = []
+    for el in system.findall("ssd:Elements/ssd:Component", NS):
+        name, source = el.get("name"), el.get("source") or ""
+        if not name or not source.endswith(".fmu"):
+            raise ScenarioError(f"{ssp_path}: component '{name}': only FMU components are supported "
+                                f"(source '{source}')")
+        if source not in names:
+            raise ScenarioError(f"{ssp_path}: component '{name}': source '{source}' is not in the package")
+        params = {}
+        for p in el.findall("ssd:ParameterBindings/ssd:ParameterBinding/ssd:ParameterValues/"
+                            "ssv:ParameterSet/ssv:Parameters/ssv:Parameter", NS):
+            for typ in ("Real", "Integer", "Boolean"):
+                node = p.find(f"ssv:{typ}", NS)
+                if node is not None:
+                    val = node.get("value")
+                    params[p.get("name")] = (float(val) if typ == "Real" else int(val) if typ == "Integer"
+                                             else val.strip().lower() == "true")
+        comps.append((name, source, params))
+    return comps
+
+
+def _extract_fmus(zf, ssp_path: Path, out_dir: Path, sysname: str, comps) -> None:
+    """Write each component's FMU into ``out_dir``, refusing files there an earlier import did not write."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    # never overwrite what a user wrote: files of the same names are replaced only when the
+    # folder holds a previous import (its scenario file starts with our header)
+    scen_file = out_dir / f"{sysname}.toml"
+    ours = scen_file.is_file() and scen_file.read_text(errors="replace").startswith(_HEADER)
+    clash = [f.name for f in [scen_file] + [out_dir / f"{n}.fmu" for n, _, _ in comps] if f.exists()]
+    if clash and not ours:
+        raise ScenarioError(f"{ssp_path}: {out_dir} already holds {', '.join(clash)} (not from an earlier "
+                            f"import); choose another folder")
+    for name, source, _ in comps:
+        (out_dir / f"{name}.fmu").write_bytes(zf.read(source))
+
+
+def _scenario_lines(sysname: str, step: float, t0: float, stop: float | None, meta: dict, comps,
+                    conns) -> list[str]:
+    """The scenario TOML that runs the imported system (header first: marks a file as ours)."""
     lines = [_HEADER, "[scenario]",
              f"name = {toml_value(sysname)}", f"step_s = {step!r}",
              f"method = {toml_value(meta.get('method', 'jacobi'))}", f"t0_s = {t0!r}"]
@@ -273,6 +293,4 @@ def import_ssp(ssp_path: str | Path, out_dir: str | Path, step_s: float | None =
     lines += ["", "[connections]"]
     for dst, dport, src, sport in conns:
         lines.append(f"{toml_value(dst + '.' + dport)} = {toml_value(src + '.' + sport)}")
-    scen = out_dir / f"{sysname}.toml"
-    scen.write_text("\n".join(lines) + "\n")
-    return scen
+    return lines
