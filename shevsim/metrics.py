@@ -524,6 +524,39 @@ def compute_metrics(df, params: Mapping | None = None) -> dict:
         notes.append(f"the vehicle did not move (distance {m['distance_km']:g} km): per-distance metrics "
                      f"(L/100 km, g/km) are null")
 
+    cells_p = _cells_parallel(opts, parameters)
+    m["cells_parallel"] = cells_p
+
+    # fuel economy A.1
+    T, t_src = _cycle_duration(df, opts, parameters)
+    m["cycle_duration_s"] = T
+    if T is not None:
+        m["n_cycles"] = m["duration_s"] / T
+    _fuel_metrics(m, df, opts, T, density, notes)
+    if "battery.soc_pct" in df.columns:
+        soc = _col(df, "battery.soc_pct")
+        m.update(soc_start_pct=float(soc[0]), soc_end_pct=float(soc[-1]), delta_soc_pct=float(soc[-1] - soc[0]),
+                 soc_min_pct=float(soc.min()), soc_max_pct=float(soc.max()))
+
+    _soot_metrics(m, df)
+    _battery_current_metrics(m, df, opts, cells_p, notes)
+
+    if _has(df, "vehicle.speed_mps", "cycle.speed_ref_mps"):
+        m.update(speed_trace_miss(df))
+    else:
+        notes.append("speed-trace miss skipped: needs vehicle.speed_mps and cycle.speed_ref_mps")
+
+    eb = energy_balance(df)
+    m["energy_balance"] = eb
+    m["energy_closure_error_frac"] = eb["closure_error_frac"]
+    if eb["missing"]:
+        notes.append(f"energy balance incomplete: missing {eb['missing']}")
+    m["notes"] = notes
+    return _clean(m)
+
+
+def _cells_parallel(opts: Mapping, parameters: Mapping) -> int:
+    """Cells in parallel: the option, else the battery parameter with 'parallel' in its name, else the default."""
     cells_p = opts.get("cells_parallel")
     if cells_p is None:
         bp = parameters.get("battery", {}) if isinstance(parameters, Mapping) else {}
@@ -532,13 +565,11 @@ def compute_metrics(df, params: Mapping | None = None) -> dict:
                 cells_p = v
                 break
     cells_p = int(cells_p or CELLS_PARALLEL)
-    m["cells_parallel"] = cells_p
+    return cells_p
 
-    # fuel economy A.1
-    T, t_src = _cycle_duration(df, opts, parameters)
-    m["cycle_duration_s"] = T
-    if T is not None:
-        m["n_cycles"] = m["duration_s"] / T
+
+def _fuel_metrics(m: dict, df, opts: Mapping, T: float | None, density: float, notes: list) -> None:
+    """Fuel economy: SOC-sustained windows (A.1), per-cycle summary and the delta-SOC corrected figures."""
     if T is not None and m["distance_km"] is not None and _has(df, "battery.soc_pct", "engine_generator.fuel_mass_g"):
         fe = fuel_economy_soc_sustained(df, T, float(opts.get("soc_tolerance_pct", 0.0)), density)
         m["fuel_economy_soc_sustained_kmpl"] = fe["fuel_economy_kmpl"]
@@ -567,11 +598,10 @@ def compute_metrics(df, params: Mapping | None = None) -> dict:
         m["fuel_equivalent_g"] = c["fuel_equivalent_g"]
         if c["fuel_economy_kmpl"] is None:
             notes.append("delta-SOC corrected fuel economy unavailable (battery energy or EG efficiency missing)")
-    if "battery.soc_pct" in df.columns:
-        soc = _col(df, "battery.soc_pct")
-        m.update(soc_start_pct=float(soc[0]), soc_end_pct=float(soc[-1]), delta_soc_pct=float(soc[-1] - soc[0]),
-                 soc_min_pct=float(soc.min()), soc_max_pct=float(soc.max()))
 
+
+def _soot_metrics(m: dict, df) -> None:
+    """Soot per km, per fuel and delta-SOC corrected (needs distance and the soot counter)."""
     if m["distance_km"] and "engine_generator.soot_mass_mg" in df.columns:
         m["soot_g_per_km"] = soot_g_per_km(df)
         m["soot_mass_g"] = _delta(df, "engine_generator.soot_mass_mg") / 1000.0
@@ -580,6 +610,9 @@ def compute_metrics(df, params: Mapping | None = None) -> dict:
             m["soot_dsoc_corrected_g_per_km"] = soot_dsoc_corrected(
                 1000.0 * m["soot_mass_g"], m["fuel_mass_g"], m.get("fuel_equivalent_g"), m["distance_km"])
 
+
+def _battery_current_metrics(m: dict, df, opts: Mapping, cells_p: int, notes: list) -> None:
+    """Effective Ah processed per cell, the current histogram, cell RMS and peak current."""
     if "battery.current_a" in df.columns:
         m.update(effective_ah_processed(df, cells_p, str(opts.get("ah_weighting", "constant")),
                                         float(opts.get("ah_severity_factor", 1.0))))
@@ -589,19 +622,6 @@ def compute_metrics(df, params: Mapping | None = None) -> dict:
         m["cell_current_max_abs_a"] = float(np.max(np.abs(i)))
     else:
         notes.append("no battery.current_a: Ah-processed and current histogram skipped")
-
-    if _has(df, "vehicle.speed_mps", "cycle.speed_ref_mps"):
-        m.update(speed_trace_miss(df))
-    else:
-        notes.append("speed-trace miss skipped: needs vehicle.speed_mps and cycle.speed_ref_mps")
-
-    eb = energy_balance(df)
-    m["energy_balance"] = eb
-    m["energy_closure_error_frac"] = eb["closure_error_frac"]
-    if eb["missing"]:
-        notes.append(f"energy balance incomplete: missing {eb['missing']}")
-    m["notes"] = notes
-    return _clean(m)
 
 
 # --------------------------------------------------------------- a result's metrics, never raising
