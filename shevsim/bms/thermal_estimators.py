@@ -359,7 +359,7 @@ class _Base:
         else:
             st[_HAS_U], st[_UQ], st[_UT] = 1.0, v[0], v[1]
 
-    def __init__(self, params, dt_s, h0, x0_c, discretisation, sigma_c, beta1, p0, h_min, h_max, compiled,
+    def __init__(self, params, dt_s, h0, x0_c, discretisation, *, sigma_c, beta1, p0, h_min, h_max, compiled,
                  beta2=0.0, total=False):
         self._st = np.zeros(12)
         self.params = params if params is not None else ThermalParams()
@@ -431,10 +431,11 @@ class ThermalKF(_Base):
 
     _STEP = staticmethod(kf_step)
 
-    def __init__(self, params: ThermalParams | None = None, h_w_m2k: float = 56.2, dt_s: float = 1.0,
+    def __init__(self, params: ThermalParams | None = None, h_w_m2k: float = 56.2, dt_s: float = 1.0, *,
                  x0_c=(30.0, 0.0), sigma_c: float = 0.05, beta1: float = 5e-4, p0=(1.0, 1.0),
                  discretisation: str = "zoh", compiled: bool = True):
-        super().__init__(params, dt_s, h_w_m2k, x0_c, discretisation, sigma_c, beta1, p0, 0.0, math.inf, compiled)
+        super().__init__(params, dt_s, h_w_m2k, x0_c, discretisation, sigma_c=sigma_c, beta1=beta1, p0=p0,
+                         h_min=0.0, h_max=math.inf, compiled=compiled)
 
 
 class ThermalDKF(_Base):
@@ -450,12 +451,12 @@ class ThermalDKF(_Base):
     dx0 = _st_property(_S7, "d x0^+ / d h")
     dx1 = _st_property(_S8, "d x1^+ / d h")
 
-    def __init__(self, params: ThermalParams | None = None, h0_w_m2k: float = 56.2, dt_s: float = 1.0,
+    def __init__(self, params: ThermalParams | None = None, h0_w_m2k: float = 56.2, dt_s: float = 1.0, *,
                  x0_c=(30.0, 0.0), sigma_c: float = 0.05, beta1: float = 5e-4, beta2: float = 7e-3,
                  p0=(1.0, 1.0), s0: float = 0.05, discretisation: str = "zoh", h_min: float = 0.5,
                  h_max: float = 1000.0, total_derivative: bool = True, compiled: bool = True):
-        super().__init__(params, dt_s, h0_w_m2k, x0_c, discretisation, sigma_c, beta1, p0, h_min, h_max, compiled,
-                         beta2, total_derivative)
+        super().__init__(params, dt_s, h0_w_m2k, x0_c, discretisation, sigma_c=sigma_c, beta1=beta1, p0=p0,
+                         h_min=h_min, h_max=h_max, compiled=compiled, beta2=beta2, total=total_derivative)
         self.ph = float(s0)
 
 
@@ -472,11 +473,11 @@ class ThermalJEKF(_Base):
     p02 = _st_property(_S7, "T_mean-h covariance")
     p12 = _st_property(_S8, "gamma-h covariance")
 
-    def __init__(self, params: ThermalParams | None = None, h0_w_m2k: float = 56.2, dt_s: float = 1.0,
+    def __init__(self, params: ThermalParams | None = None, h0_w_m2k: float = 56.2, dt_s: float = 1.0, *,
                  x0_c=(30.0, 0.0), sigma_c: float = 0.05, beta1: float = 5e-4, beta2: float = 6e-3,
                  p0=(1.0, 1.0, 0.05), discretisation: str = "zoh", h_min: float = 0.5, h_max: float = 1000.0,
                  s0: float | None = None, compiled: bool = True):
-        super().__init__(params, dt_s, h0_w_m2k, x0_c, discretisation, sigma_c, beta1, p0[:2], h_min, h_max, compiled,
-                         beta2)
+        super().__init__(params, dt_s, h0_w_m2k, x0_c, discretisation, sigma_c=sigma_c, beta1=beta1, p0=p0[:2],
+                         h_min=h_min, h_max=h_max, compiled=compiled, beta2=beta2)
         # initial h variance: s0 if given (same keyword as the DKF), else the third entry of p0
         self.p22 = float(s0) if s0 is not None else (float(p0[2]) if len(p0) > 2 else 0.05)
