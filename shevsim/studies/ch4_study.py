@@ -150,7 +150,7 @@ def duty_cycle_request_w(time_s, p_1c_w: float, period_s: float = PULSE_PERIOD_S
     return np.where(phase < duty * period_s, p_1c_w / duty, 0.0)
 
 
-def power_capability_run(cell: LumpedCell, ocv: OcvTable, p_1c_w: float, t_amb_c: float = 30.0,
+def power_capability_run(cell: LumpedCell, ocv: OcvTable, p_1c_w: float, *, t_amb_c: float = 30.0,
                          v_min_v: float = 3.2, t_max_c: float = 45.0, soc_min_frac: float = SOC_MIN_FRAC,
                          dt_s: float = DT_S, horizon_steps: int = HORIZON_STEPS, h_w_m2k: float = H_W_M2K,
                          soc0: float = 1.0, max_time_s: float = 20000.0, stop_power_frac: float = 0.05) -> dict:
