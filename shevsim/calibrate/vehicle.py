@@ -18,7 +18,8 @@ calibration bit for bit.
 Parameters are the components' own (names, units, defaults from ``components/vehicle/matv.toml``,
 ``components/motor/default.toml``, ``components/bus/default.toml``): every parameter of those files is a
 *known* parameter except ``input_mode``/``speed_init_mps`` (the record prescribes the motion; accepted and
-ignored) and ``efficiency_scale_frac`` (declared: a given value is its starting value).  ``--params``
+ignored) and ``efficiency_scale_frac``, ``regen_efficiency_scale_frac`` (declared: a given value is the
+starting value).  ``--params``
 takes a parameter file of any of the three components (``[params]``; relative ``*_file`` paths resolved
 against the file's folder), the short form (``[params]`` with any of those names), or an overlay with
 tables ``[vehicle]``/``[motor]``/``[bus]`` - e.g. a previous calibration's ``params.toml``, so one
@@ -27,7 +28,14 @@ candidates for a further change from it).  A given road grade (``grade_distance_
 the record's known grade; the ``road_grade`` effect adds its knots to it.  Unknown names fail (with a
 suggestion), as do names in another component's table and missing map files.  Fitted:
 
-* declared: ``efficiency_scale_frac`` (motor: actual / map efficiency);
+* declared: ``efficiency_scale_frac`` (motor: actual / map efficiency) and ``regen_efficiency_scale_frac``
+  (motor: generating / motoring efficiency on top of it).  Both are always fitted: the drive's efficiency
+  is never known exactly, and not the same in both directions (a published curve is often the motoring
+  curve mirrored).  With one scale only, the model can raise traction power only by lowering the
+  regenerated power, so an efficiency asymmetry of the record's drive was read as mass: the pair
+  (``mass_kg``, ``efficiency_scale_frac``) is the only other way to scale traction and braking powers
+  separately (``mass_error`` -3 % on a no-effect FASTSim record whose drive regenerates at a constant
+  0.84, the first point of the curve it motors with; ``docs/calibration_independent.md``);
 * effects (each a switchable term of a component, off at its parameter file's value):
   ``road_grade`` (vehicle ``grade_frac`` at 6 knots ``grade_distance_m`` spread evenly over the record's
   distance; reported as ``grade_frac[0]`` .. ``grade_frac[5]``), ``aux_load`` (bus ``aux_power_w``),
@@ -71,7 +79,7 @@ SUBSTEP_S = 0.1
 #: speed (speed mode, the record prescribes both; accepted in ``--params`` and ignored) and the declared
 #: efficiency scale (a ``--params`` value is its starting value)
 _IGNORED = ("input_mode", "speed_init_mps")
-_NOT_KNOWN = set(_IGNORED) | {"efficiency_scale_frac"}
+_NOT_KNOWN = set(_IGNORED) | {"efficiency_scale_frac", "regen_efficiency_scale_frac"}
 
 
 def _component_classes():
@@ -165,7 +173,7 @@ def _sample(rec: np.ndarray, n_sub: int, n_g: int) -> np.ndarray:
 
 @njit(cache=True, error_model="numpy")
 def _speed_following_power(vr, ar, h, kd, kg, m, c, fr, g, md, mi, k_w, k_tau, extrapolate, v_regen, p_regen,
-                           eff_scale, heat_rate, gamma0, aux):  # pragma: no cover - compiled
+                           eff_scale, heat_rate, gamma0, aux, regen_eff_scale):  # pragma: no cover - compiled
     """Bus power [W] at every master step of cycle -> vehicle (speed mode) -> motor -> bus (index 0 = initialise).
 
     The components' own steps in the master's order: :func:`~shevsim.powertrain.vehicle.speed_follow_step`
@@ -189,7 +197,7 @@ def _speed_following_power(vr, ar, h, kd, kg, m, c, fr, g, md, mi, k_w, k_tau, e
         st = speed_follow_step(v, th, dist, vr[k + 1], ar[k + 1], 0.0, h, kd, kg, m, c, fr, g)
         v, dist, th, f_req = st[0], st[1], st[2], st[3]
         res = motor_step(md, mi, f_req, v, 1e12, -1e12, h, v_prev, h_prev, gamma, k_w, k_tau, extrapolate,
-                         v_regen, p_regen, eff_scale, heat_rate)
+                         v_regen, p_regen, eff_scale, heat_rate, regen_eff_scale)
         gamma = res[6]
         v_prev = res[7]
         h_prev = h
@@ -228,7 +236,9 @@ class VehicleModel(CalibrationModel):
 
     def _declared_for(self, known):
         return (Param("efficiency_scale_frac", "-", 0.8, 1.08, _FILES["motor"].efficiency_scale_frac,
-                      "motor: actual / map efficiency (motor + inverter)"),)
+                      "motor: actual / map efficiency (motor + inverter)"),
+                Param("regen_efficiency_scale_frac", "-", 0.8, 1.08, _FILES["motor"].regen_efficiency_scale_frac,
+                      "motor: generating / motoring efficiency on top of efficiency_scale_frac"))
 
     def _make_effects(self):
         k = self.known
@@ -335,7 +345,7 @@ class VehicleModel(CalibrationModel):
             ctx["md"], ctx["mi"], mp.gear_ratio / mp.wheel_radius_m, mp.wheel_radius_m / mp.gear_ratio,
             bool(mp.extrapolate_speed), float(mp.regen_speed_min_mps), float(mp.regen_power_max_w),
             float(mp.efficiency_scale_frac), float(mp.heat_rate_per_s), float(mp.heat_index_init_frac),
-            float(bp.aux_power_w))
+            float(bp.aux_power_w), float(mp.regen_efficiency_scale_frac))
         pg = _sample(rec, ctx["n_sub"], ctx["tg"].size)
         return {"power_w": np.interp(ctx["t"], ctx["tg"], pg)}
 

@@ -14,7 +14,8 @@ Force request -> motor torque -> limits -> delivered traction force, friction br
 * regenerative electrical power limited to ``regen_power_max_w`` (default inf = off; the rest of
   the braking goes to the friction brakes, as beyond the bus limits);
 * electrical power ``P = tau w / eta`` (motoring) or ``tau w eta`` (generating), map
-  ``eta(w, tau)`` times ``efficiency_scale_frac`` (default 1), capped at 1.
+  ``eta(w, tau)`` times ``efficiency_scale_frac`` (default 1), and when generating times
+  ``regen_efficiency_scale_frac`` too (default 1), capped at 1.
 
 The step itself is :func:`shevsim.powertrain.motor.motor_step` (compiled, shared with the vehicle
 calibration); the component holds the state and books the energies.
@@ -87,6 +88,9 @@ class MotorParams:
         beyond it goes to the friction brakes). Default inf = no limit (off).
     efficiency_scale_frac : float
         Actual / map efficiency [-]: ``eta = min(s eta_map(w, tau), 1)``. Default 1 (the map as built).
+    regen_efficiency_scale_frac : float
+        Generating / motoring efficiency ratio on top of it [-]: when regenerating ``eta = min(s s_regen
+        eta_map(w, tau), 1)``. Default 1 (the map holds for both directions).
     rated_power_w, maps_rated_power_w : float
         Rated (peak) power [W] of this drive and the rating the map files describe (380 kW = 4 x 95 kW
         for the bundled maps).  Sizing by rating: with ``k = rated_power_w / maps_rated_power_w`` the peak
@@ -105,6 +109,7 @@ class MotorParams:
     extrapolate_speed: bool = True
     regen_power_max_w: float = field(default=float("inf"), metadata=rng(lo=0.0, allow_inf=True))
     efficiency_scale_frac: float = 1.0
+    regen_efficiency_scale_frac: float = 1.0
     rated_power_w: float = 380e3
     maps_rated_power_w: float = 380e3
 
@@ -120,6 +125,9 @@ class MotorParams:
             raise ValueError(f"parameter 'regen_power_max_w' must be >= 0, got {self.regen_power_max_w!r}")
         if not 0.0 < self.efficiency_scale_frac <= 2.0:
             raise ValueError(f"parameter 'efficiency_scale_frac' must be in (0, 2], got {self.efficiency_scale_frac!r}")
+        if not 0.0 < self.regen_efficiency_scale_frac <= 2.0:
+            raise ValueError(f"parameter 'regen_efficiency_scale_frac' must be in (0, 2], got "
+                             f"{self.regen_efficiency_scale_frac!r}")
 
 
 class Motor(CompiledStep, Component):
@@ -146,7 +154,7 @@ class Motor(CompiledStep, Component):
         out("mech_energy_j", "J", 0.0, "cumulative shaft energy delivered (signed)", _FT),
     )
     _static = ("name", "params", "maps", "_k_tau", "_k_w", "extrapolate", "_md", "_mi", "_v_regen", "_p_regen",
-               "_eff_scale", "_heat_rate", "_fn", "_u_names", "_y_names")
+               "_eff_scale", "_heat_rate", "_regen_eff_scale", "_fn", "_u_names", "_y_names")
     DATA_MUTABLE = (3,)
 
     def __init__(self, name: str = "motor", params: MotorParams | None = None):
@@ -166,6 +174,7 @@ class Motor(CompiledStep, Component):
         self._p_regen = float(p.regen_power_max_w)
         self._eff_scale = float(p.efficiency_scale_frac)
         self._heat_rate = float(p.heat_rate_per_s)
+        self._regen_eff_scale = float(p.regen_efficiency_scale_frac)
 
     def initialize(self, t0: float) -> None:
         """``data`` = ``(md, mi, p, x)``: the packed maps, ``p`` (:data:`P`) and the state ``x`` (:data:`X`)."""
@@ -173,7 +182,7 @@ class Motor(CompiledStep, Component):
         v_prev = max(self.u["speed_mps"], 0.0)
         self.data = (self._md, self._mi,
                      np.array([self._k_w, self._k_tau, 1.0 if self.extrapolate else 0.0, self._v_regen, self._p_regen,
-                               self._eff_scale, self._heat_rate], dtype=np.float64),
+                               self._eff_scale, self._heat_rate, self._regen_eff_scale], dtype=np.float64),
                      np.array([gamma, 0.0, 0.0, 0.0, v_prev, 1.0], dtype=np.float64))
         w = v_prev * self._k_w
         self.y["heat_index_frac"] = gamma
@@ -193,7 +202,7 @@ class Motor(CompiledStep, Component):
 U = port_index(Motor.VARIABLES, "input")
 Y = port_index(Motor.VARIABLES, "output")
 #: parameters ``data[2]`` and state ``data[3]`` of the step
-P = field_index(("k_w", "k_tau", "extrapolate", "v_regen", "p_regen", "eff_scale", "heat_rate"), "P")
+P = field_index(("k_w", "k_tau", "extrapolate", "v_regen", "p_regen", "eff_scale", "heat_rate", "regen_eff_scale"), "P")
 X = field_index(("gamma", "e_loss", "e_elec", "e_mech", "v_prev", "h_prev"), "X")
 
 
@@ -209,7 +218,7 @@ def motor_step(data, u, y, t, h):
      y[Y.torque_max_nm], x[X.gamma], x[X.e_loss], x[X.e_elec], x[X.e_mech], x[X.v_prev]) = motor_component_step(
         md, mi, f_req, v, u[U.elec_power_max_w], u[U.elec_power_min_w], h, x[X.v_prev], x[X.h_prev], x[X.gamma],
         x[X.e_loss], x[X.e_elec], x[X.e_mech], p[P.k_w], p[P.k_tau], p[P.extrapolate] > 0.5, p[P.v_regen],
-        p[P.p_regen], p[P.eff_scale], p[P.heat_rate])
+        p[P.p_regen], p[P.eff_scale], p[P.heat_rate], p[P.regen_eff_scale])
     x[X.h_prev] = h
     y[Y.heat_index_frac] = x[X.gamma]
     y[Y.loss_energy_j] = x[X.e_loss]

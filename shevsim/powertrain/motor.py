@@ -23,7 +23,11 @@ Electrical power (the equivalent machine, motor-shaft quantities)::
     P_loss = P_elec - P_mech >= 0
 
 At standstill the map's efficiency gives zero loss (P_mech = 0); stall copper loss is not modelled.
-``efficiency_scale_frac`` (default 1, off) multiplies the map's efficiency, ``eta = min(s eta_map, 1)``.
+``efficiency_scale_frac`` (default 1, off) multiplies the map's efficiency, ``eta = min(s eta_map, 1)``;
+``regen_efficiency_scale_frac`` (default 1, off) multiplies it once more when generating (``tau < 0``):
+``eta = min(s s_regen eta_map, 1)`` - a published curve is often a motoring curve mirrored, and the
+machine + inverter's generating efficiency differs from it (FASTSim 3.1, for one, uses the curve's
+zero-power value for every regenerative point).
 
 One step of the machine (:func:`motor_step`): force request -> torque -> heat-index torque limit ->
 regenerative limits (speed threshold, bus power limits, ``regen_power_max_w``: the most electrical
@@ -86,7 +90,7 @@ def efficiency(md, mi, w: float, tau: float, scale: float) -> float:
 @njit(cache=True)
 def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: float, v_prev: float,
                h_prev: float, gamma: float, k_w: float, k_tau: float, extrapolate: bool, regen_speed_min: float,
-               regen_power_max: float, eff_scale: float, heat_rate: float):
+               regen_power_max: float, eff_scale: float, heat_rate: float, regen_eff_scale: float = 1.0):
     """One step of the equivalent motor with inputs held over ``h`` (see :mod:`shevsim.components.motor`).
 
     Parameters
@@ -101,9 +105,9 @@ def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: floa
         Step [s]; speed input and step of the previous step (mid-step speed extrapolation); heat index.
     k_w, k_tau : float
         Motor rad/s per m/s and motor N m per wheel N.
-    extrapolate, regen_speed_min, regen_power_max, eff_scale, heat_rate
+    extrapolate, regen_speed_min, regen_power_max, eff_scale, heat_rate, regen_eff_scale
         Parameters ``extrapolate_speed``, ``regen_speed_min_mps``, ``regen_power_max_w``,
-        ``efficiency_scale_frac``, ``heat_rate_per_s``.
+        ``efficiency_scale_frac``, ``heat_rate_per_s``, ``regen_efficiency_scale_frac``.
 
     Returns
     -------
@@ -130,6 +134,9 @@ def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: floa
         if tau < -t_regen:
             tau = -t_regen
         brake = -(f_req - tau / k_tau)
+    # generating: the map's efficiency times both scales (the torque keeps its sign below)
+    if tau < 0.0:
+        eff_scale = eff_scale * regen_eff_scale
     p_el = electrical_power(tau, w_mid, efficiency(md, mi, w_mid, tau, eff_scale))
     # bus power limits (battery power capability + generator output) and the drive's own regenerative
     # power limit: scale the torque down until the electrical power fits; the rest of a braking
@@ -161,7 +168,7 @@ def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: floa
 def motor_component_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: float, v_prev: float,
                          h_prev: float, gamma: float, e_loss: float, e_elec: float, e_mech: float, k_w: float,
                          k_tau: float, extrapolate: bool, regen_speed_min: float, regen_power_max: float,
-                         eff_scale: float, heat_rate: float):
+                         eff_scale: float, heat_rate: float, regen_eff_scale: float = 1.0):
     """:func:`motor_step` plus the motor component's bookkeeping (energies integrated over the held step).
 
     Returns ``(traction_force_n, brake_force_n, elec_power_w, torque_nm, speed_radps, torque_max_nm,
@@ -171,7 +178,7 @@ def motor_component_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: floa
     """
     tau, brake, p_el, p_m, w, t_lim, gamma1, v_used = motor_step(
         md, mi, f_req, v, p_hi, p_lo, h, v_prev, h_prev, gamma, k_w, k_tau, extrapolate, regen_speed_min,
-        regen_power_max, eff_scale, heat_rate)
+        regen_power_max, eff_scale, heat_rate, regen_eff_scale)
     e_elec += p_el * h
     e_mech += p_m * h
     e_loss += (p_el - p_m) * h

@@ -7,7 +7,9 @@ given what a user has: the published vehicle data and motor efficiency curve (``
 
 Stated tolerances: mass within 5 %, auxiliary power within 15 %, the time shift within a quarter sample
 (0.25 s), the grade profile's amplitude (fitted knots projected on the true sine) within 25 % (six
-piecewise-linear knots overshoot a sine between them).
+piecewise-linear knots overshoot a sine between them), FASTSim's regenerative-efficiency asymmetry within
+0.03.  The engine-generator soot records come from an independent plant script (``make_engine_soot.py``):
+analyser lag and offset within 25 %, the soot-map scale within 10 %.
 """
 from __future__ import annotations
 
@@ -39,6 +41,13 @@ def _vehicle(case: str):
     return run_workflow("vehicle", data, load_params_toml(D / "vehicle_nominal.toml"), plots=False)
 
 
+#: FASTSim 3.1's drive regenerates at a constant 0.84 (its efficiency curve's zero-power point) where it
+#: motors along the curve: over the regenerative points of the HD-UDDS trace the published curve gives 0.908
+#: (energy-weighted), so the record's generating / motoring efficiency ratio is 0.84 / 0.908 = 0.925
+#: (make_vehicle_fastsim.py's FASTSim history; docs/calibration_independent.md)
+FASTSIM_REGEN_RATIO = 0.925
+
+
 def test_no_effect_fastsim_record_selects_nothing():
     rep = _vehicle("none")
     assert rep["timing"]["sample_convention"] == "instantaneous"      # the default, stated in the report
@@ -47,6 +56,17 @@ def test_no_effect_fastsim_record_selects_nothing():
     # the honest noise floor is the logger's 100 W (standstill segments), not the signal's dynamics
     nf = rep["noise_floor"]["power_w"]
     assert nf["method"] == "quiet" and nf["value"] == pytest.approx(100.0, rel=0.2)
+    # the drive's efficiency asymmetry is found as what it is (declared, always fitted), not as mass
+    assert rep["final_parameters"]["regen_efficiency_scale_frac"] == pytest.approx(FASTSIM_REGEN_RATIO, abs=0.03)
+
+
+@pytest.mark.parametrize("case", ["none_2", "none_3", "none_4"])
+def test_more_no_effect_fastsim_records_name_no_physical_effect(case):
+    """Another HD-UDDS window, the Orange County bus cycle (half its traction energy comes back as regen:
+    with one efficiency scale its regen asymmetry was read as mass -3 %) and the WVU interstate cycle."""
+    rep = _vehicle(case)
+    assert not (set(rep["selected_effects"]) & PHYSICAL), rep["selected_effects"]
+    assert rep["selected_effects"] == [] or rep["model_form_discrepancy"]
 
 
 def test_payload_named_as_mass_within_5_percent():
@@ -122,23 +142,35 @@ def _engine_truth():
     return json.loads((D / "engine_truth.json").read_text())
 
 
-def test_engine_no_effect_record_names_no_physical_effect():
-    """The independent plant's power response (first-order 0.8 s) is faster than the component's turbo-lag /
-    PI dynamics: no physical effect is named; what the library cannot explain is stated as a model-form
-    discrepancy (a fitted time shift may take part of it: timing is not a physical effect)."""
+def test_engine_no_effect_record_names_nothing_and_states_the_model_form():
+    """The independent plant's power response (first-order 0.8 s, operating point on the optimal line at every
+    instant) is not the component's form (turbo lag, PI rack, speed loop): nothing is named - not even a
+    time shift, which removes only a quarter of the residual above the noise (a logger latency would remove
+    nearly all of it) - and what the library cannot explain is stated as a model-form discrepancy.  The
+    baseline failure is raised against a noise floor that holds on the dynamic soot signal (the script's
+    noise: 2 % + 0.05 mg/s)."""
     rep = _engine("none")
-    assert not (set(rep["selected_effects"]) - {"timing"}), rep["selected_effects"]
-    if rep["selected_effects"]:
-        assert rep["model_form_discrepancy"]
+    assert rep["selected_effects"] == [], rep["selected_effects"]
+    stated = {d.get("effect") or d.get("channel") for d in rep["model_form_discrepancy"]}
+    assert {"timing", "soot_rate_mgps"} <= stated
     truth = _engine_truth()["cases"]["none"]["truth"]["soot_scale_frac"]
     assert rep["final_parameters"]["soot_scale_frac"] == pytest.approx(truth, rel=0.10)
+    # the script's noise at the median soot rate (the floor is a robust, median-based estimate): 0.15 mg/s
+    soot = load_measured(str(D / "engine_none.csv"), "engine").df["soot_rate_mgps"].to_numpy()
+    noise = math.hypot(0.02 * float(np.median(soot)), 0.05)
+    assert rep["noise_floor"]["soot_rate_mgps"]["value"] == pytest.approx(noise, rel=0.35)
+    bf = {b["channel"]: b for b in rep["baseline_failure"]}
+    assert bf["soot_rate_mgps"]["ratio_to_noise_floor"] > 10.0
 
 
 @pytest.mark.parametrize("case,effect,param,rel", [("analyzer_lag", "analyzer_lag", "soot_analyzer_tau_s", 0.25),
                                                    ("analyzer_offset", "analyzer_offset", "soot_analyzer_offset_mgps", 0.25)])
 def test_engine_analyser_effects_named_with_their_parameter(case, effect, param, rel):
+    """The analyser effect is named, alone among the physical effects.  (On ``analyzer_lag`` a -0.5 s time
+    shift removes 49.6 % of the residual variance above the noise that the lag leaves - at the timing rule's
+    one-half boundary - so it is stated as a model-form discrepancy; timing is not a physical effect either way.)"""
     rep = _engine(case)
-    assert effect in rep["selected_effects"] and not (set(rep["selected_effects"]) - {effect, "timing"})
+    assert set(rep["selected_effects"]) - {"timing"} == {effect}, rep["selected_effects"]
     assert rep["final_parameters"][param] == pytest.approx(_engine_truth()["cases"][case]["truth"][param], rel=rel)
 
 

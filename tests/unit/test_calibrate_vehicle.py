@@ -268,7 +268,8 @@ def test_motor_and_bus_functions_compiled_equal_py_func():
         p_hi, p_lo = float(rng.choice([1e12, 50e3, -1.0])), float(rng.choice([-1e12, -20e3, 1.0]))
         args = (md, mi, f_req, v, p_hi, p_lo, float(rng.choice([0.05, 0.1, 1.0])), float(rng.uniform(0, 30)),
                 float(rng.choice([0.1, 1.0])), float(rng.uniform(0, 1)), mot._k_w, mot._k_tau, bool(rng.random() < 0.7),
-                0.5, float(rng.choice([np.inf, 30e3])), float(rng.choice([1.0, 0.9, 1.05])), 0.3 / 180.0)
+                0.5, float(rng.choice([np.inf, 30e3])), float(rng.choice([1.0, 0.9, 1.05])), 0.3 / 180.0,
+                float(rng.choice([1.0, 0.85, 1.05])))
         _agree(motor_step, *args)
         pm, pg, pa, ax = (float(x) for x in rng.uniform(-5e4, 5e4, 4))
         _agree(bus_aux_w, pa, ax * (rng.random() < 0.5))
@@ -283,7 +284,7 @@ def test_calibration_loop_compiled_equals_py_func():
     mp = MotorParams()
     args = (ctx["vr"], ctx["ar"], ctx["h"], np.array([0.0, 200.0, 400.0]), np.array([0.0, 0.03, -0.02]), 16000.0,
             VehicleParams().c_aero, 0.013, G_MPS2, ctx["md"], ctx["mi"], mp.gear_ratio / mp.wheel_radius_m,
-            mp.wheel_radius_m / mp.gear_ratio, True, 0.5, 40e3, 0.95, mp.heat_rate_per_s, 0.3, 2e3)
+            mp.wheel_radius_m / mp.gear_ratio, True, 0.5, 40e3, 0.95, mp.heat_rate_per_s, 0.3, 2e3, 0.9)
     assert _rel(_speed_following_power(*args), _speed_following_power.py_func(*args)) <= 1e-12
 
 
@@ -347,7 +348,7 @@ def test_params_accepts_each_chain_component_file(comp):
     m = get_model("vehicle", {**vals, "__base_dir__": str(f.parent)}, str(f))
     assert m.known["mass_kg"] == VehicleParams().mass_kg
     if comp == "motor":
-        assert m.initial == {"efficiency_scale_frac": 1.0}
+        assert m.initial == {"efficiency_scale_frac": 1.0, "regen_efficiency_scale_frac": 1.0}
         assert m.known["efficiency_map_file"] == MotorParams().efficiency_map_file   # resolved against the folder
         m.prepare(_data([], duration_s=30.0)[0])                                     # maps load
 
