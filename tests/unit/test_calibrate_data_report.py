@@ -100,7 +100,8 @@ def test_shipped_records_listed_and_named():
 
 def test_record_name_errors_and_params_by_name(tmp_path, capsys):
     assert main_calibrate(["cell", "nosuch_record", "--out", str(tmp_path / "o")]) == 2
-    assert "shipped records: panasonic_18650pf/" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "shipped records: " in err and "panasonic_18650pf/25degC_US06_Pan18650PF" in err
     assert main_calibrate(["vehicle", "panasonic_18650pf/25degC_US06_Pan18650PF", "--out", str(tmp_path / "o")]) == 2
     assert "is a cell record, not vehicle" in capsys.readouterr().err
     assert load_params_toml("battery/default")["__base_dir__"].endswith("battery")

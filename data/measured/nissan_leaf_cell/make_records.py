@@ -15,9 +15,10 @@ the Bitrode times:
 * ``leaf_1C``: from the rest after the first full charge: rest 600 s, 1C (30.6 A) discharge to 3.0 V,
   rest 1800 s, C/2 charge (15.3 A, CC-CV to 4.2 V) up to where the charge returned equals the charge
   taken (the model has no coulombic inefficiency: the charge's last ~0.02 Ah would take it above 100 % SOC);
-* ``leaf_2C``: the same cycle at 2C (61.2 A);
-* ``leaf_3C``: the first 3C (91.8 A) discharge from full charge and the rest after it, as far as its
-  temperature log goes (3 948 s).
+* ``leaf_2C``: the same cycle at 2C (61.2 A).
+
+The 3C test is not shipped: its temperature log covers only the first discharge, which starts under load
+at the log's first sample, so the record cannot give its initial SOC (no rest before it).
 
 Nominal (``ocv_25degC_hppc.toml``, the calibration's ``--params``): what a user can derive from the same
 project's low-current HPPC test at 25 degC (``NissanLeaf-cell-Low-Current-HPPC-25C-2.csv``), a test
@@ -45,7 +46,6 @@ HERE = Path(__file__).resolve().parent
 WINDOWS = {  # rate: (Bitrode file, lvm file, start s, end s) - cut at the Bitrode's step boundaries
     "1C": ("1C-Discharge-Bitrode-data.csv", "Temperature-1C-discharge.lvm", 9486.3, 23846.2),
     "2C": ("2C-Discharge-Bitrode-data.csv", "Temperature-2C-discharge.lvm", 11247.9, 23714.9),
-    "3C": ("3C-Discharge-Bitrode-data.csv", "Temperature-3C-discharge.lvm", 1.0, None),
 }
 LVM_DT_S = 3.0
 POUCH_M = (0.290, 0.216, 0.0071)
