@@ -81,7 +81,7 @@ from shevsim.battery import model as _m
 from shevsim.battery.thermal import FDThermal, ThermalParams, TwoStateThermal, fd_matrices
 from numba import njit
 
-from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, njit_step, port_index
 from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError, SimulationError
 from shevsim.core.params import rng
@@ -439,7 +439,7 @@ Y = port_index(BatteryPack.VARIABLES, "output")
 
 
 # ------------------------------------------------------------------------------------ the one step
-@njit(cache=True)
+@njit_step
 def battery_publish(data, t_amb, y):
     """The outputs at the state in ``data`` (pack scaling, the next four noise draws)."""
     _d, _ix, _c, st, _th, yv, noise, kn, p, _prev = data      # the fields of D
@@ -466,7 +466,7 @@ def battery_publish(data, t_amb, y):
     y[Y.clamp_count] = st[_m.S_CLAMPS]
 
 
-@njit(cache=True)
+@njit_step
 def battery_step(data, u, y, t, h):
     """:class:`BatteryPack`'s step (two-state thermal model): input check, :func:`shevsim.battery.model.cell_step`,
     the SOC check (the state is left as it was on failure, the rejected one in ``st_prev``), the outputs at
@@ -477,7 +477,8 @@ def battery_step(data, u, y, t, h):
     t_amb = u[U.t_ambient_c]
     if not (math.isfinite(p_pack) and math.isfinite(h_conv) and math.isfinite(t_amb)) or h_conv < 0.0:
         return ERR_NAN_INPUT
-    prev[:] = st
+    for j in range(st.shape[0]):          # element by element: a slice assignment may copy (allocate)
+        prev[j] = st[j]
     _m.cell_step(d, ix, c, st, p_pack, t, h, t_amb, h_conv, th, yv)
     if not (0.0 <= st[_m.S_SOC] <= 1.0):
         for j in range(st.shape[0]):      # the state as it was; the rejected one kept in st_prev (the message)

@@ -49,7 +49,7 @@ from shevsim.bms.electrical import DEKF, E, DEKFParams, DEKFTuning, dekf_update
 from shevsim.bms.power_capability import (CellLimits, PowerCapability, PowerCapabilityParams, power_limits,
                                           thermal_coeffs)
 from shevsim.bms.thermal_estimators import ThermalDKF, ThermalJEKF, ThermalKF, dkf_step, jekf_step, kf_step
-from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, njit_step, port_index
 from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError
 from shevsim.core.lookup import t1_value
@@ -335,7 +335,7 @@ def _thermal_filter(code, tst, tc, ts, ta, q):
     return kf_step(tst, tc, ts, ta, q)
 
 
-@njit(cache=True)
+@njit_step
 def bms_step(data, u, y, t, h):
     """:class:`BMS`'s step: 1. electrical DEKF and 2. heat with the previous T_mean
     (:func:`~shevsim.bms.electrical.dekf_update`), 3. thermal filter, 4. power capability

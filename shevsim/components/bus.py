@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, port_index
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, njit_step, port_index
 from shevsim.core.component import Component
 from shevsim.core.variables import inp, out
 from shevsim.powertrain.motor import bus_aux_w, bus_balance, bus_limits
@@ -192,7 +192,7 @@ UL = port_index(PowerLimits.VARIABLES, "input")
 YL = port_index(PowerLimits.VARIABLES, "output")
 
 
-@njit(cache=True)
+@njit_step
 def power_bus_step(data, u, y, t, h):
     """:class:`PowerBus`'s step: the balance (:func:`~shevsim.powertrain.motor.bus_balance`), the energies
     over ``h``, then the limits (:func:`~shevsim.powertrain.motor.bus_limits`) at the held inputs."""
@@ -218,7 +218,7 @@ def power_bus_step(data, u, y, t, h):
     return 0
 
 
-@njit(cache=True)
+@njit_step
 def power_limits_step(data, u, y, t, h):
     """:class:`PowerLimits`'s step: the bus's limit law at the held inputs (NaN inputs refused)."""
     p = data[0]

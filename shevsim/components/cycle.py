@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shevsim.core.compiled import CompiledStep, port_index
+from shevsim.core.compiled import CompiledStep, njit_step, port_index
 from shevsim.core.component import Component
 from shevsim.core.lookup import njit
 from shevsim.core.variables import out
@@ -139,7 +139,7 @@ class CycleSource(CompiledStep, Component):
 Y = port_index(CycleSource.VARIABLES, "output")
 
 
-@njit(cache=True)
+@njit_step
 def cycle_step(data, u, y, t, h):
     """:class:`CycleSource`'s step: the trace sampled at ``t + h`` (:func:`cycle_sample`)."""
     v, slope, p = data

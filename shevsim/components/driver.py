@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, njit_step, port_index
 from shevsim.core.component import Component
 from shevsim.core.variables import inp, out
 from shevsim.powertrain.driver import driver_step
@@ -104,7 +104,7 @@ P = field_index(("kp_n_per_mps", "ki_n_per_m", "mass_kg", "drag_n_per_mps2", "ro
                  "force_brake_max_n", "force_prop_max_n"), "P")
 
 
-@njit(cache=True)
+@njit_step
 def driver_component_step(data, u, y, t, h):
     """:class:`Driver`'s step: :func:`~shevsim.powertrain.driver.driver_step` at the held inputs."""
     p, x = data

@@ -57,7 +57,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, njit_step, port_index
 from shevsim.core.component import Component
 from shevsim.core.variables import inp, out
 from shevsim.powertrain import engine as _eng
@@ -251,7 +251,7 @@ U = port_index(EngineGenerator.VARIABLES, "input")
 Y = port_index(EngineGenerator.VARIABLES, "output")
 
 
-@njit(cache=True)
+@njit_step
 def engine_generator_publish(data, p_el, fuel_gps, soot_mgps, soot_meas_mgps, y):
     """The outputs at the state in ``data`` with the step's mean electrical power, fuel, soot and analyser rates."""
     x = data[4]
@@ -277,7 +277,7 @@ def engine_generator_publish(data, p_el, fuel_gps, soot_mgps, soot_meas_mgps, y)
     y[Y.soot_rate_meas_mgps] = soot_meas_mgps
 
 
-@njit(cache=True)
+@njit_step
 def engine_generator_step(data, u, y, t, h):
     """:class:`EngineGenerator`'s step: input check, :func:`shevsim.powertrain.engine.step`, the finiteness
     check (the state is left as it was on failure), the outputs at ``t + h``."""
@@ -292,7 +292,8 @@ def engine_generator_step(data, u, y, t, h):
         prev[j] = x[j]
     _eng.step(md, mi, c, p_max[0], x, pc, rate, h, lim, floor, tot)
     if not math.isfinite(tot[T.e_el] + tot[T.fuel] + tot[T.soot_meas] + x[S.w] + x[S.tau_e]):
-        x[:] = prev
+        for j in range(x.shape[0]):
+            x[j] = prev[j]
         return ERR_NONFINITE
     engine_generator_publish(data, tot[T.e_el] / h, tot[T.fuel] / h, tot[T.soot] / h, tot[T.soot_meas], y)
     return 0

@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, njit_step, port_index
 from shevsim.core.component import Component
 from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
@@ -206,7 +206,7 @@ P = field_index(("k_w", "k_tau", "extrapolate", "v_regen", "p_regen", "eff_scale
 X = field_index(("gamma", "e_loss", "e_elec", "e_mech", "v_prev", "h_prev"), "X")
 
 
-@njit(cache=True)
+@njit_step
 def motor_step(data, u, y, t, h):
     """:class:`Motor`'s step (:func:`~shevsim.powertrain.motor.motor_component_step`)."""
     md, mi, p, x = data

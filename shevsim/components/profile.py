@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from shevsim.core.compiled import CompiledStep
+from shevsim.core.compiled import CompiledStep, njit_step
 from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError
 from shevsim.core.lookup import py_max
@@ -103,7 +103,7 @@ class ProfileSource(CompiledStep, Component):
         return self._t[-1]
 
 
-@njit(cache=True)
+@njit_step
 def profile_step(data, u, y, t, h):
     """:class:`ProfileSource`'s step: the last sample at or before ``t + h`` (tolerance 1e-9 of the time) for
     every port with a column; the others hold."""

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from shevsim.core.compiled import ERR_NAN_INPUT, ERR_SAMPLE_TIME, CompiledStep, port_index
+from shevsim.core.compiled import ERR_NAN_INPUT, ERR_SAMPLE_TIME, CompiledStep, njit_step, port_index
 from shevsim.core.component import Component
 from shevsim.core.errors import ScenarioError, SimulationError
 from shevsim.core.lookup import py_max
@@ -399,7 +399,7 @@ def _wrong_step(h, ts):
     return abs(h - ts) > 1e-9 * py_max(1.0, ts)
 
 
-@njit(cache=True)
+@njit_step
 def rule_supervisor_step(data, u, y, t, h):
     """:class:`RuleSupervisor`'s step: the sample-time and input checks,
     :func:`~shevsim.supervisor.rule_based.rule_command`, the outputs."""
@@ -429,7 +429,7 @@ UM = port_index(MPCSupervisor.VARIABLES, "input")
 YM = port_index(MPCSupervisor.VARIABLES, "output")
 
 
-@njit(cache=True)
+@njit_step
 def _mpc_supervisor_step(data, u, y, t, h):
     """:class:`MPCSupervisor`'s step (solver 'daqp'): the sample-time check,
     :func:`~shevsim.supervisor.mpc.mpc_move` (QP build, DAQP's C library, first move or fallback) from the

@@ -41,7 +41,7 @@ import numpy as np
 
 from numba import njit
 
-from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, port_index
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, njit_step, port_index
 from shevsim.core.component import Component
 from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
@@ -229,7 +229,7 @@ XF = field_index(("v", "dist", "e_traction", "e_brake", "e_rolling", "e_aero", "
 XS = field_index(("v", "dist", "th", "e_traction", "e_brake", "e_rolling", "e_aero", "e_grade"), "XS")
 
 
-@njit(cache=True)
+@njit_step
 def vehicle_step(data, u, y, t, h):
     """:class:`Vehicle`'s step in force mode (:func:`~shevsim.powertrain.vehicle.vehicle_force_step`)."""
     p, kd, kg, x = data
@@ -252,7 +252,7 @@ def vehicle_step(data, u, y, t, h):
     return 0
 
 
-@njit(cache=True)
+@njit_step
 def vehicle_speed_step(data, u, y, t, h):
     """:class:`Vehicle`'s step in speed mode (:func:`~shevsim.powertrain.vehicle.vehicle_speed_mode_step`: follow
     ``speed_ref_mps``, book the works, output the force for the next step)."""

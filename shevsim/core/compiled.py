@@ -36,11 +36,33 @@ import numpy as np
 
 from .errors import SimulationError
 
-__all__ = ["port_index", "field_index", "pack_fields", "CompiledStep", "ERR_NAN_INPUT", "ERR_SAMPLE_TIME"]
+__all__ = ["port_index", "field_index", "pack_fields", "CompiledStep", "njit_step", "ERR_NAN_INPUT",
+           "ERR_SAMPLE_TIME"]
 
 #: status codes shared by several steps (a component adds its own from 16 on)
 ERR_NAN_INPUT = 1
 ERR_SAMPLE_TIME = 2
+
+
+def njit_step(fn=None, **options):
+    """``numba.njit(cache=True)`` without numba's reference counting, for a compiled step, the hot physics it
+    calls and the compiled loop (``@njit_step`` or ``@njit_step(inline="always")``).
+
+    numba counts references to every array it binds to a name (an argument, an item unpacked from the
+    ``data`` tuple, a slice, an argument of an inlined helper): an atomic increment and decrement through a
+    call each.  A step binds a dozen or more arrays per call, so on the fast path these were 15-30 % of a
+    step's time (measured per step: engine-generator 421 -> 302 ns, motor 124 -> 100 ns, BMS 709 -> 624 ns).
+    A step allocates nothing and keeps no array beyond the call (every array it touches is owned by its
+    caller: the component or the fast runner), so the counts are pure overhead; ``_nrt=False`` (numba's
+    option to compile without its runtime) leaves them out.  numba refuses to compile a function so marked
+    that allocates (``np.empty``, a copying slice assignment, an exception with a run-time message), so the
+    contract is checked when the step compiles; such work belongs in a helper compiled with plain ``njit``.
+    """
+    from numba import njit
+    opts = {"cache": True, "_nrt": False, **options}
+    if fn is None:
+        return lambda f: njit(**opts)(f)
+    return njit(**opts)(fn)
 
 
 def field_index(names: Iterable[str], typename: str = "Index"):

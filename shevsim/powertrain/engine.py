@@ -234,7 +234,7 @@ def measured_soot_rate(st: EngineGenState, prm) -> float:
 # ---------------------------------------------------------------------------------------------
 import numpy as np  # noqa: E402
 
-from shevsim.core.compiled import field_index  # noqa: E402
+from shevsim.core.compiled import field_index, njit_step  # noqa: E402
 from shevsim.core.errors import DataError  # noqa: E402
 from shevsim.core.lookup import EXTRAPOLATION_CODES, HAVE_NUMBA, curve_ex, grid_ex, njit  # noqa: E402
 
@@ -403,7 +403,7 @@ def _soot(md, mi, c, k, x, w_avg, tau_avg, m_c, dm, fl):
     return s_sub, s_tr, meas
 
 
-@njit(cache=True)
+@njit_step
 def step(md, mi, c, p_max, x, p_cmd_w, rate_up_wps, h, elec_max_w, elec_min_w, tot):
     """Advance the engine-generator by ``h`` with the inputs held (items 1-11 of the module docstring).
 
