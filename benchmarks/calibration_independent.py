@@ -11,7 +11,8 @@ transient term of another form (``make_engine_soot.py``); seeds and truth in ``*
 user's nominal in ``*_nominal.toml`` (the engine: the component's defaults, transient term off).
 A case counts when the selected effects are exactly the expected ones (none for a no-effect record) and
 the expected parameter is within its tolerance (mass and capacity 5 %, auxiliary power 15 %, current
-offset 25 %, grade amplitude 25 %, time shift 0.25 s, heat-transfer factor 30 %, analyser lag and offset
+offset 25 %, grade amplitude 25 %, time shift 0.25 s, heat-transfer factor 30 %, apparent activation
+energy Ea/R of the cell's pulse resistance 30 %, analyser lag and offset
 25 %, soot-map scale 10 %).  Prints the table
 ``generator | case | named? | parameter fitted vs truth | held-out before -> after`` and, last,
 ``independent cases: N/M``.
@@ -61,6 +62,8 @@ CELL = {
                        lambda t: t["current_offset_a"], 0.25, True),
     "cooling_change": (["cooling_change"], "h_change_factor", lambda p, r: p.get("h_change_factor"),
                        lambda t: t["h_change_factor"], 0.30, True),
+    "arrhenius": (["arrhenius_resistance"], "arrhenius_ea_r_k", lambda p, r: p.get("arrhenius_ea_r_k"),
+                  lambda t: t["arrhenius_ea_r_k"], 0.30, True),
 }
 ENGINE = {
     "none": ([], "soot_scale_frac", lambda p, r: p.get("soot_scale_frac"), lambda t: t["soot_scale_frac"], 0.10, True),

@@ -40,7 +40,7 @@ def test_nominal_pseudo_ocv_is_the_cells_equilibrium_curve_less_a_constant_c50_o
     assert np.ptp(d) < 0.002, np.round(1e3 * d, 2)     # and nothing else (the coarse table: 17 mV peak to peak)
 
 
-@pytest.mark.parametrize("case", ["none", "capacity", "current_offset", "cooling_change"])
+@pytest.mark.parametrize("case", ["none", "capacity", "current_offset", "cooling_change", "arrhenius"])
 def test_cell_records_are_one_hour_at_1_hz_with_the_stated_noise(case):
     truth = json.loads((D / "cell_truth.json").read_text())
     df = pd.read_csv(D / f"cell_{case}.csv", comment="#")

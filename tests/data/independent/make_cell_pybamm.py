@@ -10,12 +10,18 @@ logger samples current, voltage and the cell temperature (the lumped model's vol
 as the surface reading) at 1 Hz, instantaneously, with white noise (voltage 1 mV, temperature 0.05 K,
 current 5 mA) and writes ``cell_<case>.csv``.  Effects in PyBaMM's own parameters:
 
-* ``none``: the published cell;
+* ``none``: the published cell, its exchange-current densities held at their 25 degC values (the user's
+  nominal has no temperature dependence; Chen2020's own Arrhenius kinetics made the former "no-effect"
+  record an Arrhenius record, 25 -> 33 degC, and the calibration rightly found it there);
 * ``capacity``: both electrodes' active-material volume fractions x 0.85 (lost active material: the same
   OCV-vs-SOC shape at 85 % capacity);
 * ``current_offset``: the logged current is the true one + 0.1 A (a current-sensor offset);
 * ``cooling_change``: ``Total heat transfer coefficient`` 10 -> 2.5 W/(m2.K) from t = 1200 s (a smooth
-  step of 10 s).
+  step of 10 s);
+* ``arrhenius``: Chen2020's own Arrhenius exchange-current densities (35 kJ/mol graphite, 17.8 kJ/mol
+  NMC811).  Truth in shevsim's terms (``arrhenius_ea_r_k`` scales all resistances): the apparent Ea/R of
+  the cell's 10 s, 1C pulse resistance at 60 % SOC between 25 and 35 degC, isothermal PyBaMM runs
+  (``apparent_activation_k``; the kinetic part only, so below the kinetic 4210 K).
 
 The user's nominal (``cell_nominal.toml``, the calibration's ``--params``): the rated capacity 5 A.h, a
 pseudo-OCV measured by PyBaMM at C/50 on the nominal cell, logged every 60 s as a cycler would (SOC = 1 -
@@ -26,7 +32,7 @@ cell),
 the initial SOC from the first rest voltage (``soc0_frac = -1``) and a two-RC equivalent circuit
 (``rc_pairs = 2``: solid diffusion in an NMC cell has a slow time constant that one RC branch misses).  ``cell_truth.json``: seeds, PyBaMM
 inputs and the truth in shevsim's names (``capacity_ah``, ``current_offset_a``, ``h_change_factor``,
-``h_change_time_s``).
+``h_change_time_s``, ``arrhenius_ea_r_k``).
 """
 from __future__ import annotations
 
@@ -46,13 +52,40 @@ CASES = {
     "capacity": {"seed": 22, "am_factor": 0.85},
     "current_offset": {"seed": 23, "offset_a": 0.1},
     "cooling_change": {"seed": 24, "h_after": 2.5, "t_change_s": 1200.0},
+    "arrhenius": {"seed": 25, "arrhenius": True},
 }
+T_REF_K = 298.15
+EXCHANGE = ("Negative electrode exchange-current density [A.m-2]",
+            "Positive electrode exchange-current density [A.m-2]")
 
 
-def params():
+def params(arrhenius: bool = False):
+    """Chen2020; the exchange-current densities at 25 degC whatever the temperature unless ``arrhenius``
+    (then Chen2020's own Arrhenius factors: 35 kJ/mol graphite, 17.8 kJ/mol NMC811)."""
     p = pybamm.ParameterValues("Chen2020")
     p["Upper voltage cut-off [V]"] = 4.4      # regen pulses near full charge pass 4.2 V briefly
+    if not arrhenius:
+        for k in EXCHANGE:
+            f = p[k]
+            p[k] = (lambda f: lambda c_e, c_s_surf, c_s_max, T: f(c_e, c_s_surf, c_s_max, T_REF_K))(f)
     return p
+
+
+def apparent_activation_k() -> float:
+    """The Arrhenius cell's apparent Ea/R of its 10 s pulse resistance (the quantity shevsim's
+    ``arrhenius_ea_r_k`` scales all resistances with): 1C discharge pulse from rest at 60 % SOC,
+    isothermal at 25 and 35 degC; Ea/R = ln(R25 / R35) / (1/T25 - 1/T35)."""
+    r = {}
+    for tc in (25.0, 35.0):
+        p = params(arrhenius=True)
+        p["Ambient temperature [K]"] = 273.15 + tc
+        p["Initial temperature [K]"] = 273.15 + tc
+        p["Current function [A]"] = 5.0
+        sim = pybamm.Simulation(pybamm.lithium_ion.SPMe(), parameter_values=p)
+        sol = sim.solve([0.0, 10.0], initial_soc=0.6)
+        ocv0 = float(sol["Battery open-circuit voltage [V]"].entries[0])     # at rest, before the pulse
+        r[tc] = (ocv0 - float(sol["Voltage [V]"].entries[-1])) / 5.0
+    return float(np.log(r[25.0] / r[35.0]) / (1.0 / 298.15 - 1.0 / 308.15))
 
 
 def current_profile(rng):
@@ -67,7 +100,7 @@ def current_profile(rng):
 
 
 def simulate(case: dict, t, i_true):
-    p = params()
+    p = params(case.get("arrhenius", False))
     if "am_factor" in case:
         for e in ("Negative", "Positive"):
             k = f"{e} electrode active material volume fraction"
@@ -107,8 +140,9 @@ def main() -> int:
            "[ocv]", "soc_frac = [" + ", ".join(f"{x:.4f}" for x in grid) + "]",
            "ocv_v = [" + ", ".join(f"{x:.5f}" for x in ocv) + "]"]
     (OUT / "cell_nominal.toml").write_text("\n".join(nom) + "\n")
+    ea_r = apparent_activation_k()
     truth = {"generator": f"PyBaMM {pybamm.__version__} SPMe + lumped thermal, Chen2020, 1 Hz instantaneous",
-             "noise": NOISE, "pseudo_ocv_capacity_ah": cap, "cases": {}}
+             "noise": NOISE, "pseudo_ocv_capacity_ah": cap, "arrhenius_apparent_ea_r_k": ea_r, "cases": {}}
     for name, case in CASES.items():
         rng = np.random.default_rng(case["seed"])
         t, i_true = current_profile(rng)
@@ -121,7 +155,8 @@ def main() -> int:
         lines += [f"{a:.1f},{b:.4f},{c:.5f},{d:.3f},25.0" for a, b, c, d in zip(t, i_log, v_log, ts_log)]
         (OUT / f"cell_{name}.csv").write_text("\n".join(lines) + "\n")
         tr = {"capacity_ah": 5.0 * case.get("am_factor", 1.0), "current_offset_a": case.get("offset_a", 0.0),
-              "h_change_factor": case.get("h_after", 10.0) / 10.0, "h_change_time_s": case.get("t_change_s")}
+              "h_change_factor": case.get("h_after", 10.0) / 10.0, "h_change_time_s": case.get("t_change_s"),
+              "arrhenius_ea_r_k": ea_r if case.get("arrhenius") else 0.0}
         truth["cases"][name] = {"pybamm_inputs": {k: x for k, x in case.items() if k != "seed"}, "seed": case["seed"],
                                 "truth": tr, "file": f"cell_{name}.csv", "v_min": float(v.min()), "v_max": float(v.max()),
                                 "t_max_c": float(temp.max())}
