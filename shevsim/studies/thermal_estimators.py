@@ -30,7 +30,7 @@ def _stage_h_schedule(stage: str, duration_s: float):
     return (lambda t: H_STAR_W_M2K), [0.0]
 
 
-def run_stage(stage: str, seed: int = 0, duration_s: float = 3600.0, dt_s: float = 1.0,
+def run_stage(stage: str, *, seed: int = 0, duration_s: float = 3600.0, dt_s: float = 1.0,
               sigma_c: float = 0.05, i_max_a: float = 25.0, r_heat_ohm: float = 0.015,
               t_init_c: float = 30.0, n_nodes: int = 30, params: ThermalParams | None = None,
               record: bool = False, heat_w=None, h0_adaptive_w_m2k: float | None = None,
@@ -57,13 +57,45 @@ def run_stage(stage: str, seed: int = 0, duration_s: float = 3600.0, dt_s: float
     above); the seed (Sec. 3.5) starts them at theta(0) = 56.2 W/m^2/K in every stage.  The KF,
     the plant and the noise do not depend on it.
     """
-    from shevsim.battery.thermal import FDThermal
-    from shevsim.battery.verification import drive_like_current
-
     p = params if params is not None else ThermalParams()
     stage_idx = {"I": 1, "II": 2, "III": 3}[stage]
     rng = np.random.default_rng([seed, stage_idx])
     n = int(round(duration_s / dt_s))
+    q = _stage_heat(stage_idx, seed, duration_s, dt_s, n, i_max_a, r_heat_ohm, heat_w)
+    h_true, t_changes = _stage_h_schedule(stage, duration_s)
+    h_given = 2.0 * H_STAR_W_M2K if stage == "III" else H_STAR_W_M2K
+    h0_ad = h_given if h0_adaptive_w_m2k is None else float(h0_adaptive_w_m2k)
+    filters, kw = _stage_filters(p, h_given, h0_ad, dt_s, sigma_c, tuning_ref_dt_s)
+    tc_true, ts_true, ta_true, est = _simulate_stage(stage, p, n_nodes, t_init_c, filters, q, h_true, dt_s,
+                                                     rng.standard_normal((n, 2)) * sigma_c)
+    h_arr = np.array([h_true(k * dt_s) for k in range(n)])
+    out = {"stage": stage, "seed": seed, "duration_s": duration_s, "dt_s": dt_s,
+           "mean_heat_w": float(q.mean()), "max_core_minus_surface_c": float(np.max(tc_true - ts_true)),
+           "core_rise_max_c": float(np.max(tc_true) - 27.0),
+           "mean_core_minus_ambient_c": float(np.mean(tc_true - ta_true)),
+           "max_core_minus_ambient_c": float(np.max(tc_true - ta_true)),
+           "h0_adaptive_w_m2k": h0_ad, "h_kf_w_m2k": None if stage == "II" else h_given, "filters": {},
+           "tuning": {k.upper(): dict(v) for k, v in kw.items()}, "tuning_ref_dt_s": tuning_ref_dt_s}
+    for name in filters:
+        ec = est[name][:, 0] - tc_true
+        es = est[name][:, 1] - ts_true
+        rel = np.abs(est[name][:, 2] - h_arr) / h_arr
+        settle = _settling_times(rel, t_changes, dt_s, n)
+        out["filters"][name] = {"rmse_core_c": float(np.sqrt(np.mean(ec ** 2))),
+                                "rmse_surface_c": float(np.sqrt(np.mean(es ** 2))),
+                                "h_final_w_m2k": float(est[name][-1, 2]),
+                                "h_final_rel_err": float(rel[-1]),
+                                "h_settle_10pct_s": settle}
+    if record:
+        out["trace"] = {"t_s": np.arange(n) * dt_s, "t_core_c": tc_true, "t_surface_c": ts_true,
+                        "h_w_m2k": h_arr, "q_w": q, **{f"{k}_est": v for k, v in est.items()}}
+    return out
+
+
+def _stage_heat(stage_idx: int, seed: int, duration_s: float, dt_s: float, n: int, i_max_a: float,
+                r_heat_ohm: float, heat_w) -> np.ndarray:
+    """Heat per step [W per cell]: ``i^2 r_heat_ohm`` of a drive-like current, or the given ``heat_w``."""
+    from shevsim.battery.verification import drive_like_current
     if heat_w is None:
         cur = drive_like_current(duration_s, dt_s, seed=seed * 10 + stage_idx, i_max_a=i_max_a)
         q = cur * cur * r_heat_ohm
@@ -73,11 +105,12 @@ def run_stage(stage: str, seed: int = 0, duration_s: float = 3600.0, dt_s: float
             raise SimulationError(f"run_stage: heat_w needs {n} finite samples (duration_s / dt_s), "
                                   f"got {q.size}" + ("" if q.size < n else " with non-finite values"))
         q = q[:n]
-    h_true, t_changes = _stage_h_schedule(stage, duration_s)
-    h_given = 2.0 * H_STAR_W_M2K if stage == "III" else H_STAR_W_M2K
-    h0_ad = h_given if h0_adaptive_w_m2k is None else float(h0_adaptive_w_m2k)
-    plant = FDThermal(p, n_nodes)
-    x = plant.initial_state(t_init_c)
+    return q
+
+
+def _stage_filters(p: ThermalParams, h_given: float, h0_ad: float, dt_s: float, sigma_c: float,
+                   tuning_ref_dt_s: float | None):
+    """KF (told ``h_given``), DKF and JEKF (starting at ``h0_ad``) with Table 3.2's tuning: ``(filters, tuning)``."""
     if tuning_ref_dt_s is None:          # Table 3.2 applied per step at any dt_s (the former behaviour)
         kw = {"kf": {"sigma_c": sigma_c}, "dkf": {"sigma_c": sigma_c}, "jekf": {"sigma_c": sigma_c}}
     else:                                # Table 3.2 read as per-step values at tuning_ref_dt_s: one continuous
@@ -86,7 +119,17 @@ def run_stage(stage: str, seed: int = 0, duration_s: float = 3600.0, dt_s: float
     filters = {"KF": ThermalKF(p, h_given, dt_s, **kw["kf"]),
                "DKF": ThermalDKF(p, h0_ad, dt_s, **kw["dkf"]),
                "JEKF": ThermalJEKF(p, h0_ad, dt_s, **kw["jekf"])}
-    noise = rng.standard_normal((n, 2)) * sigma_c
+    return filters, kw
+
+
+def _simulate_stage(stage: str, p: ThermalParams, n_nodes: int, t_init_c: float, filters: dict, q: np.ndarray,
+                    h_true, dt_s: float, noise: np.ndarray):
+    """Step the finite-difference plant and every filter on its noisy surface and ambient temperatures:
+    ``(core, surface, ambient [degC] of the plant, estimates (t_core, t_surface, h) per filter)``."""
+    from shevsim.battery.thermal import FDThermal
+    n = noise.shape[0]
+    plant = FDThermal(p, n_nodes)
+    x = plant.initial_state(t_init_c)
     tc_true = np.empty(n)
     ts_true = np.empty(n)
     ta_true = np.empty(n)
@@ -104,38 +147,23 @@ def run_stage(stage: str, seed: int = 0, duration_s: float = 3600.0, dt_s: float
             e = f.update(ym, tam, q[k])
             est[name][k] = (e.t_core_c, e.t_surface_c, e.h_w_m2k)
         x = plant.step(x, q[k], ta, h, dt_s)
-    h_arr = np.array([h_true(k * dt_s) for k in range(n)])
-    out = {"stage": stage, "seed": seed, "duration_s": duration_s, "dt_s": dt_s,
-           "mean_heat_w": float(q.mean()), "max_core_minus_surface_c": float(np.max(tc_true - ts_true)),
-           "core_rise_max_c": float(np.max(tc_true) - 27.0),
-           "mean_core_minus_ambient_c": float(np.mean(tc_true - ta_true)),
-           "max_core_minus_ambient_c": float(np.max(tc_true - ta_true)),
-           "h0_adaptive_w_m2k": h0_ad, "h_kf_w_m2k": None if stage == "II" else h_given, "filters": {},
-           "tuning": {k.upper(): dict(v) for k, v in kw.items()}, "tuning_ref_dt_s": tuning_ref_dt_s}
-    for name in filters:
-        ec = est[name][:, 0] - tc_true
-        es = est[name][:, 1] - ts_true
-        rel = np.abs(est[name][:, 2] - h_arr) / h_arr
-        settle = []
-        for i, t0 in enumerate(t_changes):
-            k0 = int(round(t0 / dt_s))
-            k1 = int(round(t_changes[i + 1] / dt_s)) if i + 1 < len(t_changes) else n
-            bad = np.flatnonzero(rel[k0:k1] > 0.10)
-            if bad.size == 0:
-                settle.append(0.0)
-            elif bad[-1] == k1 - k0 - 1:
-                settle.append(float("nan"))       # not within 10 % at the end of the segment
-            else:
-                settle.append(float((bad[-1] + 1) * dt_s))
-        out["filters"][name] = {"rmse_core_c": float(np.sqrt(np.mean(ec ** 2))),
-                                "rmse_surface_c": float(np.sqrt(np.mean(es ** 2))),
-                                "h_final_w_m2k": float(est[name][-1, 2]),
-                                "h_final_rel_err": float(rel[-1]),
-                                "h_settle_10pct_s": settle}
-    if record:
-        out["trace"] = {"t_s": np.arange(n) * dt_s, "t_core_c": tc_true, "t_surface_c": ts_true,
-                        "h_w_m2k": h_arr, "q_w": q, **{f"{k}_est": v for k, v in est.items()}}
-    return out
+    return tc_true, ts_true, ta_true, est
+
+
+def _settling_times(rel: np.ndarray, t_changes: list, dt_s: float, n: int) -> list[float]:
+    """Per segment of constant true h: time [s] until the relative h error stays within 10 % (nan: never)."""
+    settle = []
+    for i, t0 in enumerate(t_changes):
+        k0 = int(round(t0 / dt_s))
+        k1 = int(round(t_changes[i + 1] / dt_s)) if i + 1 < len(t_changes) else n
+        bad = np.flatnonzero(rel[k0:k1] > 0.10)
+        if bad.size == 0:
+            settle.append(0.0)
+        elif bad[-1] == k1 - k0 - 1:
+            settle.append(float("nan"))       # not within 10 % at the end of the segment
+        else:
+            settle.append(float((bad[-1] + 1) * dt_s))
+    return settle
 
 
 def uac_proxy_profile(scenario_path=None, seed: int | None = None, dt_s: float = 1.0,
