@@ -645,17 +645,7 @@ def power_capability_study(out_dir, seed: int = 1, stop_s: float | None = None, 
     met["verdict"] = {"limited_core_le_45p5": la["t_core_max_c"] <= t_max + 0.5,
                       "limited_voltage_in_bounds": la["voltage_in_bounds"], "limited_soc_in_bounds": la["soc_in_bounds"],
                       **{f"{k}_core_exceeds_45": met["runs"][k]["t_core_max_c"] > t_max for k in counterfactuals}}
-    pen = {}
-    for k in counterfactuals:
-        r = runs[k]
-        n = min(len(r.time_s), len(a.time_s))          # common span (a counterfactual may have stopped early)
-        d_lim, d_cf = float(a["vehicle.distance_m"][n - 1]), float(r["vehicle.distance_m"][n - 1])
-        pen[k] = {"over_s": float(a.time_s[n - 1]), "distance_lost_m": d_cf - d_lim,
-                  "distance_lost_pct": 100.0 * (d_cf - d_lim) / d_cf if d_cf > 0 else math.nan,
-                  "speed_rmse_increase_mps": float(
-                      np.sqrt(np.mean((a["vehicle.speed_mps"][:n] - a["cycle.speed_ref_mps"][:n]) ** 2))
-                      - np.sqrt(np.mean((r["vehicle.speed_mps"][:n] - r["cycle.speed_ref_mps"][:n]) ** 2)))}
-    met["speed_penalty_vs"] = pen
+    met["speed_penalty_vs"] = {k: _speed_penalty(a, runs[k]) for k in counterfactuals}
     import pandas as pd
     rows = [{"run": k, **{m: v for m, v in r.items() if m != "bounds"}} for k, r in met["runs"].items()]
     _write_csv(out / "power_capability.csv", pd.DataFrame(rows),
@@ -663,6 +653,28 @@ def power_capability_study(out_dir, seed: int = 1, stop_s: float | None = None, 
                + "; ".join(f"{k} = {v['what']}" for k, v in met["counterfactuals"].items())
                + "; bounds " + str(la["bounds"]))
     ns = float(a.parameters.get("battery", {}).get("n_series", 130))
+    _write_timeseries(out / "power_capability_timeseries.csv", runs, a, ns)
+    fig = _power_capability_figure(runs, met, seed, ns)
+    met["figure"] = str(_save_fig(fig, out / "power_capability.png"))
+    met["table_csv"] = str(out / "power_capability.csv")
+    write_json_atomic(out / "power_capability.json", met)
+    return met
+
+
+def _speed_penalty(a, r) -> dict:
+    """What the limits cost against counterfactual run ``r`` over the span both ran: distance and speed RMSE."""
+    n = min(len(r.time_s), len(a.time_s))          # common span (a counterfactual may have stopped early)
+    d_lim, d_cf = float(a["vehicle.distance_m"][n - 1]), float(r["vehicle.distance_m"][n - 1])
+    return {"over_s": float(a.time_s[n - 1]), "distance_lost_m": d_cf - d_lim,
+            "distance_lost_pct": 100.0 * (d_cf - d_lim) / d_cf if d_cf > 0 else math.nan,
+            "speed_rmse_increase_mps": float(
+                np.sqrt(np.mean((a["vehicle.speed_mps"][:n] - a["cycle.speed_ref_mps"][:n]) ** 2))
+                - np.sqrt(np.mean((r["vehicle.speed_mps"][:n] - r["cycle.speed_ref_mps"][:n]) ** 2)))}
+
+
+def _write_timeseries(path: Path, runs: dict, a, ns: float) -> None:
+    """1 s samples of every run's temperatures, powers, SOC, speed and cell voltage (NaN after a run stopped)."""
+    import pandas as pd
     t = a.time_s
     every = max(1, int(round(1.0 / float(np.median(np.diff(t))))))
     ts = pd.DataFrame({"time_s": t[::every], "speed_ref_mps": a["cycle.speed_ref_mps"][::every]})
@@ -676,7 +688,15 @@ def power_capability_study(out_dir, seed: int = 1, stop_s: float | None = None, 
             col_v = np.full(len(t), np.nan)
             col_v[:len(v)] = v[:len(t)]
             ts[f"{lab}_{col}"] = col_v[::every]
-    _write_csv(out / "power_capability_timeseries.csv", ts, "1 s samples of the runs (0.1 s step); NaN after a run stopped")
+    _write_csv(path, ts, "1 s samples of the runs (0.1 s step); NaN after a run stopped")
+
+
+def _power_capability_figure(runs: dict, met: dict, seed: int, ns: float):
+    """Core temperature, battery power and its limits, cell voltage, SOC and speed of every run (5 panels)."""
+    a = runs["limited"]
+    t = a.time_s
+    la = met["runs"]["limited"]
+    t_max = la["bounds"]["t_core_max_c"]
     plt = _plt()
     style = {"limited": ("C0", "-", 1.0), "unlimited": ("C3", "-", 0.7), "no_thermal_limit": ("C2", "--", 0.7)}
     lbl = {"limited": "limits enforced", "unlimited": "motors not derated", "no_thermal_limit": "no thermal limit"}
@@ -716,10 +736,7 @@ def power_capability_study(out_dir, seed: int = 1, stop_s: float | None = None, 
     ax[0].set_title(f"UAC proxy, cooling fault h 20 -> 3 W/m2K at 300 s (seed {seed})\nmax core [degC]: {ttl}",
                     fontsize=9)
     fig.tight_layout()
-    met["figure"] = str(_save_fig(fig, out / "power_capability.png"))
-    met["table_csv"] = str(out / "power_capability.csv")
-    write_json_atomic(out / "power_capability.json", met)
-    return met
+    return fig
 
 
 # -- command line -----------------------------------------------------------------------------------
