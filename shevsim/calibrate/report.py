@@ -310,43 +310,12 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
     from ..core.atomic import read_files
     from .known import load_params_toml
     from .data import load_measured, parse_mapping, parse_units
-    from .models import MODELS
     from .workflow import run_workflow
-    if model not in MODELS:
-        best = difflib.get_close_matches(str(model), sorted(MODELS), n=1)
-        raise DataError(f"calibrate: unknown model '{model}'" + (f" (did you mean '{best[0]}'?)" if best else
-                                                                 f" (models: {', '.join(sorted(MODELS))})"))
-    from .data import CURRENT_SIGNS, POWER_SIGNS
-    for name, val, allowed in (("split", split, ("blocks", "tail")),
-                               ("current_sign", current_sign, (None, "auto") + tuple(CURRENT_SIGNS)),
-                               ("power_sign", power_sign, POWER_SIGNS)):
-        if val not in allowed:
-            raise DataError(f"calibrate: {name} must be one of {', '.join(allowed)}, got {val!r}")
-    if isinstance(decimate, bool) or not isinstance(decimate, int) or decimate < 1:
-        raise DataError(f"calibrate: decimate must be an integer >= 1, got {decimate!r}")
+    _check_calibration_options(model, split, current_sign, power_sign, decimate)
     say = log or (lambda m: None)
     mapping = parse_mapping(_pairs(map))
-    data_path = str(data)
-    if not Path(data_path).is_file():
-        from .data import measured_records, resolve_record
-        rec = resolve_record(data_path)
-        if rec is None:
-            names = [r["name"] for r in measured_records()]
-            raise DataError(f"{data}: file not found" + (f" (shipped records: {', '.join(names)}; "
-                                                         f"shevsim calibrate --records)" if names else ""))
-        o = rec["options"]         # a shipped record: its declared options, under what the user gave
-        if rec["model"] != model:
-            raise DataError(f"record '{rec['name']}' is a {rec['model']} record, not {model}")
-        data_path = rec["path"]
-        mapping = {**dict(o.get("map", {})), **mapping}
-        current_sign = current_sign or o.get("current_sign")
-        drop_duplicate_rows = drop_duplicate_rows or bool(o.get("drop_duplicate_rows", False))
-        if params is None and o.get("params"):
-            params = str(Path(rec["folder"]) / o["params"])
-        say(f"record {rec['name']}: {rec['description']}")
-        say(f"  as declared by its records.toml: columns {', '.join(f'{k}={v}' for k, v in mapping.items())}; "
-            f"current sign {current_sign}; repeated rows {'dropped' if drop_duplicate_rows else 'refused'}; "
-            f"parameters {params}")
+    data_path, mapping, current_sign, drop_duplicate_rows, params = _shipped_record_options(
+        data, model, mapping, current_sign, drop_duplicate_rows, params, say)
     known = load_params_toml(params) if params else {}
     measured = load_measured(data_path, model, mapping, current_sign=current_sign or "auto",
                              power_sign=power_sign, drop_duplicate_rows=drop_duplicate_rows,
@@ -376,3 +345,47 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
     if out is not None:
         res.save(out)
     return res
+
+
+def _check_calibration_options(model: str, split: str, current_sign, power_sign: str, decimate) -> None:
+    """Refuse an unknown model, split or sign convention and a bad ``decimate`` before any file is read."""
+    from .models import MODELS
+    if model not in MODELS:
+        best = difflib.get_close_matches(str(model), sorted(MODELS), n=1)
+        raise DataError(f"calibrate: unknown model '{model}'" + (f" (did you mean '{best[0]}'?)" if best else
+                                                                 f" (models: {', '.join(sorted(MODELS))})"))
+    from .data import CURRENT_SIGNS, POWER_SIGNS
+    for name, val, allowed in (("split", split, ("blocks", "tail")),
+                               ("current_sign", current_sign, (None, "auto") + tuple(CURRENT_SIGNS)),
+                               ("power_sign", power_sign, POWER_SIGNS)):
+        if val not in allowed:
+            raise DataError(f"calibrate: {name} must be one of {', '.join(allowed)}, got {val!r}")
+    if isinstance(decimate, bool) or not isinstance(decimate, int) or decimate < 1:
+        raise DataError(f"calibrate: decimate must be an integer >= 1, got {decimate!r}")
+
+
+def _shipped_record_options(data, model: str, mapping: dict, current_sign, drop_duplicate_rows: bool, params, say):
+    """Where ``data`` names a shipped record rather than a file: its path and its declared options under what
+    the caller gave; returns ``(data_path, mapping, current_sign, drop_duplicate_rows, params)``."""
+    data_path = str(data)
+    if not Path(data_path).is_file():
+        from .data import measured_records, resolve_record
+        rec = resolve_record(data_path)
+        if rec is None:
+            names = [r["name"] for r in measured_records()]
+            raise DataError(f"{data}: file not found" + (f" (shipped records: {', '.join(names)}; "
+                                                         f"shevsim calibrate --records)" if names else ""))
+        o = rec["options"]         # a shipped record: its declared options, under what the user gave
+        if rec["model"] != model:
+            raise DataError(f"record '{rec['name']}' is a {rec['model']} record, not {model}")
+        data_path = rec["path"]
+        mapping = {**dict(o.get("map", {})), **mapping}
+        current_sign = current_sign or o.get("current_sign")
+        drop_duplicate_rows = drop_duplicate_rows or bool(o.get("drop_duplicate_rows", False))
+        if params is None and o.get("params"):
+            params = str(Path(rec["folder"]) / o["params"])
+        say(f"record {rec['name']}: {rec['description']}")
+        say(f"  as declared by its records.toml: columns {', '.join(f'{k}={v}' for k, v in mapping.items())}; "
+            f"current sign {current_sign}; repeated rows {'dropped' if drop_duplicate_rows else 'refused'}; "
+            f"parameters {params}")
+    return data_path, mapping, current_sign, drop_duplicate_rows, params
