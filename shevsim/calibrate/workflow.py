@@ -836,14 +836,15 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
                                              f"explain this record (read any selected effect as a partial repair)"})
     replay, overlay = run.close_loop(selected, final, out_dir)
     at_bounds, ident = run.bounds_and_identifiability(selected, final)
-    report = _report(run, selected, final, dropped, discrepancy, diag_before, diag_after, unexplained,
-                     baseline_failure, replay, overlay, at_bounds, ident, out_dir)
+    report = _report(run, selected, final, dropped=dropped, discrepancy=discrepancy, diag_before=diag_before,
+                     diag_after=diag_after, unexplained=unexplained, baseline_failure=baseline_failure,
+                     replay=replay, overlay=overlay, at_bounds=at_bounds, ident=ident, out_dir=out_dir)
     if out_dir is not None:
         write_report(Path(out_dir), report, run.fitter, base, final, run.t, plots)
     return report
 
 
-def _report(run, selected, final, dropped, discrepancy, diag_before, diag_after, unexplained, baseline_failure,
+def _report(run, selected, final, *, dropped, discrepancy, diag_before, diag_after, unexplained, baseline_failure,
             replay, overlay, at_bounds, ident, out_dir) -> dict:
     f, model, data, base = run.fitter, run.model, run.data, run.base
     replay_dev = (max(abs(replay[c][part] / max(final.rmse[c][part], 1e-300) - 1.0)
