@@ -172,9 +172,14 @@ def _sample(rec: np.ndarray, n_sub: int, n_g: int) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def _speed_following_power(vr, ar, h, kd, kg, m, c, fr, g, md, mi, k_w, k_tau, extrapolate, v_regen, p_regen,
-                           eff_scale, heat_rate, gamma0, aux, regen_eff_scale):  # pragma: no cover - compiled
+def _speed_following_power(vr, ar, h, vehicle, motor, aux):  # pragma: no cover - compiled
     """Bus power [W] at every master step of cycle -> vehicle (speed mode) -> motor -> bus (index 0 = initialise).
+
+    ``vehicle = (grade knots' distance [m], grade [-], mass [kg], c_aero, rolling coefficient, g [m/s^2])``,
+    ``motor = (maps md, mi, k_w, k_tau, extrapolate, regen speed min [m/s], regen power max [W], efficiency
+    scale, heat rate [1/s], initial heat index, regenerating efficiency scale)``
+    (:func:`~shevsim.powertrain.motor.motor_step`'s arguments),
+    ``aux`` the bus's auxiliary power [W].
 
     The components' own steps in the master's order: :func:`~shevsim.powertrain.vehicle.speed_follow_step`
     (:class:`~shevsim.components.vehicle.Vehicle`, speed mode), :func:`~shevsim.powertrain.motor.motor_step`
@@ -182,6 +187,8 @@ def _speed_following_power(vr, ar, h, kd, kg, m, c, fr, g, md, mi, k_w, k_tau, e
     :func:`~shevsim.powertrain.motor.bus_balance` (:class:`~shevsim.components.bus.PowerBus`, no generator,
     aux input 0); ``vr``/``ar`` are the cycle's outputs at each step.  Only the state passes between them here.
     """
+    kd, kg, m, c, fr, g = vehicle
+    md, mi, k_w, k_tau, extrapolate, v_regen, p_regen, eff_scale, heat_rate, gamma0, regen_eff_scale = motor
     n = vr.shape[0] - 1
     rec = np.empty(n + 1)
     # initialise (grade input 0, at distance 0; the motor and bus start with 0 force / power)
@@ -339,13 +346,13 @@ class VehicleModel(CalibrationModel):
         vp, mp, bp = prm["vehicle"], prm["motor"], prm["bus"]
         kd = np.array(vp.grade_distance_m, dtype=float)
         kg = np.array(vp.grade_frac, dtype=float)
-        rec = _speed_following_power(
-            ctx["vr"], ctx["ar"], ctx["h"], kd, kg, float(vp.mass_kg), float(vp.c_aero), float(vp.rolling_coefficient),
-            float(vp.gravity_mps2),
-            ctx["md"], ctx["mi"], mp.gear_ratio / mp.wheel_radius_m, mp.wheel_radius_m / mp.gear_ratio,
-            bool(mp.extrapolate_speed), float(mp.regen_speed_min_mps), float(mp.regen_power_max_w),
-            float(mp.efficiency_scale_frac), float(mp.heat_rate_per_s), float(mp.heat_index_init_frac),
-            float(bp.aux_power_w), float(mp.regen_efficiency_scale_frac))
+        vehicle = (kd, kg, float(vp.mass_kg), float(vp.c_aero), float(vp.rolling_coefficient),
+                   float(vp.gravity_mps2))
+        motor = (ctx["md"], ctx["mi"], mp.gear_ratio / mp.wheel_radius_m, mp.wheel_radius_m / mp.gear_ratio,
+                 bool(mp.extrapolate_speed), float(mp.regen_speed_min_mps), float(mp.regen_power_max_w),
+                 float(mp.efficiency_scale_frac), float(mp.heat_rate_per_s), float(mp.heat_index_init_frac),
+                 float(mp.regen_efficiency_scale_frac))
+        rec = _speed_following_power(ctx["vr"], ctx["ar"], ctx["h"], vehicle, motor, float(bp.aux_power_w))
         pg = _sample(rec, ctx["n_sub"], ctx["tg"].size)
         return {"power_w": np.interp(ctx["t"], ctx["tg"], pg)}
 

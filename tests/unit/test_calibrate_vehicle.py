@@ -282,9 +282,11 @@ def test_calibration_loop_compiled_equals_py_func():
     m = get_model("vehicle")
     ctx = m.prepare(data)
     mp = MotorParams()
-    args = (ctx["vr"], ctx["ar"], ctx["h"], np.array([0.0, 200.0, 400.0]), np.array([0.0, 0.03, -0.02]), 16000.0,
-            VehicleParams().c_aero, 0.013, G_MPS2, ctx["md"], ctx["mi"], mp.gear_ratio / mp.wheel_radius_m,
-            mp.wheel_radius_m / mp.gear_ratio, True, 0.5, 40e3, 0.95, mp.heat_rate_per_s, 0.3, 2e3, 0.9)
+    vehicle = (np.array([0.0, 200.0, 400.0]), np.array([0.0, 0.03, -0.02]), 16000.0, VehicleParams().c_aero, 0.013,
+               G_MPS2)
+    motor = (ctx["md"], ctx["mi"], mp.gear_ratio / mp.wheel_radius_m, mp.wheel_radius_m / mp.gear_ratio, True, 0.5,
+             40e3, 0.95, mp.heat_rate_per_s, 0.3, 0.9)
+    args = (ctx["vr"], ctx["ar"], ctx["h"], vehicle, motor, 2e3)
     assert _rel(_speed_following_power(*args), _speed_following_power.py_func(*args)) <= 1e-12
 
 
