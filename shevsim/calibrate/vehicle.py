@@ -200,11 +200,13 @@ def _speed_following_power(vr, ar, h, vehicle, motor, aux):  # pragma: no cover 
     h_prev = 1.0
     gamma = gamma0
     rec[0] = bus_balance(0.0, 0.0, 0.0, aux)[1]
+    vp = np.array([m, c, fr, g])                 # the vehicle's parameters (order of vehicle.VP)
+    mp = np.array([k_w, k_tau, 1.0 if extrapolate else 0.0, v_regen, p_regen, eff_scale, heat_rate,
+                   regen_eff_scale])             # the motor's (order of motor.P)
     for k in range(n):
-        st = speed_follow_step(v, th, dist, vr[k + 1], ar[k + 1], 0.0, h, kd, kg, m, c, fr, g)
+        st = speed_follow_step(vp, kd, kg, v, th, dist, vr[k + 1], ar[k + 1], 0.0, h)
         v, dist, th, f_req = st[0], st[1], st[2], st[3]
-        res = motor_step(md, mi, f_req, v, 1e12, -1e12, h, v_prev, h_prev, gamma, k_w, k_tau, extrapolate,
-                         v_regen, p_regen, eff_scale, heat_rate, regen_eff_scale)
+        res = motor_step(md, mi, mp, f_req, v, 1e12, -1e12, h, v_prev, h_prev, gamma)
         gamma = res[6]
         v_prev = res[7]
         h_prev = h

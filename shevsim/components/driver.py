@@ -17,12 +17,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
-from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, njit_step, port_index
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, njit_step, port_index
 from shevsim.core.component import Component
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.driver import driver_step
+from shevsim.powertrain.driver import DP, driver_step
 from shevsim.powertrain.vehicle import G_MPS2
 
 
@@ -98,10 +97,8 @@ class Driver(CompiledStep, Component):
 
 U = port_index(Driver.VARIABLES, "input")
 Y = port_index(Driver.VARIABLES, "output")
-#: the step's parameters ``data[0]``: the gains, the feed-forward's vehicle (mass, 0.5 rho cd A, rolling
-#: coefficient, g) and the saturation
-P = field_index(("kp_n_per_mps", "ki_n_per_m", "mass_kg", "drag_n_per_mps2", "rolling_coefficient", "g_mps2",
-                 "force_brake_max_n", "force_prop_max_n"), "P")
+#: the step's parameters ``data[0]`` (declared with the physics)
+P = DP
 
 
 @njit_step
@@ -113,9 +110,7 @@ def driver_component_step(data, u, y, t, h):
     v = u[U.speed_mps]
     if vr != vr or ar != ar or v != v:
         return ERR_NAN_INPUT
-    f, e, ff, x[0] = driver_step(vr, ar, v, x[0], h, p[P.kp_n_per_mps], p[P.ki_n_per_m], p[P.mass_kg],
-                                 p[P.drag_n_per_mps2], p[P.rolling_coefficient], p[P.g_mps2], p[P.force_brake_max_n],
-                                 p[P.force_prop_max_n])
+    f, e, ff, x[0] = driver_step(p, vr, ar, v, x[0], h)
     y[Y.force_req_n] = f
     y[Y.speed_error_mps] = e
     y[Y.feedforward_n] = ff

@@ -48,14 +48,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
-from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, njit_step, port_index
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, njit_step, port_index
 from shevsim.core.component import Component
 from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
 from shevsim.powertrain.maps import load_curve_csv, load_grid_csv, scaled_curve, scaled_grid
-from shevsim.powertrain.motor import HEAT_RATE_PER_S, MotorMaps, motor_component_step
+from shevsim.powertrain import motor as _motor
+from shevsim.powertrain.motor import HEAT_RATE_PER_S, MotorMaps, motor_component_step, motor_params
 from shevsim.core.paths import data_path
 
 _DIR = data_path("components", "motor")
@@ -181,8 +181,8 @@ class Motor(CompiledStep, Component):
         gamma = self.params.heat_index_init_frac
         v_prev = max(self.u["speed_mps"], 0.0)
         self.data = (self._md, self._mi,
-                     np.array([self._k_w, self._k_tau, 1.0 if self.extrapolate else 0.0, self._v_regen, self._p_regen,
-                               self._eff_scale, self._heat_rate, self._regen_eff_scale], dtype=np.float64),
+                     motor_params(self._k_w, self._k_tau, self.extrapolate, self._v_regen, self._p_regen,
+                                  self._eff_scale, self._heat_rate, self._regen_eff_scale),
                      np.array([gamma, 0.0, 0.0, 0.0, v_prev, 1.0], dtype=np.float64))
         w = v_prev * self._k_w
         self.y["heat_index_frac"] = gamma
@@ -201,9 +201,8 @@ class Motor(CompiledStep, Component):
 
 U = port_index(Motor.VARIABLES, "input")
 Y = port_index(Motor.VARIABLES, "output")
-#: parameters ``data[2]`` and state ``data[3]`` of the step
-P = field_index(("k_w", "k_tau", "extrapolate", "v_regen", "p_regen", "eff_scale", "heat_rate", "regen_eff_scale"), "P")
-X = field_index(("gamma", "e_loss", "e_elec", "e_mech", "v_prev", "h_prev"), "X")
+#: parameters ``data[2]`` and state ``data[3]`` of the step (declared with the physics)
+P, X = _motor.P, _motor.X
 
 
 @njit_step
@@ -215,11 +214,7 @@ def motor_step(data, u, y, t, h):
     if f_req != f_req or v != v:
         return ERR_NAN_INPUT
     (y[Y.traction_force_n], y[Y.brake_force_n], y[Y.elec_power_w], y[Y.torque_nm], y[Y.speed_radps],
-     y[Y.torque_max_nm], x[X.gamma], x[X.e_loss], x[X.e_elec], x[X.e_mech], x[X.v_prev]) = motor_component_step(
-        md, mi, f_req, v, u[U.elec_power_max_w], u[U.elec_power_min_w], h, x[X.v_prev], x[X.h_prev], x[X.gamma],
-        x[X.e_loss], x[X.e_elec], x[X.e_mech], p[P.k_w], p[P.k_tau], p[P.extrapolate] > 0.5, p[P.v_regen],
-        p[P.p_regen], p[P.eff_scale], p[P.heat_rate], p[P.regen_eff_scale])
-    x[X.h_prev] = h
+     y[Y.torque_max_nm]) = motor_component_step(md, mi, p, x, f_req, v, u[U.elec_power_max_w], u[U.elec_power_min_w], h)
     y[Y.heat_index_frac] = x[X.gamma]
     y[Y.loss_energy_j] = x[X.e_loss]
     y[Y.elec_energy_j] = x[X.e_elec]

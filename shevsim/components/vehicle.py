@@ -39,13 +39,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from numba import njit
 
-from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, njit_step, port_index
+from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, njit_step, port_index
 from shevsim.core.component import Component
 from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.vehicle import G_MPS2, grade_total_rad, vehicle_force_step, vehicle_speed_mode_step
+from shevsim.powertrain.vehicle import (G_MPS2, XF, XS, grade_total_rad, vehicle_force_step,
+                                       vehicle_speed_mode_step)
 
 INPUT_MODES = ("force", "speed")
 
@@ -177,10 +177,10 @@ class Vehicle(CompiledStep, Component):
         return grade_total_rad(th_in, 0.0, self._kd, self._kg) if self._knots else th_in
 
     def initialize(self, t0: float) -> None:
-        """``data`` = ``(p, grade_distance_m, grade_frac, x)``: ``p = [mass, 0.5 rho cd A, rolling, g(, knots)]``,
+        """``data`` = ``(p, grade_distance_m, grade_frac, x)``: ``p = [mass, 0.5 rho cd A, rolling, g]`` (:data:`~shevsim.powertrain.vehicle.VP`),
         ``x`` = :data:`XF` (force mode) or :data:`XS` (speed mode)."""
         y = self.y
-        p = [self._m, self._c, self._fr, self._g]
+        p = [self._m, self._c, self._fr, self._g]          # order of VP
         if self._speed:
             v = max(self.u["speed_ref_mps"], 0.0)
             x = [v, 0.0, self._grade(self.u["grade_rad"]), 0.0, 0.0, 0.0, 0.0, 0.0]
@@ -188,7 +188,6 @@ class Vehicle(CompiledStep, Component):
         else:
             v = self.params.speed_init_mps
             x = [v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
-            p.append(1.0 if self._knots else 0.0)
         self.data = (np.array(p, dtype=np.float64), np.ascontiguousarray(self._kd, dtype=np.float64),
                      np.ascontiguousarray(self._kg, dtype=np.float64), np.array(x, dtype=np.float64))
         y["speed_mps"] = v
@@ -224,9 +223,6 @@ U = port_index(Vehicle.VARIABLES, "input")
 Y = port_index(Vehicle.VARIABLES, "output")
 US = port_index(Vehicle.VARIABLES_SPEED, "input")
 YS = port_index(Vehicle.VARIABLES_SPEED, "output")
-#: the state ``data[3]`` in force mode and in speed mode (``th``: the grade acting over the next step)
-XF = field_index(("v", "dist", "e_traction", "e_brake", "e_rolling", "e_aero", "e_grade"), "XF")
-XS = field_index(("v", "dist", "th", "e_traction", "e_brake", "e_rolling", "e_aero", "e_grade"), "XS")
 
 
 @njit_step
@@ -238,10 +234,7 @@ def vehicle_step(data, u, y, t, h):
     th = u[U.grade_rad]
     if f_t != f_t or f_b != f_b or th != th:
         return ERR_NAN_INPUT
-    (x[XF.v], y[Y.accel_mps2], x[XF.dist], x[XF.e_traction], x[XF.e_brake], x[XF.e_rolling], x[XF.e_aero],
-     x[XF.e_grade], y[Y.kinetic_energy_j]) = vehicle_force_step(
-        x[XF.v], x[XF.dist], x[XF.e_traction], x[XF.e_brake], x[XF.e_rolling], x[XF.e_aero], x[XF.e_grade], f_t, f_b,
-        th, h, p[0], p[1], p[2], p[3], p[4] > 0.5, kd, kg)
+    y[Y.accel_mps2], y[Y.kinetic_energy_j] = vehicle_force_step(p, kd, kg, x, f_t, f_b, th, h)
     y[Y.speed_mps] = x[XF.v]
     y[Y.distance_m] = x[XF.dist]
     y[Y.traction_energy_j] = x[XF.e_traction]
@@ -262,10 +255,7 @@ def vehicle_speed_step(data, u, y, t, h):
     th = u[US.grade_rad]
     if vr != vr or ar != ar or th != th:
         return ERR_NAN_INPUT
-    (x[XS.v], y[YS.accel_mps2], x[XS.dist], x[XS.th], y[YS.force_req_n], x[XS.e_traction], x[XS.e_brake],
-     x[XS.e_rolling], x[XS.e_aero], x[XS.e_grade], y[YS.kinetic_energy_j]) = vehicle_speed_mode_step(
-        x[XS.v], x[XS.th], x[XS.dist], x[XS.e_traction], x[XS.e_brake], x[XS.e_rolling], x[XS.e_aero],
-        x[XS.e_grade], vr, ar, th, h, kd, kg, p[0], p[1], p[2], p[3])
+    y[YS.accel_mps2], y[YS.force_req_n], y[YS.kinetic_energy_j] = vehicle_speed_mode_step(p, kd, kg, x, vr, ar, th, h)
     y[YS.speed_mps] = x[XS.v]
     y[YS.distance_m] = x[XS.dist]
     y[YS.traction_energy_j] = x[XS.e_traction]

@@ -15,6 +15,7 @@ start of the step (direct feedthrough); the integral is then advanced by ``k_I e
 """
 from __future__ import annotations
 
+from shevsim.core.compiled import field_index, njit_step
 from shevsim.core.lookup import njit
 
 from .vehicle import G_MPS2
@@ -41,11 +42,19 @@ def pi_force(e: float, integ: float, ff: float, kp: float, f_min: float, f_max: 
     return f, True
 
 
-@njit(cache=True)
-def driver_step(v_ref: float, a_ref: float, v: float, integ: float, h: float, kp: float, ki: float, mass_kg: float,
-                c_aero: float, f_roll: float, g: float, force_brake_max_n: float, force_prop_max_n: float):
-    """One driver step with the inputs held over ``h``: ``(force_req_n, speed_error_mps, feedforward_n,
-    integral at t + h)``.  The component's step and the compiled whole-vehicle loop both call it."""
+#: the driver's parameters ``p`` (:func:`driver_step`; the driver component's ``data[0]``): the PI gains, the
+#: feed-forward's vehicle (mass, ``0.5 rho C_d A``, rolling coefficient, g) and the force saturation
+DP = field_index(("kp_n_per_mps", "ki_n_per_m", "mass_kg", "drag_n_per_mps2", "rolling_coefficient", "g_mps2",
+                  "force_brake_max_n", "force_prop_max_n"), "DP")
+
+
+@njit_step
+def driver_step(p, v_ref: float, a_ref: float, v: float, integ: float, h: float):
+    """One driver step with the inputs held over ``h`` and parameters ``p`` (order of :data:`DP`):
+    ``(force_req_n, speed_error_mps, feedforward_n, integral at t + h)``.  The component's step calls it, under
+    the Python master and in the compiled whole-vehicle loop alike."""
+    kp = p[DP.kp_n_per_mps]
+    force_brake_max_n = p[DP.force_brake_max_n]
     e = v_ref - v
     if v_ref <= 0.0 and a_ref <= 0.0:
         integ = 0.0
@@ -56,8 +65,9 @@ def driver_step(v_ref: float, a_ref: float, v: float, integ: float, h: float, kp
         if -force_brake_max_n > f:
             f = -force_brake_max_n
     else:
-        ff = feedforward_n(v_ref, a_ref, mass_kg, c_aero, f_roll, g)
-        f, integrate = pi_force(e, integ, ff, kp, -force_brake_max_n, force_prop_max_n)
+        ff = feedforward_n(v_ref, a_ref, p[DP.mass_kg], p[DP.drag_n_per_mps2], p[DP.rolling_coefficient],
+                           p[DP.g_mps2])
+        f, integrate = pi_force(e, integ, ff, kp, -force_brake_max_n, p[DP.force_prop_max_n])
         if integrate:
-            integ += ki * e * h
+            integ += p[DP.ki_n_per_m] * e * h
     return f, e, ff, integ

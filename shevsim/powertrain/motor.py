@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from shevsim.core.compiled import field_index, njit_step
 from shevsim.core.lookup import curve_nb, grid_nb, njit, py_max, py_min
 
 from .maps import Curve, Grid2D
@@ -87,27 +88,42 @@ def efficiency(md, mi, w: float, tau: float, scale: float) -> float:
     return eta
 
 
-@njit(cache=True)
-def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: float, v_prev: float,
-               h_prev: float, gamma: float, k_w: float, k_tau: float, extrapolate: bool, regen_speed_min: float,
-               regen_power_max: float, eff_scale: float, heat_rate: float, regen_eff_scale: float = 1.0):
+#: the motor step's parameters ``p`` (:func:`motor_step`; the motor component's ``data[2]``): motor rad/s per
+#: m/s, motor N m per wheel N, ``extrapolate_speed`` (1/0), ``regen_speed_min_mps``, ``regen_power_max_w``,
+#: ``efficiency_scale_frac``, ``heat_rate_per_s``, ``regen_efficiency_scale_frac``
+P = field_index(("k_w", "k_tau", "extrapolate", "v_regen", "p_regen", "eff_scale", "heat_rate", "regen_eff_scale"),
+                "P")
+#: the motor component's state (:func:`motor_component_step`; its ``data[3]``): heat index, the cumulative loss,
+#: electrical and shaft energies [J], the speed input and step of the previous step
+X = field_index(("gamma", "e_loss", "e_elec", "e_mech", "v_prev", "h_prev"), "X")
+
+
+def motor_params(k_w: float, k_tau: float, extrapolate: bool, regen_speed_min: float, regen_power_max: float,
+                 eff_scale: float, heat_rate: float, regen_eff_scale: float = 1.0) -> np.ndarray:
+    """The parameter array ``p`` of :func:`motor_step` (order of :data:`P`)."""
+    return np.array([k_w, k_tau, 1.0 if extrapolate else 0.0, regen_speed_min, regen_power_max, eff_scale,
+                     heat_rate, regen_eff_scale], dtype=np.float64)
+
+
+@njit_step
+def motor_step(md, mi, p, f_req: float, v: float, p_hi: float, p_lo: float, h: float, v_prev: float,
+               h_prev: float, gamma: float):
     """One step of the equivalent motor with inputs held over ``h`` (see :mod:`shevsim.components.motor`).
 
     Parameters
     ----------
     md, mi : arrays
         Packed maps (:meth:`MotorMaps.packed`).
+    p : array
+        Parameters in the order of :data:`P` (:func:`motor_params`): ``k_w``, ``k_tau`` the motor rad/s per m/s
+        and motor N m per wheel N; ``extrapolate_speed``, ``regen_speed_min_mps``, ``regen_power_max_w``,
+        ``efficiency_scale_frac``, ``heat_rate_per_s``, ``regen_efficiency_scale_frac``.
     f_req, v : float
         Wheel force request [N] (+ propel) and vehicle speed [m/s].
     p_hi, p_lo : float
         Bus power limits [W] (>= 0 / <= 0; others are clamped to 0).
     h, v_prev, h_prev, gamma : float
         Step [s]; speed input and step of the previous step (mid-step speed extrapolation); heat index.
-    k_w, k_tau : float
-        Motor rad/s per m/s and motor N m per wheel N.
-    extrapolate, regen_speed_min, regen_power_max, eff_scale, heat_rate, regen_eff_scale
-        Parameters ``extrapolate_speed``, ``regen_speed_min_mps``, ``regen_power_max_w``,
-        ``efficiency_scale_frac``, ``heat_rate_per_s``, ``regen_efficiency_scale_frac``.
 
     Returns
     -------
@@ -116,11 +132,15 @@ def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: floa
         mid-step speed, motor speed [rad/s], torque limit [N m], heat index at t + h, the speed used
         (the next step's ``v_prev``).
     """
+    k_w = p[P.k_w]
+    k_tau = p[P.k_tau]
+    eff_scale = p[P.eff_scale]
+    regen_power_max = p[P.p_regen]
     if v < 0.0:
         v = 0.0
     w = v * k_w
     # mid-step speed by linear extrapolation of the speed input (second-order accurate power)
-    v_mid = v + 0.5 * (v - v_prev) * (h / h_prev) if extrapolate else v
+    v_mid = v + 0.5 * (v - v_prev) * (h / h_prev) if p[P.extrapolate] > 0.5 else v
     w_mid = v_mid * k_w if v_mid > 0.0 else 0.0
     t_peak = curve_nb(md, mi[0], mi[1], w)
     t_cont = curve_nb(md, mi[2], mi[3], w)
@@ -130,13 +150,13 @@ def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: floa
     if tau > t_lim:
         tau = t_lim
     elif tau < 0.0:
-        t_regen = t_lim if v >= regen_speed_min else 0.0
+        t_regen = t_lim if v >= p[P.v_regen] else 0.0
         if tau < -t_regen:
             tau = -t_regen
         brake = -(f_req - tau / k_tau)
     # generating: the map's efficiency times both scales (the torque keeps its sign below)
     if tau < 0.0:
-        eff_scale = eff_scale * regen_eff_scale
+        eff_scale = eff_scale * p[P.regen_eff_scale]
     p_el = electrical_power(tau, w_mid, efficiency(md, mi, w_mid, tau, eff_scale))
     # bus power limits (battery power capability + generator output) and the drive's own regenerative
     # power limit: scale the torque down until the electrical power fits; the rest of a braking
@@ -160,29 +180,29 @@ def motor_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: floa
         if f_req < 0.0:
             brake = -(f_req - tau / k_tau)
     p_m = tau * w_mid
-    gamma1 = heat_index_step(gamma, tau, t_cont, h, heat_rate)
+    gamma1 = heat_index_step(gamma, tau, t_cont, h, p[P.heat_rate])
     return tau, brake, p_el, p_m, w, t_lim, gamma1, v
 
 
-@njit(cache=True)
-def motor_component_step(md, mi, f_req: float, v: float, p_hi: float, p_lo: float, h: float, v_prev: float,
-                         h_prev: float, gamma: float, e_loss: float, e_elec: float, e_mech: float, k_w: float,
-                         k_tau: float, extrapolate: bool, regen_speed_min: float, regen_power_max: float,
-                         eff_scale: float, heat_rate: float, regen_eff_scale: float = 1.0):
-    """:func:`motor_step` plus the motor component's bookkeeping (energies integrated over the held step).
+@njit_step
+def motor_component_step(md, mi, p, x, f_req: float, v: float, p_hi: float, p_lo: float, h: float):
+    """:func:`motor_step` from the state ``x`` (order of :data:`X`, advanced in place: heat index, the energies
+    integrated over the held step, the speed input and step for the next step's extrapolation) plus the
+    motor component's bookkeeping.
 
-    Returns ``(traction_force_n, brake_force_n, elec_power_w, torque_nm, speed_radps, torque_max_nm,
-    heat_index_frac, loss_energy_j, elec_energy_j, mech_energy_j, v_used)``; ``v_used`` is the next
-    step's ``v_prev``.  The component (:class:`shevsim.components.motor.Motor`) and the compiled
-    whole-vehicle loop (:mod:`shevsim.fast`) both call it.
+    Returns ``(traction_force_n, brake_force_n, elec_power_w, torque_nm, speed_radps, torque_max_nm)``.  The
+    component (:class:`shevsim.components.motor.Motor`) calls it, under the Python master and in the compiled
+    whole-vehicle loop alike.
     """
-    tau, brake, p_el, p_m, w, t_lim, gamma1, v_used = motor_step(
-        md, mi, f_req, v, p_hi, p_lo, h, v_prev, h_prev, gamma, k_w, k_tau, extrapolate, regen_speed_min,
-        regen_power_max, eff_scale, heat_rate, regen_eff_scale)
-    e_elec += p_el * h
-    e_mech += p_m * h
-    e_loss += (p_el - p_m) * h
-    return tau / k_tau, brake, p_el, tau, w, t_lim, gamma1, e_loss, e_elec, e_mech, v_used
+    tau, brake, p_el, p_m, w, t_lim, gamma1, v_used = motor_step(md, mi, p, f_req, v, p_hi, p_lo, h, x[X.v_prev],
+                                                                  x[X.h_prev], x[X.gamma])
+    x[X.gamma] = gamma1
+    x[X.e_elec] += p_el * h
+    x[X.e_mech] += p_m * h
+    x[X.e_loss] += (p_el - p_m) * h
+    x[X.v_prev] = v_used
+    x[X.h_prev] = h
+    return tau / p[P.k_tau], brake, p_el, tau, w, t_lim
 
 
 @njit(cache=True, error_model="numpy")

@@ -45,9 +45,18 @@ from __future__ import annotations
 
 import math
 
+from shevsim.core.compiled import field_index, njit_step
 from shevsim.core.lookup import njit, interp_held
 
 G_MPS2 = 9.80665
+
+#: the vehicle's parameters ``p`` (:func:`speed_follow_step`, :func:`vehicle_force_step`,
+#: :func:`vehicle_speed_mode_step`; the vehicle component's ``data[0]``): mass [kg], ``c_aero = 1/2 rho C_d A``
+#: [kg/m], rolling coefficient [-], gravity [m/s2]
+VP = field_index(("mass_kg", "c_aero", "f_roll_coeff", "g_mps2"), "VP")
+#: the vehicle component's state in force mode and in speed mode (``th``: the grade acting over the next step)
+XF = field_index(("v", "dist", "e_traction", "e_brake", "e_rolling", "e_aero", "e_grade"), "XF")
+XS = field_index(("v", "dist", "th", "e_traction", "e_brake", "e_rolling", "e_aero", "e_grade"), "XS")
 
 
 @njit(cache=True)
@@ -89,12 +98,13 @@ def grade_total_rad(grade_in: float, d: float, knot_d, knot_frac) -> float:
     return grade_in
 
 
-@njit(cache=True, error_model="numpy")
-def speed_follow_step(v0: float, grade0: float, d0: float, v_ref: float, a_ref: float, grade_in: float, h: float,
-                      knot_d, knot_frac, mass_kg: float, c_aero: float, f_roll_coeff: float, g: float = G_MPS2):
+@njit_step(error_model="numpy")
+def speed_follow_step(p, knot_d, knot_frac, v0: float, grade0: float, d0: float, v_ref: float, a_ref: float,
+                      grade_in: float, h: float):
     """One step of the speed-following (``input_mode = "speed"``) vehicle: the whole physics of
     :class:`shevsim.components.vehicle.Vehicle` in speed mode and of the vehicle calibration's loop.
 
+    ``p``: the vehicle's parameters (order of :data:`VP`); ``knot_d``, ``knot_frac``: the road grade's knots.
     The vehicle at ``v0`` (grade ``grade0`` [rad] held over the step, distance ``d0``) moves to
     ``v1 = max(v_ref, 0)`` over ``h``; the works are those of the force :func:`traction_force_n` that
     produced that change.  Then the grade at the new distance (:func:`grade_total_rad` of ``grade_in``) and
@@ -106,6 +116,10 @@ def speed_follow_step(v0: float, grade0: float, d0: float, v_ref: float, a_ref: 
         Speed [m/s], distance [m], grade for the next step [rad], force request for the next step [N], distance
         covered [m] and the works of propulsion, rolling, aero and grade over the step [J].
     """
+    mass_kg = p[VP.mass_kg]
+    c_aero = p[VP.c_aero]
+    f_roll_coeff = p[VP.f_roll_coeff]
+    g = p[VP.g_mps2]
     v1 = v_ref if v_ref > 0.0 else 0.0
     f = traction_force_n(v0, v1, h, grade0, mass_kg, c_aero, f_roll_coeff, g)
     dist = 0.5 * (v0 + v1) * h
@@ -170,39 +184,50 @@ def step_vehicle(v0: float, f_prop: float, f_brk: float, grade_rad: float, h: fl
     return v1, dist, f_prop * dist, f_brk * dist, f_rr * dist, f_a * dist, f_g * dist
 
 
-@njit(cache=True)
-def vehicle_force_step(v0: float, dist: float, e_trac: float, e_brake: float, e_roll: float, e_aero: float,
-                       e_grade: float, f_prop: float, f_brk: float, grade_in: float, h: float, mass_kg: float,
-                       c_aero: float, f_roll_coeff: float, g: float, knots: bool, knot_d, knot_frac):
-    """The vehicle component's force-mode step: the parameter grade added (:func:`grade_total_rad`, when
-    ``knots``), :func:`step_vehicle`, the works accumulated.
+@njit_step
+def vehicle_force_step(p, knot_d, knot_frac, x, f_prop: float, f_brk: float, grade_in: float, h: float):
+    """The vehicle component's force-mode step from the state ``x`` (order of :data:`XF`, advanced in place):
+    the parameter grade added (:func:`grade_total_rad`), :func:`step_vehicle`, the works accumulated.
 
-    Returns ``(speed_mps, accel_mps2, distance_m, traction_energy_j, brake_energy_j, rolling_energy_j,
-    aero_energy_j, grade_energy_j, kinetic_energy_j)`` at t + h.  The component
-    (:class:`shevsim.components.vehicle.Vehicle`) and the compiled whole-vehicle loop (:mod:`shevsim.fast`)
-    both call it.
+    Returns ``(accel_mps2, kinetic_energy_j)`` at t + h (speed, distance and works are in ``x``).  The
+    component (:class:`shevsim.components.vehicle.Vehicle`) calls it, under the Python master and in the
+    compiled whole-vehicle loop alike.
     """
-    th = grade_total_rad(grade_in, dist, knot_d, knot_frac) if knots else grade_in
-    v1, dd, wp, wb, wr, wa, wg = step_vehicle(v0, f_prop, f_brk, th, h, mass_kg, c_aero, f_roll_coeff, g)
-    return (v1, (v1 - v0) / h, dist + dd, e_trac + wp, e_brake + wb, e_roll + wr, e_aero + wa, e_grade + wg,
-            0.5 * mass_kg * v1 * v1)
+    v0 = x[XF.v]
+    th = grade_total_rad(grade_in, x[XF.dist], knot_d, knot_frac)
+    v1, dd, wp, wb, wr, wa, wg = step_vehicle(v0, f_prop, f_brk, th, h, p[VP.mass_kg], p[VP.c_aero],
+                                              p[VP.f_roll_coeff], p[VP.g_mps2])
+    x[XF.v] = v1
+    x[XF.dist] += dd
+    x[XF.e_traction] += wp
+    x[XF.e_brake] += wb
+    x[XF.e_rolling] += wr
+    x[XF.e_aero] += wa
+    x[XF.e_grade] += wg
+    return (v1 - v0) / h, 0.5 * p[VP.mass_kg] * v1 * v1
 
 
-@njit(cache=True)
-def vehicle_speed_mode_step(v0: float, grade0: float, dist: float, e_trac: float, e_brake: float, e_roll: float,
-                            e_aero: float, e_grade: float, v_ref: float, a_ref: float, grade_in: float, h: float,
-                            knot_d, knot_frac, mass_kg: float, c_aero: float, f_roll_coeff: float, g: float):
-    """The vehicle component's speed-mode step: :func:`speed_follow_step` and the works accumulated (the
-    brake work stays 0: the split of a negative force is the motor's).
+@njit_step
+def vehicle_speed_mode_step(p, knot_d, knot_frac, x, v_ref: float, a_ref: float, grade_in: float, h: float):
+    """The vehicle component's speed-mode step from the state ``x`` (order of :data:`XS`, advanced in place):
+    :func:`speed_follow_step` and the works accumulated (the brake work stays 0: the split of a negative force
+    is the motor's).
 
-    Returns ``(speed_mps, accel_mps2, distance_m, grade_rad, force_req_n, traction_energy_j, brake_energy_j,
-    rolling_energy_j, aero_energy_j, grade_energy_j, kinetic_energy_j)`` at t + h.  The component
-    (:class:`shevsim.components.vehicle.Vehicle`) and the compiled whole-vehicle loop both call it.
+    Returns ``(accel_mps2, force_req_n, kinetic_energy_j)`` at t + h (speed, distance, grade and works are in
+    ``x``).  The component (:class:`shevsim.components.vehicle.Vehicle`) calls it on both engines.
     """
-    v1, d1, th1, f_req, dd, wp, wr, wa, wg = speed_follow_step(v0, grade0, dist, v_ref, a_ref, grade_in, h, knot_d,
-                                                               knot_frac, mass_kg, c_aero, f_roll_coeff, g)
-    return (v1, (v1 - v0) / h, d1, th1, f_req, e_trac + wp, e_brake + 0.0, e_roll + wr, e_aero + wa, e_grade + wg,
-            0.5 * mass_kg * v1 * v1)
+    v0 = x[XS.v]
+    v1, d1, th1, f_req, dd, wp, wr, wa, wg = speed_follow_step(p, knot_d, knot_frac, v0, x[XS.th], x[XS.dist], v_ref,
+                                                               a_ref, grade_in, h)
+    x[XS.v] = v1
+    x[XS.dist] = d1
+    x[XS.th] = th1
+    x[XS.e_traction] += wp
+    x[XS.e_brake] += 0.0
+    x[XS.e_rolling] += wr
+    x[XS.e_aero] += wa
+    x[XS.e_grade] += wg
+    return (v1 - v0) / h, f_req, 0.5 * p[VP.mass_kg] * v1 * v1
 
 
 def coast_down_aero_only(v0: float, t: float, mass_kg: float, c_aero: float) -> float:

@@ -253,12 +253,12 @@ def test_vehicle_functions_compiled_equal_py_func():
         for k_d, k_g in ((kd, kg), (none, none)):
             _agree(grade_rad_at, d, k_d, k_g)
             _agree(grade_total_rad, th, d, k_d, k_g)
-            _agree(speed_follow_step, v0, th, d, v1 - 0.5, float(rng.uniform(-3, 3)), th, h, k_d, k_g, m, c, fr,
-                   G_MPS2)
+            _agree(speed_follow_step, np.array([m, c, fr, G_MPS2]), k_d, k_g, v0, th, d, v1 - 0.5,
+                   float(rng.uniform(-3, 3)), th, h)
 
 
 def test_motor_and_bus_functions_compiled_equal_py_func():
-    from shevsim.powertrain.motor import bus_aux_w, bus_balance, motor_step
+    from shevsim.powertrain.motor import bus_aux_w, bus_balance, motor_params, motor_step
     mot = Motor("m")
     md, mi = mot._md, mot._mi
     rng = np.random.default_rng(9)
@@ -266,10 +266,10 @@ def test_motor_and_bus_functions_compiled_equal_py_func():
         f_req = float(rng.choice([0.0, 1.0]) * rng.uniform(-9e4, 9e4))
         v = float(rng.choice([-0.1, 0.0, 0.3, 4.0, 15.0, 30.0]) + rng.uniform(0.0, 1.0))
         p_hi, p_lo = float(rng.choice([1e12, 50e3, -1.0])), float(rng.choice([-1e12, -20e3, 1.0]))
-        args = (md, mi, f_req, v, p_hi, p_lo, float(rng.choice([0.05, 0.1, 1.0])), float(rng.uniform(0, 30)),
-                float(rng.choice([0.1, 1.0])), float(rng.uniform(0, 1)), mot._k_w, mot._k_tau, bool(rng.random() < 0.7),
-                0.5, float(rng.choice([np.inf, 30e3])), float(rng.choice([1.0, 0.9, 1.05])), 0.3 / 180.0,
-                float(rng.choice([1.0, 0.85, 1.05])))
+        p = motor_params(mot._k_w, mot._k_tau, bool(rng.random() < 0.7), 0.5, float(rng.choice([np.inf, 30e3])),
+                         float(rng.choice([1.0, 0.9, 1.05])), 0.3 / 180.0, float(rng.choice([1.0, 0.85, 1.05])))
+        args = (md, mi, p, f_req, v, p_hi, p_lo, float(rng.choice([0.05, 0.1, 1.0])), float(rng.uniform(0, 30)),
+                float(rng.choice([0.1, 1.0])), float(rng.uniform(0, 1)))
         _agree(motor_step, *args)
         pm, pg, pa, ax = (float(x) for x in rng.uniform(-5e4, 5e4, 4))
         _agree(bus_aux_w, pa, ax * (rng.random() < 0.5))
@@ -303,8 +303,8 @@ def test_speed_mode_component_is_speed_follow_step():
         vr, ar = 8.0 * math.sin(math.pi * (k + 1) / 60.0) ** 2, 0.3 * math.cos(k / 7.0)
         veh.u.update(speed_ref_mps=vr, accel_ref_mps2=ar)
         veh.do_step(0.1 * k, 0.1)
-        v, d, th, f, *_ = speed_follow_step.py_func(v, th, d, vr, ar, 0.01, 0.1, kd, kg, p.mass_kg, p.c_aero,
-                                                     p.rolling_coefficient, p.gravity_mps2)
+        v, d, th, f, *_ = speed_follow_step.py_func(np.array([p.mass_kg, p.c_aero, p.rolling_coefficient,
+                                                               p.gravity_mps2]), kd, kg, v, th, d, vr, ar, 0.01, 0.1)
         assert (veh.y["speed_mps"], veh.y["distance_m"], veh.y["force_req_n"]) == (v, d, f)
 
 
