@@ -95,7 +95,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
-from shevsim.core.compiled import field_index
+from shevsim.core.compiled import field_index, njit_step
 from shevsim.core.lookup import HAVE_NUMBA, njit, t1_slope, t1_value, ecm_lookup
 from shevsim.core.errors import SimulationError
 
@@ -210,7 +210,77 @@ E = field_index(("soc", "v1", "x2", "th1", "th2", "p00", "p01", "p02", "p11", "p
                  "rs", "r1", "c1", "v2", "r2", "innovation", "variance"), "E")
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _nominal_factors(d, ix, k, soc, t_mean_c, i_a, dt_s, v2_prev):
+    """The nominal map factors at the predicted SOC and the slow branch: ``(rsn, r1n, c1n, v2, r2n)`` (1, 1, 1, 0,
+    inf for the free filter); ``v2`` propagated from the nominal maps with the current held over ``dt_s`` when
+    ``k[15] > 0.5`` (module docstring)."""
+    rsn = 1.0
+    r1n = 1.0
+    c1n = 1.0
+    v2 = 0.0
+    r2n = math.inf
+    if k[13] > 0.5 or k[14] > 0.5 or k[15] > 0.5:
+        rsn_t, r1n_t, c1n_t, r2n_t, c2n_t = ecm_lookup(d, ix, soc, t_mean_c, i_a)
+        if k[13] > 0.5:
+            rsn = rsn_t
+        if k[14] > 0.5:
+            r1n = r1n_t
+            c1n = c1n_t
+        if k[15] > 0.5:
+            r2n = r2n_t
+            a2 = math.exp(-dt_s / (r2n_t * c2n_t))
+            v2 = a2 * v2_prev + r2n_t * (1.0 - a2) * i_a
+    return rsn, r1n, c1n, v2, r2n
+
+
+@njit(cache=True, inline="always")
+def _state_gain(p00, p01, p02, p11, p12, p22, c0, c2, r_v):
+    """``P C^T`` with ``C = [c0, -1, c2]`` and the innovation variance ``C P C^T + r_v``: ``(h0, h1, h2, sden)``."""
+    h0 = p00 * c0 - p01 + p02 * c2
+    h1 = p01 * c0 - p11 + p12 * c2
+    h2 = p02 * c0 - p12 + p22 * c2
+    return h0, h1, h2, c0 * h0 - h1 + c2 * h2 + r_v
+
+
+@njit(cache=True, inline="always")
+def _parameter_jacobian(a, dt_s, r1, c1, r1n, c1n, v1_prev, i_a):
+    """``C^theta`` (5.17d-e, corrected) of the parameters, times the nominal value for a factor
+    (``dV/dkappa1 = R1,nom dV/dR1``, ``dV/dkappa2 = C1,nom dV/dC1``): ``(g0, g1)``."""
+    tau = r1 * c1
+    da_dr1 = a * dt_s / (r1 * tau)
+    da_dc1 = a * dt_s / (c1 * tau)
+    w = v1_prev - r1 * i_a
+    return (-da_dr1 * w - (1.0 - a) * i_a) * r1n, -da_dc1 * w * c1n
+
+
+@njit(cache=True, inline="always")
+def _parameter_update(s00, s01, s11, th1, th2, g0, g1, e, r_v):
+    """The parameter measurement update (5.24) with ``C^theta = [g0, g1]``: ``(th1, th2, s00, s01, s11)``."""
+    m0 = s00 * g0 + s01 * g1
+    m1 = s01 * g0 + s11 * g1
+    tden = g0 * m0 + g1 * m1 + r_v
+    l0 = m0 / tden
+    l1 = m1 / tden
+    return th1 + l0 * e, th2 + l1 * e, s00 - l0 * m0, s01 - l0 * m1, s11 - l1 * m1
+
+
+@njit(cache=True, inline="always")
+def _bounded(k, soc, x2, th1, th2, rsn, r1n, c1n):
+    """The estimates kept physical (SOC in [0, 1], bounds on the effective R_s, R1, C1): ``(soc, x2, th1, th2,
+    r1, c1)``."""
+    if soc < 0.0:
+        soc = 0.0
+    elif soc > 1.0:
+        soc = 1.0
+    if x2 * rsn < k[11]:
+        x2 = k[11] / rsn
+    r1 = min(max(th1 * r1n, k[7]), k[8])
+    c1 = min(max(th2 * c1n, k[9]), k[10])
+    return soc, x2, r1 / r1n, c1 / c1n, r1, c1
+
+
+@njit_step
 def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     """One DEKF step (5.21-5.24, module docstring) and the heat (5.16) at the new estimates.
 
@@ -225,37 +295,19 @@ def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     voltage after the step and ``r2`` [Ohm] the nominal R2 it used, ``inf`` without it); ``ok = 0`` when the innovation variance is unusable (the rest is then not an
     update).
     """
-    soc0, v1_prev, x2, th1, th2 = xe[E.soc], xe[E.v1], xe[E.x2], xe[E.th1], xe[E.th2]
+    v1_prev, x2, th1, th2 = xe[E.v1], xe[E.x2], xe[E.th1], xe[E.th2]
     p00, p01, p02, p11, p12, p22 = xe[E.p00], xe[E.p01], xe[E.p02], xe[E.p11], xe[E.p12], xe[E.p22]
-    s00, s01, s11 = xe[E.s00], xe[E.s01], xe[E.s11]
-    v2_prev = xe[E.v2]
     # 1. parameter time update (5.21); theta = [R1, C1] (free) or their factors (table_scaled)
-    s00 += k[5]
-    s11 += k[6]
+    s00 = xe[E.s00] + k[5]
+    s01 = xe[E.s01]
+    s11 = xe[E.s11] + k[6]
     # SOC time update first: the nominal maps are read at the predicted SOC
-    soc = soc0 - dt_s * i_a / (3600.0 * k[0])
-    rsn = 1.0
-    r1n = 1.0
-    c1n = 1.0
-    v2 = 0.0
-    r2n = math.inf
-    if k[13] > 0.5 or k[14] > 0.5 or k[15] > 0.5:
-        rsn_t, r1n_t, c1n_t, r2n_t, c2n_t = ecm_lookup(d, ix, soc, t_mean_c, i_a)
-        if k[13] > 0.5:
-            rsn = rsn_t
-        if k[14] > 0.5:
-            r1n = r1n_t
-            c1n = c1n_t
-        if k[15] > 0.5:
-            # slow second branch propagated from the nominal maps (module docstring), current held over dt
-            r2n = r2n_t
-            a2 = math.exp(-dt_s / (r2n_t * c2n_t))
-            v2 = a2 * v2_prev + r2n_t * (1.0 - a2) * i_a
+    soc = xe[E.soc] - dt_s * i_a / (3600.0 * k[0])
+    rsn, r1n, c1n, v2, r2n = _nominal_factors(d, ix, k, soc, t_mean_c, i_a, dt_s, xe[E.v2])
     r1 = th1 * r1n
     c1 = th2 * c1n
     # 2. state time update (5.22) with i_{k-1} = i_k (ZOH); A = diag(1, a, 1): A P A^T + Sigma_w
-    tau = r1 * c1
-    a = math.exp(-dt_s / tau)
+    a = math.exp(-dt_s / (r1 * c1))
     v1 = a * v1_prev + r1 * (1.0 - a) * i_a
     p01 = p01 * a
     p11 = p11 * (a * a)
@@ -264,16 +316,10 @@ def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     p11 += k[2]
     p22 += k[3]
     # 3. state measurement update (5.23); R_s = x2 * rsn (free: rsn = 1, x2 = R_s)
-    oo = ix[0]
-    no = ix[1]
-    c0 = t1_slope(d, oo, no, soc)
+    c0 = t1_slope(d, ix[0], ix[1], soc)
     c2 = -i_a * rsn
-    e = v_meas_v - (t1_value(d, oo, no, soc) - v1 - v2 - x2 * rsn * i_a)
-    # P C^T with C = [c0, -1, c2]
-    h0 = p00 * c0 - p01 + p02 * c2
-    h1 = p01 * c0 - p11 + p12 * c2
-    h2 = p02 * c0 - p12 + p22 * c2
-    sden = c0 * h0 - h1 + c2 * h2 + k[4]
+    e = v_meas_v - (t1_value(d, ix[0], ix[1], soc) - v1 - v2 - x2 * rsn * i_a)
+    h0, h1, h2, sden = _state_gain(p00, p01, p02, p11, p12, p22, c0, c2, k[4])
     if not (sden > 0.0 and math.isfinite(sden) and math.isfinite(e)):
         return (0, soc, v1, x2, x2 * rsn, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, sden,
                 0.0, v2, r2n)
@@ -290,34 +336,10 @@ def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     p11 -= k1 * h1
     p12 -= k1 * h2
     p22 -= k2 * h2
-    # 4. parameter measurement update (5.24) with C^theta (5.17d-e, corrected), times the nominal
-    #    value for a factor (dV/dkappa1 = R1,nom dV/dR1, dV/dkappa2 = C1,nom dV/dC1)
-    da_dr1 = a * dt_s / (r1 * tau)
-    da_dc1 = a * dt_s / (c1 * tau)
-    w = v1_prev - r1 * i_a
-    g0 = (-da_dr1 * w - (1.0 - a) * i_a) * r1n
-    g1 = -da_dc1 * w * c1n
-    m0 = s00 * g0 + s01 * g1
-    m1 = s01 * g0 + s11 * g1
-    tden = g0 * m0 + g1 * m1 + k[4]
-    l0 = m0 / tden
-    l1 = m1 / tden
-    th1 += l0 * e
-    th2 += l1 * e
-    s00 -= l0 * m0
-    s01 -= l0 * m1
-    s11 -= l1 * m1
-    # keep the estimates physical (bounds on the effective R_s, R1, C1)
-    if soc < 0.0:
-        soc = 0.0
-    elif soc > 1.0:
-        soc = 1.0
-    if x2 * rsn < k[11]:
-        x2 = k[11] / rsn
-    r1 = min(max(th1 * r1n, k[7]), k[8])
-    c1 = min(max(th2 * c1n, k[9]), k[10])
-    th1 = r1 / r1n
-    th2 = c1 / c1n
+    # 4. parameter measurement update (5.24)
+    g0, g1 = _parameter_jacobian(a, dt_s, r1, c1, r1n, c1n, v1_prev, i_a)
+    th1, th2, s00, s01, s11 = _parameter_update(s00, s01, s11, th1, th2, g0, g1, e, k[4])
+    soc, x2, th1, th2, r1, c1 = _bounded(k, soc, x2, th1, th2, rsn, r1n, c1n)
     rs = x2 * rsn
     heat = cell_heat(i_a, rs, v1, r1, t_mean_c, t1_value(d, ix[2], ix[3], soc))
     if k[15] > 0.5:

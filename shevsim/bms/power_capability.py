@@ -50,10 +50,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from collections import namedtuple
 from typing import NamedTuple
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
 from shevsim.battery.thermal import ThermalParams, two_state_ad_bd, two_state_out
+from shevsim.core.compiled import field_index
 from shevsim.core.lookup import HAVE_NUMBA, njit, py_func, t1_slope, t1_value
 from shevsim.bms.thermal_estimators import TwoStateDiscretiser
 from shevsim.core.errors import ScenarioError
@@ -157,22 +159,38 @@ def _constants(p: PowerCapabilityParams):
                      1.0 if p.polarisation_heat == "exact" else 0.0, FARADAY_C_MOL, float(p.horizon_steps)])
 
 
+#: a row ``th`` of the thermal coefficients (:func:`thermal_coeffs`): ``A_N, B_N = ZOH(N dt)`` of the two-state
+#: model (``a``, ``b``: rows 0-1, columns [q, T_amb]), its core-temperature output ``C_core`` (``cc0``, ``cc1``) and
+#: ``D_core`` (``dc``), and ``A, B_q = ZOH(dt)`` (``e``, ``bq``)
+TH = field_index(("a00", "a01", "a10", "a11", "b00", "b01", "b10", "b11", "cc0", "cc1", "dc", "e00", "e01", "e10",
+                  "e11", "bq0", "bq1"), "TH")
+
+#: the estimates one power-capability evaluation starts from (cell quantities: SOC [-], V1 [V], R_s, R1 [Ohm],
+#: C1 [F], T_mean, gamma, T_amb [degC]); a numba-compatible record
+CellEstimate = namedtuple("CellEstimate", ("soc", "v1", "rs", "r1", "c1", "t_mean_c", "gamma", "t_amb_c"))
+
+
 @njit(cache=True)
-def _pole_sum(rho, e00, e01, e10, e11, bq0, bq1, n00, n01, n10, n11, cc0, cc1, n):
-    """``C_c (A^N - rho^N I) (A - rho I)^{-1} B_q`` of the 2x2 thermal model (``n`` = float(N));
-    the removable singularity at ``rho = eig(A)`` is stepped around."""
-    d00 = e00 - rho
-    d11 = e11 - rho
+def _pole_sum(rho, th, n):
+    """``C_c (A_N - rho^N I) (A - rho I)^{-1} B_q`` of the 2x2 thermal model of the coefficients ``th``
+    (:data:`TH`; ``n`` = float(N)); the removable singularity at ``rho = eig(A)`` is stepped around."""
+    e01 = th[TH.e01]
+    e10 = th[TH.e10]
+    d00 = th[TH.e00] - rho
+    d11 = th[TH.e11] - rho
     det = d00 * d11 - e01 * e10
     if abs(det) < 1e-13:
         rho *= 1.0 - 1e-6
-        d00 = e00 - rho
-        d11 = e11 - rho
+        d00 = th[TH.e00] - rho
+        d11 = th[TH.e11] - rho
         det = d00 * d11 - e01 * e10
+    bq0 = th[TH.bq0]
+    bq1 = th[TH.bq1]
     v0 = (d11 * bq0 - e01 * bq1) / det
     v1_ = (-e10 * bq0 + d00 * bq1) / det
     rn = math.pow(rho, n)
-    return cc0 * (n00 * v0 + n01 * v1_ - rn * v0) + cc1 * (n10 * v0 + n11 * v1_ - rn * v1_)
+    return (th[TH.cc0] * (th[TH.a00] * v0 + th[TH.a01] * v1_ - rn * v0)
+            + th[TH.cc1] * (th[TH.a10] * v0 + th[TH.a11] * v1_ - rn * v1_))
 
 
 @njit(cache=True)
@@ -196,9 +214,11 @@ def _voltage_after(d, ix, k, i_a, soc, v1, rs, r1, c1):
 
 
 @njit(cache=True)
-def _thermal_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, last_max, last_min):
-    """``(i_t_dch, i_t_chg)`` [A] keeping the predicted core temperature <= T_c,max after N steps: exact
-    quadratic (``k[10]`` = 1, module docstring) or the 5.31 bound with the previous limits ``last_*``."""
+def _thermal_limits(d, ix, k, th, s, last_max, last_min):
+    """``(i_t_dch, i_t_chg)`` [A] keeping the predicted core temperature <= T_c,max after N steps from the
+    estimates ``s`` (:data:`CellEstimate`): exact quadratic (``k[10]`` = 1, module docstring) or the 5.31 bound
+    with the previous limits ``last_*``."""
+    soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c = s
     a00, a01, a10, a11, b00, b01, b10, b11, cc0, cc1, dc = (th[0], th[1], th[2], th[3], th[4], th[5], th[6],
                                                             th[7], th[8], th[9], th[10])
     # free response of the core temperature (mu = 0, no polarisation heat)
@@ -209,8 +229,8 @@ def _thermal_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c,
     if k[10] > 0.5:
         # S(rho) = C_c (A^N - rho^N I) (A - rho I)^{-1} B_q for rho = a and a^2
         a = math.exp(-k[1] / (r1 * c1))
-        s1 = _pole_sum(a, th[11], th[12], th[13], th[14], th[15], th[16], a00, a01, a10, a11, cc0, cc1, k[12])
-        s2 = _pole_sum(a * a, th[11], th[12], th[13], th[14], th[15], th[16], a00, a01, a10, a11, cc0, cc1, k[12])
+        s1 = _pole_sum(a, th, k[12])
+        s2 = _pole_sum(a * a, th, k[12])
         qa = gq * rs + r1 * (gq - 2.0 * s1 + s2)
         qb = -gq * beta + 2.0 * v1 * (s1 - s2)
         qc = free + v1 * v1 * s2 / r1 - k[6]
@@ -234,10 +254,13 @@ def _thermal_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c,
 
 
 @njit(cache=True)
-def power_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, last_max, last_min):
-    """One power-capability evaluation (4.17-4.19 / 5.34-5.36): the 12 fields of :class:`PowerLimits`."""
+def power_limits(d, ix, k, th, s, last_max, last_min):
+    """One power-capability evaluation (4.17-4.19 / 5.34-5.36) from the estimates ``s`` (:data:`CellEstimate`)
+    with the thermal coefficients ``th`` (:data:`TH`) and the previous limits ``last_*`` [A]: the 12 fields of
+    :class:`PowerLimits`."""
+    soc, v1, rs, r1, c1 = s.soc, s.v1, s.rs, s.r1, s.c1
     i_smin, i_smax, i_vmin, i_vmax = _electrical_limits(d, ix, k, soc, v1, rs, r1, c1)
-    i_td, i_tc = _thermal_limits(d, ix, k, th, soc, v1, rs, r1, c1, t_mean_c, gamma, t_amb_c, last_max, last_min)
+    i_td, i_tc = _thermal_limits(d, ix, k, th, s, last_max, last_min)
     i_max = min(i_smin, i_vmin, i_td, k[7])
     i_min = max(i_smax, i_vmax, i_tc, -k[7])
     v_d = _voltage_after(d, ix, k, i_max, soc, v1, rs, r1, c1)
@@ -390,9 +413,9 @@ class PowerCapability:
                                t_mean_c: float, gamma: float, h_w_m2k: float, t_amb_c: float):
         """``(i_t_dch, i_t_chg)`` [A] keeping the predicted core temperature <= T_c,max after N steps."""
         d, ix = self._tabs
-        return _thermal_limits(d, ix, self._k, self._thermal_coeffs(h_w_m2k), float(soc), float(v1), float(rs),
-                               float(r1), float(c1), float(t_mean_c), float(gamma), float(t_amb_c),
-                               self.last_i_max_a, self.last_i_min_a)
+        s = CellEstimate(float(soc), float(v1), float(rs), float(r1), float(c1), float(t_mean_c), float(gamma),
+                         float(t_amb_c))
+        return _thermal_limits(d, ix, self._k, self._thermal_coeffs(h_w_m2k), s, self.last_i_max_a, self.last_i_min_a)
 
     def voltage_after(self, i_a: float, soc: float, v1: float, rs: float, r1: float, c1: float) -> float:
         """Predicted cell terminal voltage after N steps at the held current (5.36) [V]."""
@@ -403,9 +426,9 @@ class PowerCapability:
                 h_w_m2k: float, t_amb_c: float) -> PowerLimits:
         """Current and power limits from the estimated states (SOC as a fraction, cell quantities)."""
         d, ix = self._tabs
-        r = self._limits(d, ix, self._k, self._thermal_coeffs(h_w_m2k), float(soc), float(v1), float(rs),
-                         float(r1), float(c1), float(t_mean_c), float(gamma), float(t_amb_c), self.last_i_max_a,
-                         self.last_i_min_a)
+        s = CellEstimate(float(soc), float(v1), float(rs), float(r1), float(c1), float(t_mean_c), float(gamma),
+                         float(t_amb_c))
+        r = self._limits(d, ix, self._k, self._thermal_coeffs(h_w_m2k), s, self.last_i_max_a, self.last_i_min_a)
         self.last_i_max_a = r[0]
         self.last_i_min_a = r[1]
         return PowerLimits(*r)

@@ -46,8 +46,8 @@ import numpy as np
 from numba import njit
 
 from shevsim.bms.electrical import DEKF, E, DEKFParams, DEKFTuning, dekf_update
-from shevsim.bms.power_capability import (CellLimits, PowerCapability, PowerCapabilityParams, power_limits,
-                                          thermal_coeffs)
+from shevsim.bms.power_capability import (CellEstimate, CellLimits, PowerCapability, PowerCapabilityParams,
+                                          power_limits, thermal_coeffs)
 from shevsim.bms.thermal_estimators import ThermalDKF, ThermalJEKF, ThermalKF, dkf_step, jekf_step, kf_step
 from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, field_index, njit_step, port_index
 from shevsim.core.component import Component
@@ -364,8 +364,8 @@ def bms_step(data, u, y, t, h):
     r1 = xe[E.r1]
     c1 = xe[E.c1]
     slot = thermal_coeffs(tp, xb[XB.h], keys, vals)
-    lim = power_limits(pd_, pix, pk, vals[slot], soc, v1, rs, r1, c1, xb[XB.t_mean], xb[XB.gamma], ta, xb[XB.i_max],
-                       xb[XB.i_min])
+    lim = power_limits(pd_, pix, pk, vals[slot], CellEstimate(soc, v1, rs, r1, c1, xb[XB.t_mean], xb[XB.gamma], ta),
+                       xb[XB.i_max], xb[XB.i_min])
     xb[XB.i_max] = lim[0]
     xb[XB.i_min] = lim[1]
     ns = p[0]

@@ -151,10 +151,11 @@ def test_power_capability_functions_compiled_equal_py_func(mode):
         th = fast._thermal_coeffs(h)
         last = (rng.uniform(-100.0, 100.0), rng.uniform(-100.0, 100.0))
         _close(*_both(pc_mod._electrical_limits, d, ix, k, soc, v1, rs, r1, c1))
-        _close(*_both(pc_mod._thermal_limits, d, ix, k, th, soc, v1, rs, r1, c1, tm, gamma, ta, *last))
+        _close(*_both(pc_mod._thermal_limits, d, ix, k, th, pc_mod.CellEstimate(soc, v1, rs, r1, c1, tm, gamma, ta),
+                      *last))
         _close(*_both(pc_mod._voltage_after, d, ix, k, rng.uniform(-100.0, 100.0), soc, v1, rs, r1, c1))
         for rho in (math.exp(-0.1 / (r1 * c1)), math.exp(-0.2 / (r1 * c1)), th[11]):   # incl. rho = eig
-            _close(*_both(pc_mod._pole_sum, rho, *th[11:17], *th[0:4], th[8], th[9], float(prm.horizon_steps)))
+            _close(*_both(pc_mod._pole_sum, rho, th, float(prm.horizon_steps)))
     assert bound == {"soc", "v", "t"}
     assert (fast.last_i_max_a, fast.last_i_min_a) == (ref.last_i_max_a, ref.last_i_min_a)
 
