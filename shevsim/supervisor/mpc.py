@@ -520,29 +520,15 @@ def _solve_on_vertex(H, f, A, bu, bl, wset, wsgn, kv, LU, fac, z):
     return 1 if _primal_ok(A, bu, bl, z) else 0
 
 
-@_njit(cache=True)
-def solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kU, kY, kS, kv, kLU, kfac, z):
-    """Minimise ``0.5 z'Hz + f'z`` with the constraints of ``wset`` held as equalities; return 1 and the
-    minimiser in ``z`` when it satisfies every constraint ``bl <= [I; A] z <= bu`` and every multiplier has
-    its sign (the point is then the QP's optimum), else 0 (``z`` then holds no answer).
-
-    ``H`` symmetric positive definite (n x n), ``A`` the general rows (the first ``n`` constraints are the
-    simple bounds of ``bu, bl``), work buffers ``kU, kY, kS, kLU`` (n x n), ``kv`` (3 x n) and ``kfac``
-    (``2 n + 1`` integers).  With ``n`` active constraints (a vertex: half the calls of the UAC proxy) the
-    point is fixed by them alone (:func:`_solve_on_vertex`); otherwise the range-space solve below."""
-    nw = wset[0]
-    n = H.shape[0]
-    if nw < 0 or nw > n:
-        return 0
-    if nw == n:
-        return _solve_on_vertex(H, f, A, bu, bl, wset, wsgn, kv, kLU, kfac, z)
-    # Cholesky H = U'U (U upper, in kU; U' is the L of the notes below)
+@_njit(cache=True, inline="always")
+def _cholesky_upper(H, kU, n):
+    """``H = U'U`` (U upper, in ``kU``); False when ``H`` is not positive definite."""
     for j in range(n):
         d = H[j, j]
         for k in range(j):
             d -= kU[k, j] * kU[k, j]
         if not d > 0.0:
-            return 0
+            return False
         d = math.sqrt(d)
         kU[j, j] = d
         for i in range(j + 1, n):
@@ -550,15 +536,13 @@ def solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kU, kY, kS, kv, kLU, kfac, 
             for k in range(j):
                 s -= kU[k, i] * kU[k, j]
             kU[j, i] = s / d
-    # g = L^-1 f
-    g = kv[0]
-    for i in range(n):
-        s = f[i]
-        for k in range(i):
-            s -= kU[k, i] * g[k]
-        g[i] = s / kU[i, i]
-    # Y[:, c] = L^-1 a_c for each active constraint c (row c of [I; A]), all columns at once (the inner
-    # loops run over independent columns: no chain of dependent additions)
+    return True
+
+
+@_njit(cache=True, inline="always")
+def _active_columns(kU, A, wset, nw, n, kY):
+    """``Y[:, c] = L^-1 a_c`` for each active constraint ``c`` (row ``c`` of ``[I; A]``; ``L = U'``), all columns at
+    once (the inner loops run over independent columns: no chain of dependent additions)."""
     for i in range(n):
         for c in range(nw):
             ic = wset[1 + c]
@@ -573,8 +557,13 @@ def solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kU, kY, kS, kv, kLU, kfac, 
         d = kU[i, i]
         for c in range(nw):
             kY[i, c] /= d
-    # S = Y'Y (then its Cholesky factor in place, lower) and the rhs t = -(b + Y'g)
-    mu = kv[1]
+
+
+@_njit(cache=True, inline="always")
+def _multipliers(qp, wset, wsgn, kY, kS, g, mu, nw, n):
+    """The multipliers ``mu`` of the active constraints: ``S mu = t`` with ``S = Y'Y`` (its Cholesky factor in
+    ``kS``, lower) and ``t = -(b + Y'g)``; False when ``S`` is singular (dependent active rows)."""
+    bu, bl = qp[3], qp[4]
     for c in range(nw):
         ic = wset[1 + c]
         mu[c] = -(bu[ic] if wsgn[c] > 0.0 else bl[ic])
@@ -593,7 +582,7 @@ def solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kU, kY, kS, kv, kLU, kfac, 
         for k in range(j):
             d -= kS[j, k] * kS[j, k]
         if not d > GUESS_PIVOT_TOL * d0:
-            return 0
+            return False
         d = math.sqrt(d)
         kS[j, j] = d
         for i in range(j + 1, nw):
@@ -611,6 +600,41 @@ def solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kU, kY, kS, kv, kLU, kfac, 
         for k in range(i + 1, nw):
             s -= kS[k, i] * mu[k]
         mu[i] = s / kS[i, i]
+    return True
+
+
+@_njit(cache=True)
+def solve_on_active_set(qp, guess, z):
+    """Minimise ``0.5 z'Hz + f'z`` with the constraints of the active set held as equalities; return 1 and the
+    minimiser in ``z`` when it satisfies every constraint ``bl <= [I; A] z <= bu`` and every multiplier has
+    its sign (the point is then the QP's optimum), else 0 (``z`` then holds no answer).
+
+    ``qp = (H, f, A, bu, bl)``: ``H`` symmetric positive definite (n x n), ``A`` the general rows (the first ``n``
+    constraints are the simple bounds of ``bu, bl``).  ``guess`` = :func:`new_guess_state`'s ``(wset, wsgn, kU,
+    kY, kS, kv, kLU, kfac)``: the active set and the work buffers ``kU, kY, kS, kLU`` (n x n), ``kv`` (3 x n) and
+    ``kfac`` (``2 n + 1`` integers).  With ``n`` active constraints (a vertex: half the calls of the UAC proxy)
+    the point is fixed by them alone (:func:`_solve_on_vertex`); otherwise the range-space solve below."""
+    H, f, A, bu, bl = qp
+    wset, wsgn, kU, kY, kS, kv, kLU, kfac = guess
+    nw = wset[0]
+    n = H.shape[0]
+    if nw < 0 or nw > n:
+        return 0
+    if nw == n:
+        return _solve_on_vertex(H, f, A, bu, bl, wset, wsgn, kv, kLU, kfac, z)
+    if not _cholesky_upper(H, kU, n):
+        return 0
+    # g = L^-1 f
+    g = kv[0]
+    for i in range(n):
+        s = f[i]
+        for k in range(i):
+            s -= kU[k, i] * g[k]
+        g[i] = s / kU[i, i]
+    _active_columns(kU, A, wset, nw, n, kY)
+    mu = kv[1]
+    if not _multipliers(qp, wset, wsgn, kY, kS, g, mu, nw, n):
+        return 0
     if not _signs_ok(mu, wset, wsgn, bu, bl, nw):
         return 0
     # z = -L^-T (g + Y' mu)
@@ -706,7 +730,7 @@ def mpc_move(a, soc, demand, gen, pmax_w, pmin_w, ocv, rs):
     st = _build((soc, demand * 1e-3, gen * 1e-3, ocv, rs, pmax_w * 1e-3, pmin_w * 1e-3, rate * 1e-3),
                 (c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx), (H, f, bu, bl, aux))
     if st == 0:
-        if mp[11] > 0.5 and solve_on_active_set(H, f, A, bu, bl, wset, wsgn, kL, kY, kS, kv, kLU, kfac, z) == 1:
+        if mp[11] > 0.5 and solve_on_active_set((H, f, A, bu, bl), (wset, wsgn, kL, kY, kS, kv, kLU, kfac), z) == 1:
             x[X.status] = 0.0
         else:
             flag = daqp_nb.solve(ws, qp, res, sense, z, lam, flags, H, f, A, bu, bl)
@@ -835,7 +859,7 @@ class _DaqpSolver:
         p = self.prob
         g = self.guess
         z = np.empty(p.n)
-        if p.settings.warm_active_set and self._guess(p.H, p.f, p.A, p.bu, p.bl, *g, z) == 1:   # see above
+        if p.settings.warm_active_set and self._guess((p.H, p.f, p.A, p.bu, p.bl), g, z) == 1:   # see above
             return z, "optimal"
         if self.model is None:
             if self._setup() < 0:

@@ -244,7 +244,7 @@ def test_the_previous_active_set_gives_daqps_optimum_when_accepted():
         assert p.build(soc, d / 1e3, gen / 1e3, pmax / 1e3, pmin / 1e3, ocv, rs, MAP(gen) / 1e3) == 0
         x, _, flag, info = daqp.solve(p.H, p.f, p.A, p.bu, p.bl)
         assert flag >= 1
-        ok = solve_on_active_set(p.H, p.f, p.A, p.bu, p.bl, *g, z)
+        ok = solve_on_active_set((p.H, p.f, p.A, p.bu, p.bl), g, z)
         if ok:
             accepted += 1
             vertices += int(g[0][0] == p.n)          # n constraints active: the LU branch (_solve_on_vertex)
@@ -272,7 +272,7 @@ def _guess_on(H, A, bu, bl):
         g[0][0] = len(active)
         g[0][1:1 + len(active)] = active
         g[1][:len(active)] = signs
-        return solve_on_active_set(H, np.asarray(f, float), A, bu, bl, *g, z)
+        return solve_on_active_set((H, np.asarray(f, float), A, bu, bl), g, z)
     return g, z, guess
 
 
