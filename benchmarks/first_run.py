@@ -3,18 +3,22 @@ installing the wheel, and of the first run of a scenario with a new component la
 
 What it does, as a user would:
 
-1. builds the wheel of the repository (``pip wheel --no-deps``; ``--repo`` picks another checkout, e.g. main
-   before a change) and installs it into a fresh venv (``--system-site-packages``: the dependencies come from
-   this interpreter; the wheel itself with ``--no-deps``), so nothing compiled before exists (numba's cache
-   lives beside the installed sources);
+1. builds the wheel of the repository (``pip wheel --no-deps``, as a release would: the build hook
+   ``hatch_build.py`` precompiles shevsim's numba code into the wheel when this interpreter has numba;
+   ``--repo`` picks another checkout, e.g. main before a change) and installs it into a fresh venv
+   (``--system-site-packages``: the dependencies come from this interpreter; the wheel itself with
+   ``--no-deps``) with an empty user cache folder, so nothing compiled on this machine before is used;
 2. in an empty folder, times ``shevsim run`` (the bundled hd_udds_mpc, with its plots) twice, one after the
    other, and then a 5 s scenario with a layout no run used before (cycle, driver, vehicle only);
 3. prints each command's wall and CPU time (CPU = user + sys of the child and its children: the host is
    shared, so the wall time also shows the other loads) and ends with
    ``first run: X s, second run: Y s, new layout: Z s`` (wall).
 
-Usage: ``python benchmarks/first_run.py [--repo PATH] [--keep DIR]`` (takes 1-5 minutes; a background build
-started by the first run is waited for before the folder is removed, and its time is reported too).
+Usage: ``python benchmarks/first_run.py [--repo PATH] [--keep DIR] [--cpu NAME]`` (takes 2-6 minutes, the
+wheel's build included; a background build started by a run is waited for before the folder is removed, and
+its time is reported too).  ``--cpu generic`` runs the three commands with ``NUMBA_CPU_NAME=generic``: numba
+then targets another CPU than the one the wheel was built on, as on a user's machine of another model (the
+precompiled code does not fit, and what the runs need compiles on first use).
 """
 from __future__ import annotations
 
@@ -71,6 +75,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repo", default=str(Path(__file__).resolve().parents[1]), help="checkout to build the wheel of")
     ap.add_argument("--keep", help="keep the venv and the work folder here (default: a temporary folder)")
+    ap.add_argument("--wheel", help="install this wheel instead of building one")
+    ap.add_argument("--cpu", help="NUMBA_CPU_NAME for the runs (e.g. generic: another CPU than the build's)")
     a = ap.parse_args(argv)
     root = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix="shevsim_first_run_"))
     root.mkdir(parents=True, exist_ok=True)
@@ -81,11 +87,29 @@ def main(argv=None) -> int:
     env["SHEVSIM_CACHE_DIR"] = str(root / "user_cache")      # a new user's empty cache folder (.../shevsim)
     env["MPLBACKEND"] = "Agg"
     try:
-        print(f"building the wheel of {a.repo} ...", flush=True)
         dist = root / "dist"
-        subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist), a.repo],
-                       check=True, env=env)
-        wheel = sorted(dist.glob("shevsim-*.whl"))[-1]
+        t0 = time.perf_counter()
+        r0 = r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if a.wheel:
+            wheel = Path(a.wheel).resolve()
+        else:
+            print(f"building the wheel of {a.repo} ...", flush=True)
+            subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist), a.repo],
+                           check=True, env=env)
+            r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            wheel = sorted(dist.glob("shevsim-*.whl"))[-1]
+        import json
+        import zipfile
+        with zipfile.ZipFile(wheel) as z:
+            names = z.namelist()
+            man = json.loads(z.read("shevsim/_jitcache/manifest.json")) if "shevsim/_jitcache/manifest.json" \
+                in names else None
+        head = f"wheel {wheel.name}; " if a.wheel else \
+            (f"wheel built in {time.perf_counter() - t0:.0f} s wall, "
+             f"{(r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime):.0f} s CPU; ")
+        print(head + (f"precompiled code: {man['indexes']} function caches for numba {man['numba']}, CPU "
+                      f"{man['cpu'][1]}, {len(man['layouts'])} fast loop(s)" if man else "no precompiled code"),
+              flush=True)
         venv = root / "venv"
         subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True)
         py = venv / "bin" / "python"
@@ -97,6 +121,9 @@ def main(argv=None) -> int:
             raise SystemExit(f"the venv imports shevsim from {where}, not from the wheel: aborted")
         print(f"installed {wheel.name} -> {where}", flush=True)
         env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
+        if a.cpu:
+            env["NUMBA_CPU_NAME"] = a.cpu
+            print(f"runs with NUMBA_CPU_NAME={a.cpu}", flush=True)
         work = root / "work"
         work.mkdir()
         (work / "vehicle_only.toml").write_text(NEW_LAYOUT)

@@ -7,6 +7,8 @@ The Python API (see :mod:`shevsim.api`)::
     res.to_pandas(); res.metrics; res.termination; res.plot(["vehicle.speed_mps"]); res.save("out")
 """
 from .version import __version__  # noqa: E402
+from .core import jitcache as _jitcache  # noqa: E402
+_jitcache.install()   # before any compiled function is declared: numba's cache for shevsim (core/jitcache.py)
 from . import providers  # noqa: E402,F401  (registers component types, the FMU adapter and metrics with core)
 
 from .api import (Result, Scenario, compare, load_result, load_scenario, metrics_table,  # noqa: E402

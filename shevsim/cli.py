@@ -277,6 +277,15 @@ def _cmd_report(a) -> int:
     return EXIT_OK
 
 
+def _cmd_warmup(a) -> int:
+    from .warmup import precompile
+    from .core.paths import user_cache_dir
+    out = precompile(scenarios=a.scenarios or None, stream=sys.stderr if not a.quiet else io.StringIO())
+    _say(a, f"compiled code for {len(out['scenarios'])} scenario(s) and {len(out['layouts'])} fast loop(s) is "
+            f"cached in {user_cache_dir() / 'numba'} ({out['wall_s']:.0f} s)")
+    return EXIT_OK if out["scenarios"] or out["layouts"] else EXIT_STOPPED
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``shevsim`` argument parser (sub-commands run, scenarios, info, cycles, study, calibrate, fmu)."""
     from .version import __version__
@@ -356,6 +365,14 @@ def build_parser() -> argparse.ArgumentParser:
     fi.add_argument("ssp", help="the .ssp file")
     fi.add_argument("-o", "--output", required=True, help="folder to write the FMUs and the scenario TOML into")
     fi.add_argument("--step-s", type=float, help="communication step (default: from the package)")
+    w = sub.add_parser("warmup", parents=[q], help="compile ahead of time what runs use (the component steps of "
+                                                  "the bundled scenarios, the default scenario's fast loop)",
+                       description="Compile now, with progress, the numba code that runs would otherwise compile on "
+                                   "first use: every component step of the bundled scenarios (or those named) and "
+                                   "the fast loop of hd_udds_mpc's layout; cached in the user's cache folder. A "
+                                   "wheel built with numba ships this code already (for its numba, Python and "
+                                   "CPU); useful after an editable install or on another CPU.")
+    w.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="bundled scenario names (default: all)")
     rp = sub.add_parser("report", parents=[q], help="write the HTML report of a result folder (run, study, "
                                                    "calibration) or compare run folders",
                         description="Write a self-contained HTML report (interactive plots, metrics, termination, "
@@ -545,7 +562,8 @@ def _dispatch(ap, argv, quiet) -> int:
         a.quiet = quiet or getattr(a, "quiet", False)
         rc = {"run": _cmd_run, "scenarios": _cmd_scenarios, "vehicles": _cmd_vehicles,
               "info": _cmd_info, "cycles": _cmd_cycles,
-              "components": _cmd_components, "fmu": _cmd_fmu, "report": _cmd_report}[a.cmd](a)
+              "components": _cmd_components, "fmu": _cmd_fmu, "report": _cmd_report,
+              "warmup": _cmd_warmup}[a.cmd](a)
         if sys.stdout is not None:
             sys.stdout.flush()          # a full or failing output stream is said here, not at exit
         return rc

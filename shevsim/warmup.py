@@ -71,20 +71,25 @@ def state_dir() -> Path:
 
 
 def _sources_stamp() -> str:
-    """Digest of the package's Python sources (path, size, mtime): any change makes every marker stale,
-    as numba's cache is (the loop inlines the component kernels)."""
+    """Digest of the package's Python sources (path and content; the bundled data left out), the Python and
+    numba versions: any change makes every marker stale, as numba's cache is (the loop inlines the component
+    kernels).  Content, not mtimes: ``pip install`` does not keep them, and the precompiled cache a wheel ships
+    (:mod:`shevsim.core.jitcache`) is matched by this stamp."""
     root = Path(__file__).resolve().parent
     if root in _stamp_cache:
         return _stamp_cache[root]
+    from .core.jitcache import file_stamp
     h = hashlib.sha256()
     import numba
     h.update(f"{sys.version_info[:2]} numba {numba.__version__}".encode())
     for p in sorted(root.rglob("*.py")):
+        rel = p.relative_to(root)
+        if rel.parts[0] in ("_data", "_jitcache"):
+            continue
         try:
-            st = p.stat()
+            h.update(f"{rel.as_posix()}:{file_stamp(p)}\n".encode())
         except OSError:
             continue
-        h.update(f"{p.relative_to(root)}:{st.st_size}:{st.st_mtime_ns}\n".encode())
     _stamp_cache[root] = h.hexdigest()[:16]
     return _stamp_cache[root]
 
@@ -107,8 +112,22 @@ def _read_markers() -> dict:
 
 
 def is_compiled(scenario) -> bool:
-    """True when this scenario's layout was compiled by a fast run or a warm-up since the sources changed."""
-    return bool(_read_markers().get(layout_key(scenario), {}).get("ok", False))
+    """True when this scenario's layout was compiled by a fast run or a warm-up since the sources changed, or
+    its loop is in the precompiled cache this installation ships and that cache fits this machine
+    (:func:`shevsim.core.jitcache.shipped_status`)."""
+    if _read_markers().get(layout_key(scenario), {}).get("ok", False):
+        return True
+    return is_shipped(scenario)
+
+
+def is_shipped(scenario) -> bool:
+    """This layout's loop is in the shipped precompiled cache, and that cache can be loaded here."""
+    from .core import jitcache
+    try:
+        return layout_of(scenario) in jitcache.manifest().get("layouts", ()) and jitcache.shipped_status() == ""
+    except Exception as exc:  # noqa: BLE001 - a damaged manifest only costs a compile
+        log.debug("shipped cache not usable: %s", exc)
+        return False
 
 
 def mark_compiled(scenario, ok: bool = True) -> None:
@@ -206,6 +225,81 @@ def warm(scenario) -> float:
     return time.perf_counter() - t
 
 
+# --------------------------------------------------------------------------- compiling ahead of time
+#: the scenarios whose fast loop :func:`precompile` builds by default (the default scenario of ``shevsim run``)
+PRECOMPILE_LOOPS = ("hd_udds_mpc",)
+
+
+def precompile(scenarios=None, loops=PRECOMPILE_LOOPS, stream=None, mark: bool = True) -> dict:
+    """Compile ahead of time what runs need: every compiled component step the Python master calls in the
+    bundled scenarios (one communication step of each scenario without FMUs, so each step compiles with the
+    signature a run uses) and the fast loop of the ``loops`` scenarios' layouts.  numba caches the code
+    (:mod:`shevsim.core.jitcache`: the user's cache, or with ``SHEVSIM_JITCACHE_BUILD`` set, the cache a wheel
+    ships).  ``mark``: record the built layouts as compiled (:func:`mark_compiled`).  Prints one line per
+    scenario (and :class:`CompileNotice`'s lines) to ``stream``; returns ``{"scenarios": [...], "layouts": [...],
+    "failed": {name: reason}, "wall_s": ...}``."""
+    from .core.paths import bundled_scenarios
+    from .core.scenario import load_scenario
+    from .run import simulate
+    stream = stream if stream is not None else sys.stderr
+    t0 = time.perf_counter()
+    names = list(scenarios) if scenarios is not None else bundled_scenarios()
+    done, failed, layouts = [], {}, []
+    with CompileNotice(stream=stream):
+        for name in names:
+            try:
+                sc = load_scenario(name)
+                if any(c.type == "fmu" for c in sc.components):
+                    continue                                    # FMUs run their own code
+                sc.faults = []                                  # a fault due later would refuse the run
+                sc.set("scenario.stop_s", float(sc.t0_s) + float(sc.settings.step_s))
+                stream.write(f"precompiling the component steps of {name} ...\n")
+                stream.flush()
+                simulate(sc, engine="python")
+                done.append(name)
+            except Exception as exc:  # noqa: BLE001 - one scenario that cannot run does not stop the others
+                failed[name] = f"{type(exc).__name__}: {exc}"
+        for name in loops or ():
+            try:
+                sc = load_scenario(name)
+                stream.write(f"precompiling the fast loop of {name}'s layout ({layout_of(sc)}) ...\n")
+                stream.flush()
+                from .fast import runner_for
+                runner, why = runner_for(sc.copy())
+                if runner is None:
+                    raise RuntimeError(f"not eligible for the fast path: {why}")
+                runner(float(sc.t0_s) + float(sc.settings.step_s))
+                layouts.append(layout_of(sc))
+                if mark:
+                    mark_compiled(sc)
+            except Exception as exc:  # noqa: BLE001
+                failed[f"loop {name}"] = f"{type(exc).__name__}: {exc}"
+    for k, v in failed.items():
+        stream.write(f"precompile: {k} skipped ({v})\n")
+    return {"scenarios": done, "layouts": layouts, "failed": failed, "wall_s": time.perf_counter() - t0}
+
+
+def build_shipped_cache(dest) -> int:
+    """``python -m shevsim.warmup --build DEST``: precompile into ``DEST`` (the ``_jitcache`` folder a wheel
+    ships; ``SHEVSIM_JITCACHE_BUILD`` must name it before shevsim is imported) and write its manifest.
+    Exit 0 with a manifest, 1 when nothing could be compiled."""
+    from .core import jitcache
+    dest = Path(dest)
+    if Path(os.environ.get(jitcache.BUILD_ENV, "")).resolve() != dest.resolve():
+        print(f"{jitcache.BUILD_ENV} must name {dest} before shevsim is imported", file=sys.stderr)
+        return 2
+    out = precompile(mark=False, stream=sys.stdout)
+    n = len(list(dest.rglob("*.nbi")))
+    if not n:
+        print("nothing was compiled: no precompiled cache", file=sys.stdout)
+        return 1
+    m = jitcache.write_manifest(dest, out["layouts"], _sources_stamp(), n)
+    size = sum(p.stat().st_size for p in dest.rglob("*") if p.is_file())
+    print(f"precompiled {n} function caches ({size / 1e6:.1f} MB) for numba {m['numba']}, Python {m['python']}, "
+          f"CPU {m['cpu'][1]}; loops: {', '.join(m['layouts']) or 'none'}; {out['wall_s']:.0f} s", flush=True)
+    return 0
+
+
 # --------------------------------------------------------------------------- messages while compiling
 _FRIENDLY = {"components.supervisors": "supervisor", "components.battery": "battery",
              "components.bms": "BMS", "components.engine_generator": "engine-generator",
@@ -275,11 +369,25 @@ class CompileNotice:
             return
         self._t0 = time.perf_counter()
         self.count += 1
+        if self.count == 1:
+            self._why_not_shipped()
         what = "the compiled fast loop for this component layout" if mod.startswith(("shevsim.fast.loop",
                                                                                    "shevsim_loop")) else \
             f"the {_friendly(mod)}"
         self.stream.write(f"compiling {what} ({fn.__name__}; first use, cached afterwards) ... ")
         self.stream.flush()
+
+    def _why_not_shipped(self):
+        """Before the first compilation: one line on why the precompiled code of the installation (if it
+        has any) does not serve, so a user on another CPU knows the wait is once."""
+        try:
+            from .core import jitcache
+            why = jitcache.shipped_status() if jitcache.manifest() else ""
+        except Exception:  # noqa: BLE001 - a message only
+            why = ""
+        if why:
+            self.stream.write(f"shevsim: compiling on first use, cached afterwards: {why}\n")
+            self.stream.flush()
 
     def _end(self, e):
         self._depth -= 1
@@ -303,6 +411,8 @@ def main(argv=None) -> int:
     """``python -m shevsim.warmup SCENARIO.pickle LOCK``: the background build (see :func:`start_background`)."""
     import pickle
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "--build":
+        return build_shipped_cache(argv[1])
     sc_file, lock = Path(argv[0]), Path(argv[1])
     scenario = None
     try:

@@ -229,23 +229,30 @@ def parameters_html(parameters: dict) -> str:
 
 
 def _decimate(t: np.ndarray, y: np.ndarray, limit: int = MAX_POINTS):
-    """At most ~``limit`` points, keeping each bucket's minimum and maximum (peaks stay visible)."""
+    """At most ~``limit`` points, keeping each bucket's minimum and maximum (peaks stay visible): per bucket the
+    first minimum and first maximum ignoring NaN (``np.nanargmin``/``nanargmax``), in time order, or the
+    bucket's first point when it is all NaN.  Vectorised over the buckets (a loop of two numpy calls per bucket
+    took seconds of every run's report)."""
     n = len(t)
     if n <= limit:
         return t, y
     nb = limit // 2
     edges = np.linspace(0, n, nb + 1).astype(int)
-    idx = []
-    for a, b in zip(edges[:-1], edges[1:]):
-        if b <= a:
-            continue
-        seg = y[a:b]
-        if np.all(np.isnan(seg)):
-            idx.append(a)
-            continue
-        i1, i2 = a + int(np.nanargmin(seg)), a + int(np.nanargmax(seg))
-        idx.extend(sorted({i1, i2}))
-    idx = np.asarray(idx)
+    a, lens = edges[:-1], np.diff(edges)
+    keep = lens > 0
+    a, lens = a[keep], lens[keep]
+    cols = np.arange(int(lens.max()))
+    inside = cols[None, :] < lens[:, None]
+    seg = np.where(inside, np.asarray(y, dtype=float)[np.minimum(a[:, None] + cols[None, :], n - 1)], np.nan)
+    nan = np.isnan(seg)
+    lo = np.where(nan, np.inf, seg).argmin(axis=1)
+    hi = np.where(nan, -np.inf, seg).argmax(axis=1)
+    allnan = nan.all(axis=1)
+    first = np.where(allnan, a, a + np.minimum(lo, hi))
+    second = a + np.maximum(lo, hi)
+    pairs = np.stack([first, second], axis=1)
+    take = np.stack([np.ones_like(allnan), ~allnan & (lo != hi)], axis=1)
+    idx = pairs[take]
     return t[idx], y[idx]
 
 

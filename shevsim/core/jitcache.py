@@ -1,0 +1,307 @@
+"""jitcache.py - where numba caches shevsim's compiled functions, and the precompiled cache a wheel ships.
+
+Every compiled function of shevsim is declared ``@njit(cache=True)``: numba keeps its machine code on disk and
+loads it in later processes instead of compiling again (the component steps take about a minute of CPU to
+compile; loading them takes a fraction of a second).  This module adds one cache *locator* to numba
+(:class:`ShevsimLocator`, first in numba's list, installed by :func:`install` when ``shevsim`` is imported)
+for shevsim's own modules and for the generated fast loops (:mod:`shevsim.fast.loop`):
+
+* **where**: a writable folder of the user's, ``numba/`` in :func:`shevsim.core.paths.user_cache_dir` (never the
+  installed package: ``site-packages`` may not be writable and is not ours to write); one sub-folder per
+  source folder (named by its absolute path, so two installations never share an index);
+* **when fresh**: the source stamp is the SHA-256 of the source file's content (numba < 0.63 used its mtime
+  and size, which ``pip install`` does not keep): a changed source never loads stale code, a copied or
+  re-installed one still loads;
+* **seeded from the shipped cache**: a wheel built with numba available (the build hook ``hatch_build.py``
+  runs :mod:`shevsim.warmup`'s :func:`~shevsim.warmup.precompile` with ``SHEVSIM_JITCACHE_BUILD`` pointing
+  into the build) carries ``shevsim/_jitcache/`` (the same index and data files, laid out by the sources'
+  folders inside the package, and ``manifest.json``).  The first time a function is cached in a process,
+  the shipped entries of its module whose stamp matches the installed source and whose numba version is
+  the running one are copied into the user's folder (:func:`_seed`), and numba loads them from there.
+
+numba's own index key holds the CPU (name and features) and the function's bytecode: on another CPU, or with
+another numba or Python version, the shipped entries do not match and the function compiles on first use
+as without them (with the on-screen notice of :class:`shevsim.warmup.CompileNotice`; :func:`shipped_status`
+says why the shipped code is not used).  If no writable folder exists, numba's own locators take over.
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+import pickle
+import re
+import shutil
+import sys
+import tempfile
+import uuid
+from pathlib import Path
+
+#: the package folder (``shevsim/``)
+PKG_ROOT = Path(__file__).resolve().parents[1]
+#: the precompiled cache inside the package (present in a wheel built with numba; read only)
+SHIPPED = PKG_ROOT / "_jitcache"
+MANIFEST = "manifest.json"
+#: the sub-folder of the generated fast loops (:mod:`shevsim.fast.loop`), in the user cache and the shipped one
+LOOP_FOLDER = "fastloop"
+BUILD_ENV = "SHEVSIM_JITCACHE_BUILD"
+_LOOP_FILE = re.compile(r"shevsim_loop_[0-9a-f]{20}\.py$")
+_installed = False
+_seeded: set = set()
+
+
+def file_stamp(path) -> str:
+    """The source stamp of a file: ``"sha256:<hex>"`` of its content (memoised in the process on its path, size,
+    inode, mtime and ctime: a write changes the ctime even when the mtime is set back)."""
+    st = os.stat(path)
+    return _hash(os.fspath(path), st.st_size, st.st_ino, st.st_mtime_ns, st.st_ctime_ns)
+
+
+@functools.lru_cache(maxsize=None)
+def _hash(path: str, *stat_key) -> str:
+    with open(path, "rb") as f:
+        return "sha256:" + hashlib.sha256(f.read()).hexdigest()
+
+
+def relative_folder(py_file) -> str | None:
+    """The cache sub-folder of a source file: its folder inside the package (``"components"``, ``"."``), or
+    :data:`LOOP_FOLDER` for a generated fast loop; None for a file that is not shevsim's."""
+    p = Path(os.path.abspath(py_file))
+    if _LOOP_FILE.match(p.name):
+        return LOOP_FOLDER
+    try:
+        rel = p.parent.resolve().relative_to(PKG_ROOT)
+    except (ValueError, OSError):
+        return None
+    if rel.parts and rel.parts[0] in ("_jitcache", "_data"):
+        return None
+    return rel.as_posix()
+
+
+def user_root() -> Path | None:
+    """The writable folder holding the user's cache of compiled shevsim code (created), or None."""
+    from .paths import user_cache_dir
+    cands = [user_cache_dir() / "numba",
+             Path(tempfile.gettempdir()) / f"shevsim-{os.getuid() if hasattr(os, 'getuid') else 'user'}" / "numba"]
+    for d in cands:
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+            if os.access(d, os.W_OK):
+                return d
+        except OSError:
+            continue
+    return None
+
+
+def _subfolder(rel: str, py_file) -> str:
+    tag = rel.replace("/", "_").replace(".", "") or "shevsim"
+    where = os.path.dirname(os.path.abspath(py_file))
+    return f"{tag}_{hashlib.sha1(where.encode()).hexdigest()[:16]}"
+
+
+# --------------------------------------------------------------------------------------- the locator
+def _locator_base():
+    from numba.core.caching import _CacheLocator
+    return _CacheLocator
+
+
+class _LocatorMixin:
+    """The logic of :class:`ShevsimLocator` (kept apart from numba's base class, so it is testable cheaply)."""
+
+    def __init__(self, py_func, py_file, rel: str):
+        self._py_file = py_file
+        self._lineno = py_func.__code__.co_firstlineno
+        self._rel = rel
+        build = os.environ.get(BUILD_ENV)
+        if build:                             # precompiling for a wheel: the shipped layout, nothing seeded
+            self._cache_path = os.path.join(build, rel)
+            self._seed_from = None
+        else:
+            root = user_root()
+            if root is None:
+                raise OSError("no writable cache folder")
+            self._cache_path = os.path.join(root, _subfolder(rel, py_file))
+            self._seed_from = SHIPPED / rel
+
+    def get_cache_path(self):
+        return self._cache_path
+
+    def get_source_stamp(self):
+        return file_stamp(self._py_file)
+
+    def get_disambiguator(self):
+        return str(self._lineno)
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        rel = relative_folder(py_file) if py_file and os.path.exists(py_file) else None
+        if rel is None:
+            return None
+        try:
+            self = cls(py_func, py_file, rel)
+            self.ensure_cache_path()
+        except OSError:
+            return None                       # numba's own locators take over
+        if self._seed_from is not None:
+            try:
+                _seed(self._seed_from, Path(self._cache_path), py_file)
+            except Exception:  # noqa: BLE001 - a shipped cache that cannot be read only costs a compile
+                pass
+        return self
+
+
+@functools.lru_cache(maxsize=None)
+def locator_class():
+    """:class:`ShevsimLocator`: the mixin on numba's ``_CacheLocator`` (built on first use: numba imported late)."""
+    return type("ShevsimLocator", (_LocatorMixin, _locator_base()), {"__module__": __name__})
+
+
+def install() -> bool:
+    """Put the shevsim locator first in numba's list (idempotent); False when numba has no such list."""
+    global _installed
+    if _installed:
+        return True
+    try:
+        from numba.core import caching
+    except ImportError:
+        return False
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+    classes = getattr(impl, "_locator_classes", None)
+    if not isinstance(classes, list):
+        return False
+    cls = locator_class()
+    if cls not in classes:
+        classes.insert(0, cls)
+    _installed = True
+    return True
+
+
+# --------------------------------------------------------------------------------------- index files
+def read_index(path) -> tuple[str, object, dict] | None:
+    """``(numba version, source stamp, overloads)`` of a numba index file (``.nbi``), or None if unreadable.
+    The overloads are not unpickled when the version is not the running numba's (empty dict then)."""
+    try:
+        with open(path, "rb") as f:
+            version = pickle.load(f)
+            data = f.read()
+    except (OSError, pickle.UnpicklingError, EOFError, ValueError):
+        return None
+    import numba
+    if version != numba.__version__:
+        return str(version), None, {}
+    try:
+        stamp, overloads = pickle.loads(data)
+    except Exception:  # noqa: BLE001 - an index written by something else
+        return None
+    return str(version), stamp, dict(overloads)
+
+
+def _write_index(path: Path, stamp, overloads: dict) -> None:
+    import numba
+    from numba.core.serialize import dumps
+    tmp = path.with_name(f"{path.name}.tmp.{uuid.uuid4().hex[:12]}")
+    with open(tmp, "wb") as f:
+        pickle.dump(numba.__version__, f, protocol=-1)
+        f.write(dumps((stamp, overloads)))
+    os.replace(tmp, path)
+
+
+def _copy(src: Path, dst: Path) -> None:
+    tmp = dst.with_name(f"{dst.name}.tmp.{uuid.uuid4().hex[:12]}")
+    shutil.copyfile(src, tmp)
+    os.replace(tmp, dst)
+
+
+def _seed(shipped: Path, user: Path, py_file) -> int:
+    """Copy the shipped cache entries of ``py_file``'s module into the user's folder: for each shipped index
+    of the module that is fresh (this numba, the installed source's stamp), the entries the user's index lacks
+    (a user index of another stamp is replaced).  Once per source file and process; returns entries copied."""
+    key = (os.fspath(shipped), os.fspath(user), os.fspath(py_file))
+    if key in _seeded:
+        return 0
+    _seeded.add(key)
+    if not shipped.is_dir():
+        return 0
+    modname = os.path.splitext(os.path.basename(py_file))[0]
+    stamp = file_stamp(py_file)
+    import numba
+    copied = 0
+    for idx in sorted(shipped.glob(f"{glob_escape(modname)}.*.nbi")):
+        got = read_index(idx)
+        if got is None or got[0] != numba.__version__ or got[1] != stamp or not got[2]:
+            continue                                   # stale or foreign: never used
+        target = user / idx.name
+        mine = read_index(target) if target.exists() else None
+        overloads = dict(mine[2]) if mine is not None and mine[0] == numba.__version__ and mine[1] == stamp else {}
+        used = set(overloads.values())
+        changed = False
+        base = idx.name[:-len(".nbi")]
+        for k, name in got[2].items():
+            if k in overloads or not (shipped / name).is_file():
+                continue
+            n = 1
+            while f"{base}.{n}.nbc" in used:
+                n += 1
+            new = f"{base}.{n}.nbc"
+            _copy(shipped / name, user / new)
+            overloads[k] = new
+            used.add(new)
+            changed = True
+            copied += 1
+        if changed:
+            _write_index(target, stamp, overloads)
+    return copied
+
+
+def glob_escape(s: str) -> str:
+    return re.sub(r"([*?\[\]])", r"[\1]", s)
+
+
+# --------------------------------------------------------------------------------------- the manifest
+def cpu_key() -> list:
+    """numba's description of this machine's code target (triple, CPU name, features): the part of its cache
+    key that decides whether machine code compiled elsewhere can be loaded here."""
+    from numba.core.registry import cpu_target
+    return [str(x) for x in cpu_target.target_context.codegen().magic_tuple()]
+
+
+def manifest() -> dict:
+    """The shipped cache's ``manifest.json`` ({} when this installation carries none)."""
+    try:
+        return json.loads((SHIPPED / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def write_manifest(dest: Path, layouts: list[str], sources: str, functions: int) -> dict:
+    import numba
+    m = {"numba": numba.__version__, "python": f"{sys.version_info[0]}.{sys.version_info[1]}",
+         "cpu": cpu_key(), "sources": sources, "layouts": sorted(layouts), "indexes": functions}
+    (Path(dest) / MANIFEST).write_text(json.dumps(m, indent=1))
+    return m
+
+
+@functools.lru_cache(maxsize=1)
+def shipped_status() -> str:
+    """``""`` when the shipped precompiled code can be used in this process, else why not (no shipped cache,
+    another numba or Python, another CPU, changed sources)."""
+    m = manifest()
+    if not m:
+        return "this installation carries no precompiled code"
+    import numba
+    py = f"{sys.version_info[0]}.{sys.version_info[1]}"
+    if m.get("numba") != numba.__version__ or m.get("python") != py:
+        return (f"the precompiled code was built with numba {m.get('numba')} / Python {m.get('python')}, this is "
+                f"numba {numba.__version__} / Python {py}")
+    try:
+        here = cpu_key()
+    except Exception as exc:  # noqa: BLE001
+        return f"numba cannot describe this CPU ({exc})"
+    if m.get("cpu") != here:
+        return (f"the precompiled code was built for another CPU ({m.get('cpu', ['?', '?'])[1]}; this one is "
+                f"{here[1]})")
+    from ..warmup import _sources_stamp
+    if m.get("sources") != _sources_stamp():
+        return "the sources differ from those the precompiled code was built from"
+    return ""
