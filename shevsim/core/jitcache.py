@@ -9,8 +9,8 @@ for shevsim's own modules and for the generated fast loops (:mod:`shevsim.fast.l
 * **where**: a writable folder of the user's, ``numba/`` in :func:`shevsim.core.paths.user_cache_dir` (never the
   installed package: ``site-packages`` may not be writable and is not ours to write); one sub-folder per
   source folder (named by its absolute path, so two installations never share an index);
-* **when fresh**: the source stamp is the SHA-256 of the source file's content (numba < 0.63 used its mtime
-  and size, which ``pip install`` does not keep): a changed source never loads stale code, a copied or
+* **when fresh**: the source stamp is the SHA-256 of the source file's content (older numba versions used its
+  mtime and size, which ``pip install`` does not keep): a changed source never loads stale code, a copied or
   re-installed one still loads;
 * **seeded from the shipped cache**: a wheel built with numba available (the build hook ``hatch_build.py``
   runs :mod:`shevsim.warmup`'s :func:`~shevsim.warmup.precompile` with ``SHEVSIM_JITCACHE_BUILD`` pointing
@@ -80,10 +80,13 @@ def relative_folder(py_file) -> str | None:
 
 
 def user_root() -> Path | None:
-    """The writable folder holding the user's cache of compiled shevsim code (created), or None."""
+    """The writable folder holding the user's cache of compiled shevsim code (created), or None:
+    ``shevsim`` in ``$NUMBA_CACHE_DIR`` when that is set (numba's own setting for where caches go), else
+    ``numba`` in :func:`shevsim.core.paths.user_cache_dir`, else in the temporary folder."""
     from .paths import user_cache_dir
-    cands = [user_cache_dir() / "numba",
-             Path(tempfile.gettempdir()) / f"shevsim-{os.getuid() if hasattr(os, 'getuid') else 'user'}" / "numba"]
+    cands = [Path(os.environ["NUMBA_CACHE_DIR"]) / "shevsim"] if os.environ.get("NUMBA_CACHE_DIR") else []
+    cands += [user_cache_dir() / "numba",
+              Path(tempfile.gettempdir()) / f"shevsim-{os.getuid() if hasattr(os, 'getuid') else 'user'}" / "numba"]
     for d in cands:
         try:
             d.mkdir(parents=True, exist_ok=True)

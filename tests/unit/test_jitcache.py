@@ -90,6 +90,14 @@ def test_stamp_is_the_content_not_the_mtime(tmp_path):
     assert p.stat().st_size == q.stat().st_size and jitcache.file_stamp(p) != s1
 
 
+def test_user_cache_folder(tmp_path, monkeypatch):
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv("SHEVSIM_CACHE_DIR", str(tmp_path / "c"))
+    assert jitcache.user_root() == tmp_path / "c" / "shevsim" / "numba"
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "nb"))          # numba's own setting wins
+    assert jitcache.user_root() == tmp_path / "nb" / "shevsim"
+
+
 def test_locator_takes_shevsims_files_only(tmp_path):
     assert jitcache.relative_folder(jitcache.PKG_ROOT / "components" / "battery.py") == "components"
     assert jitcache.relative_folder(jitcache.PKG_ROOT / "warmup.py") == "."

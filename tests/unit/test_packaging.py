@@ -3,6 +3,8 @@ inside the package (shevsim/_data, pyproject force-include) and shevsim.core.pat
 from __future__ import annotations
 
 import glob
+import json
+import os
 import shutil
 import subprocess
 import sys
@@ -46,7 +48,8 @@ def test_installed_layout_runs_a_bundled_scenario_by_name(tmp_path):
 @pytest.mark.slow
 def test_built_wheel_holds_the_data(tmp_path):
     r = subprocess.run([sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "-q", "-w", str(tmp_path)],
-                       capture_output=True, text=True, timeout=900)
+                       capture_output=True, text=True, timeout=900,
+                       env={**os.environ, "SHEVSIM_PRECOMPILE": "0"})      # the data only: no precompile
     assert r.returncode == 0, r.stderr
     names = zipfile.ZipFile(glob.glob(str(tmp_path / "*.whl"))[0]).namelist()
     for f in FOLDERS[:3]:
@@ -85,7 +88,9 @@ print(res.termination, len(df), df.attrs["units"]["vehicle.speed_mps"], res.metr
 @pytest.mark.slow
 def test_wheel_in_a_fresh_venv_runs_from_an_empty_folder(tmp_path):
     """Build the wheel, install it in a new virtual environment (dependencies from the system site), and from
-    an empty folder run --version, a bundled scenario (one cycle) and the Python API."""
+    an empty folder run --version, a bundled scenario (one cycle) and the Python API.  The wheel carries the
+    precompiled code (hatch_build.py, issue 26): its first run compiles nothing and the default scenario takes
+    the fast path."""
     r = subprocess.run([sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "-q", "-w", str(tmp_path)],
                        capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stderr
@@ -108,6 +113,14 @@ def test_wheel_in_a_fresh_venv_runs_from_an_empty_folder(tmp_path):
         assert out.returncode == 0, (args, out.stdout, out.stderr)
         return out.stdout
     assert run(str(exe), "--version").strip().startswith("shevsim ")
+    man = json.loads(zipfile.ZipFile(wheel).read("shevsim/_jitcache/manifest.json"))
+    assert man["indexes"] >= 50 and man["layouts"], man
+    first = subprocess.run([str(exe), "run", "-s", "scenario.stop_s=60", "-o", "res0", "--no-plots"], cwd=work,
+                           capture_output=True, text=True, timeout=900, env=env)
+    assert first.returncode == 0, first.stderr
+    assert "compiling" not in first.stderr and "engine fast" in first.stdout, (first.stdout, first.stderr)
+    assert not [p for p in venv.rglob("*.nbi") if "_jitcache" not in p.parts]      # nothing written into the venv
+    assert list((tmp_path / ".cache" / "shevsim" / "numba").rglob("*.nbi"))        # seeded into the user's cache
     run(str(exe), "run", "hd_udds_rule", "-s", "cycle.repeat=1", "-q", "-o", "res")
     assert (work / "res" / "timeseries.parquet").is_file() and (work / "res" / "overview.png").is_file()
     lines = run(str(py), "-c", SCRIPT).splitlines()
