@@ -8,7 +8,7 @@ The Python API (see :mod:`shevsim.api`)::
 """
 from .version import __version__  # noqa: E402
 from .core import jitcache as _jitcache  # noqa: E402
-_jitcache.install()   # before any compiled function is declared: numba's cache for shevsim (core/jitcache.py)
+_jitcache.install_when_numba_loads()   # numba's cache for shevsim, before any function is compiled (core/jitcache.py)
 from . import providers  # noqa: E402,F401  (registers component types, the FMU adapter and metrics with core)
 
 from .api import (Result, Scenario, compare, load_result, load_scenario, metrics_table,  # noqa: E402

@@ -278,8 +278,11 @@ def _cmd_report(a) -> int:
 
 
 def _cmd_warmup(a) -> int:
-    from .warmup import precompile
     from .core.paths import user_cache_dir
+    from .core.scenario import load_scenario
+    from .warmup import precompile
+    for name in a.scenarios:
+        load_scenario(name)                 # a name that is no scenario: exit 2, before anything compiles
     out = precompile(scenarios=a.scenarios or None, stream=sys.stderr if not a.quiet else io.StringIO())
     _say(a, f"compiled code for {len(out['scenarios'])} scenario(s) and {len(out['layouts'])} fast loop(s) is "
             f"cached in {user_cache_dir() / 'numba'} ({out['wall_s']:.0f} s)")

@@ -3,8 +3,9 @@
 Every compiled function of shevsim is declared ``@njit(cache=True)``: numba keeps its machine code on disk and
 loads it in later processes instead of compiling again (the component steps take about a minute of CPU to
 compile; loading them takes a fraction of a second).  This module adds one cache *locator* to numba
-(:class:`ShevsimLocator`, first in numba's list, installed by :func:`install` when ``shevsim`` is imported)
-for shevsim's own modules and for the generated fast loops (:mod:`shevsim.fast.loop`):
+(:class:`ShevsimLocator`, first in numba's list; :func:`install_when_numba_loads`, called by ``import shevsim``,
+installs it as numba is imported, so ``import shevsim`` alone does not import numba) for shevsim's own modules
+and for the generated fast loops (:mod:`shevsim.fast.loop`):
 
 * **where**: a writable folder of the user's, ``numba/`` in :func:`shevsim.core.paths.user_cache_dir` (never the
   installed package: ``site-packages`` may not be writable and is not ours to write); one sub-folder per
@@ -70,8 +71,13 @@ def relative_folder(py_file) -> str | None:
     p = Path(os.path.abspath(py_file))
     if _LOOP_FILE.match(p.name):
         return LOOP_FOLDER
+    return _package_folder(str(p.parent))
+
+
+@functools.lru_cache(maxsize=None)
+def _package_folder(folder: str) -> str | None:
     try:
-        rel = p.parent.resolve().relative_to(PKG_ROOT)
+        rel = Path(folder).resolve().relative_to(PKG_ROOT)
     except (ValueError, OSError):
         return None
     if rel.parts and rel.parts[0] in ("_jitcache", "_data"):
@@ -83,6 +89,12 @@ def user_root() -> Path | None:
     """The writable folder holding the user's cache of compiled shevsim code (created), or None:
     ``shevsim`` in ``$NUMBA_CACHE_DIR`` when that is set (numba's own setting for where caches go), else
     ``numba`` in :func:`shevsim.core.paths.user_cache_dir`, else in the temporary folder."""
+    env = tuple(os.environ.get(k) for k in ("NUMBA_CACHE_DIR", "SHEVSIM_CACHE_DIR", "XDG_CACHE_HOME", "HOME"))
+    return _user_root(env)
+
+
+@functools.lru_cache(maxsize=8)
+def _user_root(env: tuple) -> Path | None:
     from .paths import user_cache_dir
     cands = [Path(os.environ["NUMBA_CACHE_DIR"]) / "shevsim"] if os.environ.get("NUMBA_CACHE_DIR") else []
     cands += [user_cache_dir() / "numba",
@@ -158,6 +170,40 @@ class _LocatorMixin:
 def locator_class():
     """:class:`ShevsimLocator`: the mixin on numba's ``_CacheLocator`` (built on first use: numba imported late)."""
     return type("ShevsimLocator", (_LocatorMixin, _locator_base()), {"__module__": __name__})
+
+
+class _InstallOnImport:
+    """A one-shot import hook: when numba's ``caching`` module is imported (numba imports it with its
+    dispatcher, before any function is decorated), run :func:`install` right after it.  So ``import shevsim``
+    itself does not import numba (a command that compiles nothing, an exported FMU's slave, stay light)."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name != "numba.core.caching":
+            return None
+        try:
+            sys.meta_path.remove(self)
+        except ValueError:
+            pass
+        import importlib.util
+        spec = importlib.util.find_spec(name)
+        loader = getattr(spec, "loader", None)
+        if loader is None or not hasattr(loader, "exec_module"):
+            return spec
+        run = loader.exec_module
+
+        def exec_module(module):
+            run(module)
+            install()
+        loader.exec_module = exec_module
+        return spec
+
+
+def install_when_numba_loads() -> None:
+    """:func:`install` now if numba is imported already, else as soon as it is (:class:`_InstallOnImport`)."""
+    if "numba.core.caching" in sys.modules:
+        install()
+    elif not any(isinstance(f, _InstallOnImport) for f in sys.meta_path):
+        sys.meta_path.insert(0, _InstallOnImport())
 
 
 def install() -> bool:

@@ -98,6 +98,19 @@ def test_user_cache_folder(tmp_path, monkeypatch):
     assert jitcache.user_root() == tmp_path / "nb" / "shevsim"
 
 
+def test_import_shevsim_stays_light_and_the_locator_comes_with_numba():
+    code = ("import sys, shevsim; light = 'numba' not in sys.modules; "
+            "import shevsim.components.battery as b, numba; "
+            "d = next(v for v in vars(b).values() if isinstance(v, numba.core.dispatcher.Dispatcher)); "
+            "print(light, type(d._cache._impl.locator).__name__)")
+    import subprocess
+    for pre in ("", "import numba; "):              # shevsim first, or numba imported before shevsim
+        r = subprocess.run([sys.executable, "-c", pre + code], capture_output=True, text=True, timeout=300,
+                           env={**os.environ, "PYTHONPATH": str(ROOT)})
+        assert r.returncode == 0, r.stderr
+        assert r.stdout.split() == [str(not pre), "ShevsimLocator"], (pre, r.stdout)
+
+
 def test_locator_takes_shevsims_files_only(tmp_path):
     assert jitcache.relative_folder(jitcache.PKG_ROOT / "components" / "battery.py") == "components"
     assert jitcache.relative_folder(jitcache.PKG_ROOT / "warmup.py") == "."
@@ -271,3 +284,21 @@ def test_build_refuses_a_destination_it_was_not_told_about(tmp_path, monkeypatch
     monkeypatch.delenv(jitcache.BUILD_ENV, raising=False)
     assert warmup.build_shipped_cache(tmp_path / "_jitcache") == 2
     assert jitcache.BUILD_ENV in capsys.readouterr().err
+
+
+def test_warmup_command_compiles_ahead_and_marks_the_default_loop(tmp_path, monkeypatch, capsys):
+    """`shevsim warmup NAME`: the steps of that scenario and the default scenario's loop, cached (in this test
+    session they are compiled already: this checks the command, not the compile time)."""
+    from shevsim.cli import main
+    monkeypatch.setenv("SHEVSIM_WARMUP_DIR", str(tmp_path / "warmup"))
+    monkeypatch.setattr(jitcache, "SHIPPED", tmp_path / "none")
+    jitcache.shipped_status.cache_clear()
+    mpc = load_scenario("hd_udds_mpc")
+    assert not warmup.is_compiled(mpc)
+    assert main(["warmup", "hd_udds_rule"]) == 0
+    out, err = capsys.readouterr()
+    assert "precompiling the component steps of hd_udds_rule" in err and "fast loop of hd_udds_mpc" in err
+    assert "compiled code for 1 scenario(s) and 1 fast loop(s) is cached in" in out
+    assert warmup.is_compiled(mpc)
+    assert main(["warmup", "no_such_scenario"]) == 2
+    jitcache.shipped_status.cache_clear()
