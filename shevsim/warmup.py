@@ -7,13 +7,16 @@ component steps (:mod:`shevsim.core.master`) and needs no loop, so for a run tha
 user should not wait for the loop.  ``engine="auto"`` therefore decides as follows (:func:`choose`):
 
 1. the loop of this layout is known to be compiled (:func:`is_compiled`: a fast run or a warm-up of this
-   layout finished since the sources last changed) -> the fast path;
+   layout finished since the sources last changed, or the installation ships it precompiled for this
+   machine, :func:`is_shipped`) -> the fast path;
 2. else, when the run is estimated to take less on the master than building the loop
    (``steps x components x`` :data:`MASTER_STEP_S` ``<`` :data:`LOOP_BUILD_S`) -> the Python master, and
    when it has finished, a background process (:func:`start_background`, niced, detached) builds this
    layout's loop so that later runs take the fast path;
 3. else (a long run) -> the fast path, compiled in the foreground with a message.
 
+:func:`precompile` compiles ahead of time (``shevsim warmup``; at wheel build time, ``hatch_build.py`` runs
+:func:`build_shipped_cache`, whose result the wheel ships: :mod:`shevsim.core.jitcache`).
 Whatever compiles in the foreground says so on screen (:class:`CompileNotice`, a listener on numba's
 compile events, used by ``shevsim run``).  ``SHEVSIM_BACKGROUND_COMPILE=0`` turns the background build
 off (the test suite does); the markers live beside the compiled loops in the user cache folder
