@@ -64,6 +64,8 @@ CELL = {
                        lambda t: t["h_change_factor"], 0.30, True),
     "arrhenius": (["arrhenius_resistance"], "arrhenius_ea_r_k", lambda p, r: p.get("arrhenius_ea_r_k"),
                   lambda t: t["arrhenius_ea_r_k"], 0.30, True),
+    "none_2": ([], None, None, None, None, None),
+    "none_3": ([], None, None, None, None, None),
 }
 ENGINE = {
     "none": ([], "soot_scale_frac", lambda p, r: p.get("soot_scale_frac"), lambda t: t["soot_scale_frac"], 0.10, True),

@@ -31,6 +31,7 @@ battery parameters (or ``name[k]`` elements of a list parameter).
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -147,6 +148,21 @@ def ocv_correction(model) -> Effect:
 CELL_EFFECTS = [entropic_heat, arrhenius_resistance, cooling_change, ocv_hysteresis, capacity, current_offset,
                 low_soc_resistance, second_rc_branch, initial_soc, ocv_correction]
 N_OCV_KNOTS = 5
+
+
+def _lag(t: np.ndarray, u: np.ndarray, tau: float) -> np.ndarray:
+    """First-order lag of ``u`` (time constant ``tau`` [s]) on the grid ``t``, starting from 0."""
+    dts = np.diff(t, prepend=t[0])
+    a = np.exp(-np.clip(dts, 0.0, None) / max(tau, 1e-9))
+    if dts.size > 1 and np.allclose(dts[1:], dts[1]):
+        from scipy.signal import lfilter
+        return lfilter([1.0 - a[1]], [1.0, -a[1]], np.concatenate([[0.0], u[1:]]))
+    y = np.empty(u.size)
+    acc = 0.0
+    for k in range(u.size):
+        acc = a[k] * acc + (1.0 - a[k]) * u[k]
+        y[k] = acc
+    return y
 
 
 # ------------------------------------------------------------------------------------------ model
@@ -406,6 +422,26 @@ class CellModel(CalibrationModel):
         return {"time_s": t - t[0], "current_a": i, "abs_current_a": np.abs(i), "current_sq_a2": i * i,
                 "discharged_ah": ah, "t_ambient_c": ctx["ta"],
                 "t_surface_meas_c": ctx["df"]["t_surface_c"].to_numpy(float)}
+
+    def model_form_terms(self, ctx, values, pred, meas):
+        """The heat that the fit's own voltage error carries into the temperature (Bernardi): the cell's
+        irreversible heat is ``i (U - V)`` with the measured ``V``; the circuit's heat follows its predicted
+        ``V``, so the model heats by ``-i (V_model - V_measured)`` too much whatever the thermal effects.
+        The term is that heat error through the fitted cell's lumped thermal time constant ``m c_p / (h A)``;
+        an effect on the temperature (reversible heat, cooling change) must explain what it does not.
+        The reversible heat ``i T dU/dT`` is not in ``i (U - V)`` and stays an effect."""
+        if "t_surface_c" not in pred or "voltage_v" not in pred:
+            return {}
+        i = ctx["i"]
+        heat = -i * (np.asarray(pred["voltage_v"]) - meas["voltage_v"])
+        b = self.base
+        r, length = float(b.radius_m), float(b.length_m)
+        mass = b.density_kg_m3 * math.pi * r * r * length
+        area = 2.0 * math.pi * r * length + 2.0 * math.pi * r * r
+        cp = float(values.get("cp_j_kgk", b.cp_j_kgk))
+        h = float(self.known["h_conv_w_m2k"]) * float(values.get("h_conv_factor", b.h_conv_factor))
+        tau = mass * cp / max(h * area, 1e-12)
+        return {"t_surface_c": _lag(ctx["t"], heat, tau)[:, None]}
 
     # -- closing the loop
     def overlay(self, values, out_dir) -> dict:

@@ -174,6 +174,15 @@ class CalibrationModel:
         """Candidate explanatory signals (name -> array) for residual correlation."""
         return {}
 
+    def model_form_terms(self, ctx: dict, values: dict, pred: dict, meas: dict) -> dict:
+        """Model-form terms of one fit: ``{channel: (n, k) array}`` of signals that a structural discrepancy of
+        the model's form (not a missing effect) puts into that channel's residual, given this fit's
+        prediction ``pred`` and the measurements ``meas``.  The selection rule judges every fit on the
+        residual with its least-squares fit by these terms (coefficients from the training part) removed,
+        so that an effect must explain what the model's form cannot; the reported RMSE stays the plain one.
+        Default: none."""
+        return {}
+
     # -- helpers
     def defaults(self) -> dict:
         d = {p.name: p.default for p in self.declared}

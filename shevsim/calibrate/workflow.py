@@ -33,6 +33,13 @@ Steps (:func:`run_workflow`):
    or, whatever the BIC says, when it halves (``HALVING``) some channel's held-out RMSE and (b) holds: the
    more systematic a residual (a missing effect), the more autocorrelated it is and the fewer effective
    samples the corrected BIC counts, so the BIC alone vetoes exactly the effects that matter most.
+   In both cases (d) the gain must also be at least ``MIN_GAIN`` on the channels the effect acts on
+   (``Effect.channels``; for a pair, each effect on its own): a gain that shows only on other channels
+   comes from the refit of the declared parameters (the nominal's compromise between channels coupled
+   through them: an equivalent circuit's heat follows resistances bent to a voltage model-form error),
+   not from the effect.  Every RMSE the rule judges is taken after the model's model-form terms
+   (:meth:`CalibrationModel.model_form_terms`: the cell's heat of its own voltage error) are fitted out
+   of the residual on the training part; the reported RMSE are the plain ones.
    Among passing candidates the lowest held-out score wins, except that a candidate within ``TIE`` = 2 %
    of it with a lower BIC is preferred (parsimony).  The winner is added, the remaining candidates are
    re-tested on top of it; this repeats until none passes ("nothing found" when none passes at first).
@@ -195,6 +202,13 @@ class FitResult:
     worsen: float = float("nan")
     passed: bool = False
     reason: str = ""
+    #: RMSE per channel after the model's model-form terms (CalibrationModel.model_form_terms) are removed
+    #: from the residual (None: the model has none): what the selection rule judges
+    rmse_sel: dict | None = None
+
+    @property
+    def judged(self) -> dict:
+        return self.rmse_sel if self.rmse_sel is not None else self.rmse
 
 
 class Fitter:
@@ -329,7 +343,19 @@ class Fitter:
             ntr[c] = int(rt.size)
         full = dict(self.model.full_values(values), time_shift_s=float(values.get("time_shift_s", 0.0)))
         shown = {p.name: full[p.name] for p in self._params_for(effects)}
-        return FitResult(tuple(effects), shown, pred, rmse, sse, ntr, k, cost, nfev)
+        sel = None
+        terms = self.model.model_form_terms(self.ctx, full, pred, self.meas) or {}
+        if terms:
+            sel = {}
+            for c in self.channels:
+                r = pred[c] - self.meas[c]
+                b = terms.get(c)
+                if b is not None and np.all(np.isfinite(r)) and np.all(np.isfinite(b)):
+                    b = np.asarray(b, float).reshape(r.size, -1)
+                    r = r - b @ np.linalg.lstsq(b[self.train], r[self.train], rcond=None)[0]
+                rt, rh = r[self.train], r[self.hold]
+                sel[c] = {"train": float(np.sqrt(np.mean(rt * rt))), "holdout": float(np.sqrt(np.mean(rh * rh)))}
+        return FitResult(tuple(effects), shown, pred, rmse, sse, ntr, k, cost, nfev, rmse_sel=sel)
 
     def residual(self, fr: FitResult, c: str) -> np.ndarray:
         return fr.pred[c] - self.meas[c]
@@ -397,8 +423,8 @@ def identifiability(fitter: "Fitter", effects, values: dict) -> list[dict]:
     return out
 
 
-def _score(fr: FitResult, ref: dict) -> float:
-    return float(np.sqrt(np.mean([(fr.rmse[c]["holdout"] / max(ref[c], 1e-300)) ** 2 for c in ref])))
+def _score(fr: FitResult, ref: dict, channels=None) -> float:
+    return float(np.sqrt(np.mean([(fr.judged[c]["holdout"] / max(ref[c], 1e-300)) ** 2 for c in (channels or ref)])))
 
 
 def _bic(fr: FitResult, rho: dict) -> float:
@@ -499,7 +525,7 @@ class _Run:
         self.say(f"baseline fitted ({f.nsim} simulations)")
         base.score = 1.0
         self.base = base
-        self.ref = {c: base.rmse[c]["holdout"] for c in f.channels}
+        self.ref = {c: base.judged[c]["holdout"] for c in f.channels}
         quiet = self.model.quiet_mask(f.ctx)
         self.noise = {c: sensor_noise_floor(f.meas[c], f.residual(base, c), quiet, self.sensor_noise.get(c))
                       for c in f.channels}
@@ -513,15 +539,31 @@ class _Run:
         fr.bic = _bic(fr, rho)
         fr.dbic = fr.bic - current.bic
         fr.gain = 1.0 - fr.score / cur_score
-        fr.worsen = max(fr.rmse[c]["holdout"] / max(current.rmse[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
+        fr.worsen = max(fr.judged[c]["holdout"] / max(current.judged[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
+        # the effect must explain the residual of the channels it acts on: a gain that shows only on other
+        # channels comes from the refit of the declared parameters (the nominal's compromise between
+        # channels coupled through them, e.g. the heat of a circuit whose resistances bend to a voltage
+        # model-form error), not from the effect
+        # (for a pair: each effect on its own channels)
+        own_all, weak = set(), []
+        for e in effs:
+            own = [c for c in f.channels if c in f.effects[e].channels]
+            own_all.update(own)
+            if own and len(own) < len(f.channels):
+                g = 1.0 - _score(fr, self.ref, own) / _score(current, self.ref, own)
+                if g < MIN_GAIN:
+                    weak.append(f"{e} on {', '.join(own)} {g:.1%}")
+        own = [c for c in f.channels if c in own_all]
         why = []
         if fr.gain < MIN_GAIN:
             why.append(f"held-out score gain {fr.gain:.1%} < {MIN_GAIN:.0%}")
+        elif weak:
+            why.append(f"held-out gain on the channels the effect acts on < {MIN_GAIN:.0%} ({'; '.join(weak)})")
         if fr.worsen > MAX_WORSEN:
             why.append(f"a channel's held-out RMSE rises {fr.worsen:.1%}")
         if fr.dbic > -MIN_DBIC:
             why.append(f"dBIC {fr.dbic:+.1f} > -{MIN_DBIC:g}")
-        halved = [c for c in f.channels if fr.rmse[c]["holdout"] <= HALVING * current.rmse[c]["holdout"]]
+        halved = [] if weak else [c for c in (own or f.channels) if fr.judged[c]["holdout"] <= HALVING * current.judged[c]["holdout"]]
         fr.passed = not why or (bool(halved) and fr.worsen <= MAX_WORSEN)
         bad = [x for e in effs for x in self.implausible(e, fr.params)]
         if fr.passed and bad:
@@ -620,7 +662,7 @@ class _Run:
                 own = {p.name for p in f.effects[e].params}
                 fr = f.fit(rest, start={k: v for k, v in final.params.items() if k not in own})
                 fr.score = _score(fr, self.ref)
-                worse = max(fr.rmse[c]["holdout"] / max(final.rmse[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
+                worse = max(fr.judged[c]["holdout"] / max(final.judged[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
                 trials.append((fr.score, e, fr, worse))
             score, e, fr, worse = min(trials, key=lambda x: x[0])
             if score <= final.score * (1.0 + DROP_TOL) and worse <= DROP_TOL:
