@@ -141,8 +141,9 @@ def solve(ws, qp, res, sense, x, lam, flags, H, f, A, bu, bl):
         qp[8] = 0
         qp32[18] = 0
         qp32[19] = 0
-        t = np.zeros(1)
-        flag = _c_setup(qp.ctypes.data, w, t.ctypes.data, 0)
+        # the setup time (a double DAQP writes) goes into res's setup_time slot (byte 56), zeroed before the solve:
+        # no allocation here, so this compiles inside a step built without numba's runtime (core.compiled.njit_step)
+        flag = _c_setup(qp.ctypes.data, w, res.ctypes.data + 56, 0)
         if flag < 0:
             _c_alloc_settings(w)
             _c_free_ws(w)

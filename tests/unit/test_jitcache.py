@@ -302,3 +302,29 @@ def test_warmup_command_compiles_ahead_and_marks_the_default_loop(tmp_path, monk
     assert warmup.is_compiled(mpc)
     assert main(["warmup", "no_such_scenario"]) == 2
     jitcache.shipped_status.cache_clear()
+
+
+NRT_PROBE = """
+import numpy as np
+from numba import njit, types
+import shevsim
+from shevsim.supervisor import daqp_nb
+
+def probe(ws, qp, res, sense, x, lam, flags, H, f, A, bu, bl):
+    return daqp_nb.solve(ws, qp, res, sense, x, lam, flags, H, f, A, bu, bl)
+
+i64, f64 = types.int64[::1], types.float64[::1]
+sig = (i64, i64, i64, types.int32[::1], f64, f64, i64, types.float64[:, ::1], f64, types.float64[:, ::1], f64, f64)
+njit(_nrt=False)(probe).compile(sig)       # as a step compiled by core.compiled.njit_step calls it
+print("compiled")
+"""
+
+
+def test_daqp_binding_compiles_fresh_inside_a_step_without_numbas_runtime(tmp_path):
+    """With an empty cache, the DAQP binding compiles as a callee of a step built without numba's reference
+    counting (a callee compiled that way may not allocate; a warm cache had hidden an allocation there, so
+    a new installation's MPC runs failed to compile)."""
+    import subprocess
+    r = subprocess.run([sys.executable, "-c", NRT_PROBE], capture_output=True, text=True, timeout=600,
+                       env={**os.environ, "PYTHONPATH": str(ROOT), "SHEVSIM_CACHE_DIR": str(tmp_path / "fresh")})
+    assert r.returncode == 0 and r.stdout.strip() == "compiled", r.stderr[-3000:]
