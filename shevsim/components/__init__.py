@@ -45,6 +45,12 @@ def _plugins() -> dict:
         return {}
 
 
+def is_registered(type_name: str) -> bool:
+    """True when ``type_name`` is a component type: the package's own registry first, the installed plugins
+    (entry points, ~10 ms to list) only for a name the registry does not have."""
+    return type_name in REGISTRY or type_name in _plugins()
+
+
 def registered_types() -> list[str]:
     """Names of every component type: the package's own and the installed plugins'."""
     return sorted(set(REGISTRY) | set(_plugins()))

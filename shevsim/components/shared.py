@@ -230,12 +230,11 @@ def load_vehicle(name: str, base: Path | None = None) -> VehicleSet:
             raise ScenarioError(f"{path}: [shared] 'vehicle': a vehicle file cannot name another vehicle")
         vals[k] = check_value(k, v, f"{path}: [shared]")
     comps = {}
-    from . import registered_types
-    types = set(registered_types())
+    from . import is_registered
     for k, v in doc.items():
         if k in ("meta", "shared"):
             continue
-        if k not in types or not isinstance(v, dict):
+        if not isinstance(v, dict) or not is_registered(k):
             raise ScenarioError(f"{path}: table [{k}] is not a component type (types: {', '.join(sorted(IDENTITY))})")
         comps[k] = {kk: _abs_file(kk, vv, path.parent) for kk, vv in v.items()}
     vals = {k: _abs_file(k, v, path.parent) for k, v in vals.items()}
