@@ -205,33 +205,11 @@ _C = {n: i for i, n in enumerate(_C_NAMES)}
 AUX_NAMES = ("beta", "d0", "u_lin", "hf", "s_o", "rate_up_dt", "phi_o", "b")
 
 
-@_njit(cache=True)
-def _build(x, qc, qw):  # pragma: no cover - compiled; the same code runs uncompiled in tests
-    """Fill ``H, f, bu, bl`` of the scaled QP; return 0, or -1 for unusable inputs.
-
-    ``x = (soc [%], pd [kW], vo [kW], voc [V], rs [Ohm], pbmax [kW], pbmin [kW], rate_up [kW/s])``: the
-    operating point; ``qc`` = :attr:`MPCProblem.constants` (``c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1,
-    soc_idx``); ``qw`` = :attr:`MPCProblem.work` (``H, f, bu, bl, aux``, written).
-    """
+@_njit(cache=True, inline="always")
+def _soc_linearisation(x, dt, cap):  # pragma: no cover - compiled
+    """SOC model linearisation (5.1, 5.6) at ``u_lin`` inside the BMS limits and below the maximum-power point
+    of the OCV-R source: ``(u_lin, phi_o [%/s], b [%/s per kW], beta [% per kW per step], d0 [% per step])``."""
     soc, pd, vo, voc, rs, pbmax, pbmin, rate_up = x
-    c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1, soc_idx = qc
-    H, f, bu, bl, aux = qw
-    if not (math.isfinite(soc) and math.isfinite(pd) and math.isfinite(vo) and math.isfinite(voc)
-            and math.isfinite(rs) and math.isfinite(pbmax) and math.isfinite(pbmin) and math.isfinite(rate_up)):
-        return -1
-    if voc <= 0.0 or rs <= 0.0 or pbmax < pbmin:
-        return -1
-    dt = c[0]
-    cap = c[1]
-    eta1f = c[2]
-    eta2 = c[3]
-    eta3 = c[4]
-    eta4 = c[5]
-    kap = c[6]
-    nc = Lt1.shape[0]
-    n = nc + 2
-    # --- SOC model linearisation (5.1, 5.6): at u_lin inside the BMS limits and below the
-    # maximum-power point of the OCV-R source
     u_lin = pd - vo
     if u_lin > pbmax:
         u_lin = pbmax
@@ -246,21 +224,38 @@ def _build(x, qc, qw):  # pragma: no cover - compiled; the same code runs uncomp
     b = -100.0 * (1000.0 / sq) / (3600.0 * cap)      # %/s per kW (negative)
     beta = -dt * b                                   # % per kW per step (positive)
     d0 = dt * (phi_o + b * (pd - vo - u_lin))        # SOC change per step at held engine power
-    # --- fuel output (5.3, 5.6d): sqrt(m_f) at vo and its slope
-    m = fp.shape[0]
-    j = 0
+    return u_lin, phi_o, b, beta, d0
+
+
+@_njit(cache=True, inline="always")
+def _fuel_output(fp, fs, fsl, vo):  # pragma: no cover - compiled
+    """Fuel output (5.3, 5.6d): ``(hf, s_o)``, the slope of sqrt(m_f) and its value at ``vo`` on the
+    piecewise-linear curve ``fp -> fs`` (bisection: ``fp[lo] <= vo < fp[hi]``)."""
     lo = 0
-    hi = m - 1
-    while hi - lo > 1:                               # bisection: fp[lo] <= vo < fp[hi]
+    hi = fp.shape[0] - 1
+    while hi - lo > 1:
         mid = (lo + hi) // 2
         if fp[mid] <= vo:
             lo = mid
         else:
             hi = mid
-    j = lo
-    hf = fsl[j]
-    s_o = fs[j] + hf * (vo - fp[j])
-    # --- Hessian and gradient (0.5 z'Hz + f'z), scaled by kappa
+    hf = fsl[lo]
+    return hf, fs[lo] + hf * (vo - fp[lo])
+
+
+@_njit(cache=True, inline="always")
+def _fill_objective(x, lin, fuel, qc, H, f):  # pragma: no cover - compiled
+    """Hessian and gradient of the scaled QP (0.5 z'Hz + f'z, scaled by kappa), written into ``H, f``."""
+    soc, pd, vo = x[0], x[1], x[2]
+    beta, d0 = lin[3], lin[4]
+    hf, s_o = fuel
+    c, MtM, LtL, Mt1, Mtr, Lt1 = qc[0], qc[4], qc[5], qc[6], qc[7], qc[8]
+    eta1f = c[2]
+    eta2 = c[3]
+    eta3 = c[4]
+    eta4 = c[5]
+    kap = c[6]
+    nc = Lt1.shape[0]
     a1 = 2.0 * kap * eta1f * beta * beta
     a2 = 2.0 * kap * (eta2 * hf * hf + eta4)
     for r in range(nc):
@@ -283,8 +278,18 @@ def _build(x, qc, qw):  # pragma: no cover - compiled; the same code runs uncomp
         f[r] = g1 * (e0 * Mt1[r] + d0 * Mtr[r]) + g2 * Lt1[r]
     f[nc] = kap * c[13]
     f[nc + 1] = kap * c[15] * sig
-    # --- simple bounds: moves (5.8d), slacks
-    rate_up_dt = rate_up * dt
+
+
+@_njit(cache=True, inline="always")
+def _fill_bounds(x, lin, qc, bu, bl):  # pragma: no cover - compiled
+    """Bounds of the scaled QP, written into ``bu, bl``: simple bounds on the moves (5.8d) and the slacks, then
+    the rows: engine limits (5.8c), battery limits (5.8b), SOC window (5.8e)."""
+    soc, pd, vo, pbmax, pbmin, rate_up = x[0], x[1], x[2], x[5], x[6], x[7]
+    beta, d0 = lin[3], lin[4]
+    c, soc_idx = qc[0], qc[9]
+    nc = qc[8].shape[0]
+    n = nc + 2
+    rate_up_dt = rate_up * c[0]
     dvmin = c[12]
     for r in range(nc):
         bl[r] = dvmin
@@ -293,7 +298,6 @@ def _build(x, qc, qw):  # pragma: no cover - compiled; the same code runs uncomp
     bu[nc] = 1e30 if c[17] > 0.5 else 0.0
     bl[nc + 1] = 0.0
     bu[nc + 1] = 1e30
-    # --- rows: engine limits (5.8c), battery limits (5.8b), SOC window (5.8e)
     o = n
     for r in range(nc):
         bl[o + r] = c[10] - vo
@@ -314,14 +318,37 @@ def _build(x, qc, qw):  # pragma: no cover - compiled; the same code runs uncomp
         bu[o + r] = 1e30
         bl[o + ns + r] = -1e30
         bu[o + ns + r] = (c[9] - soc - i * d0) / beta
-    aux[0] = beta
-    aux[1] = d0
-    aux[2] = u_lin
-    aux[3] = hf
-    aux[4] = s_o
+    return rate_up_dt
+
+
+@_njit(cache=True)
+def _build(x, qc, qw):  # pragma: no cover - compiled; the same code runs uncompiled in tests
+    """Fill ``H, f, bu, bl`` of the scaled QP; return 0, or -1 for unusable inputs.
+
+    ``x = (soc [%], pd [kW], vo [kW], voc [V], rs [Ohm], pbmax [kW], pbmin [kW], rate_up [kW/s])``: the
+    operating point; ``qc`` = :attr:`MPCProblem.constants` (``c, fp, fs, fsl, MtM, LtL, Mt1, Mtr, Lt1,
+    soc_idx``); ``qw`` = :attr:`MPCProblem.work` (``H, f, bu, bl, aux``, written).
+    """
+    soc, pd, vo, voc, rs, pbmax, pbmin, rate_up = x
+    H, f, bu, bl, aux = qw
+    if not (math.isfinite(soc) and math.isfinite(pd) and math.isfinite(vo) and math.isfinite(voc)
+            and math.isfinite(rs) and math.isfinite(pbmax) and math.isfinite(pbmin) and math.isfinite(rate_up)):
+        return -1
+    if voc <= 0.0 or rs <= 0.0 or pbmax < pbmin:
+        return -1
+    c = qc[0]
+    lin = _soc_linearisation(x, c[0], c[1])
+    fuel = _fuel_output(qc[1], qc[2], qc[3], vo)
+    _fill_objective(x, lin, fuel, qc, H, f)
+    rate_up_dt = _fill_bounds(x, lin, qc, bu, bl)
+    aux[0] = lin[3]
+    aux[1] = lin[4]
+    aux[2] = lin[0]
+    aux[3] = fuel[0]
+    aux[4] = fuel[1]
     aux[5] = rate_up_dt
-    aux[6] = phi_o
-    aux[7] = b
+    aux[6] = lin[1]
+    aux[7] = lin[2]
     return 0
 
 
