@@ -57,20 +57,9 @@ def state_dir() -> Path:
     """Where the compiled-layout markers and warm-up locks live (created): beside the compiled loops
     (:mod:`shevsim.fast.loop` keeps them in ``$SHEVSIM_CACHE_DIR``, ``$XDG_CACHE_HOME/shevsim`` or
     ``~/.cache/shevsim``), so removing that folder forgets both; ``SHEVSIM_WARMUP_DIR`` overrides."""
+    from .core.paths import writable_cache_subdir
     env = os.environ.get("SHEVSIM_WARMUP_DIR")
-    base = os.environ.get("SHEVSIM_CACHE_DIR") or os.environ.get("XDG_CACHE_HOME")
-    cands = [Path(env)] if env else []
-    cands.append((Path(base) / "shevsim" if base else Path.home() / ".cache" / "shevsim") / "warmup")
-    cands.append(Path(tempfile.gettempdir()) / f"shevsim-{os.getuid() if hasattr(os, 'getuid') else 'user'}"
-                 / "warmup")
-    for d in cands:
-        try:
-            d.mkdir(parents=True, exist_ok=True)
-            if os.access(d, os.W_OK):
-                return d
-        except OSError:
-            continue
-    return Path(tempfile.gettempdir())
+    return writable_cache_subdir("warmup", Path(env) if env else None) or Path(tempfile.gettempdir())
 
 
 def _sources_stamp() -> str:

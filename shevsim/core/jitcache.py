@@ -35,7 +35,6 @@ import pickle
 import re
 import shutil
 import sys
-import tempfile
 import uuid
 from pathlib import Path
 
@@ -95,18 +94,9 @@ def user_root() -> Path | None:
 
 @functools.lru_cache(maxsize=8)
 def _user_root(env: tuple) -> Path | None:
-    from .paths import user_cache_dir
-    cands = [Path(os.environ["NUMBA_CACHE_DIR"]) / "shevsim"] if os.environ.get("NUMBA_CACHE_DIR") else []
-    cands += [user_cache_dir() / "numba",
-              Path(tempfile.gettempdir()) / f"shevsim-{os.getuid() if hasattr(os, 'getuid') else 'user'}" / "numba"]
-    for d in cands:
-        try:
-            d.mkdir(parents=True, exist_ok=True)
-            if os.access(d, os.W_OK):
-                return d
-        except OSError:
-            continue
-    return None
+    from .paths import writable_cache_subdir
+    first = Path(os.environ["NUMBA_CACHE_DIR"]) / "shevsim" if os.environ.get("NUMBA_CACHE_DIR") else None
+    return writable_cache_subdir("numba", first)
 
 
 def _subfolder(rel: str, py_file) -> str:

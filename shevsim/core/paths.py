@@ -73,3 +73,23 @@ def user_cache_dir() -> Path:
     ``$XDG_CACHE_HOME``, else ``~/.cache/shevsim`` (where the compiled loops live too)."""
     base = os.environ.get("SHEVSIM_CACHE_DIR") or os.environ.get("XDG_CACHE_HOME")
     return Path(base) / "shevsim" if base else Path.home() / ".cache" / "shevsim"
+
+
+def writable_cache_subdir(name: str, first: Path | None = None) -> Path | None:
+    """The first folder of ``first`` (a caller's override), ``user_cache_dir() / name`` and
+    ``<tmp>/shevsim-<uid>/name`` that can be created and written to (a file is written and removed to
+    check), or None when none can."""
+    import tempfile
+    uid = os.getuid() if hasattr(os, "getuid") else "user"
+    cands = ([first] if first is not None else []) + [user_cache_dir() / name,
+                                                      Path(tempfile.gettempdir()) / f"shevsim-{uid}" / name]
+    for d in cands:
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+            probe = d / f".probe-{os.getpid()}"
+            probe.write_text("")
+            probe.unlink()
+            return d
+        except OSError:
+            continue
+    return None

@@ -34,7 +34,6 @@ import importlib.util
 import inspect
 import os
 import sys
-import tempfile
 from pathlib import Path
 
 #: status of a row with a non-finite recorded value (the steps' own codes are below 1000)
@@ -154,19 +153,11 @@ def _inlined_sources(functions) -> bytes:
 
 
 def _cache_dir() -> Path:
-    base = os.environ.get("SHEVSIM_CACHE_DIR") or os.environ.get("XDG_CACHE_HOME")
-    cands = [Path(base) / "shevsim" if base else Path.home() / ".cache" / "shevsim",
-             Path(tempfile.gettempdir()) / f"shevsim-{os.getuid() if hasattr(os, 'getuid') else 'user'}"]
-    for d in cands:
-        try:
-            (d / "fastloop").mkdir(parents=True, exist_ok=True)
-            probe = d / "fastloop" / ".probe"
-            probe.write_text("")
-            probe.unlink()
-            return d / "fastloop"
-        except OSError:
-            continue
-    raise OSError("no writable cache folder for the compiled loop (set SHEVSIM_CACHE_DIR)")
+    from shevsim.core.paths import writable_cache_subdir
+    d = writable_cache_subdir("fastloop")
+    if d is None:
+        raise OSError("no writable cache folder for the compiled loop (set SHEVSIM_CACHE_DIR)")
+    return d
 
 
 _LOOPS: dict = {}
