@@ -423,6 +423,9 @@ class CellModel(CalibrationModel):
                 "discharged_ah": ah, "t_ambient_c": ctx["ta"],
                 "t_surface_meas_c": ctx["df"]["t_surface_c"].to_numpy(float)}
 
+    #: the temperature's model-form term is computed from the voltage residual
+    model_form_sources = {"t_surface_c": ("voltage_v",)}
+
     def model_form_terms(self, ctx, values, pred, meas):
         """The heat that the fit's own voltage error carries into the temperature (Bernardi): the cell's
         irreversible heat is ``i (U - V)`` with the measured ``V``; the circuit's heat follows its predicted

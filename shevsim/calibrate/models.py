@@ -174,13 +174,17 @@ class CalibrationModel:
         """Candidate explanatory signals (name -> array) for residual correlation."""
         return {}
 
+    #: channel -> the channels its model-form terms are computed from (an effect acting on one of those is
+    #: judged on the plain residuals: fixing the source fixes the term)
+    model_form_sources: dict = {}
+
     def model_form_terms(self, ctx: dict, values: dict, pred: dict, meas: dict) -> dict:
         """Model-form terms of one fit: ``{channel: (n, k) array}`` of signals that a structural discrepancy of
         the model's form (not a missing effect) puts into that channel's residual, given this fit's
-        prediction ``pred`` and the measurements ``meas``.  The selection rule judges every fit on the
-        residual with its least-squares fit by these terms (coefficients from the training part) removed,
-        so that an effect must explain what the model's form cannot; the reported RMSE stays the plain one.
-        Default: none."""
+        prediction ``pred`` and the measurements ``meas``.  The selection rule judges an effect that does not
+        act on the ``model_form_sources`` of these terms on the residual with its least-squares fit by them
+        (coefficients from the training part) removed, so that it must explain what the model's form cannot;
+        the reported RMSE stays the plain one.  Default: none."""
         return {}
 
     # -- helpers

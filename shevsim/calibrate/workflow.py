@@ -37,9 +37,12 @@ Steps (:func:`run_workflow`):
    (``Effect.channels``; for a pair, each effect on its own): a gain that shows only on other channels
    comes from the refit of the declared parameters (the nominal's compromise between channels coupled
    through them: an equivalent circuit's heat follows resistances bent to a voltage model-form error),
-   not from the effect.  Every RMSE the rule judges is taken after the model's model-form terms
-   (:meth:`CalibrationModel.model_form_terms`: the cell's heat of its own voltage error) are fitted out
-   of the residual on the training part; the reported RMSE are the plain ones.
+   not from the effect.  An effect that cannot act on the channels a model's model-form terms are computed
+   from (:meth:`CalibrationModel.model_form_terms`, ``model_form_sources``: the cell's temperature term is
+   the heat of its own voltage error) is judged after those terms are fitted out of the residual on the
+   training part: a thermal-only effect must explain what the heat of the circuit's voltage error does not
+   (an effect on the voltage is judged on the plain residuals: fixing the voltage fixes its heat).  The
+   ranking score and the reported RMSE are the plain ones.
    Among passing candidates the lowest held-out score wins, except that a candidate within ``TIE`` = 2 %
    of it with a lower BIC is preferred (parsimony).  The winner is added, the remaining candidates are
    re-tested on top of it; this repeats until none passes ("nothing found" when none passes at first).
@@ -423,8 +426,9 @@ def identifiability(fitter: "Fitter", effects, values: dict) -> list[dict]:
     return out
 
 
-def _score(fr: FitResult, ref: dict, channels=None) -> float:
-    return float(np.sqrt(np.mean([(fr.judged[c]["holdout"] / max(ref[c], 1e-300)) ** 2 for c in (channels or ref)])))
+def _score(fr: FitResult, ref: dict, channels=None, judged: bool = False) -> float:
+    rm = fr.judged if judged else fr.rmse
+    return float(np.sqrt(np.mean([(rm[c]["holdout"] / max(ref[c], 1e-300)) ** 2 for c in (channels or ref)])))
 
 
 def _bic(fr: FitResult, rho: dict) -> float:
@@ -525,7 +529,8 @@ class _Run:
         self.say(f"baseline fitted ({f.nsim} simulations)")
         base.score = 1.0
         self.base = base
-        self.ref = {c: base.judged[c]["holdout"] for c in f.channels}
+        self.ref = {c: base.rmse[c]["holdout"] for c in f.channels}
+        self.ref_sel = {c: base.judged[c]["holdout"] for c in f.channels}
         quiet = self.model.quiet_mask(f.ctx)
         self.noise = {c: sensor_noise_floor(f.meas[c], f.residual(base, c), quiet, self.sensor_noise.get(c))
                       for c in f.channels}
@@ -539,7 +544,20 @@ class _Run:
         fr.bic = _bic(fr, rho)
         fr.dbic = fr.bic - current.bic
         fr.gain = 1.0 - fr.score / cur_score
-        fr.worsen = max(fr.judged[c]["holdout"] / max(current.judged[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
+        # an effect that cannot act on the channels the model-form terms come from (the cell: the voltage, whose
+        # error's heat is the temperature's model-form term) is judged after those terms are fitted out: the
+        # heat of the circuit's voltage error is nominal model form that a thermal-only effect must not take
+        # for itself; an effect on the voltage is judged on the plain residuals (fixing the voltage fixes its
+        # heat too)
+        src = set().union(*getattr(self.model, "model_form_sources", {}).values()) if getattr(
+            self.model, "model_form_sources", None) else set()
+        sel = bool(src) and fr.rmse_sel is not None and any(not any(c in f.effects[e].channels for c in src)
+                                                            for e in effs)   # (a pair: if one of them is such)
+        ref = self.ref_sel if sel else self.ref
+        rm, cm = (fr.judged, current.judged) if sel else (fr.rmse, current.rmse)
+        if sel:
+            fr.gain = 1.0 - _score(fr, ref, judged=True) / _score(current, ref, judged=True)
+        fr.worsen = max(rm[c]["holdout"] / max(cm[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
         # the effect must explain the residual of the channels it acts on: a gain that shows only on other
         # channels comes from the refit of the declared parameters (the nominal's compromise between
         # channels coupled through them, e.g. the heat of a circuit whose resistances bend to a voltage
@@ -550,7 +568,9 @@ class _Run:
             own = [c for c in f.channels if c in f.effects[e].channels]
             own_all.update(own)
             if own and len(own) < len(f.channels):
-                g = 1.0 - _score(fr, self.ref, own) / _score(current, self.ref, own)
+                se = bool(src) and fr.rmse_sel is not None and not any(c in f.effects[e].channels for c in src)
+                re_ = self.ref_sel if se else self.ref
+                g = 1.0 - _score(fr, re_, own, se) / _score(current, re_, own, se)
                 if g < MIN_GAIN:
                     weak.append(f"{e} on {', '.join(own)} {g:.1%}")
         own = [c for c in f.channels if c in own_all]
@@ -563,7 +583,7 @@ class _Run:
             why.append(f"a channel's held-out RMSE rises {fr.worsen:.1%}")
         if fr.dbic > -MIN_DBIC:
             why.append(f"dBIC {fr.dbic:+.1f} > -{MIN_DBIC:g}")
-        halved = [] if weak else [c for c in (own or f.channels) if fr.judged[c]["holdout"] <= HALVING * current.judged[c]["holdout"]]
+        halved = [] if weak else [c for c in (own or f.channels) if rm[c]["holdout"] <= HALVING * cm[c]["holdout"]]
         fr.passed = not why or (bool(halved) and fr.worsen <= MAX_WORSEN)
         bad = [x for e in effs for x in self.implausible(e, fr.params)]
         if fr.passed and bad:
@@ -662,7 +682,7 @@ class _Run:
                 own = {p.name for p in f.effects[e].params}
                 fr = f.fit(rest, start={k: v for k, v in final.params.items() if k not in own})
                 fr.score = _score(fr, self.ref)
-                worse = max(fr.judged[c]["holdout"] / max(final.judged[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
+                worse = max(fr.rmse[c]["holdout"] / max(final.rmse[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
                 trials.append((fr.score, e, fr, worse))
             score, e, fr, worse = min(trials, key=lambda x: x[0])
             if score <= final.score * (1.0 + DROP_TOL) and worse <= DROP_TOL:
