@@ -45,7 +45,6 @@ LOOP_BUILD_S = 30.0
 #: a warm-up lock older than this is stale (its process died)
 LOCK_STALE_S = 900.0
 _MARKERS = "compiled_layouts.json"
-_stamp_cache: dict = {}
 
 
 def background_enabled() -> bool:
@@ -63,27 +62,9 @@ def state_dir() -> Path:
 
 
 def _sources_stamp() -> str:
-    """Digest of the package's Python sources (path and content; the bundled data left out), the Python and
-    numba versions: any change makes every marker stale, as numba's cache is (the loop inlines the component
-    kernels).  Content, not mtimes: ``pip install`` does not keep them, and the precompiled cache a wheel ships
-    (:mod:`shevsim.core.jitcache`) is matched by this stamp."""
-    root = Path(__file__).resolve().parent
-    if root in _stamp_cache:
-        return _stamp_cache[root]
-    from .core.jitcache import file_stamp
-    h = hashlib.sha256()
-    import numba
-    h.update(f"{sys.version_info[:2]} numba {numba.__version__}".encode())
-    for p in sorted(root.rglob("*.py")):
-        rel = p.relative_to(root)
-        if rel.parts[0] in ("_data", "_jitcache"):
-            continue
-        try:
-            h.update(f"{rel.as_posix()}:{file_stamp(p)}\n".encode())
-        except OSError:
-            continue
-    _stamp_cache[root] = h.hexdigest()[:16]
-    return _stamp_cache[root]
+    """:func:`shevsim.core.jitcache.sources_stamp` (the markers are matched by it)."""
+    from .core.jitcache import sources_stamp
+    return sources_stamp()
 
 
 def layout_of(scenario) -> str:
@@ -231,8 +212,7 @@ def precompile(scenarios=None, loops=PRECOMPILE_LOOPS, stream=None, mark: bool =
     scenario (and :class:`CompileNotice`'s lines) to ``stream``; returns ``{"scenarios": [...], "layouts": [...],
     "failed": {name: reason}, "wall_s": ...}``."""
     from .core.paths import bundled_scenarios
-    from .core.scenario import load_scenario
-    from .run import simulate
+    from .core.scenario import build_master, load_scenario
     stream = stream if stream is not None else sys.stderr
     t0 = time.perf_counter()
     names = list(scenarios) if scenarios is not None else bundled_scenarios()
@@ -247,7 +227,11 @@ def precompile(scenarios=None, loops=PRECOMPILE_LOOPS, stream=None, mark: bool =
                 sc.set("scenario.stop_s", float(sc.t0_s) + float(sc.settings.step_s))
                 stream.write(f"precompiling the component steps of {name} ...\n")
                 stream.flush()
-                simulate(sc, engine="python")
+                master = build_master(sc)               # the Python master, one step: what simulate(
+                try:                                    # engine="python") does, without metrics or files
+                    master.run(float(sc.t0_s) + float(sc.settings.step_s), t0=sc.t0_s)
+                finally:
+                    master.terminate()
                 done.append(name)
             except Exception as exc:  # noqa: BLE001 - one scenario that cannot run does not stop the others
                 failed[name] = f"{type(exc).__name__}: {exc}"

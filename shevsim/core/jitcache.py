@@ -340,7 +340,32 @@ def shipped_status() -> str:
     if m.get("cpu") != here:
         return (f"the precompiled code was built for another CPU ({m.get('cpu', ['?', '?'])[1]}; this one is "
                 f"{here[1]})")
-    from ..warmup import _sources_stamp
-    if m.get("sources") != _sources_stamp():
+    if m.get("sources") != sources_stamp():
         return "the sources differ from those the precompiled code was built from"
     return ""
+
+
+_stamp_cache: dict = {}
+
+
+def sources_stamp() -> str:
+    """Digest of the package's Python sources (path and content; the bundled data left out), the Python and
+    numba versions: any change makes every compiled-layout marker (:mod:`shevsim.warmup`) stale, as numba's
+    cache is (the loop inlines the component kernels).  Content, not mtimes: ``pip install`` does not keep them,
+    and the precompiled cache a wheel ships is matched by this stamp."""
+    root = Path(__file__).resolve().parent.parent
+    if root in _stamp_cache:
+        return _stamp_cache[root]
+    import numba
+    h = hashlib.sha256()
+    h.update(f"{sys.version_info[:2]} numba {numba.__version__}".encode())
+    for p in sorted(root.rglob("*.py")):
+        rel = p.relative_to(root)
+        if rel.parts[0] in ("_data", "_jitcache"):
+            continue
+        try:
+            h.update(f"{rel.as_posix()}:{file_stamp(p)}\n".encode())
+        except OSError:
+            continue
+    _stamp_cache[root] = h.hexdigest()[:16]
+    return _stamp_cache[root]

@@ -242,14 +242,14 @@ def test_the_compile_notice_says_why_the_shipped_code_does_not_serve(manifest):
 
 def test_the_markers_stamp_follows_content(monkeypatch):
     """The markers' stamp is the sources' content: the same for a copy with new mtimes (pip), new on an edit."""
-    monkeypatch.setattr(warmup, "_stamp_cache", {})
-    a = warmup._sources_stamp()
+    monkeypatch.setattr(jitcache, "_stamp_cache", {})
+    a = jitcache.sources_stamp()
     p = jitcache.PKG_ROOT / "version.py"
     st = p.stat()
     try:
         os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
-        monkeypatch.setattr(warmup, "_stamp_cache", {})
-        assert warmup._sources_stamp() == a
+        monkeypatch.setattr(jitcache, "_stamp_cache", {})
+        assert jitcache.sources_stamp() == a
     finally:
         os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns))
 
