@@ -56,7 +56,7 @@ _ECM_COLS = ("soc_frac", "t_c", "rs_ohm", "r1_ohm", "c1_f", "r2_ohm", "c2_f")
 
 
 @memo_file
-def _read_csv(path: Path, cols: tuple[str, ...]) -> tuple[tuple[float, ...], ...]:
+def read_csv_table(path: Path, cols: tuple[str, ...]) -> tuple[tuple[float, ...], ...]:
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: table file not found")
@@ -176,17 +176,17 @@ class CellTables:
                    Path(discharge_file or DATA_DIR / "a123_26650_ecm_discharge.csv"),
                    Path(charge_file or DATA_DIR / "a123_26650_ecm_charge.csv"))
         self.paths = p
-        rows = _read_csv(p.ocv, ("soc_frac", "ocv_v"))
+        rows = read_csv_table(p.ocv, ("soc_frac", "ocv_v"))
         xs = [r[0] for r in rows]
         _check_increasing(xs, p.ocv, "soc_frac")
         _check_increasing([r[1] for r in rows], p.ocv, "ocv_v")
         self._ocv = _Table1(xs, [r[1] for r in rows])
-        rows = _read_csv(p.entropy, ("soc_frac", "delta_s_j_molk"))
+        rows = read_csv_table(p.entropy, ("soc_frac", "delta_s_j_molk"))
         xs = [r[0] for r in rows]
         _check_increasing(xs, p.entropy, "soc_frac")
         self._ds = _Table1(xs, [r[1] for r in rows])
-        self._dch = _Grid2(_read_csv(p.discharge, _ECM_COLS), p.discharge)
-        self._chg = _Grid2(_read_csv(p.charge, _ECM_COLS), p.charge)
+        self._dch = _Grid2(read_csv_table(p.discharge, _ECM_COLS), p.discharge)
+        self._chg = _Grid2(read_csv_table(p.charge, _ECM_COLS), p.charge)
         self.scales = tuple(float(k) for k in scales)
         if self.scales != (1.0,) * 5:         # a calibrated cell: factors on R_s, R1, C1, R2, C2
             if len(self.scales) != 5 or not all(k > 0.0 and math.isfinite(k) for k in self.scales):

@@ -124,9 +124,9 @@ class OcvTable:
     """
 
     def __init__(self, path: str | Path):
-        from shevsim.battery.cell import _read_csv
+        from shevsim.battery.cell import read_csv_table
         from shevsim.core.errors import DataError
-        rows = _read_csv(Path(path), ("soc_frac", "ocv_v"))
+        rows = read_csv_table(Path(path), ("soc_frac", "ocv_v"))
         soc = np.array([r[0] for r in rows], dtype=float)
         ocv = np.array([r[1] for r in rows], dtype=float)
         if soc.size < 2 or np.any(np.diff(soc) <= 0.0):

@@ -419,7 +419,7 @@ class Scenario:
     def shared_values(self) -> dict[str, Any]:
         """The shared quantities in effect (the vehicle's, then the scenario's and every change, lifted
         component values included), ``{}`` when the scenario declares none."""
-        r = shared_quantities().resolve(self, _file_params)
+        r = shared_quantities().resolve(self, file_params)
         return {} if r is None else {k: v for k, (v, _) in r.values.items()}
 
     def copy(self) -> "Scenario":
@@ -1023,7 +1023,7 @@ def component_seed(scenario_seed: int, name: str) -> int:
     return (scenario_seed * 1_000_003 + zlib.crc32(name.encode())) % (2**31 - 1)
 
 
-def _file_params(spec: ComponentSpec) -> dict:
+def file_params(spec: ComponentSpec) -> dict:
     """The ``[params]`` a component's parameter file states (``*_file`` values absolute), ``{}`` without."""
     if spec.params_table is not None:        # captured (a study's bundle): paths already absolute
         return dict(spec.params_table)
@@ -1043,7 +1043,7 @@ def shared_params(scenario: Scenario) -> tuple[dict[str, dict[str, Any]], dict[s
     each value came from; checks that no component-level value contradicts them
     (`shevsim.components.shared`)."""
     try:
-        r = shared_quantities().resolve(scenario, _file_params)
+        r = shared_quantities().resolve(scenario, file_params)
     except ScenarioError as exc:
         raise ScenarioError(f"{scenario.path or '<scenario>'}: [shared]: {exc}") from None
     return ({}, {}) if r is None else (r.params, r.sources)
@@ -1053,7 +1053,7 @@ def shared_metrics(scenario: Scenario) -> dict[str, Any]:
     """Metric options the shared quantities set (``fuel_density_kg_per_l``); a ``[metrics]`` value that
     contradicts one is an error naming both."""
     sq = shared_quantities()
-    r = sq.resolve(scenario, _file_params)
+    r = sq.resolve(scenario, file_params)
     if r is None:
         return {}
     out = {}

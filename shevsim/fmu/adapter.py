@@ -1471,8 +1471,8 @@ def component_from_spec(spec, scenario, where: str) -> FMUComponent:
     from ..core.scenario import component_seed
     from ..core.paths import DATA_ROOT
     fmu_path = Path(spec.fmu)
-    if not fmu_path.is_file() and spec.replaces and _inside(fmu_path, DATA_ROOT):
-        fmu_path = _bundled_export(spec, where)      # a bundled scenario's exported native component
+    if not fmu_path.is_file() and spec.replaces and is_inside(fmu_path, DATA_ROOT):
+        fmu_path = bundled_export(spec, where)      # a bundled scenario's exported native component
     if not fmu_path.is_file():
         kind = spec.replaces or "TYPE"
         raise ScenarioError(f"{where}: field 'fmu': file '{spec.fmu}' not found (an exported native component "
@@ -1492,7 +1492,7 @@ def component_from_spec(spec, scenario, where: str) -> FMUComponent:
         raise ScenarioError(f"{where}: {exc}") from exc
 
 
-def _inside(p: Path, root: Path) -> bool:
+def is_inside(p: Path, root: Path) -> bool:
     try:
         Path(p).resolve().relative_to(Path(root).resolve())
         return True
@@ -1500,7 +1500,7 @@ def _inside(p: Path, root: Path) -> bool:
         return False
 
 
-def _bundled_export(spec: ComponentSpec, where: str) -> Path:
+def bundled_export(spec: ComponentSpec, where: str) -> Path:
     """The FMU a bundled scenario names but the package does not ship (``fmus/battery.fmu``, ``replaces =
     "battery"``): exported once from the native component with its bundled default parameters into
     :func:`user_cache_dir` (never into the installed package) and reused while the sources are unchanged."""

@@ -113,13 +113,13 @@ def _tokenize_table(d: dict, where: str, blobs: dict, base: Path | None = None, 
 def _fmu_file(spec, where: str) -> Path:
     """The FMU file of a component: a bundled scenario's FMU that the package does not ship (e.g.
     ``fmus/battery.fmu`` of ``hd_udds_fmu_battery``) is built first, through the same export as ``shevsim run``
-    (:func:`shevsim.fmu.adapter._bundled_export`, into the user cache), so that its bytes can be captured."""
+    (:func:`shevsim.fmu.adapter.bundled_export`, into the user cache), so that its bytes can be captured."""
     p = Path(spec.fmu)
     if p.is_file() or not spec.replaces:
         return p
     from ..core.paths import DATA_ROOT
-    from ..fmu.adapter import _bundled_export, _inside
-    return _bundled_export(spec, where) if _inside(p, DATA_ROOT) else p
+    from ..fmu.adapter import bundled_export, is_inside
+    return bundled_export(spec, where) if is_inside(p, DATA_ROOT) else p
 
 
 def tokenize_scenario(sc, blobs: dict, seen: dict | None = None) -> None:
@@ -149,9 +149,9 @@ def _capture_shared(sc, blobs: dict, seen: dict | None) -> None:
     if not sc.shared and not sc.shared_base:
         return
     from ..core.registry import shared_quantities
-    from ..core.scenario import _file_params
+    from ..core.scenario import file_params
     if not sc.shared_base or "vehicle" in sc.shared:
-        r = shared_quantities().resolve(sc, _file_params)
+        r = shared_quantities().resolve(sc, file_params)
         veh = r.vehicle
         sc.shared_base = {q: v for q, (v, _) in r.values.items() if q not in r.explicit and q not in r.lifted}
         declared = {q: r.values[q][0] for q in r.explicit if q in r.values}
