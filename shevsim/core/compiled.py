@@ -56,7 +56,10 @@ def njit_step(fn=None, **options):
     caller: the component or the fast runner), so the counts are pure overhead; ``_nrt=False`` (numba's
     option to compile without its runtime) leaves them out.  numba refuses to compile a function so marked
     that allocates (``np.empty``, a copying slice assignment, an exception with a run-time message), so the
-    contract is checked when the step compiles; such work belongs in a helper compiled with plain ``njit``.
+    contract is checked when the step compiles.  numba compiles the functions a step calls without the runtime
+    too, so a helper compiled with plain ``njit`` cannot allocate either: scratch arrays belong in the
+    component's ``data`` tuple, allocated once in ``initialize`` (numba's message then reads "No implementation
+    of function ... empty" or "Only accept returning of array passed into the function as argument").
     """
     from numba import njit
     opts = {"cache": True, "_nrt": False, **options}

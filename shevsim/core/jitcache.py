@@ -64,6 +64,77 @@ def _hash(path: str, *stat_key) -> str:
         return "sha256:" + hashlib.sha256(f.read()).hexdigest()
 
 
+def closure_stamp(py_file) -> str:
+    """The source stamp of a compiled function's file: the content of that file AND of every shevsim module it
+    imports, transitively (read from the ``import`` statements, function-level ones included).  numba copies
+    the machine code of the functions a function calls into its cache entry, so an edit of a callee's file
+    (``powertrain/motor.py`` under ``components/motor.py``'s step) must make the caller's entry stale: numba's
+    own stamp, and the file's alone, would keep the old physics.  Memoised per process."""
+    files = _import_closure(os.path.abspath(py_file))
+    h = hashlib.sha256()
+    for f in files:                           # named inside the package: the same in a build tree and installed
+        try:
+            name = Path(f).resolve().relative_to(PKG_ROOT).as_posix()
+        except (ValueError, OSError):
+            name = os.path.basename(f)
+        try:
+            h.update(f"{name}:{file_stamp(f)}\n".encode())
+        except OSError:
+            h.update(f"{name}:missing\n".encode())
+    return "closure:" + h.hexdigest()
+
+
+def _import_closure(py_file: str) -> tuple[str, ...]:
+    seen: set = set()
+    todo = [py_file]
+    while todo:
+        f = todo.pop()
+        if f in seen:
+            continue
+        seen.add(f)
+        try:
+            st = os.stat(f)
+            todo.extend(d for d in _imported_files(f, st.st_size, st.st_mtime_ns, st.st_ctime_ns) if d not in seen)
+        except OSError:
+            continue
+    return tuple(sorted(seen))
+
+
+@functools.lru_cache(maxsize=None)
+def _imported_files(py_file: str, *stat_key) -> tuple[str, ...]:
+    """The files of the shevsim modules ``py_file`` imports (``import shevsim.x``, ``from .x import y``,
+    ``from . import x``): the package's own, resolved against :data:`PKG_ROOT`; other packages left out."""
+    import ast
+    try:
+        tree = ast.parse(Path(py_file).read_bytes())
+    except (OSError, SyntaxError, ValueError):
+        return ()
+    here = Path(py_file).resolve().parent
+    try:
+        pkg = ("shevsim",) + here.relative_to(PKG_ROOT).parts
+    except ValueError:
+        pkg = ("shevsim",)                    # a generated fast loop: absolute imports only
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            mods = [a.name.split(".") for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = list(pkg[:len(pkg) - node.level + 1]) if node.level else []
+            mod = base + (node.module.split(".") if node.module else [])
+            mods = [mod] + [mod + [a.name] for a in node.names]
+        else:
+            continue
+        for m in mods:
+            if not m or m[0] != "shevsim":
+                continue
+            target = PKG_ROOT.joinpath(*m[1:])
+            for cand in (target.with_suffix(".py"), target / "__init__.py"):
+                if cand.is_file():
+                    out.append(os.fspath(cand))
+                    break
+    return tuple(sorted(set(out)))
+
+
 def relative_folder(py_file) -> str | None:
     """The cache sub-folder of a source file: its folder inside the package (``"components"``, ``"."``), or
     :data:`LOOP_FOLDER` for a generated fast loop; None for a file that is not shevsim's."""
@@ -133,7 +204,7 @@ class _LocatorMixin:
         return self._cache_path
 
     def get_source_stamp(self):
-        return file_stamp(self._py_file)
+        return closure_stamp(self._py_file)
 
     def get_disambiguator(self):
         return str(self._lineno)
@@ -263,7 +334,7 @@ def _seed(shipped: Path, user: Path, py_file) -> int:
     if not shipped.is_dir():
         return 0
     modname = os.path.splitext(os.path.basename(py_file))[0]
-    stamp = file_stamp(py_file)
+    stamp = closure_stamp(py_file)
     import numba
     copied = 0
     for idx in sorted(shipped.glob(f"{glob_escape(modname)}.*.nbi")):

@@ -111,6 +111,44 @@ def test_import_shevsim_stays_light_and_the_locator_comes_with_numba():
         assert r.stdout.split() == [str(not pre), "ShevsimLocator"], (pre, r.stdout)
 
 
+def test_a_callees_edit_makes_the_callers_cache_stale(tmp_path, monkeypatch):
+    """numba copies a callee's machine code into its caller's cache entry: the caller's stamp covers every
+    shevsim module its file imports, transitively (an upgrade or edit of powertrain/motor.py must not leave the
+    component step in components/motor.py on the old physics)."""
+    pkg = tmp_path / "shevsim"
+    (pkg / "powertrain").mkdir(parents=True)
+    (pkg / "components").mkdir()
+    for d in (pkg, pkg / "powertrain", pkg / "components"):
+        (d / "__init__.py").write_text("")
+    (pkg / "powertrain" / "motor.py").write_text("from ..core import lookup\ndef g(x):\n    return x\n")
+    (pkg / "core").mkdir()
+    (pkg / "core" / "__init__.py").write_text("")
+    (pkg / "core" / "lookup.py").write_text("K = 1\n")
+    (pkg / "unrelated.py").write_text("Z = 0\n")
+    caller = pkg / "components" / "motor.py"
+    caller.write_text("import numpy as np\nfrom shevsim.powertrain import motor as _m\n"
+                      "def f(x):\n    from ..unrelated import Z\n    return _m.g(x) + Z\n")
+    monkeypatch.setattr(jitcache, "PKG_ROOT", pkg)
+    names = {Path(f).relative_to(pkg).as_posix() for f in jitcache._import_closure(str(caller))}
+    assert names == {"components/motor.py", "powertrain/motor.py", "core/lookup.py", "unrelated.py",
+                     "powertrain/__init__.py", "core/__init__.py"}, names
+    s0 = jitcache.closure_stamp(caller)
+    callee = pkg / "powertrain" / "motor.py"
+    st = callee.stat()
+    os.utime(callee, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))          # new mtime, same content (pip)
+    assert jitcache.closure_stamp(caller) == s0
+    (pkg / "core" / "lookup.py").write_text("K = 2\n")                      # two imports down
+    s1 = jitcache.closure_stamp(caller)
+    assert s1 != s0
+    callee.write_text("from ..core import lookup\ndef g(x):\n    return 2 * x\n")
+    assert jitcache.closure_stamp(caller) not in (s0, s1)
+    # the real package: the motor component's step depends on the motor physics
+    monkeypatch.undo()
+    real = {Path(f).resolve().relative_to(jitcache.PKG_ROOT).as_posix()
+            for f in jitcache._import_closure(str(jitcache.PKG_ROOT / "components" / "motor.py"))}
+    assert {"powertrain/motor.py", "core/compiled.py"} <= real, sorted(real)
+
+
 def test_locator_takes_shevsims_files_only(tmp_path):
     assert jitcache.relative_folder(jitcache.PKG_ROOT / "components" / "battery.py") == "components"
     assert jitcache.relative_folder(jitcache.PKG_ROOT / "warmup.py") == "."
@@ -121,7 +159,7 @@ def test_locator_takes_shevsims_files_only(tmp_path):
     step = next(v for v in vars(b).values() if isinstance(v, numba.core.dispatcher.Dispatcher))
     loc = step._cache._impl.locator
     assert type(loc).__name__ == "ShevsimLocator"
-    assert loc.get_source_stamp() == jitcache.file_stamp(b.__file__)
+    assert loc.get_source_stamp() == jitcache.closure_stamp(b.__file__)
     assert not Path(loc.get_cache_path()).resolve().is_relative_to(jitcache.PKG_ROOT)   # never into the package
 
 
@@ -148,7 +186,7 @@ def test_a_changed_source_never_loads_the_shipped_code(shipped, tmp_path):
     assert _counts(mod.scaled) == (0, 1)                      # compiled
     user = tmp_path / "user" / "shevsim" / "numba"
     for idx in user.rglob("*.nbi"):                           # the user's index carries the edited file's stamp
-        assert jitcache.read_index(idx)[1] == jitcache.file_stamp(tmp_path / "site" / NAME)
+        assert jitcache.read_index(idx)[1] == jitcache.closure_stamp(tmp_path / "site" / NAME)
     # and code that changes behaviour is compiled from the new source, not taken from the cache
     jitcache._seeded.clear()
     mod2 = _import(_write(tmp_path / "site2", SRC.replace("2.5", "4.0")))
