@@ -402,10 +402,8 @@ class Master:
                         comp.do_step(t, m * h)
             except SimulationError as exc:
                 raise _where(exc, comp.name, None, t)
-            except Exception as exc:      # same message as _do_step
-                raise _where(SimulationError(f"component '{comp.name}' failed in do_step at t={t:.6g} s "
-                                             f"(step {self.step_index}): {type(exc).__name__}: {exc}"),
-                             comp.name, None, t) from exc
+            except Exception as exc:
+                raise _step_failure(comp, t, self.step_index, exc) from exc
         self.step_index = k + 1
         self.time_s = self.t0 + self.step_index * h
         if self.record_every == 1 or self.step_index % self.record_every == 0:
@@ -430,9 +428,7 @@ class Master:
         except SimulationError as exc:
             raise _where(exc, comp.name, None, t)
         except Exception as exc:
-            raise _where(SimulationError(f"component '{comp.name}' failed in do_step at t={t:.6g} s "
-                                         f"(step {self.step_index}): {type(exc).__name__}: {exc}"),
-                         comp.name, None, t) from exc
+            raise _step_failure(comp, t, self.step_index, exc) from exc
 
     def run(self, stop_s: float, t0: float = 0.0) -> Result:
         """Initialise (if needed) and step until ``stop_s``; return the result."""
@@ -559,6 +555,31 @@ class Master:
         if unconnected:
             lines.append("unconnected inputs (held at start value): " + ", ".join(unconnected))
         return "\n".join(lines)
+
+
+def _step_failure(comp, t: float, step_index: int, exc: BaseException) -> Exception:
+    """The error for a component whose ``do_step`` raised something that is not a :class:`SimulationError`.
+    A compiled step that numba cannot compile (a user's component: numba's typing or lowering error) is the
+    component's code, not the run: a :class:`ScenarioError` naming the component, numba's first line and the
+    rule of :func:`shevsim.core.compiled.njit_step` (steps and their callees allocate nothing)."""
+    if type(exc).__module__.startswith("numba.") and type(exc).__name__ in ("TypingError", "LoweringError",
+                                                                           "UnsupportedError", "NumbaError"):
+        import re
+        text = re.sub(r"\x1b\[[0-9;]*m", "", str(exc))            # numba colours its messages
+        lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+        what = next((ln for ln in lines if ln.startswith(("No implementation", "Cannot", "Unknown attribute",
+                                                          "Use of unsupported"))), lines[0] if lines else "")
+        where = next((ln.rstrip(":") for ln in reversed(lines) if ln.startswith("File ")), "")
+        return ScenarioError(
+            f"component '{comp.name}' (type {getattr(comp, 'TYPE', type(comp).__name__)}): its compiled step does "
+            f"not compile: {what}{' (' + where + ')' if where else ''}. A step compiled with "
+            f"shevsim.core.compiled.njit_step runs without numba's runtime, and so do the functions it calls: they "
+            f"may not allocate (np.empty, a copying slice, an exception with a run-time message); scratch arrays "
+            f"belong in the component's data tuple, allocated in initialize. numba's message: "
+            f"{type(exc).__name__}: {text}")
+    return _where(SimulationError(f"component '{comp.name}' failed in do_step at t={t:.6g} s (step {step_index}): "
+                                  f"{type(exc).__name__}: {exc}"), comp.name, None, t)
+
 
 
 def _where(exc: SimulationError, component: str | None, port: str | None, time_s: float | None):

@@ -107,16 +107,19 @@ def test_pybamm_cooling_change_named_with_its_factor_and_time():
 
 
 @pytest.mark.slow
-def test_false_selection_rate_on_the_no_effect_pybamm_records_whole_library():
-    """Three no-effect drives, the whole effect library: at most one names a physical effect (measured: 1/3,
-    ``none_2`` names entropic_heat - the reversible-heat term takes part of the thermal residual that the
-    two-state model leaves on PyBaMM's lumped cell; the other two select nothing)."""
-    reps = {c: _cell(c) for c in ("none", "none_2", "none_3")}
-    false = {c: r["selected_effects"] for c, r in reps.items() if set(r["selected_effects"]) & PHYSICAL_CELL}
-    assert len(false) <= 1, false
-    for c, r in reps.items():
-        if c not in false:
-            _check_no_effect(r)
+@pytest.mark.parametrize("case", [
+    "none",
+    pytest.param("none_2", marks=pytest.mark.xfail(strict=True, reason=(
+        "known false selection (issue 24 open): none_2 names entropic_heat - the reversible-heat term takes "
+        "part of the thermal residual the two-state model leaves on PyBaMM's lumped cell"))),
+    "none_3",
+])
+def test_no_effect_pybamm_records_whole_library_name_no_physical_effect(case):
+    """Each no-effect drive, the whole effect library: no physical effect named (the false-selection rate of
+    docs/calibration_independent.md, one record at a time; the one that fails today is marked, strictly)."""
+    r = _cell(case)
+    assert not set(r["selected_effects"]) & PHYSICAL_CELL, r["selected_effects"]
+    _check_no_effect(r)
 
 
 @pytest.mark.slow

@@ -474,3 +474,32 @@ def test_a_new_component_type_runs_on_both_engines_with_no_fast_path_code(monkey
     assert np.array_equal(fast["lag.y_mps"], ref["lag.y_mps"])
     t = ref.time_s
     np.testing.assert_allclose(ref["lag.y_mps"][1:], 1.0 - np.exp(-t[1:] / 2.0), rtol=1e-12, atol=1e-12)
+
+
+class AllocLag(Lag):
+    """The lag with a step that allocates: refused by njit_step's rule (no numba runtime in a step)."""
+    TYPE = "test_alloc_lag"
+
+
+def _alloc_lag_step(data, u, y, t, h):
+    p, x = data
+    tmp = np.empty(1)                    # not allowed in a step compiled without numba's runtime
+    tmp[0] = u[_LU.u_mps]
+    x[0] = tmp[0] + (x[0] - tmp[0]) * math.exp(-h / p[0])
+    y[_LY.y_mps] = x[0]
+    return 0
+
+
+def test_a_users_step_that_allocates_is_a_clear_error_naming_the_component(monkeypatch):
+    """A user's step compiled with njit_step that allocates: a ScenarioError (bad input, exit 2) naming the
+    component, numba's first line and the rule, not a run 'stopped' with numba's traceback as the reason."""
+    from shevsim.components import REGISTRY
+    from shevsim.core.compiled import njit_step
+    from shevsim.core.errors import ScenarioError
+    monkeypatch.setattr(AllocLag, "STEP", njit_step(cache=False)(_alloc_lag_step))
+    monkeypatch.setitem(REGISTRY, "test_alloc_lag", f"{__name__}:AllocLag")
+    sc = load_scenario(None, text=LAG.replace('type = "test_lag"', 'type = "test_alloc_lag"'))
+    with pytest.raises(ScenarioError) as e:
+        build_master(sc).run(1.0)
+    msg = str(e.value)
+    assert "component 'lag'" in msg and "does not compile" in msg and "may not allocate" in msg, msg
