@@ -17,8 +17,8 @@ and for the generated fast loops (:mod:`shevsim.fast.loop`):
   runs :mod:`shevsim.warmup`'s :func:`~shevsim.warmup.precompile` with ``SHEVSIM_JITCACHE_BUILD`` pointing
   into the build) carries ``shevsim/_jitcache/`` (the same index and data files, laid out by the sources'
   folders inside the package, and ``manifest.json``).  The first time a function is cached in a process,
-  the shipped entries of its module whose stamp matches the installed source and whose numba version is
-  the running one are copied into the user's folder (:func:`_seed`), and numba loads them from there.
+  the shipped entries of its module whose stamp matches the installed source are copied, when the manifest's
+  numba, numpy and Python versions are the running ones (:func:`versions_refusal`), into the user's folder (:func:`_seed`), and numba loads them from there.
 
 numba's own index key holds the CPU (name and features) and the function's bytecode: on another CPU, or with
 another numba or Python version, the shipped entries do not match and the function compiles on first use
@@ -219,7 +219,7 @@ class _LocatorMixin:
             self.ensure_cache_path()
         except OSError:
             return None                       # numba's own locators take over
-        if self._seed_from is not None:
+        if self._seed_from is not None and _shipped_versions_ok():
             try:
                 _seed(self._seed_from, Path(self._cache_path), py_file)
             except Exception:  # noqa: BLE001 - a shipped cache that cannot be read only costs a compile
@@ -384,10 +384,35 @@ def manifest() -> dict:
         return {}
 
 
-def write_manifest(dest: Path, layouts: list[str], sources: str, functions: int) -> dict:
+def runtime_versions() -> dict:
+    """The versions a precompiled cache is tied to: numba's, numpy's (numba's typing and the arrays' layout),
+    Python's (major.minor)."""
     import numba
-    m = {"numba": numba.__version__, "python": f"{sys.version_info[0]}.{sys.version_info[1]}",
-         "cpu": cpu_key(), "sources": sources, "layouts": sorted(layouts), "indexes": functions}
+    import numpy
+    return {"numba": numba.__version__, "numpy": numpy.__version__,
+            "python": f"{sys.version_info[0]}.{sys.version_info[1]}"}
+
+
+def versions_refusal(m: dict) -> str:
+    """``""`` when the manifest ``m`` was built with this process's numba, numpy and Python, else why not (the
+    build environment resolves the newest versions; a runtime environment may hold older ones)."""
+    here = runtime_versions()
+    if all(m.get(k) == v for k, v in here.items()):
+        return ""
+    return ("the precompiled code was built with " + " / ".join(f"{k} {m.get(k)}" for k in here) + ", this is "
+            + " / ".join(f"{k} {v}" for k, v in here.items()))
+
+
+def _shipped_versions_ok() -> bool:
+    """The shipped cache's manifest names this numba, numpy and Python (checked before a module's shipped
+    entries are seeded into the user's cache; a cache without a manifest is never seeded)."""
+    m = manifest()
+    return bool(m) and versions_refusal(m) == ""
+
+
+def write_manifest(dest: Path, layouts: list[str], sources: str, functions: int) -> dict:
+    import platform
+    m = {**runtime_versions(), "machine": platform.machine(), "cpu": cpu_key(), "sources": sources, "layouts": sorted(layouts), "indexes": functions}
     (Path(dest) / MANIFEST).write_text(json.dumps(m, indent=1))
     return m
 
@@ -399,11 +424,9 @@ def shipped_status() -> str:
     m = manifest()
     if not m:
         return "this installation carries no precompiled code"
-    import numba
-    py = f"{sys.version_info[0]}.{sys.version_info[1]}"
-    if m.get("numba") != numba.__version__ or m.get("python") != py:
-        return (f"the precompiled code was built with numba {m.get('numba')} / Python {m.get('python')}, this is "
-                f"numba {numba.__version__} / Python {py}")
+    why = versions_refusal(m)
+    if why:
+        return why
     try:
         here = cpu_key()
     except Exception as exc:  # noqa: BLE001

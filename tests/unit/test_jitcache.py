@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import numba
+import numpy as np
 import pytest
 
 from shevsim import warmup
@@ -71,6 +72,7 @@ def shipped(tmp_path, monkeypatch):
     assert _counts(mod.scaled) == (0, 1)                      # compiled at 'build time'
     assert list((ship / jitcache.LOOP_FOLDER).glob("*.nbi"))  # ... into the shipped layout
     monkeypatch.delenv(jitcache.BUILD_ENV)
+    jitcache.write_manifest(ship, [], "0123456789abcdef", 1)   # as the build writes it (this numba/numpy/Python)
     monkeypatch.setattr(jitcache, "SHIPPED", ship)
     monkeypatch.setenv("SHEVSIM_CACHE_DIR", str(tmp_path / "user"))
     monkeypatch.setattr(jitcache, "_seeded", set())
@@ -219,6 +221,25 @@ def test_another_numba_version_is_not_read(shipped, tmp_path):
     assert mod.scaled(2.0) == 5.0 and _counts(mod.scaled) == (0, 1)
 
 
+@pytest.mark.parametrize("key", ["numpy", "python", None])
+def test_a_shipped_cache_of_another_numpy_or_python_is_not_seeded(shipped, tmp_path, key):
+    """The build environment resolves the newest numba/numpy; a runtime environment may hold older ones: a
+    manifest naming another numpy or Python (or none at all) leaves the shipped entries unused (compiled)."""
+    m = json.loads((shipped / jitcache.MANIFEST).read_text())
+    assert m["numpy"] == np.__version__ and m["numba"] == numba.__version__ and m["cpu"] == jitcache.cpu_key()
+    if key is None:
+        (shipped / jitcache.MANIFEST).unlink()
+    else:
+        m[key] = "1.0" if key == "python" else "1.26.0.dev0"
+        (shipped / jitcache.MANIFEST).write_text(json.dumps(m))
+        jitcache.shipped_status.cache_clear()
+        assert f"{key} {m[key]}" in jitcache.shipped_status()
+        jitcache.shipped_status.cache_clear()
+    mod = _import(_write(tmp_path / "site"))
+    assert mod.scaled(2.0) == 5.0 and _counts(mod.scaled) == (0, 1)      # compiled, nothing seeded
+    jitcache.shipped_status.cache_clear()
+
+
 # ------------------------------------------------------------------------------------ manifest -> engine
 @pytest.fixture
 def manifest(tmp_path, monkeypatch):
@@ -316,6 +337,55 @@ def test_build_hook_without_numba_builds_without_the_cache_and_says_so(tmp_path,
     monkeypatch.setenv("PYTHONNOUSERSITE", "1")
     assert hatch_build.find_python([str(fake), sys.executable], hatch_build.clean_env(str(ROOT))) == sys.executable
     assert "PYTHONNOUSERSITE" not in hatch_build.clean_env(str(ROOT))
+
+
+def test_build_hook_compiles_inside_the_isolated_build_environment(tmp_path, monkeypatch):
+    """pip's isolated build: the build's own interpreter is tried first with pip's isolation variables kept
+    (its build environment holds numba from [build-system] requires), the checkout first on the path; the
+    undone-isolation search only after; $SHEVSIM_BUILD_PYTHON before both."""
+    sys.path.insert(0, str(ROOT))
+    try:
+        import hatch_build
+    finally:
+        sys.path.remove(str(ROOT))
+    monkeypatch.delenv("SHEVSIM_BUILD_PYTHON", raising=False)
+    monkeypatch.setenv("PYTHONNOUSERSITE", "1")
+    monkeypatch.setenv("PYTHONPATH", "/tmp/pip-build-env-x/site")
+    monkeypatch.setenv("NUMBA_CPU_NAME", "generic")
+    tries = hatch_build.attempts(str(ROOT))
+    py, env = tries[0]
+    assert py == sys.executable and env["PYTHONNOUSERSITE"] == "1" and "NUMBA_CPU_NAME" not in env
+    assert env["PYTHONPATH"].split(os.pathsep) == [str(ROOT), "/tmp/pip-build-env-x/site"]
+    assert all("PYTHONNOUSERSITE" not in e and e["PYTHONPATH"] == str(ROOT) for _, e in tries[1:])
+    monkeypatch.setenv("SHEVSIM_BUILD_PYTHON", "/opt/py/bin/python")
+    tries = hatch_build.attempts(str(ROOT))
+    assert tries[0][0] == "/opt/py/bin/python" and "PYTHONNOUSERSITE" not in tries[0][1]
+    assert tries[1][0] == sys.executable and tries[1][1]["PYTHONNOUSERSITE"] == "1"
+    assert [p for p, _ in tries].count("/opt/py/bin/python") == 1
+    # pyproject: the build environment gets numba and what the probe imports, with the runtime constraints
+    import tomllib
+    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    req = {r.split(">")[0]: r for r in cfg["build-system"]["requires"]}
+    deps = {r.split(">")[0]: r for r in cfg["project"]["dependencies"]}
+    for name in hatch_build.PROBE.removeprefix("import ").split(", "):
+        assert req[name] == deps[name], name
+
+
+def test_editable_build_replaces_the_in_tree_cache_only_with_a_new_one(tmp_path):
+    sys.path.insert(0, str(ROOT))
+    try:
+        import hatch_build
+    finally:
+        sys.path.remove(str(ROOT))
+    root = tmp_path / "checkout"
+    (root / "shevsim" / "_jitcache").mkdir(parents=True)
+    (root / "shevsim" / "_jitcache" / "old.nbi").write_text("old")
+    new = tmp_path / "w" / "_jitcache"
+    new.mkdir(parents=True)
+    (new / "manifest.json").write_text("{}")
+    out = hatch_build.install_in_tree(new, root)
+    assert out == root / "shevsim" / "_jitcache" and sorted(p.name for p in out.iterdir()) == ["manifest.json"]
+    assert sorted(p.name for p in (root / "shevsim").iterdir()) == ["_jitcache"]      # no leftover
 
 
 def test_build_refuses_a_destination_it_was_not_told_about(tmp_path, monkeypatch, capsys):
