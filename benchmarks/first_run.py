@@ -94,8 +94,10 @@ def main(argv=None) -> int:
             wheel = Path(a.wheel).resolve()
         else:
             print(f"building the wheel of {a.repo} ...", flush=True)
+            # the venv below takes numba & co. from this interpreter: the build compiles with it too (in pip's
+            # isolated build environment the newest numba/numpy would be used, which this one may not hold)
             subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist), a.repo],
-                           check=True, env=env)
+                           check=True, env={**env, "SHEVSIM_BUILD_PYTHON": sys.executable})
             r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
             wheel = sorted(dist.glob("shevsim-*.whl"))[-1]
         import json
