@@ -22,10 +22,16 @@ from shevsim.run import NOT_BUILT
 
 @pytest.fixture
 def fresh_state(tmp_path, monkeypatch):
-    """An empty marker folder (as after a fresh install; the compiled code itself stays where it is)."""
+    """An empty marker folder and no precompiled code shipped (as after a fresh install without it; an editable
+    install puts one into the checkout's shevsim/_jitcache, which would count its loop as built; the compiled
+    code itself stays where it is)."""
+    from shevsim.core import jitcache
     monkeypatch.setenv("SHEVSIM_WARMUP_DIR", str(tmp_path / "warmup"))
+    monkeypatch.setattr(jitcache, "SHIPPED", tmp_path / "no_shipped_cache")
+    jitcache.shipped_status.cache_clear()
     assert warmup.state_dir() == tmp_path / "warmup"
-    return tmp_path
+    yield tmp_path
+    jitcache.shipped_status.cache_clear()
 
 
 def _short(name="hd_udds_rule", stop=20.0):
