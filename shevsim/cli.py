@@ -372,9 +372,10 @@ def build_parser() -> argparse.ArgumentParser:
                                                   "the bundled scenarios, the default scenario's fast loop)",
                        description="Compile now, with progress, the numba code that runs would otherwise compile on "
                                    "first use: every component step of the bundled scenarios (or those named) and "
-                                   "the fast loop of hd_udds_mpc's layout; cached in the user's cache folder. A "
-                                   "wheel built with numba ships this code already (for its numba, Python and "
-                                   "CPU); useful after an editable install or on another CPU.")
+                                   "the fast loop of hd_udds_mpc's layout; cached in the user's cache folder. An "
+                                   "installation (wheel or editable) carries this code already, for the numba, "
+                                   "numpy, Python and CPU it was built with; useful after editing the sources, "
+                                   "or on another CPU or versions.")
     w.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="bundled scenario names (default: all)")
     rp = sub.add_parser("report", parents=[q], help="write the HTML report of a result folder (run, study, "
                                                    "calibration) or compare run folders",

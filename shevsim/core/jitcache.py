@@ -13,9 +13,9 @@ and for the generated fast loops (:mod:`shevsim.fast.loop`):
 * **when fresh**: the source stamp is the SHA-256 of the source file's content (older numba versions used its
   mtime and size, which ``pip install`` does not keep): a changed source never loads stale code, a copied or
   re-installed one still loads;
-* **seeded from the shipped cache**: a wheel built with numba available (the build hook ``hatch_build.py``
-  runs :mod:`shevsim.warmup`'s :func:`~shevsim.warmup.precompile` with ``SHEVSIM_JITCACHE_BUILD`` pointing
-  into the build) carries ``shevsim/_jitcache/`` (the same index and data files, laid out by the sources'
+* **seeded from the shipped cache**: a wheel (the build hook ``hatch_build.py`` runs :mod:`shevsim.warmup`'s
+  :func:`~shevsim.warmup.precompile` with ``SHEVSIM_JITCACHE_BUILD`` pointing into the build) carries
+  ``shevsim/_jitcache/``, and an editable install has it in the checkout's package folder (the same index and data files, laid out by the sources'
   folders inside the package, and ``manifest.json``).  The first time a function is cached in a process,
   the shipped entries of its module whose stamp matches the installed source are copied, when the manifest's
   numba, numpy and Python versions are the running ones (:func:`versions_refusal`), into the user's folder (:func:`_seed`), and numba loads them from there.
