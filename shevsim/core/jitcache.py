@@ -15,10 +15,11 @@ and for the generated fast loops (:mod:`shevsim.fast.loop`):
   re-installed one still loads;
 * **seeded from the shipped cache**: a wheel (the build hook ``hatch_build.py`` runs :mod:`shevsim.warmup`'s
   :func:`~shevsim.warmup.precompile` with ``SHEVSIM_JITCACHE_BUILD`` pointing into the build) carries
-  ``shevsim/_jitcache/``, and an editable install has it in the checkout's package folder (the same index and data files, laid out by the sources'
-  folders inside the package, and ``manifest.json``).  The first time a function is cached in a process,
-  the shipped entries of its module whose stamp matches the installed source are copied, when the manifest's
-  numba, numpy and Python versions are the running ones (:func:`versions_refusal`), into the user's folder (:func:`_seed`), and numba loads them from there.
+  ``shevsim/_jitcache/``, and an editable install has it in the checkout's package folder (the same index and
+  data files, laid out by the sources' folders inside the package, and ``manifest.json``).  The first time a
+  function is cached in a process, the shipped entries of its module whose stamp matches the installed source
+  are copied into the user's folder (:func:`_seed`), when the manifest's numba, numpy and Python versions are
+  the running ones (:func:`versions_refusal`), and numba loads them from there.
 
 numba's own index key holds the CPU (name and features) and the function's bytecode: on another CPU, or with
 another numba or Python version, the shipped entries do not match and the function compiles on first use
