@@ -137,7 +137,12 @@ def build_cache(root, workdir, say, cands=None) -> Path | None:
         tail = (r.stdout + r.stderr).strip().splitlines()[-5:]
         say("precompiling failed: the wheel is built without precompiled code:\n  " + "\n  ".join(tail), True)
         return None
-    say(r.stdout.strip().splitlines()[-1], False)
+    lines = r.stdout.strip().splitlines()
+    skipped = [ln for ln in lines if ln.startswith("precompile: ") and " skipped (" in ln]
+    if skipped:                             # a partial cache still serves, but what it lacks compiles on first use
+        say(f"{len(skipped)} part(s) could not be precompiled and will compile on first use:\n  "
+            + "\n  ".join(skipped), True)
+    say(lines[-1], False)
     return dest
 
 

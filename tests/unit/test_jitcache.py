@@ -339,6 +339,29 @@ def test_build_hook_without_numba_builds_without_the_cache_and_says_so(tmp_path,
     assert "PYTHONNOUSERSITE" not in hatch_build.clean_env(str(ROOT))
 
 
+def test_build_hook_says_what_it_could_not_precompile(tmp_path, monkeypatch):
+    """A precompile that skipped a part (a scenario or loop that failed) still ships what it made, and the
+    build says, as a warning, which parts will compile on first use."""
+    sys.path.insert(0, str(ROOT))
+    try:
+        import hatch_build
+    finally:
+        sys.path.remove(str(ROOT))
+    monkeypatch.delenv("SHEVSIM_PRECOMPILE", raising=False)
+    fake = tmp_path / "python-partial"
+    fake.write_text('#!/bin/sh\nif [ "$1" = "-c" ]; then exit 0; fi\necho "{}" > "$4/manifest.json"\n'
+                    'echo "precompile: loop hd_udds_mpc skipped (TypingError: boom)"\n'
+                    'echo "precompiled 3 function caches"\n')
+    fake.chmod(0o755)
+    said = []
+    out = hatch_build.build_cache(ROOT, tmp_path / "w", lambda m, warn=False: said.append((m, warn)),
+                                  cands=[str(fake)])
+    assert out is not None and (out / "manifest.json").is_file()
+    warns = [m for m, w in said if w]
+    assert len(warns) == 1 and "loop hd_udds_mpc skipped (TypingError: boom)" in warns[0], said
+    assert said[-1] == ("precompiled 3 function caches", False)
+
+
 def test_build_hook_compiles_inside_the_isolated_build_environment(tmp_path, monkeypatch):
     """pip's isolated build: the build's own interpreter is tried first with pip's isolation variables kept
     (its build environment holds numba from [build-system] requires), the checkout first on the path; the
