@@ -365,7 +365,7 @@ def make_params(cls: type, values: Mapping[str, Any], where: str = "<parameters>
 
 
 @memo_file
-def _read_param_toml(path: Path) -> dict:
+def read_param_toml(path: Path) -> dict:
     """The parsed TOML of a parameter file (parsed once per process while the file is unchanged)."""
     from .errors import toml_loads
     try:
@@ -380,7 +380,7 @@ def read_params_table(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(f"{path}: parameter file not found")
-    doc = _read_param_toml(path)
+    doc = read_param_toml(path)
     extra = set(doc) - {"meta", "params"}
     if extra:
         k = sorted(extra)[0]

@@ -1029,8 +1029,8 @@ def file_params(spec: ComponentSpec) -> dict:
         return dict(spec.params_table)
     if spec.params_file is None or not Path(spec.params_file).is_file():
         return {}
-    from .params import _read_param_toml
-    prm = _read_param_toml(Path(spec.params_file)).get("params", {})
+    from .params import read_param_toml
+    prm = read_param_toml(Path(spec.params_file)).get("params", {})
     if not isinstance(prm, dict):
         return {}
     base = Path(spec.params_file).parent
