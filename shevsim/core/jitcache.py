@@ -10,9 +10,10 @@ and for the generated fast loops (:mod:`shevsim.fast.loop`):
 * **where**: a writable folder of the user's, ``numba/`` in :func:`shevsim.core.paths.user_cache_dir` (never the
   installed package: ``site-packages`` may not be writable and is not ours to write); one sub-folder per
   source folder (named by its absolute path, so two installations never share an index);
-* **when fresh**: the source stamp is the SHA-256 of the source file's content (older numba versions used its
-  mtime and size, which ``pip install`` does not keep): a changed source never loads stale code, a copied or
-  re-installed one still loads;
+* **when fresh**: the source stamp (:func:`closure_stamp`) is the SHA-256 of the content of the function's file
+  and of every shevsim module it imports, transitively (numba copies callees' machine code into the caller's
+  entry; older numba versions used the file's own mtime and size, which ``pip install`` does not keep): a changed
+  source, the function's own or a callee's, never loads stale code, a copied or re-installed one still loads;
 * **seeded from the shipped cache**: a wheel (the build hook ``hatch_build.py`` runs :mod:`shevsim.warmup`'s
   :func:`~shevsim.warmup.precompile` with ``SHEVSIM_JITCACHE_BUILD`` pointing into the build) carries
   ``shevsim/_jitcache/``, and an editable install has it in the checkout's package folder (the same index and
