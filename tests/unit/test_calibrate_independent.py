@@ -103,6 +103,17 @@ def test_latency_named_as_timing_never_as_mass(case):
     assert "mass_kg" not in rep["final_parameters"]
 
 
+def test_payload_with_half_sample_shift_names_both_mass_and_timing():
+    """The payload vehicle with its power channel 0.5 s late: both the effect and the timing are named, the
+    shift within the same 0.25 s as ``shift_half``.  The mass is not pinned here: it comes out 2107 kg
+    against 1950 kg (+8.1 %, outside the 5 % of the payload case; benchmarks/calibration_independent.py
+    counts the row as a miss, docs/calibration_independent.md)."""
+    rep = _vehicle("payload_shift")
+    tr = _truth()["cases"]["payload_shift"]["truth"]
+    assert sorted(rep["selected_effects"]) == ["mass_error", "timing"], rep["selected_effects"]
+    assert rep["timing"]["time_shift_s"] == pytest.approx(tr["time_shift_s"], abs=0.25)
+
+
 def test_dynamic_record_with_100x_residual_is_a_baseline_failure():
     """The FASTSim car's record against the shevsim default vehicle (a 15.5 t truck): the nominal's residual
     is far above the 100 W logger noise, whatever the 1 Hz power's swings."""

@@ -21,6 +21,8 @@ sampling alone leaves a 1.8 kW error in any model that sees only the 1 Hz speed,
   distance: a hill up, then down; a constant grade is indistinguishable from rolling resistance);
 * ``shift_half``: the ``none`` vehicle, the power channel logged 0.5 s late (CAN latency of half a sample);
 * ``latency_2``: the ``none`` vehicle, the power channel logged 2 s late;
+* ``payload_shift``: the ``payload`` vehicle (1950 kg), the power channel logged 0.5 s late (an effect and a
+  timing artefact in one record);
 * ``none_2``, ``none_3``, ``none_4``: no effect, on HD-UDDS from its first standstill after 300 s, the Orange County bus cycle and the
   WVU interstate cycle (first 700 s), other noise seeds (the false-selection rate).
 
@@ -61,6 +63,8 @@ CASES = {
     "none_2": {"seed": 17, "start_s": 300.0},
     "none_3": {"seed": 18, "cycle": "orange_county_bus.csv"},
     "none_4": {"seed": 19, "cycle": "wvu_interstate.csv"},
+    # an effect and a timing artefact together (review): the payload vehicle, the power channel 0.5 s late
+    "payload_shift": {"seed": 20, "mass_kilograms": 1950.0, "lag_s": 0.5},
 }
 
 
