@@ -39,6 +39,13 @@ try:
 except ImportError:  # pragma: no cover - imported by the tests without hatchling: the functions below only
     BuildHookInterface = object
 
+#: runs ``python -m shevsim.warmup --build DEST`` with the checkout put first on ``sys.path`` after start-up:
+#: pip's build-environment ``sitecustomize`` drops every path that a ``.pth`` file of the interpreter's
+#: site-packages adds, so when that interpreter holds an editable install of this very checkout, the checkout
+#: on ``PYTHONPATH`` is dropped too and ``shevsim`` cannot be imported
+BOOT = ("import sys, runpy; sys.path.insert(0, sys.argv.pop(1)); "
+        "runpy.run_module('shevsim.warmup', run_name='__main__', alter_sys=True)")
+
 PROBE = "import numba, numpy, scipy, pandas, daqp"
 
 
@@ -128,7 +135,7 @@ def build_cache(root, workdir, say, cands=None) -> Path | None:
     env["SHEVSIM_CACHE_DIR"] = str(Path(workdir) / "user_cache")
     say(f"precompiling shevsim's numba code with {python} (a minute or two) ...", False)
     try:
-        r = subprocess.run([python, "-m", "shevsim.warmup", "--build", str(dest)], env=env, cwd=str(workdir),
+        r = subprocess.run([python, "-c", BOOT, root, "--build", str(dest)], env=env, cwd=str(workdir),
                            capture_output=True, text=True, timeout=3600)
     except (OSError, subprocess.SubprocessError) as exc:
         say(f"precompiling failed ({exc}): the wheel is built without precompiled code", True)

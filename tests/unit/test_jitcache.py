@@ -349,7 +349,7 @@ def test_build_hook_says_what_it_could_not_precompile(tmp_path, monkeypatch):
         sys.path.remove(str(ROOT))
     monkeypatch.delenv("SHEVSIM_PRECOMPILE", raising=False)
     fake = tmp_path / "python-partial"
-    fake.write_text('#!/bin/sh\nif [ "$1" = "-c" ]; then exit 0; fi\necho "{}" > "$4/manifest.json"\n'
+    fake.write_text('#!/bin/sh\nif [ "$#" -eq 2 ]; then exit 0; fi\nfor a; do last="$a"; done\necho "{}" > "$last/manifest.json"\n'
                     'echo "precompile: loop hd_udds_mpc skipped (TypingError: boom)"\n'
                     'echo "precompiled 3 function caches"\n')
     fake.chmod(0o755)
