@@ -74,11 +74,13 @@ def closure_stamp(py_file) -> str:
     own stamp, and the file's alone, would keep the old physics.  Memoised per process."""
     files = _import_closure(os.path.abspath(py_file))
     h = hashlib.sha256()
+    named = []
     for f in files:                           # named inside the package: the same in a build tree and installed
         try:
-            name = Path(f).resolve().relative_to(PKG_ROOT).as_posix()
+            named.append((Path(f).resolve().relative_to(PKG_ROOT).as_posix(), f))
         except (ValueError, OSError):
-            name = os.path.basename(f)
+            named.append((os.path.basename(f), f))
+    for name, f in sorted(named):             # in the order of those names, not of the absolute paths
         try:
             h.update(f"{name}:{file_stamp(f)}\n".encode())
         except OSError:
