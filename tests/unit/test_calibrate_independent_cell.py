@@ -40,9 +40,15 @@ def test_nominal_pseudo_ocv_is_the_cells_equilibrium_curve_less_a_constant_c50_o
     assert np.ptp(d) < 0.002, np.round(1e3 * d, 2)     # and nothing else (the coarse table: 17 mV peak to peak)
 
 
-@pytest.mark.parametrize("case", ["none", "capacity", "current_offset", "cooling_change", "arrhenius"])
-def test_cell_records_are_one_hour_at_1_hz_with_the_stated_noise(case):
+DRIVE_CASES = ["none", "capacity", "current_offset", "cooling_change", "arrhenius", "none_2", "none_3",
+               "contact_resistance", "entropic"]
+SWING_CASES = ["none_swing", "capacity_swing", "current_offset_swing", "none_swing_2"]
+
+
+@pytest.mark.parametrize("case", DRIVE_CASES)
+def test_cell_drive_records_are_one_hour_at_1_hz_with_the_stated_noise(case):
     truth = json.loads((D / "cell_truth.json").read_text())
+    assert set(truth["cases"]) == set(DRIVE_CASES + SWING_CASES) and truth["cases"][case]["protocol"] == "drive"
     df = pd.read_csv(D / f"cell_{case}.csv", comment="#")
     t = df["time_s"].to_numpy()
     assert np.all(np.diff(t) == 1.0) and t[-1] - t[0] == 3600.0
@@ -52,7 +58,53 @@ def test_cell_records_are_one_hour_at_1_hz_with_the_stated_noise(case):
     # a drive-like current: discharge and charge pulses up to 2C and -1C, about a quarter of the capacity
     i = df["current_a"].to_numpy()
     assert i.max() > 8.0 and i.min() < -3.0
-    assert 0.15 < np.sum(i) / 3600.0 / 5.0 < 0.45
+    assert 0.15 < np.sum(i) / 3600.0 / 5.0 < 0.45 or case == "entropic"      # its drive (seed 28) swings 53 %
+
+
+@pytest.mark.parametrize("case", SWING_CASES)
+def test_cell_swing_records_are_two_hours_with_rest_stops_and_a_wide_soc_swing(case):
+    truth = json.loads((D / "cell_truth.json").read_text())
+    assert truth["cases"][case]["protocol"] == "swing"
+    df = pd.read_csv(D / f"cell_{case}.csv", comment="#")
+    t = df["time_s"].to_numpy()
+    assert np.all(np.diff(t) == 1.0) and t[-1] - t[0] == 7200.0
+    assert np.std(df["voltage_v"].to_numpy()[:60]) == pytest.approx(truth["noise"]["voltage_v"], rel=0.3)
+    # pulses up to 1.6C and -0.7C; a rest stop of 10 min after each 30 min drive block, where the logged
+    # current is the sensor's offset and noise only
+    i = df["current_a"].to_numpy()
+    assert i.max() > 7.0 and i.min() < -2.5
+    off = truth["cases"][case]["truth"]["current_offset_a"]
+    for a, b in ((1860, 2460), (4260, 4860), (6660, 7200)):
+        rest = i[(t >= a) & (t < b)]
+        assert abs(rest.mean() - off) < 0.002 and rest.std() == pytest.approx(truth["noise"]["current_a"], rel=0.3)
+    # a wide SOC swing (a capacity is identifiable only over one): half the rated capacity or more
+    assert 0.45 < np.sum(i - off) / 3600.0 / 5.0 < 0.75
+    lo, hi = truth["cases"][case]["soc_table_range"]
+    assert hi > 0.94 and lo < 0.5
+
+
+def test_entropic_truth_is_the_published_lg_m50_entropic_change():
+    """The truth of the ``entropic`` record against O'Regan et al. 2022 directly (not through the generator):
+    the cell's dU/dT is the positive's minus the negative's; both published fits, in mV/K, at the electrode
+    stoichiometries of Chen2020's SOC window."""
+    pybamm = pytest.importorskip("pybamm")
+    tr = json.loads((D / "cell_truth.json").read_text())
+    e = tr["cases"]["entropic"]["truth"]
+    p = pybamm.ParameterValues("Chen2020")
+    x0, y0 = pybamm.lithium_ion.get_initial_stoichiometries(0.0, p)
+    x1, y1 = pybamm.lithium_ion.get_initial_stoichiometries(1.0, p)
+    soc = np.array(e["dudt_soc_frac"])
+    s = 1.0 - (1.0 - soc) * 5.0 / tr["pseudo_ocv_capacity_ah"]
+    x, y = x0 + s * (x1 - x0), y0 + s * (y1 - y0)
+    # O'Regan 2022, Table: graphite (a1 fixed to 0 in their final fit) and NMC811 fits [mV/K]
+    dn = -0.1112 * x + 0.02914 + 0.3561 * np.exp(-((x - 0.08309) ** 2) / 0.004616)
+    dp = 0.04006 * np.exp(-((y - 0.2828) ** 2) / 0.0009855) - 0.06656 * np.exp(-((y - 0.8032) ** 2) / 0.02179)
+    np.testing.assert_allclose(np.array(e["dudt_v_k"]), 1e-3 * (dp - dn), atol=1e-9)
+    assert e["dudt_knots_soc_frac"][-1] == pytest.approx(tr["cases"]["entropic"]["soc_table_range"][1])
+    # the other records have no entropic change, and only the contact-resistance record adds a resistance
+    for name, c in tr["cases"].items():
+        assert (c["truth"]["series_resistance_added_ohm"] > 0) == (name == "contact_resistance")
+        assert ("dudt_v_k" in c["truth"]) == (name == "entropic")
 
 
 # ------------------------------------------------------------------ the calibration on the PyBaMM records
