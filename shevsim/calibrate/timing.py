@@ -13,10 +13,18 @@ Each calibration model declares the convention of its own prediction (``native_c
 model's power is the mean over the grid period ending at the sample; the cell and engine models are
 instantaneous).  A value averaged over a period of length ``dt`` is, to second order in ``dt``, the
 instantaneous value at the period's centre, so the prediction is moved to the record's convention by
-reading it (linear interpolation between samples) at ``t + (c_record - c_model) dt`` with the centres
-``c`` = 0 (instantaneous), -1/2 (ending), +1/2 (starting).  Reading an ending-mean prediction half a sample
-later averages two neighbouring periods: the central difference of the inertial term that an
-instantaneous logger records.
+reading it at ``t + (c_record - c_model) dt`` with the centres ``c`` = 0 (instantaneous), -1/2 (ending),
++1/2 (starting).
+
+Every such read - the convention's offset and the fitted time shift alike - is a band-limited fractional
+delay (:func:`band_limited_read`), never an interpolating filter.  Linear interpolation at a fraction
+``a`` of a sample is a low-pass whose strength depends on ``a`` (white noise keeps 71 % of its rms at
+``a`` = 1/2, all of it at ``a`` = 0), so a fitted shift could buy smoothing: on a vehicle record the
+prediction carries the differentiated speed noise, the fit moved the shift towards half-sample reads
+(0.65 s for a 0.5 s latency, whose true read falls on the samples) and the mass up to make up for the
+inertial power the smoothing took away (``docs/calibration_independent.md``).  Read half a sample later
+by the band-limited delay, an ending-mean prediction is the mean over the period centred on the sample
+(its box filter stays: it is the model's); read by linear interpolation it was the mean over two periods.
 
 Time shift (the ``timing`` effect of every model)
 -------------------------------------------------
@@ -79,12 +87,40 @@ def timing_effect(channels, dt: float) -> Effect:
 
 
 def shift_prediction(pred: dict, t: np.ndarray, offset_s: float) -> dict:
-    """Every array channel of ``pred`` read at ``t + offset_s`` (linear interpolation, held at the ends)."""
+    """Every array channel of ``pred`` read at ``t + offset_s`` (:func:`band_limited_read`)."""
     if offset_s == 0.0:
         return pred
-    ts = t + offset_s
-    return {c: (np.interp(ts, t, y) if isinstance(y, np.ndarray) and y.shape == t.shape else y)
+    return {c: (band_limited_read(y, t, offset_s) if isinstance(y, np.ndarray) and y.shape == t.shape else y)
             for c, y in pred.items()}
+
+
+def band_limited_read(y: np.ndarray, t: np.ndarray, offset_s: float) -> np.ndarray:
+    """``y`` (sampled at ``t``) read at ``t + offset_s`` by a band-limited fractional delay (module docstring).
+
+    The delay multiplies the spectrum of the even extension ``[y, y reversed]`` (whose periodic
+    continuation is continuous, so the record's ends do not ring) by ``exp(2 pi i f offset_s)``: an
+    all-pass, every frequency keeps its amplitude whatever the offset (the Nyquist bin of the even length
+    keeps its real part).  Beyond the record's ends the read is the mirror image.  An irregular ``t`` is
+    delayed on its median-step grid and read back linearly; a channel with non-finite values is read by
+    linear interpolation (the FFT would spread them over the whole channel).
+    """
+    y = np.asarray(y, float)
+    n = y.size
+    if n < 4 or not np.all(np.isfinite(y)):
+        return np.interp(t + offset_s, t, y)
+    dt = median_dt(t)
+    tg = t[0] + dt * np.arange(n)
+    regular = bool(np.allclose(tg, t, rtol=0.0, atol=1e-6 * dt))
+    if not regular:
+        tg = t[0] + dt * np.arange(int(round((t[-1] - t[0]) / dt)) + 1)
+    yg = y if regular else np.interp(tg, t, y)
+    from scipy import fft as sfft
+    ext = np.concatenate([yg, yg[::-1]])
+    m = ext.size
+    ph = np.exp(2j * np.pi * np.arange(m // 2 + 1) * (offset_s / dt) / m)
+    ph[-1] = math.cos(math.pi * offset_s / dt)
+    out = sfft.irfft(sfft.rfft(ext) * ph, m)[:yg.size]
+    return out if regular else np.interp(t, tg, out)
 
 
 def _robust_std(x: np.ndarray) -> float:
@@ -125,3 +161,4 @@ def sensor_noise_floor(meas: np.ndarray, residual: np.ndarray, quiet, declared: 
         return {"value": float("nan"), "method": "none", "estimates": est}
     k = min(ok, key=ok.get)
     return {"value": ok[k], "method": k, "estimates": est}
+

@@ -19,6 +19,7 @@ import pytest
 
 from shevsim.calibrate.models import get_model
 from shevsim.calibrate.synthetic import VEHICLE_EFFECTS, as_measured, synth_vehicle
+from shevsim.calibrate.timing import shift_prediction
 from shevsim.calibrate.workflow import make_split, run_workflow
 from shevsim.components.bus import BusParams, PowerBus
 from shevsim.components.motor import Motor, MotorParams
@@ -62,7 +63,7 @@ def _replay_rmse(data, rep, tmp_path):
     t = data.df["time_s"].to_numpy(float)
     # the record's timing (declared convention, fitted time shift) belongs to the logger, not the components
     tm = rep["timing"]
-    pred = np.interp(t + tm["convention_offset_s"] - tm["time_shift_s"], t, model.replay(data, f)["power_w"])
+    pred = shift_prediction(model.replay(data, f), t, tm["convention_offset_s"] - tm["time_shift_s"])["power_w"]
     train, hold, _ = make_split(t, 0.3)
     r = pred - data.df["power_w"].to_numpy(float)
     return {"train": float(np.sqrt(np.mean(r[train] ** 2))), "holdout": float(np.sqrt(np.mean(r[hold] ** 2)))}, ov
