@@ -11,7 +11,7 @@ transient term of another form (``make_engine_soot.py``); seeds and truth in ``*
 user's nominal in ``*_nominal.toml`` (the engine: the component's defaults, transient term off).
 A case counts when the selected effects are exactly the expected ones (none for a no-effect record) and
 the expected parameter is within its tolerance (mass and capacity 5 %, auxiliary power 15 %, current
-offset 25 %, grade amplitude 25 %, time shift 0.25 s, heat-transfer factor 30 %, apparent activation
+offset 25 %, grade amplitude 25 %, regenerative power limit 10 %, time shift 0.25 s, heat-transfer factor 30 %, apparent activation
 energy Ea/R of the cell's pulse resistance 30 %, analyser lag and offset
 25 %, soot-map scale 10 %).  Prints the table
 ``generator | case | named? | parameter fitted vs truth | held-out before -> after`` and, last,
@@ -56,6 +56,9 @@ VEHICLE = {
     "none_4": ([], None, None, None, None, None),
     # an effect and a timing artefact in one record: both named, the mass within 5 % (the shift is printed)
     "payload_shift": (["mass_error", "timing"], "mass_kg", lambda p, r: p.get("mass_kg"), lambda t: t["mass_kg"], 0.05, True),
+    # the drive's electrical regenerative power limited through FASTSim's machine efficiency curve
+    "regen_limit": (["regen_limit"], "regen_power_max_w", lambda p, r: p.get("regen_power_max_w"),
+                    lambda t: t["regen_power_max_w"], 0.10, True),
 }
 CELL = {
     "none": ([], None, None, None, None, None),

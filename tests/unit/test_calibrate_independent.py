@@ -74,7 +74,13 @@ def test_payload_named_as_mass_within_5_percent():
     truth = _truth()["cases"]["payload"]["truth"]["mass_kg"]
     assert rep["selected_effects"] == ["mass_error"]
     assert rep["final_parameters"]["mass_kg"] == pytest.approx(truth, rel=0.05)
-    assert rep["rmse_after"]["power_w"]["holdout"] < 0.7 * rep["rmse_before"]["power_w"]["holdout"]
+    # the held-out residual of this trace has a floor that is not the payload's: the model differentiates
+    # the logged speed (0.02 m/s noise), about 0.8 kW on the no-effect record of the same trace (other noise
+    # seed).  The payload adds residual variance over that floor; the fitted mass removes most of it.
+    floor = _vehicle("none")["rmse_before"]["power_w"]["holdout"]
+    before, after = (rep[k]["power_w"]["holdout"] for k in ("rmse_before", "rmse_after"))
+    assert before ** 2 - floor ** 2 > 0.3 * floor ** 2                      # the payload is visible
+    assert after ** 2 - floor ** 2 < 0.25 * (before ** 2 - floor ** 2)
 
 
 def test_aux_load_named_within_15_percent():
@@ -105,13 +111,50 @@ def test_latency_named_as_timing_never_as_mass(case):
 
 def test_payload_with_half_sample_shift_names_both_mass_and_timing():
     """The payload vehicle with its power channel 0.5 s late: both the effect and the timing are named, the
-    shift within the same 0.25 s as ``shift_half``.  The mass is not pinned here: it comes out 2107 kg
-    against 1950 kg (+8.1 %, outside the 5 % of the payload case; benchmarks/calibration_independent.py
-    counts the row as a miss, docs/calibration_independent.md)."""
+    shift within the same 0.25 s as ``shift_half`` and the mass within the payload case's 5 %.  (With the
+    shift read by linear interpolation the fit bought smoothing with it: 0.69 s and 2107 kg, +8.1 %;
+    docs/calibration_independent.md.)"""
     rep = _vehicle("payload_shift")
     tr = _truth()["cases"]["payload_shift"]["truth"]
     assert sorted(rep["selected_effects"]) == ["mass_error", "timing"], rep["selected_effects"]
     assert rep["timing"]["time_shift_s"] == pytest.approx(tr["time_shift_s"], abs=0.25)
+    assert rep["final_parameters"]["mass_kg"] == pytest.approx(tr["mass_kg"], rel=0.05)
+
+
+def test_regen_limit_named_with_its_power():
+    """FASTSim's drive with its electrical regenerative power saturating at 6 kW (its machine efficiency curve
+    over the signed power fraction, make_vehicle_fastsim.py): named as ``regen_limit``, the limit within
+    10 %, and the generating-efficiency scale does not take it (it stays near the no-effect record's)."""
+    rep = _vehicle("regen_limit")
+    truth = _truth()["cases"]["regen_limit"]["truth"]["regen_power_max_w"]
+    assert rep["selected_effects"] == ["regen_limit"], rep["selected_effects"]
+    assert rep["final_parameters"]["regen_power_max_w"] == pytest.approx(truth, rel=0.10)
+    assert rep["final_parameters"]["regen_efficiency_scale_frac"] > 0.85
+
+
+def test_fractional_read_is_a_delay_not_a_filter():
+    """A prediction read between samples (sample convention, fitted time shift) keeps every frequency's
+    amplitude whatever the fraction: a linear read at half a sample keeps 71 % of white noise's rms, at a
+    whole sample all of it, so a fitted shift could buy smoothing (payload_shift: 0.69 s, mass +8 %)."""
+    from shevsim.calibrate.timing import band_limited_read, shift_prediction
+    rng = np.random.default_rng(5)
+    t = np.arange(4000.0)
+    w = rng.normal(size=t.size)
+    for frac in (0.1, 0.25, 0.5, 0.75, 1.0, -2.5):
+        assert np.std(band_limited_read(w, t, frac)) == pytest.approx(1.0, abs=0.03)
+    assert np.std(np.interp(t + 0.5, t, w)) == pytest.approx(math.sqrt(0.5), abs=0.03)     # the former read
+    # a band-limited signal is delayed exactly (away from the mirrored ends)
+    y = np.sin(2 * math.pi * t / 17.0) + 0.5 * np.cos(2 * math.pi * t / 5.3)
+    for off in (0.5, -0.37, 2.2):
+        ref = np.sin(2 * math.pi * (t + off) / 17.0) + 0.5 * np.cos(2 * math.pi * (t + off) / 5.3)
+        assert np.max(np.abs(band_limited_read(y, t, off) - ref)[50:-50]) < 2e-3
+    # an irregular record (logger jitter) is delayed on its median-step grid (to it and back linearly:
+    # twice the linear-interpolation error of a 17-sample period, (2 pi / 17)^2 / 8 = 0.017)
+    tj = t[:500] + rng.uniform(-0.05, 0.05, 500)
+    yj = np.sin(2 * math.pi * tj / 17.0)
+    got = shift_prediction({"y": yj, "k": 3.0}, tj, 0.5)
+    assert got["k"] == 3.0
+    assert np.max(np.abs(got["y"] - np.sin(2 * math.pi * (tj + 0.5) / 17.0))[20:-20]) < 0.05
 
 
 def test_dynamic_record_with_100x_residual_is_a_baseline_failure():
