@@ -11,8 +11,8 @@ transient term of another form (``make_engine_soot.py``); seeds and truth in ``*
 user's nominal in ``*_nominal.toml`` (the engine: the component's defaults, transient term off).
 A case counts when the selected effects are exactly the expected ones (none for a no-effect record) and
 the expected parameter is within its tolerance (mass and capacity 5 %, auxiliary power 15 %, current
-offset 25 %, grade amplitude 25 %, regenerative power limit 10 %, time shift 0.25 s, heat-transfer factor 30 %, apparent activation
-energy Ea/R of the cell's pulse resistance 30 %, analyser lag and offset
+offset 25 %, grade amplitude 25 %, regenerative power limit 10 %, time shift 0.25 s, heat-transfer
+factor 30 %, apparent activation energy Ea/R of the cell's pulse resistance 30 %, analyser lag and offset
 25 %, soot-map scale 10 %).  Prints the table
 ``generator | case | named? | parameter fitted vs truth | held-out before -> after`` and, last,
 ``independent cases: N/M``.

@@ -111,9 +111,9 @@ def test_latency_named_as_timing_never_as_mass(case):
 
 def test_payload_with_half_sample_shift_names_both_mass_and_timing():
     """The payload vehicle with its power channel 0.5 s late: both the effect and the timing are named, the
-    shift within the same 0.25 s as ``shift_half`` and the mass within the payload case's 5 %.  (With the
-    shift read by linear interpolation the fit bought smoothing with it: 0.69 s and 2107 kg, +8.1 %;
-    docs/calibration_independent.md.)"""
+    shift within the same 0.25 s as ``shift_half`` and the mass within the payload case's 5 %.  (Before: a
+    shift read by linear interpolation bought smoothing, and the generator's PCHIP trace was sampled
+    half-way between its knots: 0.69 s and 2107 kg, +8.1 %; docs/calibration_independent.md.)"""
     rep = _vehicle("payload_shift")
     tr = _truth()["cases"]["payload_shift"]["truth"]
     assert sorted(rep["selected_effects"]) == ["mass_error", "timing"], rep["selected_effects"]
@@ -199,7 +199,7 @@ def _engine_truth():
 def test_engine_no_effect_record_names_nothing_and_states_the_model_form():
     """The independent plant's power response (first-order 0.8 s, operating point on the optimal line at every
     instant) is not the component's form (turbo lag, PI rack, speed loop): nothing is named - not even a
-    time shift, which removes only a quarter of the residual above the noise (a logger latency would remove
+    time shift, which removes only 17 % of the residual variance above the noise (a logger latency would remove
     nearly all of it) - and what the library cannot explain is stated as a model-form discrepancy.  The
     baseline failure is raised against a noise floor that holds on the dynamic soot signal (the script's
     noise: 2 % + 0.05 mg/s)."""
@@ -220,8 +220,8 @@ def test_engine_no_effect_record_names_nothing_and_states_the_model_form():
 @pytest.mark.parametrize("case,effect,param,rel", [("analyzer_lag", "analyzer_lag", "soot_analyzer_tau_s", 0.25),
                                                    ("analyzer_offset", "analyzer_offset", "soot_analyzer_offset_mgps", 0.25)])
 def test_engine_analyser_effects_named_with_their_parameter(case, effect, param, rel):
-    """The analyser effect is named, alone among the physical effects.  (On ``analyzer_lag`` a -0.5 s time
-    shift removes 49.6 % of the residual variance above the noise that the lag leaves - at the timing rule's
+    """The analyser effect is named, alone among the physical effects.  (On ``analyzer_lag`` a -0.53 s time
+    shift removes 49.7 % of the residual variance above the noise that the lag leaves - at the timing rule's
     one-half boundary - so it is stated as a model-form discrepancy; timing is not a physical effect either way.)"""
     rep = _engine(case)
     assert set(rep["selected_effects"]) - {"timing"} == {effect}, rep["selected_effects"]

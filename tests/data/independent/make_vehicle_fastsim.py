@@ -31,7 +31,7 @@ A logger then samples the speed and the battery's electrical output power
 * ``payload_shift``: the ``payload`` vehicle (1950 kg), the power channel logged 0.5 s late (an effect and a
   timing artefact in one record);
 * ``regen_limit``: the electrical regenerative power at most 6 kW (the published vehicle regenerates up to
-  17.8 kW on this trace).  FASTSim 3.1's battery-electric vehicle has no regeneration-only power limit
+  17 kW on this trace).  FASTSim 3.1's battery-electric vehicle has no regeneration-only power limit
   (``ReversibleEnergyStorage::set_pwr_charge_max``: the charge limit is the battery's ``pwr_out_max``, the
   number that also limits discharge; ``ElectricMachine::set_curr_pwr_prop_out_max``: the machine's
   ``pwr_out_max`` both ways; the cycle's ``pwr_max_chrg`` is read and never used), but its machine
