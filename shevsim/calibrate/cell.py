@@ -324,6 +324,27 @@ class CellModel(CalibrationModel):
         self.dudt_knots = tuple(float(x) for x in np.linspace(lo, hi, N_DUDT_KNOTS))
         self.ocv_knots = tuple(float(x) for x in np.linspace(lo, hi, N_OCV_KNOTS))
         self.ocv_base = (np.array(tables._ocv.xs, float), np.array(tables._ocv.ys, float))
+        # the record's rests after current has flowed: the slow time constant it resolves and the current a
+        # sensor logs at zero current (record_resolution, measured_params)
+        spans = self._rest_spans(t, i)
+        self.rests_s = [float(t[b] - t[a]) for a, b in spans]
+        # the slow RC branch's time constant is limited to the longest rest: a relaxation that no rest shows
+        # decaying cannot be told from a series capacitor - that is, from a capacity or a current offset
+        # (over a swing where the OCV is near linear in the charge); no rest: no limit, and a capacity or
+        # offset is not identifiable apart from the branch (record_resolution says so)
+        self.tau2_max_s = max(self.rests_s) if self.rests_s else None
+        xs = np.linspace(lo, hi, 21)
+        self.tau2_table_s = float(np.mean([tables.params(x, 25.0, 1.0)[3] * tables.params(x, 25.0, 1.0)[4]
+                                           for x in xs]))
+        self.soc_swing = hi - lo
+        ir = np.concatenate([i[a:b + 1] for a, b in spans]) if spans else np.zeros(0)
+        self.rest_current = None
+        if ir.size >= 30:
+            med = float(np.median(ir))
+            # spread: the MAD's std, or the plain std when the logging is quantised (MAD 0)
+            sd = 1.4826 * float(np.median(np.abs(ir - med))) or float(np.std(ir))
+            self.rest_current = {"value": med, "se": 1.2533 * sd / math.sqrt(ir.size), "n": int(ir.size),
+                                 "duration_s": float(sum(self.rests_s))}
         self.effects = self._make_effects()
         tg, (ig, tag), _h, resampled = sampling_grid(t, i, ta)
         return {"t": t, "i": i, "ta": ta, "tg": tg, "ig": ig, "tag": tag, "resampled": resampled, "d": d, "ix": ix, "n": t.size, "df": df,
@@ -363,6 +384,11 @@ class CellModel(CalibrationModel):
         for k, v in full.items():
             if k in _FIELDS:
                 kw[k] = v
+        tmax = getattr(self, "tau2_max_s", None)
+        if tmax and kw.get("r2_scale", self.base.r2_scale) > 0.0:
+            r2s = kw.get("r2_scale", self.base.r2_scale)
+            c2s = kw.get("c2_scale", self.base.c2_scale)
+            kw["c2_scale"] = min(c2s, tmax / (r2s * self.tau2_table_s))
         return dataclasses.replace(self.base, **kw)
 
     def ocv_corrected(self, values):
@@ -404,6 +430,62 @@ class CellModel(CalibrationModel):
         out = {"voltage_v": ov, "t_surface_c": ots, "_t_core_c": otc}
         if ctx["has_core"]:
             out["t_core_c"] = otc
+        return out
+
+    @staticmethod
+    def _rest_spans(t, i, min_s: float = 60.0):
+        """Index spans ``(first, last)`` of the record's rests after current has flowed (a rest before any current shows no
+        relaxation): spans >= ``min_s`` where the logged current stays within 2 % of the record's largest of
+        its value at the span's start and is within 2 % of zero (a sensor offset leaves a rest a rest)."""
+        imax = max(float(np.abs(i).max()), 1e-9)
+        dev = np.abs(np.diff(i, prepend=i[0]))
+        still = dev <= 0.02 * imax
+        n = i.size
+        moved = np.flatnonzero(np.abs(i) > 0.05 * imax)
+        out, k = [], (int(moved[0]) if moved.size else n)
+        while k < n:
+            if not still[k]:
+                k += 1
+                continue
+            j = k
+            while j + 1 < n and still[j + 1] and abs(i[j + 1] - i[k]) <= 0.02 * imax:
+                j += 1
+            if t[j] - t[k] >= min_s and abs(np.median(i[k:j + 1])) <= 0.02 * imax:
+                out.append((k, j))
+            k = j + 1
+        return out
+
+    #: a rest current beyond this many standard errors of its median is a measured sensor offset
+    REST_OFFSET_SE = 5.0
+
+    def measured_params(self, ctx) -> dict:
+        """Parameters this record measures directly: the current-sensor offset, when the logged current in the
+        rests (after current has flowed) differs from zero by more than ``REST_OFFSET_SE`` standard errors
+        of its median - a cell at rest carries no current, so what the sensor logs there is its offset."""
+        rc = getattr(self, "rest_current", None)
+        if rc is None or not abs(rc["value"]) > self.REST_OFFSET_SE * rc["se"]:
+            return {}
+        return {"current_offset_a": {"value": rc["value"], "se": rc["se"],
+                                     "how": f"the median logged current over {rc['duration_s']:.0f} s of rests "
+                                            f"({rc['n']} samples)"}}
+
+    def record_resolution(self) -> dict:
+        """What the record can resolve: its rests after current, the slow RC branch's time-constant limit,
+        the SOC swing, and whether a capacity / a current offset can be told from the slow branch."""
+        rests = list(getattr(self, "rests_s", []))
+        tmax = getattr(self, "tau2_max_s", None)
+        two = self.base.r2_scale > 0.0 or "second_rc_branch" in self.effects
+        out = {"rests_after_current_s": rests, "soc_swing_frac": float(getattr(self, "soc_swing", float("nan"))),
+               "slow_branch_tau_max_s": tmax,
+               "rest_current_a": getattr(self, "rest_current", None)}
+        if not rests:
+            out["statement"] = ("the record has no rest (>= 60 s after current has flowed): a slow RC branch's "
+                                "relaxation is never seen, so a capacity error or a current offset cannot be told "
+                                "apart from it" + ("" if two else " (the nominal has one RC branch)"))
+        else:
+            out["statement"] = (f"the slow RC branch's time constant is limited to the longest rest, {tmax:.0f} s "
+                                f"(longer relaxations are a series capacitor: a capacity); SOC swing "
+                                f"{100 * out['soc_swing_frac']:.0f} %")
         return out
 
     def quiet_mask(self, ctx):

@@ -68,6 +68,13 @@ Steps (:func:`run_workflow`):
    logger latency but a model bent towards dynamics of another form: removed, refitted and stated as a
    model-form discrepancy (:meth:`_Run.screen_timing`).
 
+Parameters the record measures directly (``CalibrationModel.measured_params``, e.g. a current-sensor
+offset read in the rests of a cell record): the parameter is held within its measurement's +-3 standard
+errors, and its effect is not held to the ``MIN_GAIN`` held-out gain (its parameter is not inferred from
+the residual): it passes when it improves the held-out error of its channels at all, worsens no channel by
+more than ``MAX_WORSEN`` and lowers the BIC by ``MIN_DBIC``.  The measurement is in the report
+(``measured_parameters``).
+
 Sample timing (:mod:`shevsim.calibrate.timing`): the record's declared ``sample_convention`` moves the
 prediction once; the ``timing`` effect (a fitted time shift between inputs and outputs) is a candidate of
 every model, so a logger latency is named as timing, not read as a physical parameter.
@@ -235,6 +242,11 @@ class Fitter:
         self.train, self.hold = train, hold
         self.weights = {c: 1.0 / max(float(np.std(self.meas[c])), 1e-12) for c in self.channels}
         self.bounds_override = model.param_bounds(self.ctx)
+        #: parameters the record measures directly: {name: {"value", "se", "how"}}; held within +-3 standard errors
+        self.measured = dict(model.measured_params(self.ctx)) if hasattr(model, "measured_params") else {}
+        for k, m in self.measured.items():
+            half = max(3.0 * float(m["se"]), 1e-9 * max(abs(float(m["value"])), 1.0))
+            self.bounds_override[k] = (float(m["value"]) - half, float(m["value"]) + half)
         self.nsim = 0
         # the loss uses at most MAX_FIT_SAMPLES training samples per channel (uniform stride; the model is
         # still simulated at every sample): keeps the least-squares linear algebra small on long records
@@ -563,6 +575,11 @@ class _Run:
         # channels coupled through them, e.g. the heat of a circuit whose resistances bend to a voltage
         # model-form error), not from the effect
         # (for a pair: each effect on its own channels)
+        # an effect whose parameters the record measures directly is not inferred from the residual: any held-out
+        # gain confirms it (the BIC and worsening rules stay)
+        eff_params = [p.name for e in effs for p in f.effects[e].params]
+        measured = bool(eff_params) and all(k in f.measured for k in eff_params)
+        min_gain = 0.0 if measured else MIN_GAIN
         own_all, weak = set(), []
         for e in effs:
             own = [c for c in f.channels if c in f.effects[e].channels]
@@ -571,14 +588,22 @@ class _Run:
                 se = bool(src) and fr.rmse_sel is not None and not any(c in f.effects[e].channels for c in src)
                 re_ = self.ref_sel if se else self.ref
                 g = 1.0 - _score(fr, re_, own, se) / _score(current, re_, own, se)
-                if g < MIN_GAIN:
+                if g < MIN_GAIN if not measured else g <= 0.0:
                     weak.append(f"{e} on {', '.join(own)} {g:.1%}")
         own = [c for c in f.channels if c in own_all]
+        off_note = ""
+        if measured and own:
+            # a measured correction is applied, not inferred: what it worsens on channels it does not act on is
+            # the refit of the declared parameters (their compromise with those channels' model form)
+            off = {c: rm[c]["holdout"] / max(cm[c]["holdout"], 1e-300) - 1.0 for c in f.channels if c not in own}
+            fr.worsen = max(rm[c]["holdout"] / max(cm[c]["holdout"], 1e-300) - 1.0 for c in own)
+            off_note = "; ".join(f"{c} {v:+.1%}" for c, v in off.items() if v > MAX_WORSEN)
         why = []
-        if fr.gain < MIN_GAIN:
-            why.append(f"held-out score gain {fr.gain:.1%} < {MIN_GAIN:.0%}")
+        if fr.gain <= min_gain if measured else fr.gain < min_gain:
+            why.append(f"held-out score gain {fr.gain:.1%} {'<=' if measured else '<'} {min_gain:.0%}"
+                       + (" (its parameter measured directly)" if measured else ""))
         elif weak:
-            why.append(f"held-out gain on the channels the effect acts on < {MIN_GAIN:.0%} ({'; '.join(weak)})")
+            why.append(f"held-out gain on the channels the effect acts on < {min_gain:.0%} ({'; '.join(weak)})")
         if fr.worsen > MAX_WORSEN:
             why.append(f"a channel's held-out RMSE rises {fr.worsen:.1%}")
         if fr.dbic > -MIN_DBIC:
@@ -595,7 +620,11 @@ class _Run:
             self.say(f"round {rnd + 1}: {'+'.join(effs)}: {fr.reason}")
             return fr
         if not why:
-            fr.reason = "passes"
+            fr.reason = "passes" + (" (its parameter measured directly: "
+                                    + "; ".join(f"{k} = {f.measured[k]['value']:.4g} from {f.measured[k]['how']}"
+                                                for e in effs for k in (p.name for p in f.effects[e].params))
+                                    + (f"; the refit of the declared parameters moves {off_note}" if off_note else "")
+                                    + ")" if measured else "")
         elif fr.passed:
             # held-out evidence decides: the autocorrelation-corrected BIC has few effective samples
             # exactly when a systematic residual (a missing effect) makes the residual autocorrelated
@@ -700,7 +729,7 @@ class _Run:
         out = []
         for prm in f.effects[effect].params:
             v = values.get(prm.name)
-            if v is None:
+            if v is None or prm.name in f.measured:     # held at its direct measurement: its bounds are that
                 continue
             lo, hi = f.bounds_override.get(prm.name, (prm.lo, prm.hi))
             pos = _bound_position(prm, v, lo, hi)
@@ -841,13 +870,16 @@ class _Run:
         for prm in f._params_for(tuple(selected)):
             lo, hi = f.bounds_override.get(prm.name, (prm.lo, prm.hi))
             v = final.params.get(prm.name)
-            if v is None:
+            if v is None or prm.name in f.measured:
                 continue
             pos = _bound_position(prm, v, lo, hi)
             if pos <= BOUND_TOL or pos >= 1.0 - BOUND_TOL:
                 at_bounds.append({"parameter": prm.name, "value": v, "bound": "lower" if pos <= BOUND_TOL else "upper",
                                   "bounds": [lo, hi], "unit": prm.unit})
         ident = identifiability(f, tuple(selected), final.params)
+        for d in ident:      # a directly measured parameter: identified by its measurement, not by the fit
+            if d["parameter"] in f.measured:
+                d["identifiable"], d["measured"] = True, f.measured[d["parameter"]]
         by_name = {d["parameter"]: d for d in ident}
         for b in at_bounds:
             b["identifiable"] = by_name.get(b["parameter"], {}).get("identifiable")
@@ -926,6 +958,8 @@ def _report(run, selected, final, *, dropped, discrepancy, diag_before, diag_aft
                            "min_bic_drop": MIN_DBIC, "tie_fraction": TIE, "bic": "autocorrelation-corrected",
                            "halving_passes": HALVING},
         "baseline_parameters": base.params,
+        "measured_parameters": f.measured,
+        "record_resolution": (model.record_resolution() if hasattr(model, "record_resolution") else {}),
         "selected_effects": selected,
         "final_parameters": final.params,
         "candidates": run.first_round,
