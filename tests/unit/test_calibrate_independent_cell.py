@@ -11,6 +11,7 @@ sampling and noise.
 from __future__ import annotations
 
 import json
+import math
 import tomllib
 from pathlib import Path
 
@@ -209,3 +210,85 @@ def test_pybamm_contact_resistance_raises_the_fitted_ohmic_resistance_by_its_val
     assert rise == pytest.approx(truth, rel=0.25), rise
     # and the model with the risen R_s explains the record as well as the nominal explains the one without
     assert contact["rmse_before"]["voltage_v"]["holdout"] < 1.5 * none["rmse_before"]["voltage_v"]["holdout"]
+
+
+
+# ------------------------------------------------------------------ capacity and current offset: the swing records
+#
+# Over the one-hour drive (25 % SOC swing, no rest stop) the nominal's slow RC branch takes up a capacity
+# loss or a current offset: an RC branch whose time constant is longer than any rest the record has is never
+# seen relaxing, and over a swing where the OCV is near linear in the charge it is a series capacitor - a
+# capacity.  The calibration now limits that time constant to the record's longest rest after current
+# (CellModel.record_resolution), and reads a current-sensor offset where a lab reads it: the logged current
+# in the rests (CellModel.measured_params).  The "swing" records (95 % -> 25-45 % SOC, three 30 min drive
+# blocks with 10 min rest stops) identify both.  Stated tolerances: capacity 5 %, offset 25 %.  The default
+# run offers the voltage effects a capacity or an offset is confused with; the whole library is `slow`.
+
+SWING_EFFECTS = ["capacity", "current_offset", "ocv_hysteresis"]
+
+
+def test_rest_spans_and_the_rest_current_are_what_a_lab_reads():
+    """No PyBaMM: a current record with a leading rest (no relaxation to see), two rest stops after current
+    (300 s and 600 s) and a logged offset of 50 mA with 5 mA noise."""
+    from shevsim.calibrate.cell import CellModel
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 2401.0)
+    i = np.zeros(t.size)
+    i[100:700] = 5.0
+    i[1000:1700] = -2.0
+    i_log = i + 0.05 + rng.normal(0.0, 0.005, t.size)
+    spans = CellModel._rest_spans(t, i_log)
+    assert [float(t[b] - t[a]) for a, b in spans] == pytest.approx([299.0, 700.0], abs=2.0)
+    m = CellModel(None)
+    m.rest_current = {"value": float(np.median(np.concatenate([i_log[a:b + 1] for a, b in spans]))),
+                      "se": 0.005 / math.sqrt(1000), "n": 1000, "duration_s": 1000.0}
+    got = m.measured_params({})["current_offset_a"]
+    assert got["value"] == pytest.approx(0.05, abs=0.001)
+    m.rest_current["value"] = 0.0002                     # within 5 standard errors of zero: not a measurement
+    assert m.measured_params({}) == {}
+
+
+def test_pybamm_swing_capacity_named_within_5_percent():
+    rep = _cell("capacity_swing", effects=SWING_EFFECTS)
+    res = rep["record_resolution"]
+    assert 500.0 < res["slow_branch_tau_max_s"] < 700.0 and res["soc_swing_frac"] > 0.5
+    assert rep["measured_parameters"] == {}              # the rests carry no current: no offset measured
+    assert rep["selected_effects"] == ["capacity"], rep["selected_effects"]
+    cap = rep["final_parameters"]["capacity_ah"]
+    assert cap == pytest.approx(_cell_truth("capacity_swing")["capacity_ah"], rel=0.05), cap
+    assert rep["rmse_after"]["voltage_v"]["holdout"] < 0.75 * rep["rmse_before"]["voltage_v"]["holdout"]
+
+
+def test_pybamm_swing_current_offset_named_with_the_offset_its_rests_measure():
+    rep = _cell("current_offset_swing", effects=SWING_EFFECTS)
+    truth = _cell_truth("current_offset_swing")["current_offset_a"]
+    meas = rep["measured_parameters"]["current_offset_a"]
+    assert meas["value"] == pytest.approx(truth, rel=0.25)
+    assert rep["selected_effects"] == ["current_offset"], rep["selected_effects"]
+    assert rep["final_parameters"]["current_offset_a"] == pytest.approx(truth, rel=0.25)
+    # the measured offset explains the voltage: held-out error down by a quarter or more
+    assert rep["rmse_after"]["voltage_v"]["holdout"] < 0.75 * rep["rmse_before"]["voltage_v"]["holdout"]
+
+
+def test_no_effect_swing_record_names_no_physical_effect():
+    rep = _cell("none_swing", effects=SWING_EFFECTS)
+    assert rep["measured_parameters"] == {}
+    _check_no_effect(rep)
+
+
+@pytest.mark.slow
+def test_pybamm_swing_current_offset_named_whole_library():
+    rep = _cell("current_offset_swing")
+    assert rep["selected_effects"] == ["current_offset"], rep["selected_effects"]
+    assert rep["final_parameters"]["current_offset_a"] == pytest.approx(0.1, rel=0.25)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", [
+    "none_swing",
+    pytest.param("none_swing_2", marks=pytest.mark.xfail(strict=True, reason=(
+        "known false selection (issue 24 open): none_swing_2 names ocv_hysteresis (+24 mV) and entropic_heat - "
+        "the circuit's model-form residual on the SPMe (26 mV held-out, 26x the noise)"))),
+])
+def test_no_effect_swing_records_whole_library_name_no_physical_effect(case):
+    _check_no_effect(_cell(case))
