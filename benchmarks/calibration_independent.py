@@ -13,7 +13,9 @@ A case counts when the selected effects are exactly the expected ones (none for 
 the expected parameter is within its tolerance (mass and capacity 5 %, auxiliary power 15 %, current
 offset 25 %, grade amplitude 25 %, regenerative power limit 10 %, time shift 0.25 s, heat-transfer
 factor 30 %, apparent activation energy Ea/R of the cell's pulse resistance 30 %, analyser lag and offset
-25 %, soot-map scale 10 %).  Prints the table
+25 %, soot-map scale 10 %; the cell's contact resistance: no effect named and the fitted ohmic resistance
+above the same drive's no-effect fit by the 10 mOhm within 25 %; the cell's entropic change: entropic_heat
+named and its dU/dT within 0.05 mV/K rms of O'Regan 2022's at the fitted knots).  Prints the table
 ``generator | case | named? | parameter fitted vs truth | held-out before -> after`` and, last,
 ``independent cases: N/M``.
 """
@@ -107,8 +109,9 @@ CELL = {
     # effect is named); the fitted R_s rises over the same drive's (none) by the truth within 25 %
     "contact_resistance": ([], "series R rise (ohm)", _contact_rise, lambda t: t["series_resistance_added_ohm"],
                            0.25, True),
-    # O'Regan 2022's dU/dT (-0.05..+0.07 mV/K over the SOC visited): within 0.03 mV/K rms at the knots
-    "entropic": (["entropic_heat"], "dU/dT rms error (V/K)", _dudt_rms_error, lambda t: 0.0, 3e-5, False),
+    # O'Regan 2022's dU/dT (-0.05..+0.07 mV/K over the SOC visited): within 0.05 mV/K rms at the fitted knots
+    # (a fit wrong by more than that does not tell the published curve from zero)
+    "entropic": (["entropic_heat"], "dU/dT rms error (V/K)", _dudt_rms_error, lambda t: 0.0, 5e-5, False),
     # the "swing" protocol (95 % -> 25-45 % SOC, rest stops): capacity and offset identifiable
     "none_swing": ([], None, None, None, None, None),
     "capacity_swing": (["capacity"], "capacity_ah", lambda p, r: p.get("capacity_ah"), lambda t: t["capacity_ah"],

@@ -330,12 +330,17 @@ class CellModel(CalibrationModel):
         self.rests_s = [float(t[b] - t[a]) for a, b in spans]
         # the slow RC branch's time constant is limited to the longest rest: a relaxation that no rest shows
         # decaying cannot be told from a series capacitor - that is, from a capacity or a current offset
-        # (over a swing where the OCV is near linear in the charge); no rest: no limit, and a capacity or
-        # offset is not identifiable apart from the branch (record_resolution says so)
-        self.tau2_max_s = max(self.rests_s) if self.rests_s else None
+        # (over a swing where the OCV is near linear in the charge).  A record whose rests are all shorter than
+        # the nominal slow branch's own time constant (the table's, x the declared scales) resolves no slow
+        # relaxation at all: no limit then (the branch stays as declared), and a capacity or an offset is not
+        # identifiable apart from it (record_resolution says so)
         xs = np.linspace(lo, hi, 21)
         self.tau2_table_s = float(np.mean([tables.params(x, 25.0, 1.0)[3] * tables.params(x, 25.0, 1.0)[4]
                                            for x in xs]))
+        b = self.base
+        self.tau2_nominal_s = self.tau2_table_s * (b.r2_scale if b.r2_scale > 0.0 else 1.0) * b.c2_scale
+        longest = max(self.rests_s) if self.rests_s else 0.0
+        self.tau2_max_s = longest if longest >= self.tau2_nominal_s else None
         self.soc_swing = hi - lo
         ir = np.concatenate([i[a:b + 1] for a, b in spans]) if spans else np.zeros(0)
         self.rest_current = None
@@ -478,10 +483,13 @@ class CellModel(CalibrationModel):
         out = {"rests_after_current_s": rests, "soc_swing_frac": float(getattr(self, "soc_swing", float("nan"))),
                "slow_branch_tau_max_s": tmax,
                "rest_current_a": getattr(self, "rest_current", None)}
-        if not rests:
-            out["statement"] = ("the record has no rest (>= 60 s after current has flowed): a slow RC branch's "
-                                "relaxation is never seen, so a capacity error or a current offset cannot be told "
-                                "apart from it" + ("" if two else " (the nominal has one RC branch)"))
+        out["slow_branch_tau_nominal_s"] = float(getattr(self, "tau2_nominal_s", float("nan")))
+        if tmax is None:
+            out["statement"] = ((f"the record's longest rest after current ({max(rests):.0f} s) is shorter than the "
+                                 f"slow RC branch's time constant ({out['slow_branch_tau_nominal_s']:.0f} s)" if rests
+                                 else "the record has no rest (>= 60 s) after current")
+                                + ": the slow relaxation is not resolved, so a capacity error or a current offset "
+                                "cannot be told apart from it" + ("" if two else " (the nominal has one RC branch)"))
         else:
             out["statement"] = (f"the slow RC branch's time constant is limited to the longest rest, {tmax:.0f} s "
                                 f"(longer relaxations are a series capacitor: a capacity); SOC swing "

@@ -1138,6 +1138,12 @@ def render_markdown(rep: dict) -> str:
         L += ["", "**Model-form discrepancy** (not explained by any effect of the library; the evidence):"]
         for d in rep["model_form_discrepancy"]:
             L.append(f"- {d['statement']}")
+    if rep.get("measured_parameters"):
+        L += ["", "Measured directly by the record (held there, +-3 standard errors): " + "; ".join(
+            f"`{k}` = {_g(m['value'])} (standard error {_g(m['se'])}) from {m['how']}"
+            for k, m in rep["measured_parameters"].items()) + "."]
+    if (rep.get("record_resolution") or {}).get("statement"):
+        L += ["", f"What the record resolves: {rep['record_resolution']['statement']}."]
     if rep.get("parameters_at_bounds"):
         L += ["", "Parameters that ended on a bound (not identifiable from this record, or the bound is wrong): "
               + ", ".join(f"`{b['parameter']}` = {_g(b['value'])} {b['unit']} ({b['bound']})"
