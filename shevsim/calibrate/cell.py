@@ -439,9 +439,10 @@ class CellModel(CalibrationModel):
 
     @staticmethod
     def _rest_spans(t, i, min_s: float = 60.0):
-        """Index spans ``(first, last)`` of the record's rests after current has flowed (a rest before any current shows no
-        relaxation): spans >= ``min_s`` where the logged current stays within 2 % of the record's largest of
-        its value at the span's start and is within 2 % of zero (a sensor offset leaves a rest a rest)."""
+        """Index spans ``(first, last)`` of the record's rests after current has flowed (a rest before any
+        current shows no relaxation): spans >= ``min_s`` where the logged current stays within 2 % of the
+        record's largest of its value at the span's start and is within 2 % of zero (a sensor offset leaves a
+        rest a rest)."""
         imax = max(float(np.abs(i).max()), 1e-9)
         dev = np.abs(np.diff(i, prepend=i[0]))
         still = dev <= 0.02 * imax
@@ -479,17 +480,18 @@ class CellModel(CalibrationModel):
         the SOC swing, and whether a capacity / a current offset can be told from the slow branch."""
         rests = list(getattr(self, "rests_s", []))
         tmax = getattr(self, "tau2_max_s", None)
-        two = self.base.r2_scale > 0.0 or "second_rc_branch" in self.effects
+        two = self.base.r2_scale > 0.0      # the nominal declares the slow branch (else: the effect's)
         out = {"rests_after_current_s": rests, "soc_swing_frac": float(getattr(self, "soc_swing", float("nan"))),
                "slow_branch_tau_max_s": tmax,
                "rest_current_a": getattr(self, "rest_current", None)}
         out["slow_branch_tau_nominal_s"] = float(getattr(self, "tau2_nominal_s", float("nan")))
         if tmax is None:
-            out["statement"] = ((f"the record's longest rest after current ({max(rests):.0f} s) is shorter than the "
-                                 f"slow RC branch's time constant ({out['slow_branch_tau_nominal_s']:.0f} s)" if rests
-                                 else "the record has no rest (>= 60 s) after current")
-                                + ": the slow relaxation is not resolved, so a capacity error or a current offset "
-                                "cannot be told apart from it" + ("" if two else " (the nominal has one RC branch)"))
+            what = (f"the record's longest rest after current ({max(rests):.0f} s) is shorter than the slow RC "
+                    f"branch's time constant ({out['slow_branch_tau_nominal_s']:.0f} s)" if rests
+                    else "the record has no rest (>= 60 s) after current")
+            one = "" if two else " (the nominal has one RC branch: the time constant is the second_rc_branch effect's)"
+            out["statement"] = (f"{what}: the slow relaxation is not resolved, so a capacity error or a current "
+                                f"offset cannot be told apart from it{one}")
         else:
             out["statement"] = (f"the slow RC branch's time constant is limited to the longest rest, {tmax:.0f} s "
                                 f"(longer relaxations are a series capacitor: a capacity); SOC swing "
