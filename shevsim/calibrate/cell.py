@@ -465,13 +465,16 @@ class CellModel(CalibrationModel):
     REST_OFFSET_SE = 5.0
 
     def measured_params(self, ctx) -> dict:
-        """Parameters this record measures directly: the current-sensor offset, when the logged current in the
-        rests (after current has flowed) differs from zero by more than ``REST_OFFSET_SE`` standard errors
-        of its median - a cell at rest carries no current, so what the sensor logs there is its offset."""
+        """Parameters this record measures directly: the current-sensor offset, whenever the record has rests
+        after current (>= 30 samples) - a cell at rest carries no current, so what the sensor logs there is
+        its offset: the median logged current, with its standard error.  ``significant``: it differs from
+        zero by more than ``REST_OFFSET_SE`` standard errors (else the rests measure the offset as zero, and
+        the ``current_offset`` effect cannot be named)."""
         rc = getattr(self, "rest_current", None)
-        if rc is None or not abs(rc["value"]) > self.REST_OFFSET_SE * rc["se"]:
+        if rc is None:
             return {}
         return {"current_offset_a": {"value": rc["value"], "se": rc["se"],
+                                     "significant": bool(abs(rc["value"]) > self.REST_OFFSET_SE * rc["se"]),
                                      "how": f"the median logged current over {rc['duration_s']:.0f} s of rests "
                                             f"({rc['n']} samples)"}}
 

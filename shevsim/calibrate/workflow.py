@@ -72,7 +72,8 @@ Parameters the record measures directly (``CalibrationModel.measured_params``, e
 offset read in the rests of a cell record): the parameter is held within its measurement's +-3 standard
 errors, and its effect is not held to the ``MIN_GAIN`` held-out gain (its parameter is not inferred from
 the residual): it passes when it improves the held-out error of its channels at all, worsens no channel by
-more than ``MAX_WORSEN`` and lowers the BIC by ``MIN_DBIC``.  The measurement is in the report
+more than ``MAX_WORSEN`` and lowers the BIC by ``MIN_DBIC``; measured as zero (not ``significant``), it
+does not pass.  The measurement is in the report
 (``measured_parameters``).
 
 Sample timing (:mod:`shevsim.calibrate.timing`): the record's declared ``sample_convention`` moves the
@@ -608,8 +609,14 @@ class _Run:
             why.append(f"a channel's held-out RMSE rises {fr.worsen:.1%}")
         if fr.dbic > -MIN_DBIC:
             why.append(f"dBIC {fr.dbic:+.1f} > -{MIN_DBIC:g}")
+        # measured as zero: the record's own measurement says the effect is absent, whatever the fit gains
+        absent = [k for k in eff_params if k in f.measured and not f.measured[k].get("significant", True)]
         halved = [] if weak else [c for c in (own or f.channels) if rm[c]["holdout"] <= HALVING * cm[c]["holdout"]]
-        fr.passed = not why or (bool(halved) and fr.worsen <= MAX_WORSEN)
+        fr.passed = not absent and (not why or (bool(halved) and fr.worsen <= MAX_WORSEN))
+        if absent:
+            why.insert(0, "measured as zero: " + "; ".join(
+                f"{k} = {f.measured[k]['value']:.3g} +- {f.measured[k]['se']:.2g} from {f.measured[k]['how']}"
+                for k in absent))
         bad = [x for e in effs for x in self.implausible(e, fr.params)]
         if fr.passed and bad:
             # it improves the fit only with parameters no cell / vehicle / engine has: not the explanation

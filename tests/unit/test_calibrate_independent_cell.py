@@ -244,7 +244,10 @@ def test_rest_spans_and_the_rest_current_are_what_a_lab_reads():
                       "se": 0.005 / math.sqrt(1000), "n": 1000, "duration_s": 1000.0}
     got = m.measured_params({})["current_offset_a"]
     assert got["value"] == pytest.approx(0.05, abs=0.001)
-    m.rest_current["value"] = 0.0002                     # within 5 standard errors of zero: not a measurement
+    assert got["significant"]
+    m.rest_current["value"] = 0.0002                     # within 5 standard errors of zero: measured as zero
+    assert not m.measured_params({})["current_offset_a"]["significant"]
+    m.rest_current = None                                # no rest after current: nothing measured
     assert m.measured_params({}) == {}
 
 
@@ -252,7 +255,8 @@ def test_pybamm_swing_capacity_named_within_5_percent():
     rep = _cell("capacity_swing", effects=SWING_EFFECTS)
     res = rep["record_resolution"]
     assert 500.0 < res["slow_branch_tau_max_s"] < 700.0 and res["soc_swing_frac"] > 0.5
-    assert rep["measured_parameters"] == {}              # the rests carry no current: no offset measured
+    off = rep["measured_parameters"]["current_offset_a"]     # the rests carry no current: measured as zero
+    assert not off["significant"] and abs(off["value"]) < 0.002
     assert rep["selected_effects"] == ["capacity"], rep["selected_effects"]
     cap = rep["final_parameters"]["capacity_ah"]
     assert cap == pytest.approx(_cell_truth("capacity_swing")["capacity_ah"], rel=0.05), cap
@@ -263,7 +267,7 @@ def test_pybamm_swing_current_offset_named_with_the_offset_its_rests_measure():
     rep = _cell("current_offset_swing", effects=SWING_EFFECTS)
     truth = _cell_truth("current_offset_swing")["current_offset_a"]
     meas = rep["measured_parameters"]["current_offset_a"]
-    assert meas["value"] == pytest.approx(truth, rel=0.25)
+    assert meas["significant"] and meas["value"] == pytest.approx(truth, rel=0.25)
     assert rep["selected_effects"] == ["current_offset"], rep["selected_effects"]
     assert rep["final_parameters"]["current_offset_a"] == pytest.approx(truth, rel=0.25)
     # the measured offset explains the voltage: held-out error down by a quarter or more
@@ -272,7 +276,7 @@ def test_pybamm_swing_current_offset_named_with_the_offset_its_rests_measure():
 
 def test_no_effect_swing_record_names_no_physical_effect():
     rep = _cell("none_swing", effects=SWING_EFFECTS)
-    assert rep["measured_parameters"] == {}
+    assert not rep["measured_parameters"]["current_offset_a"]["significant"]
     _check_no_effect(rep)
 
 
