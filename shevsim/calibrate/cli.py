@@ -3,7 +3,8 @@
 
 ``--sample-convention`` says what a logged value stands for (default ``instantaneous``: the value at the
 sample time); a time shift between inputs and outputs is fitted as the ``timing`` effect of every model.
-``--sensor-noise`` declares a channel's sensor noise (1 sigma, SI) as its noise floor; otherwise it is
+``--sensor-noise`` declares a channel's sensor noise (1 sigma, SI) as its sensor floor, or a measured
+input's (e.g. ``speed_mps=0.02``), which the model carries into the floor of its outputs; otherwise it is
 estimated (quiet segments, a local smoother; :mod:`shevsim.calibrate.timing`) and the method is reported.
 
 ``--params`` TOML::
@@ -68,8 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="what a logged value stands for: the value at the sample time (default), the mean over "
                          "the period ending at it, or over the period starting at it (stated in the report)")
     ap.add_argument("--sensor-noise", action="append", default=[], metavar="CHANNEL=VALUE",
-                    help="declared sensor noise (1 sigma, SI) of a channel, used as its noise floor (otherwise "
-                         "estimated from quiet segments and a local smoother; the method is stated)")
+                    help="declared sensor noise (1 sigma, SI) of an output channel (its sensor floor) or of a "
+                         "measured input (propagated through the model into the outputs' floor); otherwise "
+                         "estimated from quiet segments and a local smoother; the method is stated")
     ap.add_argument("--effects", nargs="+", help="restrict the candidate effects to these names")
     ap.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     ap.add_argument("--decimate", type=_at_least_one, default=1, metavar="K",

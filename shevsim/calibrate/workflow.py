@@ -54,9 +54,13 @@ Steps (:func:`run_workflow`):
    An effect that acts only on channels whose nominal held-out residual is within ``AT_NOISE`` = 1.5x their
    noise floor is not a candidate (there is nothing there for it to explain; listed in the report).
 6. **Refit and report**: ``report.json``, ``report.md`` and PNG plots in the output directory, all
-   written atomically (temp file + ``os.replace``).  The noise floor of each channel is the sensor noise
+   written atomically (temp file + ``os.replace``).  The noise floor of each channel is its sensor noise
    (:func:`shevsim.calibrate.timing.sensor_noise_floor`: declared, or the smallest of a quiet-segment, a
-   local-smoother and a first-difference estimate; the method is reported), so it holds on dynamic signals.
+   local-smoother and a first-difference estimate; the method is reported), so it holds on dynamic signals,
+   plus, in quadrature, the measured inputs' noise propagated through the nominal model
+   (:class:`shevsim.calibrate.timing.PropagatedInputNoise`): what a correct model cannot remove.  Both parts
+   are reported.  The combined floor judges the baseline failure, ``unexplained`` (the final model's floor)
+   and the timing rule; the ``AT_NOISE`` gate uses the sensor floor (:meth:`_Run.at_noise_floor`).
    Channels whose final held-out residual still exceeds 3x the noise floor with a significant correlation
    are listed under ``unexplained``; a nominal model whose held-out error is more than
    ``BASELINE_FAILURE_RATIO`` = 10x the noise floor is reported under ``baseline_failure`` (channel, ratio,

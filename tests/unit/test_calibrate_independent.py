@@ -228,6 +228,12 @@ def test_noise_floor_includes_the_inputs_noise_propagated_through_the_model(tmp_
         held_mask |= (t >= a) & (t <= b)
     assert nf["propagated_inputs"]["value"] == pytest.approx(hand(held_mask) * speed["value"] / 0.02, rel=0.2)
     assert nf["value"] == pytest.approx(math.hypot(30.0, nf["propagated_inputs"]["value"]))
+    # a declared speed noise (--sensor-noise speed_mps=0.02) is propagated as given
+    rep_d = run_workflow("vehicle", data, load_params_toml(nominal), plots=False, effects=[],
+                         sensor_noise={"power_w": 30.0, "speed_mps": 0.02})
+    pd_ = rep_d["noise_floor"]["power_w"]["propagated_inputs"]
+    assert pd_["inputs"]["speed_mps"]["method"] == "declared"
+    assert pd_["value"] == pytest.approx(hand(held_mask), rel=0.2)
     held = rep["rmse_before"]["power_w"]["holdout"]
     assert held > 10 * 30.0                     # the sensor floor alone would call this correct model a failure
     assert rep["baseline_failure"] == [] and held < 2.0 * nf["value"]
