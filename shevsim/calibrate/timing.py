@@ -196,22 +196,23 @@ class PropagatedInputNoise:
 
     ``floors``: ``{input column: 1-sigma noise}``.  The record is copied ``seeds`` times with independent
     white noise (fixed seeds: deterministic) at those levels added to the input columns, and each copy is
-    prepared by a shallow copy of the model (``prepare`` may set record-dependent state on the model; the
-    caller's model is left as it was).  :meth:`floor` simulates every copy at the given parameter values and
+    prepared by a throw-away shallow copy of the model: ``prepare`` may set record-derived state on the model
+    (the cell's initial SOC, knots, rests), which stays the original record's - only the prepared input
+    arrays differ.  :meth:`floor` simulates every copy with ``model`` at the given parameter values and
     returns, per output channel, the rms over the seeds and samples of the change of the prediction.
     """
 
     def __init__(self, model, data, floors: dict, seeds: int = N_INPUT_SEEDS):
         self.floors = {k: float(v) for k, v in floors.items() if math.isfinite(v) and v > 0}
         self.seeds = seeds if self.floors else 0
+        self.model = model
         self.copies = []
         for k in range(self.seeds):
             rng = np.random.default_rng([INPUT_NOISE_SEED, k])
             df = data.df.copy()
             for c, sd in self.floors.items():
                 df[c] = df[c].to_numpy(float) + rng.normal(0.0, sd, len(df))
-            m = copy.copy(model)
-            self.copies.append((m, m.prepare(dataclasses.replace(data, df=df))))
+            self.copies.append(copy.copy(model).prepare(dataclasses.replace(data, df=df)))
 
     @property
     def method(self) -> str:
@@ -228,8 +229,8 @@ class PropagatedInputNoise:
         if not self.copies:
             return {c: 0.0 for c in channels}
         acc = {c: [] for c in channels}
-        for m, ctx in self.copies:
-            p = simulate(m, ctx, values)
+        for ctx in self.copies:
+            p = simulate(self.model, ctx, values)
             for c in channels:
                 d = np.asarray(p[c], float) - np.asarray(pred[c], float)
                 if where is not None:
