@@ -207,17 +207,24 @@ class PropagatedInputNoise:
         self.seeds = seeds if self.floors else 0
         self.model = model
         self.copies = []
+        self.failed = None
         for k in range(self.seeds):
             rng = np.random.default_rng([INPUT_NOISE_SEED, k])
             df = data.df.copy()
             for c, sd in self.floors.items():
                 df[c] = df[c].to_numpy(float) + rng.normal(0.0, sd, len(df))
-            self.copies.append(copy.copy(model).prepare(dataclasses.replace(data, df=df)))
+            try:
+                self.copies.append(copy.copy(model).prepare(dataclasses.replace(data, df=df)))
+            except (DataError, ArithmeticError, ValueError) as exc:   # said in the method, never hidden
+                self.failed, self.copies = f"{type(exc).__name__}: {exc}", []
+                break
 
     @property
     def method(self) -> str:
         if not self.floors:
             return "none (no measured input with a noise floor)"
+        if self.failed:
+            return f"none: the record with its inputs re-noised could not be prepared ({self.failed})"
         return (f"Monte Carlo: the inputs ({', '.join(f'{c} +- {v:.3g}' for c, v in self.floors.items())}) "
                 f"re-noised with {self.seeds} fixed seeds, rms of the prediction's change over the held-out samples")
 
