@@ -58,6 +58,9 @@ class Effect:
     neutral: Mapping[str, float]
     channels: tuple[str, ...]
     starts: Any = None  # callable(ctx, base_values) -> list[dict] or None
+    #: the channels on which the effect must show itself (its held-out gain >= MIN_GAIN there; None: all of
+    #: ``channels``): a resistance's temperature law acts on the heat too, but it is seen in the voltage
+    evidence: tuple[str, ...] | None = None
 
 
 class CalibrationModel:
@@ -165,6 +168,12 @@ class CalibrationModel:
         else:
             out.append("units or sign of an input column (check --map, --current-sign / --power-sign)")
         return out
+
+    def effect_evidence(self, effect: str, ctx: dict, values: dict, meas: dict) -> dict | None:
+        """A check of what ``effect`` claims, on the record itself, beyond a better fit (None: no check).
+        Returns ``{"ok": bool, "statement": str, "evidence": {...}}``; a candidate that fits better but whose
+        claim the record does not show (``ok`` False) is not selected, and the report says why."""
+        return None
 
     def param_bounds(self, ctx: dict) -> dict:
         """Data-dependent bounds overriding the declared ones (name -> (lo, hi))."""
