@@ -35,11 +35,12 @@ Steps (:func:`run_workflow`):
    samples the corrected BIC counts, so the BIC alone vetoes exactly the effects that matter most.
    In both cases (d) the gain must also be at least ``MIN_GAIN`` on the channels the effect acts on
    (``Effect.evidence``, default ``Effect.channels``; for a pair, each effect over the current model and
-   over the other one alone): a
-   gain that shows only on other channels
-   comes from the refit of the declared parameters (the nominal's compromise between channels coupled
-   through them: an equivalent circuit's heat follows resistances bent to a voltage model-form error),
-   not from the effect.  An effect that cannot act on the channels a model's model-form terms are computed
+   over the other one alone): a gain that shows only on other channels comes from the refit of the declared
+   parameters (the nominal's compromise between channels coupled through them: an equivalent circuit's heat
+   follows resistances bent to a voltage model-form error), not from the effect.  What an effect claims is
+   also checked on the record itself where the model can (:meth:`CalibrationModel.effect_evidence`: the
+   cell's cooling change and reversible heat against the record's own energy balance); a candidate whose
+   claim the record does not show does not pass, and the report says why.  An effect that cannot act on the channels a model's model-form terms are computed
    from (:meth:`CalibrationModel.model_form_terms`, ``model_form_sources``: the cell's temperature term is
    the heat of its own voltage error) is judged after those terms are fitted out of the residual on the
    training part: a thermal-only effect must explain what the heat of the circuit's voltage error does not
