@@ -570,8 +570,8 @@ class _Run:
         self.propagation = PropagatedInputNoise(self.model, self.data,
                                                 {c: v["value"] for c, v in self.input_floors.items()})
         prop = self.propagation.floor(f.simulate_in, base.params, base.pred, f.channels, self.hold)
-        self.noise = {c: combined_floor(sensor[c], prop[c], self.propagation.method, self.input_floors)
-                      for c in f.channels}
+        self.noise = {c: combined_floor(sensor[c], prop[c], self.propagation.method, self.input_floors,
+                                        self.propagation.non_proportional.get(c, 0.0)) for c in f.channels}
         self.say("noise floors: " + ", ".join(
             f"{c} {_g(n['value'])} (sensor {_g(n['sensor']['value'])} {n['sensor']['method']}, inputs propagated "
             f"{_g(n['propagated_inputs']['value'])})" for c, n in self.noise.items()))
