@@ -24,6 +24,12 @@ rest voltage.
 Declared (fitted) parameters: ``rs_scale, r1_scale, c1_scale`` (and ``r2_scale, c2_scale`` when the
 nominal has the second branch), ``kt_w_mk``, ``cp_j_kgk``, ``h_conv_factor``.
 
+What the record resolves (:meth:`CellModel.record_resolution`, in the report): the slow branch's time
+constant R2 C2 is limited to the record's longest rest after current when that rest is at least the
+nominal slow branch's own time constant (a relaxation no rest shows decaying is a series capacitor - a
+capacity); and the rests measure the current-sensor offset (:meth:`CellModel.measured_params`: the median
+logged current at rest; the calibration holds ``current_offset_a`` there).
+
 Effects: :data:`CELL_EFFECTS`, a list of functions ``f(model) -> Effect | None`` (None: does not apply
 to this nominal model).  Add an effect with one function and one entry; its parameters must be
 battery parameters (or ``name[k]`` elements of a list parameter).
