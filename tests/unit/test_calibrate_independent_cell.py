@@ -275,6 +275,13 @@ def test_no_effect_swing_record_names_no_physical_effect():
 
 
 @pytest.mark.slow
+def test_pybamm_swing_capacity_named_whole_library():
+    rep = _cell("capacity_swing")
+    assert rep["selected_effects"] == ["capacity"], rep["selected_effects"]
+    assert rep["final_parameters"]["capacity_ah"] == pytest.approx(4.25, rel=0.05)
+
+
+@pytest.mark.slow
 def test_pybamm_swing_current_offset_named_whole_library():
     rep = _cell("current_offset_swing")
     assert rep["selected_effects"] == ["current_offset"], rep["selected_effects"]
