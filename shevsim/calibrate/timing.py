@@ -57,7 +57,10 @@ half amplitude, ``N_INPUT_SEEDS`` fixed seeds; the rms over the held-out samples
 prediction's change proportional to the noise; the model's own simulation, so any model - vehicle, cell,
 engine - with its nonlinearity, time stepping and sample timing).  An input's floor
 (:func:`input_noise_floor`) is ``declared`` (``--sensor-noise`` accepts input channels) or the
-``smoother`` estimate; the ``quiet`` estimate is not used for an input: its quiet segments are selected on
+``smoother`` estimate, taken as zero (method ``none``, no noise to propagate) below ``MIN_REL_INPUT_NOISE``
+= 1e-9 x the channel's scale (the larger of its rms and its range: a constant ambient's 6e-15 degC, a
+noise-free command's 1.6e-10 W are floating-point rounding, not a sensor's noise; a 24-bit ADC resolves
+6e-8 of its range); the ``quiet`` estimate is not used for an input: its quiet segments are selected on
 that input's own values (standstill: speed < 0.05 m/s) and a speed logger clips at zero, so the noise it
 sees is truncated (0.008 m/s on the FASTSim records whose speed noise is 0.02 m/s).
 """
@@ -78,6 +81,8 @@ MAX_SHIFT_SAMPLES = 4.0
 MIN_QUIET = 30
 SG_WINDOW = 7
 N_INPUT_SEEDS = 4
+GAP_STEPS = 10.0             # band_limited_read: a step over this x the median step splits the record
+MIN_REL_INPUT_NOISE = 1e-9   # an input noise below this x the channel's scale is rounding (a 24-bit ADC: 6e-8)
 INPUT_NOISE_SEED = 24
 
 
@@ -120,13 +125,28 @@ def band_limited_read(y: np.ndarray, t: np.ndarray, offset_s: float) -> np.ndarr
     all-pass, every frequency keeps its amplitude whatever the offset (the Nyquist bin of the even length
     keeps its real part).  Beyond the record's ends the read is the mirror image.  An irregular ``t`` is
     delayed on its median-step grid and read back linearly; a channel with non-finite values is read by
-    linear interpolation (the FFT would spread them over the whole channel).
+    linear interpolation (the FFT would spread them over the whole channel).  A record with gaps (a step
+    over ``GAP_STEPS`` x the median step: a logger stopped overnight) is split there and each segment read
+    on its own (mirrored at its ends), so the grid is at most ``GAP_STEPS`` x the samples, whatever the
+    gaps' length (on the whole span's grid a one-day gap made each read of 1 800 samples 0.5 s).
     """
     y = np.asarray(y, float)
+    t = np.asarray(t, float)
     n = y.size
     if n < 4 or not np.all(np.isfinite(y)):
         return np.interp(t + offset_s, t, y)
     dt = median_dt(t)
+    cuts = np.flatnonzero(np.diff(t) > GAP_STEPS * dt) + 1
+    if cuts.size:
+        return np.concatenate([band_limited_read(ys, ts, offset_s) if ts.size >= 4 else
+                               np.interp(ts + offset_s, ts, ys)
+                               for ys, ts in zip(np.split(y, cuts), np.split(t, cuts))])
+    return _read_segment(y, t, offset_s, dt)
+
+
+def _read_segment(y: np.ndarray, t: np.ndarray, offset_s: float, dt: float) -> np.ndarray:
+    """:func:`band_limited_read` of one gap-free segment on the grid of step ``dt``."""
+    n = y.size
     tg = t[0] + dt * np.arange(n)
     regular = bool(np.allclose(tg, t, rtol=0.0, atol=1e-6 * dt))
     if not regular:
@@ -184,12 +204,21 @@ def sensor_noise_floor(meas: np.ndarray, residual: np.ndarray, quiet, declared: 
 
 def input_noise_floor(y: np.ndarray, declared: float | None = None) -> dict:
     """``{"value", "method", "estimates"}``: the noise floor of a measured *input* (module docstring): declared,
-    or the local-smoother estimate (value 0 when the channel has none, e.g. a noise-free command)."""
+    or the local-smoother estimate; value 0 (method ``none``, saying why) when the channel has none: a
+    noise-free command, a constant, or an estimate below ``MIN_REL_INPUT_NOISE`` x the channel's scale
+    (max of its rms and its range) - floating-point rounding, not noise."""
     if declared is not None:
         return {"value": float(declared), "method": "declared", "estimates": {"declared": float(declared)}}
-    est = smoother_noise(np.asarray(y, float))
-    ok = math.isfinite(est) and est > 0
-    return {"value": est if ok else 0.0, "method": "smoother" if ok else "none", "estimates": {"smoother": est}}
+    y = np.asarray(y, float)
+    est = smoother_noise(y)
+    fin = y[np.isfinite(y)]
+    scale = max(float(np.sqrt(np.mean(fin * fin))), float(np.ptp(fin))) if fin.size else 0.0
+    if math.isfinite(est) and est > MIN_REL_INPUT_NOISE * scale:
+        return {"value": est, "method": "smoother", "estimates": {"smoother": est}}
+    why = ("none: no estimate (too few samples)" if not math.isfinite(est) else
+           f"none: the smoother estimate {est:.3g} is below {MIN_REL_INPUT_NOISE:g} x the channel's scale "
+           f"{scale:.3g} (numerically zero: no noise to propagate)")
+    return {"value": 0.0, "method": why, "estimates": {"smoother": est, "scale": scale}}
 
 
 class PropagatedInputNoise:

@@ -69,8 +69,11 @@ Steps (:func:`run_workflow`):
    and the timing rule; the ``AT_NOISE`` gate uses the sensor floor (:meth:`_Run.at_noise_floor`).
    Channels whose final held-out residual still exceeds 3x the noise floor with a significant correlation
    are listed under ``unexplained``; a nominal model whose held-out error is more than
-   ``BASELINE_FAILURE_RATIO`` = 10x the noise floor is reported under ``baseline_failure`` (channel, ratio,
-   correlated signals, likely causes) and in words.  A selected effect whose parameter ends on a bound or
+   ``BASELINE_FAILURE_RATIO`` = 10x the combined noise floor, or at least ``SENSOR_FAILURE_RATIO`` = 100x the
+   sensor floor alone, is reported under ``baseline_failure`` (channel, both ratios, the rules it broke,
+   correlated signals, likely causes) and in words.  The second rule does not depend on the nominal: the
+   propagated part is the nominal's own response to the input noise, so a grossly wrong nominal inflates
+   its own combined floor (the 15.5 t truck on a car's record: 8.7x its combined floor, 790x the sensor's).  A selected effect whose parameter ends on a bound or
    outside its plausible range (``Param.plausible``) is removed, the model refitted without it, and the
    effect reported under ``model_form_discrepancy`` with that evidence; a baseline failure the selected
    effects do not fix is stated there too.  A selected time shift (``timing``) that removes no more than
@@ -118,7 +121,8 @@ MIN_GAIN = 0.10
 MAX_WORSEN = 0.10
 DROP_TOL = 0.03        # backward elimination: drop an effect when removing it costs < 3 % held-out score
 HALVING = 0.5          # an effect that halves a channel's held-out RMSE (and worsens none > MAX_WORSEN) passes
-BASELINE_FAILURE_RATIO = 10.0   # baseline held-out RMSE / sensor-noise floor above which the nominal model "fails"
+BASELINE_FAILURE_RATIO = 10.0   # baseline held-out RMSE / combined noise floor above which the nominal model "fails"
+SENSOR_FAILURE_RATIO = 100.0    # ... or / the sensor floor alone, at or above which it fails whatever the model
 MIN_DBIC = 10.0
 TIE = 0.02
 N_BLOCKS = 10
@@ -925,21 +929,32 @@ class _Run:
                                             "selected model does not explain"})
             db = diag_before[c]["holdout"]
             ratio = db["rmse"] / nf if nf > 0 else float("inf")
-            if ratio > BASELINE_FAILURE_RATIO:
+            # the sensor floor does not depend on the nominal; the propagated part does (a wrong nominal's own
+            # amplification of the input noise: the 15.5 t truck on a car's record, 8.7x its combined floor at
+            # 790x the sensor's), so a residual SENSOR_FAILURE_RATIO x the sensor floor fails whatever the model
+            sf = self.noise[c]["sensor"]["value"]
+            ratio_s = db["rmse"] / sf if math.isfinite(sf) and sf > 0 else float("nan")
+            rules = ([f"> {BASELINE_FAILURE_RATIO:g}x the combined noise floor"] if ratio > BASELINE_FAILURE_RATIO
+                     else []) + ([f">= {SENSOR_FAILURE_RATIO:g}x the sensor noise floor"]
+                                 if ratio_s >= SENSOR_FAILURE_RATIO else [])
+            if rules:
+                ratio_s_after = dh["rmse"] / sf if math.isfinite(sf) and sf > 0 else float("nan")
                 failure.append({
                     "channel": c, "holdout_rmse": db["rmse"], "noise_floor": nf,
                     "noise_floor_method": self.noise[c]["method"], "ratio_to_noise_floor": ratio,
-                    "sensor_noise_floor": self.noise[c]["sensor"]["value"],
+                    "sensor_noise_floor": sf,
                     "propagated_input_floor": self.noise[c]["propagated_inputs"]["value"],
-                    "ratio_to_sensor_floor": (db["rmse"] / self.noise[c]["sensor"]["value"]
-                                              if self.noise[c]["sensor"]["value"] > 0 else float("inf")),
+                    "ratio_to_sensor_floor": ratio_s, "rules": rules,
                     "bias": db["bias"], "drift_per_hour": db["drift_per_hour"],
                     "correlated_signals": db["correlations"][:4], "likely_causes": self.model.likely_causes(c, db, self.data),
-                    "fixed_by_selected_effects": bool(dh["rmse"] <= BASELINE_FAILURE_RATIO * max(nfa, 1e-300)),
-                    "noise_floor_after": nfa, "ratio_after": dh["rmse"] / nfa if nfa > 0 else float("inf")})
+                    "fixed_by_selected_effects": bool(dh["rmse"] <= BASELINE_FAILURE_RATIO * max(nfa, 1e-300)
+                                                      and not ratio_s_after >= SENSOR_FAILURE_RATIO),
+                    "noise_floor_after": nfa, "ratio_after": dh["rmse"] / nfa if nfa > 0 else float("inf"),
+                    "ratio_to_sensor_floor_after": ratio_s_after})
         for b in failure:
             self.say(f"baseline failure: {b['channel']} held-out RMSE {b['holdout_rmse']:.4g} = "
-                     f"{b['ratio_to_noise_floor']:.0f}x the noise floor ({b['noise_floor_method']}); likely: "
+                     f"{b['ratio_to_noise_floor']:.1f}x the combined noise floor ({b['noise_floor_method']}), "
+                     f"{b['ratio_to_sensor_floor']:.0f}x the sensor floor ({'; '.join(b['rules'])}); likely: "
                      f"{'; '.join(b['likely_causes'][:2])}")
         return unexplained, failure
 
@@ -1061,9 +1076,12 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
     unexplained, baseline_failure = run.verdicts(diag_before, diag_after, final)
     for b in baseline_failure:
         if not b["fixed_by_selected_effects"]:
-            discrepancy.append({"channel": b["channel"], "evidence": [{"ratio_to_noise_floor_after": b["ratio_after"]}],
-                                "statement": f"{b['channel']}: the held-out residual stays {b['ratio_after']:.0f}x the "
-                                             f"noise floor after the selected effects: the model's form does not "
+            discrepancy.append({"channel": b["channel"], "evidence": [{"ratio_to_noise_floor_after": b["ratio_after"],
+                                                                      "ratio_to_sensor_floor_after":
+                                                                          b["ratio_to_sensor_floor_after"]}],
+                                "statement": f"{b['channel']}: the held-out residual stays {b['ratio_after']:.1f}x the "
+                                             f"noise floor ({b['ratio_to_sensor_floor_after']:.0f}x the sensor floor) "
+                                             f"after the selected effects: the model's form does not "
                                              f"explain this record (read any selected effect as a partial repair)"})
     replay, overlay = run.close_loop(selected, final, out_dir)
     at_bounds, ident = run.bounds_and_identifiability(selected, final)
@@ -1275,10 +1293,12 @@ def render_markdown(rep: dict) -> str:
               "noise floor; read the selected effects as a partial repair, not a diagnosis):"]
         for b in rep["baseline_failure"]:
             cs = ", ".join(f"`{x['signal']}` (r = {x['r']:+.2f})" for x in b["correlated_signals"][:3])
-            L.append(f"- `{b['channel']}`: held-out RMSE {_g(b['holdout_rmse'])} = {b['ratio_to_noise_floor']:.0f}x the "
+            L.append(f"- `{b['channel']}`: held-out RMSE {_g(b['holdout_rmse'])} = {b['ratio_to_noise_floor']:.1f}x the "
                      f"noise floor {_g(b['noise_floor'])}"
                      + (f" (sensor {_g(b['sensor_noise_floor'])} (+) inputs propagated {_g(b['propagated_input_floor'])})"
+                        f", {b['ratio_to_sensor_floor']:.0f}x the sensor floor alone"
                         if "sensor_noise_floor" in b else "")
+                     + (f" (fails: {'; '.join(b['rules'])})" if b.get("rules") else "")
                      + f"; most correlated with {cs or 'nothing'}; likely causes: "
                      + "; ".join(b["likely_causes"])
                      + (" (the selected effects bring it within range)" if b["fixed_by_selected_effects"] else ""))
