@@ -336,8 +336,10 @@ class CellModel(CalibrationModel):
         self.ocv_base = (np.array(tables._ocv.xs, float), np.array(tables._ocv.ys, float))
         # the record's rests after current has flowed: the slow time constant it resolves and the current a
         # sensor logs at zero current (record_resolution, measured_params)
-        spans = self._rest_spans(t, i)
+        refused: list = []
+        spans = self._rest_spans(t, i, df["voltage_v"].to_numpy(float), self.base.capacity_ah, why=refused)
         self.rests_s = [float(t[b] - t[a]) for a, b in spans]
+        self.rests_refused = refused
         # the slow RC branch's time constant is limited to the longest rest: a relaxation that no rest shows
         # decaying cannot be told from a series capacitor - that is, from a capacity or a current offset
         # (over a swing where the OCV is near linear in the charge).  A record whose rests are all shorter than
@@ -358,8 +360,11 @@ class CellModel(CalibrationModel):
             med = float(np.median(ir))
             # spread: the MAD's std, or the plain std when the logging is quantised (MAD 0)
             sd = 1.4826 * float(np.median(np.abs(ir - med))) or float(np.std(ir))
-            self.rest_current = {"value": med, "se": 1.2533 * sd / math.sqrt(ir.size), "n": int(ir.size),
-                                 "duration_s": float(sum(self.rests_s))}
+            # correlated samples (a fast logger's filtered noise) count less than independent ones: the effective
+            # number of samples of each rest is its length over its integrated autocorrelation time
+            n_eff = sum((b - a + 1) / self._tau_int(i[a:b + 1]) for a, b in spans)
+            self.rest_current = {"value": med, "se": 1.2533 * sd / math.sqrt(max(n_eff, 1.0)), "n": int(ir.size),
+                                 "n_eff": float(n_eff), "duration_s": float(sum(self.rests_s))}
         self.effects = self._make_effects()
         tg, (ig, tag), _h, resampled = sampling_grid(t, i, ta)
         return {"t": t, "i": i, "ta": ta, "tg": tg, "ig": ig, "tag": tag, "resampled": resampled, "d": d, "ix": ix, "n": t.size, "df": df,
@@ -447,29 +452,137 @@ class CellModel(CalibrationModel):
             out["t_core_c"] = otc
         return out
 
+    #: a rest's current level: at most this C-rate (A per A.h of the nominal capacity) - a sensor offset larger
+    #: than C/20 is not an offset the rests are read for
+    REST_LEVEL_C_RATE = 1.0 / 20.0
+    #: the still band around a rest's level: this C-rate (or 6 noise standard deviations, or 2 resolution steps)
+    REST_BAND_C_RATE = 1.0 / 100.0
+    #: a rest's current has no trend (a CV taper decays): the change over the span within this many standard errors
+    REST_TREND_SE = 4.0
+    #: ... or a sensor's own drift: this C-rate over the span (a rest logged in 10 mA steps may step once)
+    REST_DRIFT_C_RATE = 1.0 / 2000.0
+    #: and its voltage relaxes: it moves in the relaxation's direction by more than this many standard errors
+    REST_RELAX_SE = 4.0
+
     @staticmethod
-    def _rest_spans(t, i, min_s: float = 60.0):
+    def _noise(x) -> tuple[float, float]:
+        """``(sd, q)``: the white-noise standard deviation of a smooth signal's samples (MAD of the second
+        differences) and its resolution (the smallest nonzero step)."""
+        x = np.asarray(x, float)
+        d = np.abs(np.diff(x))
+        q = float(d[d > 0].min()) if np.any(d > 0) else 0.0
+        d2 = np.diff(x, 2)
+        sd = 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0) if d2.size else 0.0
+        return sd, q
+
+    @staticmethod
+    def _tau_int(x) -> float:
+        """Integrated autocorrelation time (in samples, >= 1) of ``x`` about its mean: ``1 + 2 sum rho_k``, the sum
+        stopped at the first lag whose autocorrelation is no longer positive (Geyer's initial sequence): the
+        factor by which correlated samples count less than independent ones (``n_eff = n / tau``)."""
+        x = np.asarray(x, float) - float(np.mean(x))
+        n = x.size
+        c0 = float(x @ x)
+        if n < 4 or c0 <= 0.0:
+            return 1.0
+        f = np.fft.rfft(x, 2 * n)
+        ac = np.fft.irfft(f * np.conj(f))[:n] / c0
+        tau = 1.0
+        for k in range(1, n // 4):
+            if ac[k] <= 0.0:
+                break
+            tau += 2.0 * float(ac[k])
+        return max(tau, 1.0)
+
+    @classmethod
+    def _rest_spans(cls, t, i, v=None, capacity_ah: float | None = None, min_s: float = 60.0, why=None):
         """Index spans ``(first, last)`` of the record's rests after current has flowed (a rest before any
-        current shows no relaxation): spans >= ``min_s`` where the logged current stays within 2 % of the
-        record's largest of its value at the span's start and is within 2 % of zero (a sensor offset leaves a
-        rest a rest)."""
-        imax = max(float(np.abs(i).max()), 1e-9)
-        dev = np.abs(np.diff(i, prepend=i[0]))
-        still = dev <= 0.02 * imax
+        current shows no relaxation).  A rest is where the cell carries no current, whatever its sensor logs:
+
+        * the logged current stays at one level (within ``REST_BAND_C_RATE`` of the capacity, or 6 of the
+          channel's own noise standard deviations, or 2 of its resolution steps; a 5-sample running median, so a
+          lone spike does not end a rest) for at least ``min_s``, the level at most ``REST_LEVEL_C_RATE`` of the
+          capacity (a sensor offset, not a charge or discharge);
+        * with no trend: the current's linear change over the span is within ``REST_TREND_SE`` standard errors
+          (autocorrelation counted), 2 resolution steps or ``REST_DRIFT_C_RATE`` of the capacity - a CV taper, whose current decays while the voltage
+          is held at its limit, is not a rest;
+        * and, given the voltage ``v``, the voltage relaxes: it moves, from the span's first tenth to its last,
+          the way a cell relaxes after the current before it (up after a discharge, down after a charge), by more
+          than ``REST_RELAX_SE`` standard errors of the voltage noise (a CV hold keeps the voltage flat; a small
+          constant charge after a charge keeps it rising).
+
+        ``capacity_ah`` (the nominal's) sets the absolute current scale; without it, 1 A h.  ``why``: a list that
+        receives ``(t_start_s, duration_s, reason)`` for each candidate span >= ``min_s`` refused."""
+        from scipy.ndimage import median_filter
+        t, i = np.asarray(t, float), np.asarray(i, float)
         n = i.size
-        moved = np.flatnonzero(np.abs(i) > 0.05 * imax)
-        out, k = [], (int(moved[0]) if moved.size else n)
+        if n < 5:
+            return []
+        cap = float(capacity_ah) if capacity_ah and capacity_ah > 0 else 1.0
+        level_max = cls.REST_LEVEL_C_RATE * cap
+        m = median_filter(i, size=5, mode="nearest")
+        quiet = np.abs(m) <= level_max
+        sd_i, q_i = cls._noise(i[quiet]) if quiet.sum() > 5 else (0.0, 0.0)
+        band = max(cls.REST_BAND_C_RATE * cap, 6.0 * sd_i, 2.0 * q_i)
+        moved = np.flatnonzero(~quiet)
+        out, k = [], (int(moved[0]) + 1 if moved.size else n)
         while k < n:
-            if not still[k]:
+            if not quiet[k]:
                 k += 1
                 continue
             j = k
-            while j + 1 < n and still[j + 1] and abs(i[j + 1] - i[k]) <= 0.02 * imax:
+            while j + 1 < n and quiet[j + 1] and abs(m[j + 1] - m[k]) <= band:
                 j += 1
-            if t[j] - t[k] >= min_s and abs(np.median(i[k:j + 1])) <= 0.02 * imax:
-                out.append((k, j))
+            if t[j] - t[k] >= min_s:
+                reason = cls._not_a_rest(t, i, v, k, j, q_i, cap)
+                if reason is None:
+                    out.append((k, j))
+                elif why is not None:
+                    why.append((float(t[k]), float(t[j] - t[k]), reason))
             k = j + 1
         return out
+
+    @classmethod
+    def _not_a_rest(cls, t, i, v, k, j, q_i, cap):
+        """Why the still span ``k..j`` is not a rest (None: it is one); see :meth:`_rest_spans`."""
+        ts, xs = t[k:j + 1], i[k:j + 1]
+        tc = ts - ts.mean()
+        slope = float(tc @ (xs - xs.mean())) / max(float(tc @ tc), 1e-300)
+        res = xs - xs.mean() - slope * tc
+        dur = float(ts[-1] - ts[0])
+        se_change = math.sqrt(float(res @ res) / max(xs.size - 2, 1) * cls._tau_int(res) / max(float(tc @ tc), 1e-300)) * dur
+        change = slope * dur
+        if abs(change) > max(cls.REST_TREND_SE * se_change, 2.0 * q_i, cls.REST_DRIFT_C_RATE * cap):
+            held = ""
+            if v is not None:
+                vs = np.asarray(v, float)[k:j + 1]
+                sd_v, q_v = cls._noise(vs)
+                if np.ptp(vs) <= max(6.0 * sd_v, 2.0 * q_v) and change * float(np.median(xs)) < 0.0:
+                    held = " with the voltage held (a CV phase)"
+            return f"the current {'decays' if change * float(np.median(xs)) < 0 else 'drifts'} by {change:+.4g} A{held}"
+        if v is None:
+            return None
+        v = np.asarray(v, float)
+        vs = v[k:j + 1]
+        # the current before the span relative to the span's level, weighted by its recency on the span's own time
+        # scale (what the voltage relaxes from over the span): its sign is the polarisation
+        level = float(np.median(xs))
+        pre = (t >= t[k] - 5.0 * dur) & (np.arange(t.size) < k)
+        if not pre.any():
+            return "no current before it"
+        before = float(np.sum((i[pre] - level) * np.exp((t[pre] - t[k]) / max(dur, 1e-9))))
+        if before == 0.0:
+            return "no current before it"
+        w = max(3, int(0.1 * vs.size))
+        a, c = float(np.mean(vs[:w])), float(np.mean(vs[-w:]))
+        sd_v, q_v = cls._noise(vs)
+        se = sd_v * math.sqrt(2.0 / w)
+        rise = (c - a) * math.copysign(1.0, before)      # + : relaxes (up after a discharge, down after a charge)
+        if rise <= max(cls.REST_RELAX_SE * se, q_v):
+            side = "discharge" if before > 0 else "charge"
+            return (f"the voltage does not relax after the {side} before it ({1e3 * (c - a):+.2f} mV over "
+                    f"{float(ts[-1] - ts[0]):.0f} s)")
+        return None
 
     #: a rest current beyond this many standard errors of its median is a measured sensor offset
     REST_OFFSET_SE = 5.0
@@ -486,7 +599,8 @@ class CellModel(CalibrationModel):
         return {"current_offset_a": {"value": rc["value"], "se": rc["se"],
                                      "significant": bool(abs(rc["value"]) > self.REST_OFFSET_SE * rc["se"]),
                                      "how": f"the median logged current over {rc['duration_s']:.0f} s of rests "
-                                            f"({rc['n']} samples)"}}
+                                            f"({rc['n']} samples, {rc.get('n_eff', rc['n']):.0f} effectively "
+                                            f"independent)"}}
 
     def record_resolution(self) -> dict:
         """What the record can resolve: its rests after current, the slow RC branch's time-constant limit,
