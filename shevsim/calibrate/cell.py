@@ -28,7 +28,12 @@ What the record resolves (:meth:`CellModel.record_resolution`, in the report): t
 constant R2 C2 is limited to the record's longest rest after current when that rest is at least the
 nominal slow branch's own time constant (a relaxation no rest shows decaying is a series capacitor - a
 capacity); and the rests measure the current-sensor offset (:meth:`CellModel.measured_params`: the median
-logged current at rest; the calibration holds ``current_offset_a`` there).
+logged current at rest, its standard error from the rests' effective sample size; the calibration holds
+``current_offset_a`` there).  A rest (:meth:`CellModel._rest_spans`) is where the cell carries no current: the
+logged current at one level no larger than C/20 (absolute thresholds from the nominal capacity and the current
+channel's own noise and resolution, not from the record's peak), without a trend, and the voltage relaxing
+the way a cell relaxes after the current before it - a CV taper (current decaying, voltage held) or a small
+constant charge is not a rest.
 
 Effects: :data:`CELL_EFFECTS`, a list of functions ``f(model) -> Effect | None`` (None: does not apply
 to this nominal model).  Add an effect with one function and one entry; its parameters must be
@@ -610,7 +615,8 @@ class CellModel(CalibrationModel):
         two = self.base.r2_scale > 0.0      # the nominal declares the slow branch (else: the effect's)
         out = {"rests_after_current_s": rests, "soc_swing_frac": float(getattr(self, "soc_swing", float("nan"))),
                "slow_branch_tau_max_s": tmax,
-               "rest_current_a": getattr(self, "rest_current", None)}
+               "rest_current_a": getattr(self, "rest_current", None),
+               "rests_refused": [{"t_s": a, "duration_s": d, "why": w} for a, d, w in getattr(self, "rests_refused", [])]}
         out["slow_branch_tau_nominal_s"] = float(getattr(self, "tau2_nominal_s", float("nan")))
         if tmax is None:
             what = (f"the record's longest rest after current ({max(rests):.0f} s) is shorter than the slow RC "
@@ -623,6 +629,10 @@ class CellModel(CalibrationModel):
             out["statement"] = (f"the slow RC branch's time constant is limited to the longest rest, {tmax:.0f} s "
                                 f"(longer relaxations are a series capacitor: a capacity); SOC swing "
                                 f"{100 * out['soc_swing_frac']:.0f} %")
+        if out["rests_refused"]:
+            r = out["rests_refused"][0]
+            out["statement"] += (f"; {len(out['rests_refused'])} low-current span(s) of >= 60 s are not rests (the "
+                                 f"first, at {r['t_s']:.0f} s for {r['duration_s']:.0f} s: {r['why']})")
         return out
 
     def quiet_mask(self, ctx):

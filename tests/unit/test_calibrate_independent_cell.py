@@ -221,28 +221,133 @@ def test_pybamm_contact_resistance_raises_the_fitted_ohmic_resistance_by_its_val
 SWING_EFFECTS = ["capacity", "current_offset", "ocv_hysteresis"]
 
 
-def test_rest_spans_and_the_rest_current_are_what_a_lab_reads():
-    """No PyBaMM: a current record with a leading rest (no relaxation to see), two rest stops after current
-    (300 s and 600 s) and a logged offset of 50 mA with 5 mA noise."""
+# A small cell of our own for the rest detection (no PyBaMM, not shevsim's cell model): OCV(SOC) + R0 + one RC
+# branch, a charger with CC and CV phases, a logger with a current-sensor offset and noise.
+_ECM_CAP_AH, _ECM_R0, _ECM_R1, _ECM_TAU1 = 5.0, 0.03, 0.015, 60.0
+_ECM_OCV_SOC = np.linspace(0.0, 1.0, 11)
+_ECM_OCV_V = 3.3 + 0.9 * _ECM_OCV_SOC - 0.25 * (1.0 - _ECM_OCV_SOC) ** 4
+
+
+def _ecm_record(steps, dt=1.0, soc0=0.5, v_max=4.1, offset_a=0.0, i_noise=None, v_noise=0.001, seed=0):
+    """Simulate ``steps`` - ``("cc", current_a, duration_s)`` (+ discharge), ``("cv", stop_abs_current_a)`` (hold
+    ``v_max`` until the charge current falls to the stop), ``("rest", duration_s)`` - exactly (the RC branch by
+    its exponential step).  Returns a DataFrame as a cell record: the logged current is the true one + offset +
+    noise (``i_noise``: an array of the logger's noise, or white 5 mA)."""
+    t, cur, volt = [], [], []
+    soc, v1, now = soc0, 0.0, 0.0
+    a = math.exp(-dt / _ECM_TAU1)
+
+    def ocv(s):
+        return float(np.interp(s, _ECM_OCV_SOC, _ECM_OCV_V))
+
+    def step(i):
+        nonlocal soc, v1, now
+        soc -= i * dt / 3600.0 / _ECM_CAP_AH
+        v1 = a * v1 + (1.0 - a) * _ECM_R1 * i
+        now += dt
+        t.append(now)
+        cur.append(i)
+        volt.append(ocv(soc) - v1 - _ECM_R0 * i)
+
+    for s in steps:
+        if s[0] in ("cc", "rest"):
+            i = float(s[1]) if s[0] == "cc" else 0.0
+            for _ in range(int(round(s[-1] / dt))):
+                step(i)
+        else:                                  # CV: the current that holds v_max, until it falls to the stop
+            while True:
+                i = (ocv(soc) - a * v1 - v_max) / (_ECM_R0 + (1.0 - a) * _ECM_R1)
+                if -i <= s[1]:
+                    break
+                step(i)
+    rng = np.random.default_rng(seed)
+    n = len(t)
+    noise = rng.normal(0.0, 0.005, n) if i_noise is None else np.asarray(i_noise)[:n]
+    return pd.DataFrame({"time_s": np.asarray(t) - dt, "current_a": np.asarray(cur) + offset_a + noise,
+                         "voltage_v": np.asarray(volt) + rng.normal(0.0, v_noise, n),
+                         "t_surface_c": 25.0 + rng.normal(0.0, 0.05, n), "t_ambient_c": np.full(n, 25.0)}), \
+        np.asarray(cur)
+
+
+def _ecm_model(df):
+    """The calibration's cell model prepared on the record ``df`` (the real path: rests, offset and its SE)."""
+    from types import SimpleNamespace
     from shevsim.calibrate.cell import CellModel
-    rng = np.random.default_rng(3)
-    t = np.arange(0.0, 2401.0)
-    i = np.zeros(t.size)
-    i[100:700] = 5.0
-    i[1000:1700] = -2.0
-    i_log = i + 0.05 + rng.normal(0.0, 0.005, t.size)
-    spans = CellModel._rest_spans(t, i_log)
-    assert [float(t[b] - t[a]) for a, b in spans] == pytest.approx([299.0, 700.0], abs=2.0)
-    m = CellModel(None)
-    m.rest_current = {"value": float(np.median(np.concatenate([i_log[a:b + 1] for a, b in spans]))),
-                      "se": 0.005 / math.sqrt(1000), "n": 1000, "duration_s": 1000.0}
+    m = CellModel({"capacity_ah": _ECM_CAP_AH, "ocv_soc_frac": list(_ECM_OCV_SOC), "ocv_v": list(_ECM_OCV_V)})
+    m.prepare(SimpleNamespace(df=df))
+    return m
+
+
+_DRIVE = [("cc", 10.0, 30), ("cc", -5.0, 20), ("cc", 6.0, 60), ("cc", 0.0, 20), ("cc", -8.0, 10), ("cc", 10.0, 40)]
+
+
+def test_a_cv_taper_and_a_small_charge_tail_are_not_rests():
+    """The reviewer's record: a 10 A drive, a CC charge to the voltage limit, a CV taper down to 0.15 A, then a
+    -0.15 A tail.  The former rule (current within 2 % of the record's peak) took the taper's end and the tail
+    for a 'rest' logging a -0.15 A 'offset'.  A cell at rest carries no current and relaxes; here the current
+    decays with the voltage held, then charges on with the voltage rising: no rest, no offset measured."""
+    df, i_true = _ecm_record([("rest", 60)] + _DRIVE * 10 + [("cc", -2.5, 600), ("cv", 0.15), ("cc", -0.15, 900)],
+                             soc0=0.6)
+    t, i = df["time_s"].to_numpy(), df["current_a"].to_numpy()
+    cv = int(np.flatnonzero(i_true == -2.5)[-1]) + 1           # the CV phase starts here
+    assert df["voltage_v"].to_numpy()[cv:].min() > 4.09          # the charge reached the limit and held it
+    tail = i[t >= t[-1] - 740.0]
+    # the case the former relative rule took for a rest: still within 2 % of the peak, median -0.15 A
+    assert np.ptp(tail) <= 0.02 * np.abs(i).max() and np.median(tail) == pytest.approx(-0.15, abs=0.005)
+    from shevsim.calibrate.cell import CellModel
+    why: list = []
+    spans = CellModel._rest_spans(t, i, df["voltage_v"].to_numpy(), _ECM_CAP_AH, why=why)
+    assert not [s for s in spans if s[1] >= cv], (spans, why)
+    assert any("CV phase" in r for _t, _d, r in why), why       # the taper was seen and refused as a CV phase
+    m = _ecm_model(df)
+    assert m.measured_params({}) == {} and m.tau2_max_s is None, (m.rests_s, m.rest_current)
+
+
+def _offset_protocol():
+    return [("rest", 60)] + _DRIVE * 5 + [("rest", 600)] + _DRIVE * 5 + [("rest", 600)] + \
+        [("cc", -2.5, 600), ("rest", 600)]
+
+
+@pytest.mark.parametrize("offset_a", [0.1, 0.0])
+def test_rests_measure_a_true_current_sensor_offset_through_prepare(offset_a):
+    """Real rests (after a discharge and after a charge) logging 0.1 A of sensor offset with 5 mA white noise:
+    the rests are found (600 s each), the offset is measured at 0.1 A (within 3 of its own standard errors,
+    which the model computes from the record) and significant; without the offset it is measured as zero."""
+    df, _ = _ecm_record(_offset_protocol(), offset_a=offset_a, seed=7)
+    m = _ecm_model(df)
+    assert m.rests_s == pytest.approx([600.0, 600.0, 600.0], abs=5.0), m.rests_s
+    assert m.tau2_max_s == pytest.approx(max(m.rests_s))
     got = m.measured_params({})["current_offset_a"]
-    assert got["value"] == pytest.approx(0.05, abs=0.001)
-    assert got["significant"]
-    m.rest_current["value"] = 0.0002                     # within 5 standard errors of zero: measured as zero
-    assert not m.measured_params({})["current_offset_a"]["significant"]
-    m.rest_current = None                                # no rest after current: nothing measured
-    assert m.measured_params({}) == {}
+    # white noise: median of ~1800 samples, SE = 1.2533 x 5 mA / sqrt(n)
+    assert got["se"] == pytest.approx(1.2533 * 0.005 / math.sqrt(m.rest_current["n"]), rel=0.2)
+    assert abs(got["value"] - offset_a) < 3.0 * got["se"]
+    assert got["significant"] == (offset_a != 0.0)
+
+
+def test_autocorrelated_rest_current_does_not_fake_a_significant_offset():
+    """A 10 Hz logger whose current noise is filtered (AR(1), 2 s correlation time, 5 mA): counted as independent
+    samples its median's standard error is some 6x too small, and a zero offset would look 'significant' (5
+    standard errors) on some seeds.  With the effective sample size it never does."""
+    dt, tau = 0.1, 2.0
+    phi = math.exp(-dt / tau)
+    z_naive, z = [], []
+    for seed in range(8):
+        rng = np.random.default_rng(100 + seed)
+        e = rng.normal(0.0, 0.005 * math.sqrt(1.0 - phi * phi), 60000)
+        from scipy.signal import lfilter
+        noise = lfilter([1.0], [1.0, -phi], e)
+        df, _ = _ecm_record(_offset_protocol(), dt=dt, i_noise=noise, seed=seed)
+        m = _ecm_model(df)
+        assert len(m.rests_s) == 3, m.rests_s
+        got = m.measured_params({})["current_offset_a"]
+        rc = m.rest_current
+        assert rc["n_eff"] < rc["n"] / 10.0                      # (1 + phi) / (1 - phi) = 40: counted as such
+        z.append(abs(got["value"]) / got["se"])
+        naive_se = got["se"] * math.sqrt(rc["n_eff"] / rc["n"])
+        z_naive.append(abs(got["value"]) / naive_se)
+        assert not got["significant"], (seed, got)
+    assert max(z) < 4.0, z
+    assert max(z_naive) > 5.0, z_naive                           # the former SE would have fired
 
 
 def test_pybamm_swing_capacity_named_within_5_percent():
