@@ -509,8 +509,8 @@ class CellModel(CalibrationModel):
           lone spike does not end a rest) for at least ``min_s``, the level at most ``REST_LEVEL_C_RATE`` of the
           capacity (a sensor offset, not a charge or discharge);
         * with no trend: the current's linear change over the span is within ``REST_TREND_SE`` standard errors
-          (autocorrelation counted), 2 resolution steps or ``REST_DRIFT_C_RATE`` of the capacity - a CV taper, whose current decays while the voltage
-          is held at its limit, is not a rest;
+          (autocorrelation counted), 2 resolution steps or ``REST_DRIFT_C_RATE`` of the capacity - a CV taper,
+          whose current decays while the voltage is held at its limit, is not a rest;
         * and, given the voltage ``v``, the voltage relaxes: it moves, from the span's first tenth to its last,
           the way a cell relaxes after the current before it (up after a discharge, down after a charge), by more
           than ``REST_RELAX_SE`` standard errors of the voltage noise (a CV hold keeps the voltage flat; a small
@@ -555,7 +555,8 @@ class CellModel(CalibrationModel):
         slope = float(tc @ (xs - xs.mean())) / max(float(tc @ tc), 1e-300)
         res = xs - xs.mean() - slope * tc
         dur = float(ts[-1] - ts[0])
-        se_change = math.sqrt(float(res @ res) / max(xs.size - 2, 1) * cls._tau_int(res) / max(float(tc @ tc), 1e-300)) * dur
+        var_slope = float(res @ res) / max(xs.size - 2, 1) * cls._tau_int(res) / max(float(tc @ tc), 1e-300)
+        se_change = math.sqrt(var_slope) * dur
         change = slope * dur
         if abs(change) > max(cls.REST_TREND_SE * se_change, 2.0 * q_i, cls.REST_DRIFT_C_RATE * cap):
             held = ""
@@ -616,7 +617,8 @@ class CellModel(CalibrationModel):
         out = {"rests_after_current_s": rests, "soc_swing_frac": float(getattr(self, "soc_swing", float("nan"))),
                "slow_branch_tau_max_s": tmax,
                "rest_current_a": getattr(self, "rest_current", None),
-               "rests_refused": [{"t_s": a, "duration_s": d, "why": w} for a, d, w in getattr(self, "rests_refused", [])]}
+               "rests_refused": [{"t_s": a, "duration_s": d, "why": w}
+                                 for a, d, w in getattr(self, "rests_refused", [])]}
         out["slow_branch_tau_nominal_s"] = float(getattr(self, "tau2_nominal_s", float("nan")))
         if tmax is None:
             what = (f"the record's longest rest after current ({max(rests):.0f} s) is shorter than the slow RC "
