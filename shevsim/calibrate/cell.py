@@ -80,8 +80,11 @@ def arrhenius_resistance(model) -> Effect:
                   {"arrhenius_ea_r_k": 0.0}, ("voltage_v", "t_surface_c"), starts,
                   # seen in the voltage (the resistances fall as the cell warms); its heat is the circuit's
                   # heat, whose form is uncertain (CellModel.model_form_terms): a temperature law fitted to
-                  # bend the heat alone, with the voltage no better, is not the explanation
-                  evidence=("voltage_v",))
+                  # bend the heat alone is not the explanation.  The claim is tested on the voltage alone
+                  # (workflow _Run.channel_claim): Ea/R refitted with the temperature's weight 0 and the
+                  # thermal parameters held at the candidate fit (the temperature the law reads stays the one
+                  # the record's temperature channel made), the electrical ones free to trade against it
+                  channel_claim=(("voltage_v",), ("kt_w_mk", "cp_j_kgk", "h_conv_factor")))
 
 
 def cooling_change(model) -> Effect:

@@ -61,6 +61,10 @@ class Effect:
     #: the channels on which the effect must show itself (its held-out gain >= MIN_GAIN there; None: all of
     #: ``channels``): a resistance's temperature law acts on the heat too, but it is seen in the voltage
     evidence: tuple[str, ...] | None = None
+    #: ``(channels, fixed)``: the effect's claim is tested on ``channels`` alone - its parameters refitted with
+    #: every other channel's weight 0 and the declared parameters named in ``fixed`` held at the candidate
+    #: fit (the workflow's ``_Run.channel_claim``); it must be significant there and agree with the joint fit
+    channel_claim: tuple | None = None
 
 
 class CalibrationModel:

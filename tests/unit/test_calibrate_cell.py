@@ -153,3 +153,28 @@ def test_scenario_field_overlay_and_precedence(tmp_path):
     bat = build_master(load_scenario(sc_file, ["battery.hyst_max_v=0.02"])).components["battery"]
     assert bat.params.rs_scale == 1.25 and bat.params.hyst_max_v == 0.02
     assert Path(bat.params.ocv_file) == (tmp_path / "ocv.csv").resolve()
+
+
+def test_arrhenius_claim_is_tested_on_the_voltage_alone():
+    """``arrhenius_resistance`` claims that the resistances follow exp(Ea/R (1/T - 1/T_ref)); the workflow
+    refits Ea/R on the voltage alone (temperature weight 0, thermal parameters held) and needs it significant
+    and of the joint fit's size (``_Run.channel_claim``).  A warm-up record (chamber -10 -> +25 degC, a seed
+    the selection tests do not use) with the law (Ea/R 4000 K) in the voltage: the voltage alone finds it.
+    The same drive without the law, with a joint fit that claims 4000 K: the voltage alone does not."""
+    from shevsim.calibrate.workflow import _Run
+    eff = ("arrhenius_resistance",)
+    out = {}
+    for case, effects in (("law", ["arrhenius_resistance"]), ("none", [])):
+        df, truth = synth_cell({e: {} for e in effects}, seed=23, ambient="warmup", duration_s=1800.0)
+        run = _Run("cell", as_measured(df, "cell"), dict(CELL_NOMINAL), 0.3, "blocks", None, "<params>", None,
+                   {"sample_convention": "instantaneous", "sensor_noise": {}})
+        f = run.fitter
+        base = f.fit((), max_nfev=40)
+        joint = f.evaluate(eff, dict(base.params, arrhenius_ea_r_k=4000.0), len(base.params) + 1)
+        out[case] = run.channel_claim("arrhenius_resistance", joint)
+    law = out["law"]["evidence"]
+    assert out["law"]["ok"], out["law"]["statement"]
+    assert law["arrhenius_ea_r_k_voltage_v_only"] == pytest.approx(4000.0, rel=0.25), out["law"]["statement"]
+    assert law["arrhenius_ea_r_k_se"] < 0.25 * 4000.0
+    assert not out["none"]["ok"], out["none"]["statement"]
+    assert "not" in out["none"]["statement"]
