@@ -424,7 +424,12 @@ class Fitter:
         se = {}
         for j, p in enumerate(ps):
             lo, hi = self._bounds(p)
-            se[p.name] = float(math.sqrt(max(float(cov[j, j]), 0.0))) * (hi - lo) if not p.log else float("nan")
+            v = float(cov[j, j])
+            # a parameter the channels do not move at all (e.g. pinned at its bound with no gradient) has no
+            # information: an infinite, not a zero, standard error
+            if not np.any(jac[:, j]) or not v > 0.0:
+                v = float("inf")
+            se[p.name] = float(math.sqrt(v)) * (hi - lo) if not p.log else float("nan")
         return {**start, **self._to_values(ps, sol.x)}, se
 
 
