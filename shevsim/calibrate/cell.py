@@ -84,7 +84,7 @@ def arrhenius_resistance(model) -> Effect:
                   # (workflow _Run.channel_claim): Ea/R refitted with the temperature's weight 0 and the
                   # thermal parameters held at the candidate fit (the temperature the law reads stays the one
                   # the record's temperature channel made), the electrical ones free to trade against it
-                  channel_claim=(("voltage_v",), ("kt_w_mk", "cp_j_kgk", "h_conv_factor")))
+                  evidence=("voltage_v",), channel_claim=(("voltage_v",), ("kt_w_mk", "cp_j_kgk", "h_conv_factor")))
 
 
 def cooling_change(model) -> Effect:

@@ -58,8 +58,9 @@ class Effect:
     neutral: Mapping[str, float]
     channels: tuple[str, ...]
     starts: Any = None  # callable(ctx, base_values) -> list[dict] or None
-    #: the channels on which the effect must show itself (its held-out gain >= MIN_GAIN there; None: all of
-    #: ``channels``): a resistance's temperature law acts on the heat too, but it is seen in the voltage
+    #: the channels on which the effect must show itself (its held-out gain >= MIN_GAIN there - unless it has
+    #: a ``channel_claim``, which replaces that rule; None: all of ``channels``): a resistance's temperature
+    #: law acts on the heat too, but it is seen in the voltage
     evidence: tuple[str, ...] | None = None
     #: ``(channels, fixed)``: the effect's claim is tested on ``channels`` alone - its parameters refitted with
     #: every other channel's weight 0 and the declared parameters named in ``fixed`` held at the candidate

@@ -40,7 +40,10 @@ Steps (:func:`run_workflow`):
    follows resistances bent to a voltage model-form error), not from the effect.  What an effect claims is
    also checked on the record itself where the model can (:meth:`CalibrationModel.effect_evidence`: the
    cell's cooling change and reversible heat against the record's own energy balance); a candidate whose
-   claim the record does not show does not pass, and the report says why.  An effect that cannot act on the channels a model's model-form terms are computed
+   claim the record does not show does not pass, and the report says why.  An effect with a claim about one
+   channel (``Effect.channel_claim``: the cell's Arrhenius law, about the voltage) is tested there instead of
+   by (d): its parameter refitted on that channel alone must be significant and of the joint fit's size
+   (``_Run.channel_claim``).  An effect that cannot act on the channels a model's model-form terms are computed
    from (:meth:`CalibrationModel.model_form_terms`, ``model_form_sources``: the cell's temperature term is
    the heat of its own voltage error) is judged after those terms are fitted out of the residual on the
    training part: a thermal-only effect must explain what the heat of the circuit's voltage error does not
@@ -670,7 +673,10 @@ class _Run:
                 g = 1.0 - _score(fr, re_, own, se) / _score(current, re_, own, se)
                 if without and e in without:     # and over the other effect of the pair alone
                     g = min(g, 1.0 - _score(fr, re_, own, se) / _score(without[e], re_, own, se))
-                if g < MIN_GAIN if not measured else g <= 0.0:
+                # (an effect whose claim is tested on its own channel alone, Effect.channel_claim, is judged by
+                # that test instead: a real law can be below what the held-out part resolves against the
+                # model's form there, and still be what the channel shows)
+                if (g < MIN_GAIN if not measured else g <= 0.0) and f.effects[e].channel_claim is None:
                     weak.append(f"{e} on {', '.join(own)} {g:.1%}")
         own = [c for c in f.channels if c in own_all]
         off_note = ""
