@@ -653,6 +653,59 @@ class _Run:
         if sel:
             fr.gain = 1.0 - _score(fr, ref, judged=True) / _score(current, ref, judged=True)
         fr.worsen = max(rm[c]["holdout"] / max(cm[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
+        eff_params = [p.name for e in effs for p in self.fitter.effects[e].params]
+        measured, min_gain, weak, own, off_note = self._own_channel_gains(fr, current, effs, rm, cm, src, without)
+        why = []
+        if fr.gain <= min_gain if measured else fr.gain < min_gain:
+            why.append(f"held-out score gain {fr.gain:.1%} {'<=' if measured else '<'} {min_gain:.0%}"
+                       + (" (its parameter measured directly)" if measured else ""))
+        elif weak:
+            why.append(f"held-out gain on the channels the effect acts on < {min_gain:.0%} ({'; '.join(weak)})")
+        if fr.worsen > MAX_WORSEN:
+            why.append(f"a channel's held-out RMSE rises {fr.worsen:.1%}")
+        if fr.dbic > -MIN_DBIC:
+            why.append(f"dBIC {fr.dbic:+.1f} > -{MIN_DBIC:g}")
+        # measured as zero: the record's own measurement says the effect is absent, whatever the fit gains
+        absent = [k for k in eff_params if k in f.measured and not f.measured[k].get("significant", True)]
+        halved = [] if weak else [c for c in (own or f.channels) if rm[c]["holdout"] <= HALVING * cm[c]["holdout"]]
+        fr.passed = not absent and (not why or (bool(halved) and fr.worsen <= MAX_WORSEN))
+        if absent:
+            why.insert(0, "measured as zero: " + "; ".join(
+                f"{k} = {f.measured[k]['value']:.3g} +- {f.measured[k]['se']:.2g} from {f.measured[k]['how']}"
+                for k in absent))
+        bad = [x for e in effs for x in self.implausible(e, fr.params)]
+        if fr.passed and bad:
+            # it improves the fit only with parameters no cell / vehicle / engine has: not the explanation
+            fr.passed = False
+            fr.reason = "implausible: " + "; ".join(f"{x['parameter']} = {x['value']:.4g} {x['why']}" for x in bad)
+            self.implausible_candidates.append({"effect": "+".join(effs), "round": rnd + 1, "evidence": bad,
+                                                "holdout_gain": fr.gain})
+            self.say(f"round {rnd + 1}: {'+'.join(effs)}: {fr.reason}")
+            return fr
+        if fr.passed and self._not_supported(fr, effs, rnd):
+            return fr
+        if not why:
+            fr.reason = "passes" + (" (its parameter measured directly: "
+                                    + "; ".join(f"{k} = {f.measured[k]['value']:.4g} from {f.measured[k]['how']}"
+                                                for e in effs for k in (p.name for p in f.effects[e].params))
+                                    + (f"; the refit of the declared parameters moves {off_note}" if off_note else "")
+                                    + ")" if measured else "")
+        elif fr.passed:
+            # held-out evidence decides: the autocorrelation-corrected BIC has few effective samples
+            # exactly when a systematic residual (a missing effect) makes the residual autocorrelated
+            fr.reason = (f"passes: halves the held-out RMSE of {', '.join(halved)} (the BIC rule alone would "
+                         f"veto: {'; '.join(why)})")
+        else:
+            fr.reason = "; ".join(why)
+        self.say(f"round {rnd + 1}: {'+'.join(effs)}: score {fr.score:.3f} gain {fr.gain:+.1%} dBIC {fr.dbic:+.1f} "
+                 f"{'PASS' if fr.passed else ''}")
+        return fr
+
+    def _own_channel_gains(self, fr, current, effs, rm, cm, src, without):
+        """The gain of each effect of ``effs`` on the channels it acts on (``Effect.evidence``, default its
+        channels); whether its parameters are measured directly; returns ``(measured, min_gain, weak, own,
+        off_note)`` and, for a measured correction, limits ``fr.worsen`` to its own channels."""
+        f = self.fitter
         # the effect must explain the residual of the channels it acts on: a gain that shows only on other
         # channels comes from the refit of the declared parameters (the nominal's compromise between
         # channels coupled through them, e.g. the heat of a circuit whose resistances bend to a voltage
@@ -686,65 +739,28 @@ class _Run:
             off = {c: rm[c]["holdout"] / max(cm[c]["holdout"], 1e-300) - 1.0 for c in f.channels if c not in own}
             fr.worsen = max(rm[c]["holdout"] / max(cm[c]["holdout"], 1e-300) - 1.0 for c in own)
             off_note = "; ".join(f"{c} {v:+.1%}" for c, v in off.items() if v > MAX_WORSEN)
-        why = []
-        if fr.gain <= min_gain if measured else fr.gain < min_gain:
-            why.append(f"held-out score gain {fr.gain:.1%} {'<=' if measured else '<'} {min_gain:.0%}"
-                       + (" (its parameter measured directly)" if measured else ""))
-        elif weak:
-            why.append(f"held-out gain on the channels the effect acts on < {min_gain:.0%} ({'; '.join(weak)})")
-        if fr.worsen > MAX_WORSEN:
-            why.append(f"a channel's held-out RMSE rises {fr.worsen:.1%}")
-        if fr.dbic > -MIN_DBIC:
-            why.append(f"dBIC {fr.dbic:+.1f} > -{MIN_DBIC:g}")
-        # measured as zero: the record's own measurement says the effect is absent, whatever the fit gains
-        absent = [k for k in eff_params if k in f.measured and not f.measured[k].get("significant", True)]
-        halved = [] if weak else [c for c in (own or f.channels) if rm[c]["holdout"] <= HALVING * cm[c]["holdout"]]
-        fr.passed = not absent and (not why or (bool(halved) and fr.worsen <= MAX_WORSEN))
-        if absent:
-            why.insert(0, "measured as zero: " + "; ".join(
-                f"{k} = {f.measured[k]['value']:.3g} +- {f.measured[k]['se']:.2g} from {f.measured[k]['how']}"
-                for k in absent))
-        bad = [x for e in effs for x in self.implausible(e, fr.params)]
-        if fr.passed and bad:
-            # it improves the fit only with parameters no cell / vehicle / engine has: not the explanation
+        return measured, min_gain, weak, own, off_note
+
+    def _not_supported(self, fr, effs, rnd) -> bool:
+        """True (and ``fr`` marked not passed, with the reason) when what an effect of ``effs`` claims does not
+        show on the record itself."""
+        f = self.fitter
+        # what the effect claims must show on the record itself, not only as a better fit
+        # (CalibrationModel.effect_evidence: e.g. a cooling change must change the cell's own rate of
+        # heat loss per kelvin at the fitted time)
+        full = self.model.full_values({k: v for k, v in fr.params.items() if k != "time_shift_s"})
+        ev = [(e, x) for e in effs
+              for x in [self.model.effect_evidence(e, f.ctx, full, f.meas) if f.effects[e].channel_claim is None
+                        else self.channel_claim(e, fr)] if x is not None and not x["ok"]]
+        if ev:
             fr.passed = False
-            fr.reason = "implausible: " + "; ".join(f"{x['parameter']} = {x['value']:.4g} {x['why']}" for x in bad)
-            self.implausible_candidates.append({"effect": "+".join(effs), "round": rnd + 1, "evidence": bad,
-                                                "holdout_gain": fr.gain})
+            fr.reason = "not supported by the record: " + "; ".join(x["statement"] for _, x in ev)
+            self.unsupported_candidates.append({"effect": "+".join(effs), "round": rnd + 1, "holdout_gain": fr.gain,
+                                                "evidence": [dict(x["evidence"], effect=e) for e, x in ev],
+                                                "statement": fr.reason})
             self.say(f"round {rnd + 1}: {'+'.join(effs)}: {fr.reason}")
-            return fr
-        if fr.passed:
-            # what the effect claims must show on the record itself, not only as a better fit
-            # (CalibrationModel.effect_evidence: e.g. a cooling change must change the cell's own rate of
-            # heat loss per kelvin at the fitted time)
-            full = self.model.full_values({k: v for k, v in fr.params.items() if k != "time_shift_s"})
-            ev = [(e, x) for e in effs
-                  for x in [self.model.effect_evidence(e, f.ctx, full, f.meas) if f.effects[e].channel_claim is None
-                            else self.channel_claim(e, fr)] if x is not None and not x["ok"]]
-            if ev:
-                fr.passed = False
-                fr.reason = "not supported by the record: " + "; ".join(x["statement"] for _, x in ev)
-                self.unsupported_candidates.append({"effect": "+".join(effs), "round": rnd + 1, "holdout_gain": fr.gain,
-                                                    "evidence": [dict(x["evidence"], effect=e) for e, x in ev],
-                                                    "statement": fr.reason})
-                self.say(f"round {rnd + 1}: {'+'.join(effs)}: {fr.reason}")
-                return fr
-        if not why:
-            fr.reason = "passes" + (" (its parameter measured directly: "
-                                    + "; ".join(f"{k} = {f.measured[k]['value']:.4g} from {f.measured[k]['how']}"
-                                                for e in effs for k in (p.name for p in f.effects[e].params))
-                                    + (f"; the refit of the declared parameters moves {off_note}" if off_note else "")
-                                    + ")" if measured else "")
-        elif fr.passed:
-            # held-out evidence decides: the autocorrelation-corrected BIC has few effective samples
-            # exactly when a systematic residual (a missing effect) makes the residual autocorrelated
-            fr.reason = (f"passes: halves the held-out RMSE of {', '.join(halved)} (the BIC rule alone would "
-                         f"veto: {'; '.join(why)})")
-        else:
-            fr.reason = "; ".join(why)
-        self.say(f"round {rnd + 1}: {'+'.join(effs)}: score {fr.score:.3f} gain {fr.gain:+.1%} dBIC {fr.dbic:+.1f} "
-                 f"{'PASS' if fr.passed else ''}")
-        return fr
+            return True
+        return False
 
     def channel_claim(self, e, fr):
         """The claim of ``e`` tested on its own channel alone (``Effect.channel_claim``): e.g. "the resistances
@@ -1349,6 +1365,39 @@ def _md_timing_noise(rep: dict) -> list[str]:
     return L + [""]
 
 
+def _md_evidence(rep: dict) -> list[str]:
+    """The report's evidence: the selection rule, each round's candidates, the parameters, the residual
+    diagnostics."""
+    L = []
+    r = rep["selection_rule"]
+    L += ["", "## Evidence", "",
+          f"Rule: held-out score gain >= {r['min_holdout_gain']:.0%}, no channel worse by > {r['max_channel_worsening']:.0%}, "
+          f"autocorrelation-corrected BIC drop >= {r['min_bic_drop']:g}; or a held-out RMSE halved on some channel "
+          f"with no channel worse by > {r['max_channel_worsening']:.0%}.", ""]
+    for rd in rep["rounds"]:
+        L += [f"Round {rd['round']} (on top of: {', '.join(rd['on_top_of']) or 'baseline'}; current score "
+              f"{rd['current_score']:.3f}; selected: {rd.get('selected', 'none')})", "",
+              "| effect | held-out score | gain | dBIC | held-out RMSE | parameters | verdict |", "|---|---|---|---|---|---|---|"]
+        for c in sorted(rd["candidates"], key=lambda c: c["score"]) + rd.get("pairs", []):
+            hr = ", ".join(f"{k} {_g(v)}" for k, v in c["holdout_rmse"].items())
+            own = {k: v for k, v in c["parameters"].items() if k not in rep["baseline_parameters"]}
+            pr = ", ".join(f"{k}={_g(v)}" for k, v in own.items())
+            L.append(f"| {c['name']} | {c['score']:.3f} | {c['gain']:+.1%} | {c['delta_bic']:+.1f} | {hr} | {pr} | {c['reason']} |")
+        L.append("")
+    L += ["## Parameters", "", "| parameter | baseline | final |", "|---|---|---|"]
+    for k, v in rep["final_parameters"].items():
+        L.append(f"| {k} | {_g(rep['baseline_parameters'].get(k, float('nan')))} | {_g(v)} |")
+    L += ["", "## Residual diagnostics (held-out part)", "",
+          "| channel | when | bias | RMSE | drift /h | acf lag 1 | Ljung-Box p | noise floor | top correlations |",
+          "|---|---|---|---|---|---|---|---|---|"]
+    for c in rep["diagnostics_before"]:
+        for when, d in (("before", rep["diagnostics_before"][c]["holdout"]), ("after", rep["diagnostics_after"][c]["holdout"])):
+            cr = ", ".join(f"{x['signal']} {x['r']:+.2f}" for x in d["correlations"][:3])
+            L.append(f"| {c} | {when} | {_g(d['bias'])} | {_g(d['rmse'])} | {_g(d['drift_per_hour'])} | {d['acf'][0]:.3f} | "
+                     f"{d['ljung_box_p']:.2g} | {_g(d['noise_floor'])} | {cr} |")
+    return L
+
+
 def render_markdown(rep: dict) -> str:
     L = [f"# Calibration report: model `{rep['model']}`", "",
          f"Data: `{rep['data']['path']}` ({rep['data']['n_samples']} samples, {rep['data']['duration_s']:.0f} s); "
@@ -1424,32 +1473,7 @@ def render_markdown(rep: dict) -> str:
             L.append(f"- `{u['channel']}`: held-out RMSE {_g(u['holdout_rmse'])} vs noise floor {_g(u['noise_floor'])}, "
                      f"bias {_g(u['bias'])}, drift {_g(u['drift_per_hour'])}/h"
                      + (f", most correlated with `{tc['signal']}` (r = {tc['r']:+.2f})" if tc else ""))
-    r = rep["selection_rule"]
-    L += ["", "## Evidence", "",
-          f"Rule: held-out score gain >= {r['min_holdout_gain']:.0%}, no channel worse by > {r['max_channel_worsening']:.0%}, "
-          f"autocorrelation-corrected BIC drop >= {r['min_bic_drop']:g}; or a held-out RMSE halved on some channel "
-          f"with no channel worse by > {r['max_channel_worsening']:.0%}.", ""]
-    for rd in rep["rounds"]:
-        L += [f"Round {rd['round']} (on top of: {', '.join(rd['on_top_of']) or 'baseline'}; current score "
-              f"{rd['current_score']:.3f}; selected: {rd.get('selected', 'none')})", "",
-              "| effect | held-out score | gain | dBIC | held-out RMSE | parameters | verdict |", "|---|---|---|---|---|---|---|"]
-        for c in sorted(rd["candidates"], key=lambda c: c["score"]) + rd.get("pairs", []):
-            hr = ", ".join(f"{k} {_g(v)}" for k, v in c["holdout_rmse"].items())
-            own = {k: v for k, v in c["parameters"].items() if k not in rep["baseline_parameters"]}
-            pr = ", ".join(f"{k}={_g(v)}" for k, v in own.items())
-            L.append(f"| {c['name']} | {c['score']:.3f} | {c['gain']:+.1%} | {c['delta_bic']:+.1f} | {hr} | {pr} | {c['reason']} |")
-        L.append("")
-    L += ["## Parameters", "", "| parameter | baseline | final |", "|---|---|---|"]
-    for k, v in rep["final_parameters"].items():
-        L.append(f"| {k} | {_g(rep['baseline_parameters'].get(k, float('nan')))} | {_g(v)} |")
-    L += ["", "## Residual diagnostics (held-out part)", "",
-          "| channel | when | bias | RMSE | drift /h | acf lag 1 | Ljung-Box p | noise floor | top correlations |",
-          "|---|---|---|---|---|---|---|---|---|"]
-    for c in rep["diagnostics_before"]:
-        for when, d in (("before", rep["diagnostics_before"][c]["holdout"]), ("after", rep["diagnostics_after"][c]["holdout"])):
-            cr = ", ".join(f"{x['signal']} {x['r']:+.2f}" for x in d["correlations"][:3])
-            L.append(f"| {c} | {when} | {_g(d['bias'])} | {_g(d['rmse'])} | {_g(d['drift_per_hour'])} | {d['acf'][0]:.3f} | "
-                     f"{d['ljung_box_p']:.2g} | {_g(d['noise_floor'])} | {cr} |")
+    L += _md_evidence(rep)
     if rep.get("plots"):
         L += ["", "## Plots", ""]
         for p in rep["plots"]:
