@@ -345,9 +345,13 @@ class CellModel(CalibrationModel):
         # the record's rests after current has flowed: the slow time constant it resolves and the current a
         # sensor logs at zero current (record_resolution, measured_params)
         refused: list = []
-        spans = self._rest_spans(t, i, df["voltage_v"].to_numpy(float), self.base.capacity_ah, why=refused)
+        v_meas = df["voltage_v"].to_numpy(float)
+        spans = self._rest_spans(t, i, v_meas, self.base.capacity_ah, min_s=self.SLOW_REST_MIN_S, why=refused)
         self.rests_s = [float(t[b] - t[a]) for a, b in spans]
         self.rests_refused = refused
+        # the sensor offset is read in every rest long enough to be recognised as one (its relaxation tested), not
+        # only in those long enough to show the slow branch: a drive's 20-90 s stops are rests too
+        offset_spans = self._rest_spans(t, i, v_meas, self.base.capacity_ah, min_s=self.OFFSET_REST_MIN_S)
         # the slow RC branch's time constant is limited to the longest rest: a relaxation that no rest shows
         # decaying cannot be told from a series capacitor - that is, from a capacity or a current offset
         # (over a swing where the OCV is near linear in the charge).  A record whose rests are all shorter than
@@ -362,7 +366,7 @@ class CellModel(CalibrationModel):
         longest = max(self.rests_s) if self.rests_s else 0.0
         self.tau2_max_s = longest if longest >= self.tau2_nominal_s else None
         self.soc_swing = hi - lo
-        ir = np.concatenate([i[a:b + 1] for a, b in spans]) if spans else np.zeros(0)
+        ir = np.concatenate([i[a:b + 1] for a, b in offset_spans]) if offset_spans else np.zeros(0)
         self.rest_current = None
         if ir.size >= 30:
             med = float(np.median(ir))
@@ -370,9 +374,10 @@ class CellModel(CalibrationModel):
             sd = 1.4826 * float(np.median(np.abs(ir - med))) or float(np.std(ir))
             # correlated samples (a fast logger's filtered noise) count less than independent ones: the effective
             # number of samples of each rest is its length over its integrated autocorrelation time
-            n_eff = sum((b - a + 1) / self._tau_int(i[a:b + 1]) for a, b in spans)
+            n_eff = sum((b - a + 1) / self._tau_int(i[a:b + 1]) for a, b in offset_spans)
             self.rest_current = {"value": med, "se": 1.2533 * sd / math.sqrt(max(n_eff, 1.0)), "n": int(ir.size),
-                                 "n_eff": float(n_eff), "duration_s": float(sum(self.rests_s))}
+                                 "n_eff": float(n_eff), "n_rests": len(offset_spans),
+                                 "duration_s": float(sum(t[b] - t[a] for a, b in offset_spans))}
         self.effects = self._make_effects()
         tg, (ig, tag), _h, resampled = sampling_grid(t, i, ta)
         return {"t": t, "i": i, "ta": ta, "tg": tg, "ig": ig, "tag": tag, "resampled": resampled, "d": d, "ix": ix, "n": t.size, "df": df,
@@ -460,6 +465,11 @@ class CellModel(CalibrationModel):
             out["t_core_c"] = otc
         return out
 
+    #: the rests that limit the slow RC branch's time constant (record_resolution): at least this long
+    SLOW_REST_MIN_S = 60.0
+    #: the rests the current-sensor offset is read in (measured_params): at least this long - 20 samples at 1 Hz,
+    #: enough for the relaxation test's first and last tenths (3 samples each) to tell a relaxing voltage
+    OFFSET_REST_MIN_S = 20.0
     #: a rest's current level: at most this C-rate (A per A.h of the nominal capacity) - a sensor offset larger
     #: than C/20 is not an offset the rests are read for
     REST_LEVEL_C_RATE = 1.0 / 20.0
@@ -598,7 +608,7 @@ class CellModel(CalibrationModel):
 
     def measured_params(self, ctx) -> dict:
         """Parameters this record measures directly: the current-sensor offset, whenever the record has rests
-        after current (>= 30 samples) - a cell at rest carries no current, so what the sensor logs there is
+        after current (rests of at least ``OFFSET_REST_MIN_S``, >= 30 samples in all) - a cell at rest carries no current, so what the sensor logs there is
         its offset: the median logged current, with its standard error.  ``significant``: it differs from
         zero by more than ``REST_OFFSET_SE`` standard errors (else the rests measure the offset as zero, and
         the ``current_offset`` effect cannot be named)."""
@@ -607,7 +617,8 @@ class CellModel(CalibrationModel):
             return {}
         return {"current_offset_a": {"value": rc["value"], "se": rc["se"],
                                      "significant": bool(abs(rc["value"]) > self.REST_OFFSET_SE * rc["se"]),
-                                     "how": f"the median logged current over {rc['duration_s']:.0f} s of rests "
+                                     "how": f"the median logged current over {rc['duration_s']:.0f} s of "
+                                            f"{rc.get('n_rests', '')} rests "
                                             f"({rc['n']} samples, {rc.get('n_eff', rc['n']):.0f} effectively "
                                             f"independent)"}}
 

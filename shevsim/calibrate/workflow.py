@@ -88,8 +88,8 @@ Parameters the record measures directly (``CalibrationModel.measured_params``, e
 offset read in the rests of a cell record): the parameter is held within its measurement's +-3 standard
 errors, and its effect is not held to the ``MIN_GAIN`` held-out gain (its parameter is not inferred from
 the residual): it passes when it improves the held-out error of its channels at all, worsens no channel by
-more than ``MAX_WORSEN`` and lowers the BIC by ``MIN_DBIC``; measured as zero (not ``significant``), it
-does not pass.  The measurement is in the report
+more than ``MAX_WORSEN`` and lowers the BIC by ``MIN_DBIC``, the BIC counting no complexity for a parameter held at
+its measurement (it is not inferred from the residual); measured as zero (not ``significant``), it does not pass.  The measurement is in the report
 (``measured_parameters``).
 
 Sample timing (:mod:`shevsim.calibrate.timing`): the record's declared ``sample_convention`` moves the
@@ -367,7 +367,10 @@ class Fitter:
             if best is None or sol.cost < best.cost:
                 best = sol
         values = self._to_values(ps, best.x)
-        return self.evaluate(effects, values, len(ps), float(best.cost), int(best.nfev))
+        # the BIC's complexity counts the parameters inferred from the residual: one held within its direct
+        # measurement's +-3 standard errors (measured_params: a sensor offset read in the rests) is not one
+        k = sum(1 for p in ps if p.name not in self.measured)
+        return self.evaluate(effects, values, k, float(best.cost), int(best.nfev))
 
     def _lsq(self, ps, x0, max_nfev):
         return optimize.least_squares(lambda x: self._resid(self._to_values(ps, x)), x0, bounds=(0.0, 1.0),

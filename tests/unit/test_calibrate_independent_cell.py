@@ -210,7 +210,7 @@ def test_pybamm_contact_resistance_raises_the_fitted_ohmic_resistance_by_its_val
 # ------------------------------------------------------------------ capacity and current offset: the swing records
 #
 # Over the one-hour drive (25 % SOC swing, no rest stop) the nominal's slow RC branch takes up a capacity
-# loss or a current offset: an RC branch whose time constant is longer than any rest the record has is never
+# loss (a current offset is read in the drive's own 20-90 s stops: see the drive-offset tests below): an RC branch whose time constant is longer than any rest the record has is never
 # seen relaxing, and over a swing where the OCV is near linear in the charge it is a series capacitor - a
 # capacity.  The calibration now limits that time constant to the record's longest rest after current
 # (CellModel.record_resolution), and reads a current-sensor offset where a lab reads it: the logged current
@@ -377,6 +377,34 @@ def test_no_effect_swing_record_names_no_physical_effect():
     rep = _cell("none_swing", effects=SWING_EFFECTS)
     assert not rep["measured_parameters"]["current_offset_a"]["significant"]
     _check_no_effect(rep)
+
+
+def test_pybamm_drive_current_offset_named_from_the_drives_own_stops():
+    """The one-hour drive has no rest stop, but its 20-90 s stops are rests: the logged current there is the
+    sensor's offset (measured and held, not inferred from the voltage), and the offset is named on the drive too."""
+    rep = _cell("current_offset", effects=SWING_EFFECTS)
+    truth = _cell_truth("current_offset")["current_offset_a"]
+    meas = rep["measured_parameters"]["current_offset_a"]
+    assert meas["significant"] and meas["value"] == pytest.approx(truth, rel=0.25), meas
+    assert rep["record_resolution"]["rest_current_a"]["n_rests"] >= 10
+    assert rep["record_resolution"]["rests_after_current_s"] == []       # none long enough for the slow branch
+    assert rep["selected_effects"] == ["current_offset"], rep["selected_effects"]
+    assert rep["final_parameters"]["current_offset_a"] == pytest.approx(truth, rel=0.25)
+    assert rep["rmse_after"]["voltage_v"]["holdout"] < rep["rmse_before"]["voltage_v"]["holdout"]
+
+
+def test_no_effect_drive_stops_measure_the_offset_as_zero():
+    rep = _cell("none", effects=["current_offset"])
+    off = rep["measured_parameters"]["current_offset_a"]
+    assert not off["significant"] and abs(off["value"]) < 0.002, off
+    assert rep["selected_effects"] == [], rep["selected_effects"]
+
+
+@pytest.mark.slow
+def test_pybamm_drive_current_offset_named_whole_library():
+    rep = _cell("current_offset")
+    assert rep["selected_effects"] == ["current_offset"], rep["selected_effects"]
+    assert rep["final_parameters"]["current_offset_a"] == pytest.approx(0.1, rel=0.25)
 
 
 @pytest.mark.slow
