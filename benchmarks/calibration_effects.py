@@ -18,7 +18,9 @@ from shevsim.calibrate.synthetic import (CELL_EFFECTS, CELL_NOMINAL, ENGINE_EFFE
 from shevsim.calibrate.workflow import run_workflow  # noqa: E402
 
 CELL_CHANNEL = {"entropic_heat": "t_surface_c", "cooling_change": "t_surface_c"}
-CELL_KW = {"arrhenius_resistance": {"ambient": "warmup"}, "low_soc_resistance": {"soc0": 0.5, "discharge_frac": 0.45}}
+# (as tests/unit/test_calibrate_cell.py: hysteresis shows only where rests are reached after charge and after discharge)
+CELL_KW = {"arrhenius_resistance": {"ambient": "warmup"}, "low_soc_resistance": {"soc0": 0.5, "discharge_frac": 0.45},
+           "ocv_hysteresis": {"charge_rests": True}}
 
 
 def _row(model, effect, rep, channel, dt):

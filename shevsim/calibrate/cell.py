@@ -348,6 +348,7 @@ class CellModel(CalibrationModel):
         v_meas = df["voltage_v"].to_numpy(float)
         spans = self._rest_spans(t, i, v_meas, self.base.capacity_ah, min_s=self.SLOW_REST_MIN_S, why=refused)
         self.rests_s = [float(t[b] - t[a]) for a, b in spans]
+        self.rest_spans = list(spans)
         self.rests_refused = refused
         # the sensor offset is read in every rest long enough to be recognised as one (its relaxation tested), not
         # only in those long enough to show the slow branch: a drive's 20-90 s stops are rests too
@@ -649,6 +650,12 @@ class CellModel(CalibrationModel):
             out["statement"] = (f"the slow RC branch's time constant is limited to the longest rest, {tmax:.0f} s "
                                 f"(longer relaxations are a series capacitor: a capacity){one}; SOC swing "
                                 f"{100 * out['soc_swing_frac']:.0f} %")
+        if len(rests) < 3:
+            # the open-circuit voltage shows only at rest (effect_evidence: _hysteresis_evidence, _rest_claim)
+            out["statement"] += (f"; {len(rests)} rest(s) after current: OCV hysteresis (rests reached after charge "
+                                 f"and after discharge) cannot be told from an OCV offset"
+                                 + (", nor an OCV correction from the resistances' form under current" if len(rests) < 2
+                                    else ""))
         if out["rests_refused"]:
             r = out["rests_refused"][0]
             out["statement"] += (f"; {len(out['rests_refused'])} low-current span(s) of >= 60 s are not rests (the "
@@ -802,11 +809,33 @@ class CellModel(CalibrationModel):
           is at least ``ENERGY_BALANCE_MIN_SHARE``.
 
         A step in h at a free time, or an SOC-shaped reversible heat, that only bends the model to a thermal
-        model-form error leaves the record's own balance without them."""
+        model-form error leaves the record's own balance without them.
+
+        ``ocv_hysteresis`` claims that the open-circuit voltage depends on the direction the cell came from
+        (:meth:`_hysteresis_evidence`): checked on the record's relaxed rest voltages, not on its voltage under
+        current, where a resistance of another form (the Butler-Volmer overpotential's asymmetry and
+        nonlinearity) bends the model the same way.  ``ocv_correction`` (the OCV itself differs from the given
+        curve) and ``capacity`` (the SOC that the charge passed reaches differs) are claims about the relaxed
+        voltage too: checked at the rests (:meth:`_rest_claim`); a record without rests after current cannot show
+        an OCV correction (refused, what it lacks said); a capacity is then not checked there (a wide swing's
+        voltage under current shows it, and :meth:`record_resolution` says when the record cannot tell it from
+        the slow RC branch)."""
         if effect == "cooling_change":
             return self._cooling_evidence(ctx, values, meas)
         if effect == "entropic_heat":
             return self._entropic_evidence(ctx, values, meas)
+        if effect == "ocv_hysteresis":
+            return self._hysteresis_evidence(ctx, values, meas)
+        if effect == "ocv_correction":
+            k = len(getattr(self, "ocv_knots", ()))
+            if not any(float(values.get(f"ocv_delta_v[{j}]", 0.0)) for j in range(k)):
+                return None
+            return self._rest_claim(ctx, values, meas, {f"ocv_delta_v[{j}]": 0.0 for j in range(k)},
+                                    "the OCV correction", 2)
+        if effect == "capacity":
+            if float(values.get("capacity_ah", self.base.capacity_ah)) == self.base.capacity_ah:
+                return None
+            return self._rest_claim(ctx, values, meas, {"capacity_ah": self.base.capacity_ah}, "the capacity", 0)
         return None
 
     def _cooling_evidence(self, ctx, values, meas):
@@ -889,6 +918,147 @@ class CellModel(CalibrationModel):
         return {"ok": ok, "evidence": ev, "statement": why + ("" if ok else f" (needed: > {k:g} standard errors and "
                 f"at least {share:g}): the reversible heat fitted is not the record's, it bends the model to a "
                 f"thermal model-form error")}
+
+    #: the checks at the rests (:meth:`_rest_claim`, :meth:`_hysteresis_evidence`): the rests' voltage must follow the
+    #: fitted effect at this one-sided level (Student's t with the rests' degrees of freedom: a record has a handful of
+    #: rests) ...
+    REST_CLAIM_LEVEL = 0.95
+    #: ... and with a slope within this factor of the fitted size (as :data:`workflow.CLAIM_FACTOR`)
+    REST_CLAIM_FACTOR = 2.0
+    #: the cell's hysteresis state at the record's start, which the record does not know (the fit assumes 0)
+    HYSTERESIS_START_STATES = (-1.0, 0.0, 1.0)
+
+    def _rest_end_deviation(self, ctx, values, meas, neutral):
+        """At the end (last tenth) of each rest after current: ``(fitted, measured)`` [V], the candidate fit's voltage
+        and the measured one, each minus the fit's voltage with the parameters ``neutral`` (the effect switched off,
+        the other parameters as fitted: the RC branches' remaining relaxation is the model's)."""
+        v = np.asarray(meas["voltage_v"], float)
+        with_e = np.asarray(self.simulate(ctx, values)["voltage_v"], float)
+        without = np.asarray(self.simulate(ctx, dict(values, **neutral))["voltage_v"], float)
+        fit, dev = [], []
+        for a, b in getattr(self, "rest_spans", []):
+            sl = slice(b + 1 - max(3, int(0.1 * (b - a + 1))), b + 1)
+            fit.append(float(np.mean(with_e[sl] - without[sl])))
+            dev.append(float(np.mean(v[sl] - without[sl])))
+        return np.array(fit), np.array(dev)
+
+    def _rest_claim(self, ctx, values, meas, neutral: dict, what: str, min_rests: int):
+        """Whether the record's own rests show what an effect fitted there claims about the open-circuit voltage.
+        At rest the cell's voltage relaxes to its open-circuit voltage, where no resistance of any form acts: an
+        effect on the OCV itself (a correction of the curve) or on the state it is read at (a capacity: the SOC the
+        charge passed reaches) claims that the relaxed rest voltages sit where the fit puts them.  At each rest's
+        end the measured voltage minus the fit's with ``neutral`` (the effect off, the other parameters as fitted)
+        is regressed on the fit's own difference there, through the origin (the effect off is the alternative);
+        supported when the slope exceeds 0 by Student's one-sided ``REST_CLAIM_LEVEL`` quantile (n - 1 degrees of
+        freedom, the rests' scatter about the line: the OCV table's own error at their SOC) and is of the fitted
+        size (within ``REST_CLAIM_FACTOR`` of 1, or 1 within the quantile's standard errors).  Fitted to the
+        voltage under current, where it trades against the resistances' form (the Butler-Volmer overpotential's
+        nonlinearity and asymmetry, which a linear circuit lacks), such an effect puts the rests where they are
+        not.  With fewer than ``min_rests`` rests after current: not supported (``min_rests`` > 0: what the record
+        lacks is said) or not checked (0)."""
+        from scipy import stats
+        spans = list(getattr(self, "rest_spans", []))
+        n = len(spans)
+        ev = {"n_rests": n}
+        if n < max(min_rests, 2):
+            if min_rests <= 0:
+                return None
+            return {"ok": False, "evidence": ev, "statement": (
+                f"the record has {n} rest(s) after current (>= 60 s): the open-circuit voltage shows only at rest, and "
+                f"without rests the record cannot tell {what} from the resistances' form under current")}
+        fit, dev = self._rest_end_deviation(ctx, values, meas, neutral)
+        q = float(stats.t.ppf(self.REST_CLAIM_LEVEL, n - 1))
+        sxx = float(fit @ fit)
+        slope = float(fit @ dev) / sxx if sxx > 0.0 else float("nan")
+        se = math.sqrt(float((dev - slope * fit) @ (dev - slope * fit)) / (n - 1) / sxx) if sxx > 0.0 else float("inf")
+        ok = (math.isfinite(se) and slope > q * se and slope > 0.0
+              and (abs(math.log(slope)) <= math.log(self.REST_CLAIM_FACTOR) or abs(slope - 1.0) <= q * se))
+        ev.update(rest_end_t_s=[float(ctx["t"][b]) for _a, b in spans], fitted_at_rest_ends_v=[float(x) for x in fit],
+                  rest_deviation_v=[float(x) for x in dev], slope=slope, se=se)
+        why = (f"at the ends of the record's {n} rests after current {what} moves the model's voltage by "
+               + ", ".join(f"{1e3 * x:+.1f}" for x in fit) + " mV and the relaxed voltage differs from the model's "
+               "without it by " + ", ".join(f"{1e3 * x:+.1f}" for x in dev) + f" mV: slope {slope:.2f} +- {se:.2f}")
+        return {"ok": ok, "evidence": ev, "statement": why + ("" if ok else (
+            f" (needed: > {q:.2f} standard errors, Student's t with {n - 1} degrees of freedom, and within a factor "
+            f"{self.REST_CLAIM_FACTOR:g} of 1): the rests do not sit where it puts them; it bends the model to the "
+            f"voltage's model-form error under current"))}
+
+    def _hysteresis_evidence(self, ctx, values, meas):
+        """Whether the record's own rests show the fitted OCV hysteresis ``M h``.
+
+        Hysteresis claims that the voltage a cell relaxes to at rest depends on the direction it came from: rests
+        reached after charge and after discharge sit apart by ``M`` times the difference of their hysteresis state
+        ``h``.  Its evidence is the record's rests after current (:meth:`_rest_spans`): at each rest's end (its last
+        tenth) the measured voltage minus the candidate fit's voltage without hysteresis (``hyst_max_v = 0``, the
+        other parameters as fitted: the RC branches' remaining relaxation is the model's) is regressed on the fit's
+        ``M h`` there, with an intercept - an OCV offset, which a record whose rests all share one ``h`` cannot
+        tell from hysteresis (nor from an OCV correction, when ``h`` only builds up along a one-way discharge:
+        then ``h`` is a function of the SOC).  ``h`` at each rest comes from the fit (the voltage with hysteresis
+        minus the one without, over ``M``) for every start state of :data:`HYSTERESIS_START_STATES`: the
+        recursion ``h+ = a h + b`` is affine, so a start state ``h0`` adds ``h0 exp(-g |charge passed| / Q)`` -
+        evidence that rests on the fit's assumed start (0) is not the record's.  Supported when, for every start
+        state, the slope exceeds 0 by Student's one-sided ``REST_CLAIM_LEVEL`` quantile (n - 2 degrees of
+        freedom, the scatter of the rests about the line: the OCV table's own error at their SOC) and is of the
+        fitted size (within ``REST_CLAIM_FACTOR`` of 1, or 1 within the quantile's standard errors).  A record
+        with fewer than 3 rests after current cannot show it (a drive without rest stops: what it lacks is said)."""
+        from scipy import stats
+        m_h = float(values.get("hyst_max_v", 0.0))
+        if m_h == 0.0:
+            return None
+        g = float(values.get("hyst_rate", 30.0))
+        spans = list(getattr(self, "rest_spans", []))
+        ev = {"hyst_max_v": m_h, "hyst_rate": g, "n_rests": len(spans)}
+        if len(spans) < 3:
+            return {"ok": False, "evidence": ev, "statement": (
+                f"the record has {len(spans)} rest(s) after current (>= 60 s); hysteresis is the "
+                "rest voltage depending on the direction the cell came from, and without rests reached after charge "
+                "and after discharge the record cannot tell it from an OCV offset or correction: the fitted M h "
+                "bends the model to the voltage's model-form error under current")}
+        x0, dev = self._rest_end_deviation(ctx, values, meas, {"hyst_max_v": 0.0})
+        t = ctx["t"]
+        i_true = ctx["i"] - float(values.get("current_offset_a", 0.0))
+        cap = float(values.get("capacity_ah", self.base.capacity_ah))
+        memory = np.exp(-g * np.cumsum(np.abs(i_true) * np.diff(t, prepend=t[0])) / (3600.0 * max(cap, 1e-9)))
+        mem = np.array([float(np.mean(memory[b + 1 - max(3, int(0.1 * (b - a + 1))):b + 1])) for a, b in spans])
+        n = dev.size
+        q = float(stats.t.ppf(self.REST_CLAIM_LEVEL, n - 2))
+        ev.update(rest_end_t_s=[float(t[b]) for _a, b in spans], h_at_rest_ends=[float(x) for x in x0 / m_h],
+                  start_memory_at_rest_ends=[float(x) for x in mem], rest_deviation_v=[float(x) for x in dev])
+        fits, bad = [], []
+        for h0 in self.HYSTERESIS_START_STATES:
+            x = x0 + h0 * m_h * mem
+            xc = x - x.mean()
+            sxx = float(xc @ xc)
+            if sxx <= 0.0:
+                slope, se = float("nan"), float("inf")
+            else:
+                slope = float(xc @ (dev - dev.mean())) / sxx
+                res = dev - dev.mean() - slope * xc
+                se = math.sqrt(float(res @ res) / (n - 2) / sxx)
+            sig = math.isfinite(se) and slope > q * se
+            same = slope > 0.0 and (abs(math.log(slope)) <= math.log(self.REST_CLAIM_FACTOR)
+                                    or abs(slope - 1.0) <= q * se)
+            fits.append({"start_state": h0, "slope": slope, "se": se, "h_spread": float(np.ptp(x)) / abs(m_h)})
+            if not (sig and same):
+                bad.append((h0, slope, se, float(np.ptp(x)) / abs(m_h)))
+        ev["regressions"] = fits
+        ok = not bad
+        h_txt = ", ".join(f"{x:+.2f}" for x in x0 / m_h)
+        why = (f"at the ends of the record's {n} rests after current the fitted hysteresis state h is {h_txt} (start "
+               f"state 0 as fitted; M = {1e3 * m_h:+.1f} mV); the rest voltages minus the model's without hysteresis "
+               f"follow M h with slope "
+               + ", ".join(f"{f['slope']:.2f} +- {f['se']:.2f} (start h {f['start_state']:+g})" for f in fits))
+        if ok:
+            return {"ok": True, "evidence": ev, "statement": why}
+        h0, slope, se, spread = bad[0]
+        what = (f"with start state {h0:+g} the rests' h spread is {spread:.2f}: they are reached from one side, and "
+                "the record cannot tell hysteresis from an OCV offset / correction"
+                if not math.isfinite(se) or spread < 0.1
+                else f"with start state {h0:+g} the rests do not sit apart by M h")
+        return {"ok": False, "evidence": ev, "statement": why + (
+            f" (needed, whatever the cell's unknown state at the start: > {q:.2f} standard errors, Student's t with "
+            f"{n - 2} degrees of freedom, and within a factor {self.REST_CLAIM_FACTOR:g} of 1): {what}; the fitted M h "
+            f"bends the model to the voltage's model-form error under current")}
 
     # -- closing the loop
     def overlay(self, values, out_dir) -> dict:

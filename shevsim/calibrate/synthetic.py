@@ -51,23 +51,33 @@ VEHICLE_EFFECTS = {   # component parameters of the plant (vehicle / motor / bus
 }
 
 
-def _cell_current(duration_s: float, dt: float, rng, quantum_s: float) -> np.ndarray:
+def _cell_current(duration_s: float, dt: float, rng, quantum_s: float, charge_rests: bool = False):
     """Drive-like current [A, + discharge]: random pulses (up to 12 A = 4C, regen down to -6 A) and rests.
 
-    Segment boundaries fall on multiples of ``quantum_s`` (the logger's sample period)."""
+    Segment boundaries fall on multiples of ``quantum_s`` (the logger's sample period).  ``charge_rests``: every
+    other rest (at random) is reached after a charge of 60-180 s at 1-3 A (the record then has rests reached after
+    charge and after discharge, what a lab uses to see OCV hysteresis: on a drive that only discharges between its
+    rests the hysteresis state is the same at every rest, and the rests cannot tell it from an OCV offset).
+    Returns the current and the mask of those charges (the caller does not scale them)."""
     n = int(round(duration_s / dt)) + 1
     q = max(1, int(round(quantum_s / dt)))
     i = np.zeros(n)
+    held = np.zeros(n, bool)
     k = int(60 / dt)  # initial rest
     while k < n:
         if rng.random() < 0.2:
+            if charge_rests and rng.random() < 0.5:
+                seg = q * int(rng.uniform(60, 180) / quantum_s)
+                i[k:k + seg] = -rng.uniform(1.0, 3.0)
+                held[k:k + seg] = True
+                k += seg
             k += q * int(rng.uniform(60, 240) / quantum_s)  # rest
             continue
         seg = q * max(1, int(rng.uniform(3, 25) / quantum_s))
         val = rng.choice([rng.uniform(1.0, 12.0), rng.uniform(-6.0, -0.5), rng.uniform(1.0, 4.0)], p=[0.5, 0.25, 0.25])
         i[k:k + seg] = val
         k += seg
-    return i
+    return i, held[:n]
 
 
 def _bumped_ocv_file(e: dict) -> str:
@@ -86,7 +96,7 @@ def _bumped_ocv_file(e: dict) -> str:
 
 def synth_cell(effects: dict | None = None, duration_s: float = 2400.0, dt_s: float = 1.0,
                ambient: str = "constant", seed: int = 0, truth: dict | None = None, soc0: float = 0.95,
-               discharge_frac: float = 0.6):
+               discharge_frac: float = 0.6, charge_rests: bool = False):
     """Synthetic cell record from the co-simulation plant, and the truth used.
 
     The ``battery`` component (one cell, current input) is stepped by the master at 0.1 s with
@@ -97,23 +107,24 @@ def synth_cell(effects: dict | None = None, duration_s: float = 2400.0, dt_s: fl
     (after the step change), with Gaussian noise (10 mA, 2 mV, 0.05 K, ambient 0.1 K).
     ``ambient``: ``"constant"`` (25 degC) or ``"warmup"`` (chamber from -10 to +25 degC).  The cell starts at
     ``soc0`` and the discharge pulses are scaled so the record's net discharge is ``discharge_frac`` of 2.3 Ah.
+    ``charge_rests``: half the rests are reached after a charge (:func:`_cell_current`).
     """
     from ..components.battery import BatteryPack, BatteryPackParams
     from ..components.profile import ProfileParams, ProfileSource
     from ..core.master import Connection, Fault, Master, MasterSettings
     rng = np.random.default_rng(seed)
     fine = 0.1
-    i_true = _cell_current(duration_s, fine, rng, dt_s)
+    i_true, held = _cell_current(duration_s, fine, rng, dt_s, charge_rests)
     # discharge pulses scaled (x0.3 .. x2) towards a net discharge of discharge_frac of 2.3 Ah, then down
-    # until the SOC stays within [0.03, 0.98] along the whole record
+    # until the SOC stays within [0.03, 0.98] along the whole record (the charges before rests are not scaled)
     dis = float(np.sum(np.maximum(i_true, 0.0)) * fine / 3600.0)
-    chg = float(np.sum(np.maximum(-i_true, 0.0)) * fine / 3600.0)
-    target = discharge_frac * 2.3
+    chg = float(np.sum(np.maximum(-i_true[~held], 0.0)) * fine / 3600.0)
+    target = discharge_frac * 2.3 + float(np.sum(-i_true[held]) * fine / 3600.0)
     scale = min(max((target + chg) / dis, 0.3), 2.0) if dis > 0 else 1.0
     # then the charge pulses (x0.2 .. x1) make up what the capped discharge scale could not
     scale_c = min(max((scale * dis - target) / chg, 0.2), 1.0) if chg > 0 else 1.0
     for _ in range(100):
-        i_try = np.where(i_true > 0, i_true * scale, i_true * scale_c)
+        i_try = np.where(held, i_true, np.where(i_true > 0, i_true * scale, i_true * scale_c))
         soc = soc0 - np.cumsum(i_try) * fine / (3600.0 * 2.3)
         if soc.min() >= 0.03 and soc.max() <= 0.98:
             break

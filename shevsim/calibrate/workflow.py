@@ -39,7 +39,8 @@ Steps (:func:`run_workflow`):
    parameters (the nominal's compromise between channels coupled through them: an equivalent circuit's heat
    follows resistances bent to a voltage model-form error), not from the effect.  What an effect claims is
    also checked on the record itself where the model can (:meth:`CalibrationModel.effect_evidence`: the
-   cell's cooling change and reversible heat against the record's own energy balance); a candidate whose
+   cell's cooling change and reversible heat against the record's own energy balance, its OCV hysteresis, OCV
+   correction and capacity against the relaxed voltages of its rests after current); a candidate whose
    claim the record does not show does not pass, and the report says why.  An effect with a claim about one
    channel (``Effect.channel_claim``: the cell's Arrhenius law, about the voltage) is tested there instead of
    by (d): its parameter refitted on that channel alone must be significant and of the joint fit's size
