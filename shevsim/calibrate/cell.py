@@ -25,9 +25,9 @@ Declared (fitted) parameters: ``rs_scale, r1_scale, c1_scale`` (and ``r2_scale, 
 nominal has the second branch), ``kt_w_mk``, ``cp_j_kgk``, ``h_conv_factor``.
 
 What the record resolves (:meth:`CellModel.record_resolution`, in the report): the slow branch's time
-constant R2 C2 is limited to the longer of the record's longest rest after current and the nominal slow
-branch's own time constant (a relaxation no rest shows decaying, and the nominal does not declare, is a series
-capacitor - a capacity); and the rests measure the current-sensor offset (:meth:`CellModel.measured_params`: the median
+constant R2 C2 is limited to the record's longest rest after current when that rest is at least the
+nominal slow branch's own time constant (a relaxation no rest shows decaying is a series capacitor - a
+capacity); and the rests measure the current-sensor offset (:meth:`CellModel.measured_params`: the median
 logged current at rest, its standard error from the rests' effective sample size; the calibration holds
 ``current_offset_a`` there).  A rest (:meth:`CellModel._rest_spans`) is where the cell carries no current: the
 logged current at one level no larger than C/20 (absolute thresholds from the nominal capacity and the current
@@ -353,19 +353,19 @@ class CellModel(CalibrationModel):
         # the sensor offset is read in every rest long enough to be recognised as one (its relaxation tested), not
         # only in those long enough to show the slow branch: a drive's 20-90 s stops are rests too
         offset_spans = self._rest_spans(t, i, v_meas, self.base.capacity_ah, min_s=self.OFFSET_REST_MIN_S)
-        # the slow RC branch's time constant is limited to the longer of the record's longest rest and the
-        # nominal's own slow time constant (the table's, x the declared scales): a relaxation that no rest shows
-        # decaying, and that the nominal does not declare, cannot be told from a series capacitor - that is,
-        # from a capacity or a current offset (over a swing where the OCV is near linear in the charge).  A record
-        # whose rests are all shorter than the declared time constant resolves nothing beyond it: the declared
-        # value is the limit then (continuous at a rest as long as it; record_resolution says which applies)
+        # the slow RC branch's time constant is limited to the longest rest: a relaxation that no rest shows
+        # decaying cannot be told from a series capacitor - that is, from a capacity or a current offset
+        # (over a swing where the OCV is near linear in the charge).  A record whose rests are all shorter than
+        # the nominal slow branch's own time constant (the table's, x the declared scales) resolves no slow
+        # relaxation at all: no limit then (the branch stays as declared), and a capacity or an offset is not
+        # identifiable apart from it (record_resolution says so)
         xs = np.linspace(lo, hi, 21)
         self.tau2_table_s = float(np.mean([tables.params(x, 25.0, 1.0)[3] * tables.params(x, 25.0, 1.0)[4]
                                            for x in xs]))
         b = self.base
         self.tau2_nominal_s = self.tau2_table_s * (b.r2_scale if b.r2_scale > 0.0 else 1.0) * b.c2_scale
         longest = max(self.rests_s) if self.rests_s else 0.0
-        self.tau2_max_s = max(longest, self.tau2_nominal_s)
+        self.tau2_max_s = longest if longest >= self.tau2_nominal_s else None
         self.soc_swing = hi - lo
         ir = np.concatenate([i[a:b + 1] for a, b in offset_spans]) if offset_spans else np.zeros(0)
         self.rest_current = None
@@ -635,20 +635,16 @@ class CellModel(CalibrationModel):
                "rests_refused": [{"t_s": a, "duration_s": d, "why": w}
                                  for a, d, w in getattr(self, "rests_refused", [])]}
         out["slow_branch_tau_nominal_s"] = float(getattr(self, "tau2_nominal_s", float("nan")))
-        longest = max(rests) if rests else 0.0
-        one = "" if two else " (the nominal has one RC branch: the second_rc_branch effect's is limited alike)"
         if tmax is None:
-            out["statement"] = "no limit on the slow RC branch's time constant"
-        elif longest < tmax:
-            what = (f"the record's longest rest after current ({longest:.0f} s) is shorter than the slow RC branch's "
-                    f"declared time constant" if rests else "the record has no rest (>= 60 s) after current: the "
-                    "slow RC branch's time constant is not resolved beyond the declared one")
-            out["statement"] = (f"{what}: the time constant is limited to the declared {tmax:.0f} s (a slower "
-                                f"relaxation, which no rest shows and the nominal does not declare, is a series "
-                                f"capacitor: a capacity){one}; SOC swing {100 * out['soc_swing_frac']:.0f} %")
+            what = (f"the record's longest rest after current ({max(rests):.0f} s) is shorter than the slow RC "
+                    f"branch's time constant ({out['slow_branch_tau_nominal_s']:.0f} s)" if rests
+                    else "the record has no rest (>= 60 s) after current")
+            one = "" if two else " (the nominal has one RC branch: the time constant is the second_rc_branch effect's)"
+            out["statement"] = (f"{what}: the slow relaxation is not resolved, so a capacity error or a current "
+                                f"offset cannot be told apart from it{one}")
         else:
             out["statement"] = (f"the slow RC branch's time constant is limited to the longest rest, {tmax:.0f} s "
-                                f"(longer relaxations are a series capacitor: a capacity){one}; SOC swing "
+                                f"(longer relaxations are a series capacitor: a capacity); SOC swing "
                                 f"{100 * out['soc_swing_frac']:.0f} %")
         if len(rests) < 3:
             # the open-circuit voltage shows only at rest (effect_evidence: _hysteresis_evidence, _rest_claim)

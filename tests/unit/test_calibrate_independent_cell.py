@@ -209,14 +209,13 @@ def test_pybamm_contact_resistance_raises_the_fitted_ohmic_resistance_by_its_val
 
 # ------------------------------------------------------------------ capacity and current offset: the swing records
 #
-# An RC branch whose time constant is longer than any rest the record has is never seen relaxing, and over a
-# swing where the OCV is near linear in the charge it is a series capacitor - a capacity: with its time
-# constant free, the nominal's slow branch took up a 15 % capacity loss on the one-hour drive (r2_scale 5.7,
-# c2_scale 0.6).  The calibration limits that time constant to the longer of the record's longest rest after
-# current and the nominal's declared one (CellModel.record_resolution), and reads a current-sensor offset where a
-# lab reads it: the logged current in the rests (CellModel.measured_params; a drive's own 20-90 s stops are
-# rests).  Both the one-hour drive records and the "swing" records (95 % -> 25-45 % SOC, three 30 min drive
-# blocks with 10 min rest stops) now identify both.  Stated tolerances: capacity 5 %, offset 25 %.  The default
+# Over the one-hour drive (25 % SOC swing, no rest stop) the nominal's slow RC branch takes up a capacity
+# loss (a current offset is read in the drive's own 20-90 s stops: see the drive-offset tests below): an RC branch whose time constant is longer than any rest the record has is never
+# seen relaxing, and over a swing where the OCV is near linear in the charge it is a series capacitor - a
+# capacity.  The calibration now limits that time constant to the record's longest rest after current
+# (CellModel.record_resolution), and reads a current-sensor offset where a lab reads it: the logged current
+# in the rests (CellModel.measured_params).  The "swing" records (95 % -> 25-45 % SOC, three 30 min drive
+# blocks with 10 min rest stops) identify both.  Stated tolerances: capacity 5 %, offset 25 %.  The default
 # run offers the voltage effects a capacity or an offset is confused with; the whole library is `slow`.
 
 SWING_EFFECTS = ["capacity", "current_offset", "ocv_hysteresis"]
@@ -301,8 +300,7 @@ def test_a_cv_taper_and_a_small_charge_tail_are_not_rests():
     assert not [s for s in spans if s[1] >= cv], (spans, why)
     assert any("CV phase" in r for _t, _d, r in why), why       # the taper was seen and refused as a CV phase
     m = _ecm_model(df)
-    assert m.measured_params({}) == {}, (m.rests_s, m.rest_current)
-    assert m.tau2_max_s == pytest.approx(m.tau2_nominal_s)          # no rest: the declared slow time constant
+    assert m.measured_params({}) == {} and m.tau2_max_s is None, (m.rests_s, m.rest_current)
 
 
 def _offset_protocol():
@@ -381,26 +379,6 @@ def test_no_effect_swing_record_names_no_physical_effect():
     _check_no_effect(rep)
 
 
-def test_pybamm_drive_capacity_named_with_the_slow_branch_held_to_what_the_record_or_nominal_resolves():
-    """The one-hour drive (38 % SOC swing, no rest as long as the slow branch): its time constant held at the
-    nominal's declared one, the 15 % capacity loss is no longer a series capacitor of the slow branch."""
-    rep = _cell("capacity", effects=SWING_EFFECTS)
-    res = rep["record_resolution"]
-    assert res["rests_after_current_s"] == [] and res["slow_branch_tau_max_s"] == pytest.approx(
-        res["slow_branch_tau_nominal_s"])
-    assert rep["selected_effects"] == ["capacity"], rep["selected_effects"]
-    cap = rep["final_parameters"]["capacity_ah"]
-    assert cap == pytest.approx(_cell_truth("capacity")["capacity_ah"], rel=0.05), cap
-    assert rep["rmse_after"]["voltage_v"]["holdout"] < 0.9 * rep["rmse_before"]["voltage_v"]["holdout"]
-
-
-@pytest.mark.slow
-def test_pybamm_drive_capacity_named_whole_library():
-    rep = _cell("capacity")
-    assert rep["selected_effects"] == ["capacity"], rep["selected_effects"]
-    assert rep["final_parameters"]["capacity_ah"] == pytest.approx(4.25, rel=0.05)
-
-
 def test_pybamm_drive_current_offset_named_from_the_drives_own_stops():
     """The one-hour drive has no rest stop, but its 20-90 s stops are rests: the logged current there is the
     sensor's offset (measured and held, not inferred from the voltage), and the offset is named on the drive too."""
@@ -464,12 +442,11 @@ def _discrepancy_of(rep, effect):
     return [d for d in rep["model_form_discrepancy"] if d.get("effect") == effect]
 
 
-def test_a_step_in_h_that_only_bends_to_the_thermal_model_form_is_not_a_cooling_change():
-    """On the offset record a step in h at a free time (factor 1.8 at 865 s) fits the temperature better, but the
-    record's own heat loss per kelvin is the same on both sides of it.  (On the Arrhenius record the step gained
-    10 % too while the slow RC branch's time constant was free; held to what the record or the nominal resolves,
-    it gains 5.9 % and fails the gain rule before its evidence is asked: the test below.)"""
-    rep = _cell("current_offset", effects=["cooling_change"])
+@pytest.mark.parametrize("case", ["arrhenius", "current_offset"])
+def test_a_step_in_h_that_only_bends_to_the_thermal_model_form_is_not_a_cooling_change(case):
+    """On the Arrhenius and offset records a step in h at a free time (factor 1.5 at 1136 s, 1.8 at 865 s) fitted
+    the temperature better, but the record's own heat loss per kelvin is the same on both sides of it."""
+    rep = _cell(case, effects=["cooling_change"])
     assert "cooling_change" not in rep["selected_effects"]
     (d,) = _discrepancy_of(rep, "cooling_change")
     (ev,) = d["evidence"]
