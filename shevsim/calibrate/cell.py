@@ -367,18 +367,7 @@ class CellModel(CalibrationModel):
         longest = max(self.rests_s) if self.rests_s else 0.0
         self.tau2_max_s = longest if longest >= self.tau2_nominal_s else None
         self.soc_swing = hi - lo
-        ir = np.concatenate([i[a:b + 1] for a, b in offset_spans]) if offset_spans else np.zeros(0)
-        self.rest_current = None
-        if ir.size >= 30:
-            med = float(np.median(ir))
-            # spread: the MAD's std, or the plain std when the logging is quantised (MAD 0)
-            sd = 1.4826 * float(np.median(np.abs(ir - med))) or float(np.std(ir))
-            # correlated samples (a fast logger's filtered noise) count less than independent ones: the effective
-            # number of samples of each rest is its length over its integrated autocorrelation time
-            n_eff = sum((b - a + 1) / self._tau_int(i[a:b + 1]) for a, b in offset_spans)
-            self.rest_current = {"value": med, "se": 1.2533 * sd / math.sqrt(max(n_eff, 1.0)), "n": int(ir.size),
-                                 "n_eff": float(n_eff), "n_rests": len(offset_spans),
-                                 "duration_s": float(sum(t[b] - t[a] for a, b in offset_spans))}
+        self.rest_current = self._offset_from_rests(t, i, offset_spans)
         self.effects = self._make_effects()
         tg, (ig, tag), _h, resampled = sampling_grid(t, i, ta)
         return {"t": t, "i": i, "ta": ta, "tg": tg, "ig": ig, "tag": tag, "resampled": resampled, "d": d, "ix": ix, "n": t.size, "df": df,
@@ -606,6 +595,72 @@ class CellModel(CalibrationModel):
 
     #: a rest current beyond this many standard errors of its median is a measured sensor offset
     REST_OFFSET_SE = 5.0
+    #: a rest whose level is more than this many of its standard errors from the rests' consensus carries a real
+    #: current (a small pulse, a draw), not the offset: left out of the measurement and listed
+    REST_AGREE_SE = 4.0
+    #: the offset is measured only by at least this many agreeing rests (one or two cannot show their agreement)
+    REST_MIN_AGREEING = 3
+
+    def _rest_consensus(self, i, spans, q, pooled=False):
+        """``(value, se, tau_int, chi2, agree, levels, level_se)`` of the offset from the rests ``spans`` (see
+        :meth:`_offset_from_rests`); ``pooled``: one median over all of them (no consensus asked).  None when fewer
+        than ``REST_MIN_AGREEING`` agree or the rests have < 30 samples."""
+        segs = [i[a:b + 1] for a, b in spans]
+        meds = np.array([float(np.median(x)) for x in segs])
+        dev = np.concatenate([x - m for x, m in zip(segs, meds)])
+        if dev.size < 30:
+            return None
+        # spread: the MAD's std, or the plain std when the logging is quantised (MAD 0)
+        sd = 1.4826 * float(np.median(np.abs(dev))) or float(np.std(dev))
+        tau = self._tau_int(dev)
+        se_k = np.maximum(1.2533 * sd / np.sqrt(np.array([x.size for x in segs]) / tau), 1e-12)
+        if pooled:
+            allx = np.concatenate(segs)
+            return (float(np.median(allx)), max(1.2533 * sd / math.sqrt(allx.size / tau), 0.5 * q), tau, 1.0,
+                    np.ones(len(spans), bool), meds, se_k)
+        centre = float(np.median(meds))
+        for _ in range(3):
+            agree = np.abs(meds - centre) <= self.REST_AGREE_SE * se_k
+            if agree.sum() < self.REST_MIN_AGREEING:
+                return None
+            w = 1.0 / se_k[agree] ** 2
+            centre = float(np.sum(w * meds[agree]) / np.sum(w))
+        se_int = 1.0 / math.sqrt(float(np.sum(w)))
+        chi2 = float(np.sum(w * (meds[agree] - centre) ** 2)) / max(int(agree.sum()) - 1, 1)
+        return centre, max(se_int * math.sqrt(max(chi2, 1.0)), 0.5 * q), tau, chi2, agree, meds, se_k
+
+    def _offset_from_rests(self, t, i, spans) -> dict | None:
+        """The current the sensor logs at zero current, from the rests ``spans``: each rest is one measurement of
+        the same offset - its median logged current, whose standard error counts the noise's autocorrelation (the
+        integrated autocorrelation time of all the rests' deviations pooled: a 20-sample span alone underestimates
+        its own).  A span that is a small real current (below C/20, after a larger one, its voltage relaxing) looks
+        like a rest but does not agree with the others: rests further than ``REST_AGREE_SE`` of their standard errors
+        from the consensus (the median of the rests' levels, then the inverse-variance mean of the agreeing ones) are
+        left out and listed.  The estimate is that mean; its standard error the larger of the internal one and the
+        agreeing rests' scatter (Birge ratio), and at least half the current channel's resolution (a quantised
+        rest cannot be read finer).  When fewer than ``REST_MIN_AGREEING`` rests agree, only the rests of at least
+        ``SLOW_REST_MIN_S`` are read, pooled (a real current does not relax the voltage for a minute like a rest:
+        the former rule); None when there are none (or < 30 samples)."""
+        steps = np.abs(np.diff(i))
+        q = float(steps[steps > 0].min()) if np.any(steps > 0) else 0.0
+        got = self._rest_consensus(i, spans, q) if len(spans) >= self.REST_MIN_AGREEING else None
+        consensus = got is not None
+        if got is None:
+            spans = [(a, b) for a, b in spans if t[b] - t[a] >= self.SLOW_REST_MIN_S]
+            if not spans:
+                return None
+            got = self._rest_consensus(i, spans, q, pooled=True)
+            if got is None:
+                return None
+        centre, se, tau, chi2, agree, meds, se_k = got
+        kept = [sp for sp, ok in zip(spans, agree) if ok]
+        n = int(sum(b - a + 1 for a, b in kept))
+        return {"value": centre, "se": se, "n": n, "n_eff": float(n / tau), "n_rests": len(kept),
+                "duration_s": float(sum(t[b] - t[a] for a, b in kept)), "birge_ratio": math.sqrt(chi2),
+                "consensus": consensus,
+                "rests_left_out": [{"t_s": float(t[a]), "duration_s": float(t[b] - t[a]), "level_a": float(m),
+                                    "se_a": float(e)}
+                                   for (a, b), m, e, ok in zip(spans, meds, se_k, agree) if not ok]}
 
     def measured_params(self, ctx) -> dict:
         """Parameters this record measures directly: the current-sensor offset, whenever the record has rests
@@ -618,10 +673,14 @@ class CellModel(CalibrationModel):
             return {}
         return {"current_offset_a": {"value": rc["value"], "se": rc["se"],
                                      "significant": bool(abs(rc["value"]) > self.REST_OFFSET_SE * rc["se"]),
-                                     "how": f"the median logged current over {rc['duration_s']:.0f} s of "
-                                            f"{rc.get('n_rests', '')} rests "
-                                            f"({rc['n']} samples, {rc.get('n_eff', rc['n']):.0f} effectively "
-                                            f"independent)"}}
+                                     "how": f"the logged current in {rc.get('n_rests', '')} "
+                                            + ("agreeing rests, " if rc.get("consensus", True)
+                                               else f"rest(s) of >= {self.SLOW_REST_MIN_S:.0f} s, pooled, ")
+                                            + f"{rc['duration_s']:.0f} s ({rc['n']} samples, "
+                                            f"{rc.get('n_eff', rc['n']):.0f} effectively independent"
+                                            + (f"; {len(rc['rests_left_out'])} low-current span(s) left out, their "
+                                               f"level not the others' (a real current)"
+                                               if rc.get("rests_left_out") else "") + ")"}}
 
     def record_resolution(self) -> dict:
         """What the record can resolve: its rests after current, the slow RC branch's time-constant limit,

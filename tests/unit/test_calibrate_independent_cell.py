@@ -324,6 +324,53 @@ def test_rests_measure_a_true_current_sensor_offset_through_prepare(offset_a):
     assert got["significant"] == (offset_a != 0.0)
 
 
+@pytest.mark.parametrize("offset_a", [0.0, 0.1])
+def test_small_real_currents_that_pass_for_rests_are_left_out_by_the_rests_consensus(offset_a):
+    """Drives followed by six true 40 s rests and by three 30 s spans of a real 80 mA discharge (below C/20,
+    after a 10 A pulse, its voltage relaxing: each passes for a rest).  Each rest is one measurement of the offset;
+    the 80 mA spans disagree with them by some 15 of their standard errors and are left out (a single pooled
+    median would have been pulled towards them).  With as many such spans as rests there is no consensus, and
+    no measurement."""
+    drive = _DRIVE + [("rest", 40)] + _DRIVE + [("rest", 40)] + _DRIVE + [("cc", 0.08, 30)]
+    df, _ = _ecm_record([("rest", 60)] + drive * 3, offset_a=offset_a, seed=11)
+    m = _ecm_model(df)
+    rc = m.rest_current
+    assert rc["n_rests"] == 6 and len(rc["rests_left_out"]) == 3, rc
+    assert all(r["level_a"] == pytest.approx(offset_a + 0.08, abs=0.01) for r in rc["rests_left_out"])
+    got = m.measured_params({})["current_offset_a"]
+    assert abs(got["value"] - offset_a) < 3.0 * got["se"], got
+    assert got["significant"] == (offset_a != 0.0)
+    even = _DRIVE + [("rest", 40)] + _DRIVE + [("cc", 0.08, 30)]
+    df, _ = _ecm_record([("rest", 60)] + even * 4, offset_a=offset_a, seed=11)
+    assert _ecm_model(df).rest_current is None
+
+
+NO_OFFSET_CASES = ["none", "none_2", "none_3", "capacity", "cooling_change", "arrhenius", "contact_resistance",
+                   "entropic", "none_swing", "none_swing_2", "capacity_swing"]
+
+
+def _prepared(case):
+    from shevsim.calibrate.cell import CellModel
+    from shevsim.calibrate.data import load_measured
+    from shevsim.calibrate.known import load_params_toml
+    m = CellModel(load_params_toml(D / "cell_nominal.toml"))
+    m.prepare(load_measured(str(D / f"cell_{case}.csv"), "cell"))
+    return m
+
+
+def test_pybamm_rests_measure_the_offset_within_its_standard_error_on_every_record():
+    """The drive's stops (20-90 s) and the swing's rest stops, every PyBaMM record: no offset within 3 standard
+    errors where there is none (several records have 20-40 s spans of a real -243..+242 mA current that pass for
+    rests: the consensus leaves them out), the +0.1 A offset within 3 standard errors where there is one."""
+    for case in NO_OFFSET_CASES:
+        rc = _prepared(case).rest_current
+        assert rc is not None and rc["n_rests"] >= 3, (case, rc)
+        assert abs(rc["value"]) < 3.0 * rc["se"], (case, rc)
+    for case in ("current_offset", "current_offset_swing"):
+        rc = _prepared(case).rest_current
+        assert abs(rc["value"] - _cell_truth(case)["current_offset_a"]) < 3.0 * rc["se"], (case, rc)
+
+
 def test_autocorrelated_rest_current_does_not_fake_a_significant_offset():
     """A 10 Hz logger whose current noise is filtered (AR(1), 2 s correlation time, 5 mA): counted as independent
     samples its median's standard error is some 6x too small, and a zero offset would look 'significant' (5
@@ -385,7 +432,7 @@ def test_pybamm_drive_current_offset_named_from_the_drives_own_stops():
     rep = _cell("current_offset", effects=SWING_EFFECTS)
     truth = _cell_truth("current_offset")["current_offset_a"]
     meas = rep["measured_parameters"]["current_offset_a"]
-    assert meas["significant"] and meas["value"] == pytest.approx(truth, rel=0.25), meas
+    assert meas["significant"] and abs(meas["value"] - truth) < 3.0 * meas["se"], meas
     assert rep["record_resolution"]["rest_current_a"]["n_rests"] >= 10
     assert rep["record_resolution"]["rests_after_current_s"] == []       # none long enough for the slow branch
     assert rep["selected_effects"] == ["current_offset"], rep["selected_effects"]
