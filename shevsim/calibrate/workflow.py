@@ -44,11 +44,30 @@ Steps (:func:`run_workflow`):
    claim the record does not show does not pass, and the report says why.  An effect with a claim about one
    channel (``Effect.channel_claim``: the cell's Arrhenius law, about the voltage) is tested there instead of
    by (d): its parameter refitted on that channel alone must be significant and of the joint fit's size
-   (``_Run.channel_claim``).  An effect that cannot act on the channels a model's model-form terms are computed
-   from (:meth:`CalibrationModel.model_form_terms`, ``model_form_sources``: the cell's temperature term is
-   the heat of its own voltage error) is judged after those terms are fitted out of the residual on the
-   training part: a thermal-only effect must explain what the heat of the circuit's voltage error does not
-   (an effect on the voltage is judged on the plain residuals: fixing the voltage fixes its heat).  The
+   (``_Run.channel_claim``; the standard error by the sandwich with a HAC - Newey-West, Andrews bandwidth -
+   variance of the parameter's influence series, :meth:`Fitter.channel_only`).  Such an effect, new to the model,
+   that does not pass with every parameter free is fitted and judged once more with the parameters it does not
+   act on (the claim's held ones: the thermal parameters under an electrical law) held at the current model's
+   values (:meth:`_Run.assess`, :meth:`_Run.hold_for`); when that version passes it is the candidate, and those
+   parameters stay held while the effect is selected.  Why: free, they let the law trade the other channel's
+   model-form error (measured on the PyBaMM Arrhenius record: Ea/R 2662 K with the held-out voltage +12.7 % and
+   temperature -35 %; held, 1598 K; truth 1413 K); held always, they keep the compensation a model without the
+   law made (the Panasonic -20 degC warm-up, whose free candidate passes: held, its final temperature error was
+   1.07 K instead of 0.27 K).  A claim verified on its channel is a measurement there, as a directly measured
+   parameter is (below): (a) is then any held-out gain (> 0), (b)-(c) stay.  Why not ``MIN_GAIN``: a law the
+   channel shows can be small against the model's form error on the held-out blocks - the Arrhenius record's law
+   acts where the cell is far from its mean temperature (the cold first minutes, a training block); the held-out
+   blocks sit within 3 K of it, where the true law (Ea/R fixed at 1413 K) changes the held-out voltage by -0.4 %
+   against a 12.4 mV form error.  A held-out significance test instead (Diebold-Mariano with a HAC variance) was
+   measured and does not separate: t = -0.4 on the Arrhenius record, -2.0 to -4.6 (significant) on no-effect
+   records (none_2, none_swing_2, capacity_swing), where the law with its thermal parameters held still fits the
+   temperature's form error; the claim on the voltage does separate (Arrhenius record 1431 +- 223 K, t = 6.4;
+   no-effect records 0 to 572 +- 390 K, t <= 1.5).
+   An effect that cannot act on the channels a model's model-form terms are computed from
+   (:meth:`CalibrationModel.model_form_terms`, ``model_form_sources``: the cell's temperature term is the heat of
+   its own voltage error) is judged after those terms are fitted out of the residual on the training part: a
+   thermal-only effect must explain what the heat of the circuit's voltage error does not (an effect on the
+   voltage is judged on the plain residuals: fixing the voltage fixes its heat).  The
    ranking score and the reported RMSE are the plain ones.
    Among passing candidates the lowest held-out score wins, except that a candidate within ``TIE`` = 2 %
    of it with a lower BIC is preferred (parsimony).  The winner is added, the remaining candidates are
@@ -239,6 +258,10 @@ class FitResult:
     #: RMSE per channel after the model's model-form terms (CalibrationModel.model_form_terms) are removed
     #: from the residual (None: the model has none): what the selection rule judges
     rmse_sel: dict | None = None
+    #: the claims of its effects tested on their own channel (effect -> _Run.channel_claim's answer), when tested
+    claims: dict | None = None
+    #: parameters held at these values in this candidate fit (an effect with a channel claim, _Run.assess)
+    held: dict | None = None
 
     @property
     def judged(self) -> dict:
@@ -342,13 +365,18 @@ class Fitter:
             r = np.where(np.isfinite(r), r, 1e6)
         return r
 
-    def fit(self, effects=(), start: dict | None = None, max_nfev: int = 200) -> FitResult:
-        ps = self._params_for(effects)
+    def fit(self, effects=(), start: dict | None = None, max_nfev: int = 200, hold: dict | None = None) -> FitResult:
+        """Fit the declared parameters and those of ``effects`` on the training part.  ``hold``: parameters held
+        at the given values (not fitted; e.g. the thermal ones under an electrical law with a channel claim,
+        :meth:`_Run.hold_for`)."""
+        hold = {k: float(v) for k, v in (hold or {}).items() if k in {p.name for p in self._params_for(effects)}}
+        ps = [p for p in self._params_for(effects) if p.name not in hold]
         base = self.model.defaults()
         for e in effects:
             base.update({p.name: p.default for p in self.effects[e].params})
         if start:
             base.update({k: v for k, v in start.items() if k in {p.name for p in ps}})
+        base.update(hold)
         starts = [base]
         for e in effects:
             fn = self.effects[e].starts
@@ -360,21 +388,22 @@ class Fitter:
         x_starts = [self._to_x(ps, s0) for s0 in starts]
         if len(x_starts) > N_STARTS_KEPT:
             # screen the starting points with short fits, finish the best few
-            pre = [self._lsq(ps, x0, PRE_NFEV) for x0 in x_starts]
+            pre = [self._lsq(ps, x0, PRE_NFEV, hold) for x0 in x_starts]
             x_starts = [pre[j].x for j in np.argsort([p.cost for p in pre])[:N_STARTS_KEPT]]
         best = None
         for x0 in x_starts:
-            sol = self._lsq(ps, x0, max_nfev)
+            sol = self._lsq(ps, x0, max_nfev, hold)
             if best is None or sol.cost < best.cost:
                 best = sol
-        values = self._to_values(ps, best.x)
+        values = {**hold, **self._to_values(ps, best.x)}
         # the BIC's complexity counts the parameters inferred from the residual: one held within its direct
         # measurement's +-3 standard errors (measured_params: a sensor offset read in the rests) is not one
         k = sum(1 for p in ps if p.name not in self.measured)
         return self.evaluate(effects, values, k, float(best.cost), int(best.nfev))
 
-    def _lsq(self, ps, x0, max_nfev):
-        return optimize.least_squares(lambda x: self._resid(self._to_values(ps, x)), x0, bounds=(0.0, 1.0),
+    def _lsq(self, ps, x0, max_nfev, hold=None):
+        hold = hold or {}
+        return optimize.least_squares(lambda x: self._resid({**hold, **self._to_values(ps, x)}), x0, bounds=(0.0, 1.0),
                                          method="trf", x_scale=1.0, diff_step=1e-5, max_nfev=max_nfev,
                                          ftol=1e-7, xtol=1e-7, gtol=1e-9)
 
@@ -409,9 +438,14 @@ class Fitter:
     def channel_only(self, effects, values: dict, channels, fixed, max_nfev: int = CAND_NFEV):
         """Refit ``effects`` from ``values`` on ``channels`` alone (every other channel's weight 0), the
         parameters named in ``fixed`` held.  Returns ``(values, se)``: the refitted values and each free
-        parameter's standard error from the Jacobian of the ``channels``' training residual at the optimum,
-        the residual variance discounted for its lag-1 autocorrelation (correlated samples carry less
-        information, as in ``identifiability``)."""
+        parameter's standard error from the Jacobian of the ``channels``' training residual at the optimum, by
+        the sandwich estimator with a HAC (Newey-West) variance of the parameter's influence series
+        (:func:`_hac_var`).  Why not the residual's lag-1 autocorrelation as a discount of the sample count
+        ``n (1 - rho) / (1 + rho)``: that is the variance of a *mean* of the residual (a regressor constant over
+        the record); a parameter whose sensitivity changes sign with the current (a resistance law: every pulse)
+        averages the residual's slow model-form error out, and the discount overstates its standard error by
+        an order of magnitude (the PyBaMM Arrhenius record: Ea/R 1431 +- 1975 K by the discount, +- 223 K by
+        the sandwich; its no-Arrhenius twin, the same drive: 174 +- 296 K)."""
         ps = [p for p in self._params_for(effects) if p.name not in fixed]
         start = dict(values)
         saved = dict(self.weights)
@@ -425,19 +459,40 @@ class Fitter:
         n = self.fit_idx.size
         rows = np.concatenate([np.full(n, c in channels) for c in self.channels])
         jac, res = np.asarray(sol.jac)[rows], np.asarray(sol.fun)[rows]
-        rho = float(np.clip(np.corrcoef(res[:-1], res[1:])[0, 1], 0.0, 0.999)) if np.std(res) > 0 else 0.0
-        neff = max(res.size * (1.0 - rho) / (1.0 + rho), float(len(ps) + 2))
-        cov = np.linalg.pinv(jac.T @ jac) * float(res @ res) / max(neff - len(ps), 1.0) * (res.size / neff)
+        # the sandwich (heteroscedasticity- and autocorrelation-consistent) covariance: each parameter's influence
+        # series psi_t = (J^T J)^-1 J_t^T r_t, its variance summed with the Bartlett weights of Newey-West over
+        # the lags of Andrews' (1991) AR(1) plug-in bandwidth (_hac_var)
+        psi = (jac * res[:, None]) @ np.linalg.pinv(jac.T @ jac)
         se = {}
         for j, p in enumerate(ps):
             lo, hi = self._bounds(p)
-            v = float(cov[j, j])
+            v = _hac_var(psi[:, j])
             # a parameter the channels do not move at all (e.g. pinned at its bound with no gradient) has no
             # information: an infinite, not a zero, standard error
             if not np.any(jac[:, j]) or not v > 0.0:
                 v = float("inf")
             se[p.name] = float(math.sqrt(v)) * (hi - lo) if not p.log else float("nan")
         return {**start, **self._to_values(ps, sol.x)}, se
+
+
+def _hac_var(x: np.ndarray) -> float:
+    """Long-run variance ``sum_t sum_s w_|t-s| x_t x_s`` of the series ``x`` (the variance of its sum, not of its
+    mean): Bartlett weights ``w_k = 1 - k / (L + 1)`` (Newey-West 1987, never negative) with Andrews' (1991)
+    AR(1) plug-in bandwidth ``L = 1.1447 (alpha n)^(1/3)``, ``alpha = 4 rho^2 / ((1 - rho)^2 (1 + rho)^2)``,
+    rho the series' lag-1 autocorrelation (the more persistent the series, the more lags count)."""
+    x = np.asarray(x, float)
+    n = x.size
+    if n < 3 or not np.all(np.isfinite(x)):
+        return float("nan")
+    xc = x - x.mean()
+    d = float(xc @ xc)
+    rho = float(np.clip(xc[1:] @ xc[:-1] / d, -0.99, 0.99)) if d > 0 else 0.0
+    alpha = 4.0 * rho * rho / ((1.0 - rho) ** 2 * (1.0 + rho) ** 2)
+    lags = int(min(n - 1, max(1, math.ceil(1.1447 * (alpha * n) ** (1.0 / 3.0)))))
+    v = float(x @ x)
+    for k in range(1, lags + 1):
+        v += 2.0 * (1.0 - k / (lags + 1.0)) * float(x[k:] @ x[:-k])
+    return v
 
 
 IDENT_SE_MAX = 0.1      # 1-sigma uncertainty above this fraction of the bound range: "not identifiable"
@@ -582,6 +637,9 @@ class _Run:
                 raise DataError(f"{why}; available: {', '.join(effs)}")
         self.implausible_candidates: list[dict] = []
         self.unsupported_candidates: list[dict] = []
+        #: effect -> {parameter: value}: the parameters an effect with a channel claim does not act on (its
+        #: ``channel_claim``'s held ones), held at the values of the model it was added to (hold_for)
+        self.claim_hold: dict[str, dict] = {}
         self.regs = model.regressors(self.fitter.ctx)
         for col in data.extra_columns:
             self.regs["measured:" + col] = data.df[col].to_numpy(float)
@@ -636,9 +694,26 @@ class _Run:
     def assess(self, selected, effs, start, current, rho, cur_score, rnd, without=None):
         """Fit ``selected + effs`` and judge it against ``current`` by the selection rule.  ``without``: for a
         pair, ``{effect: the fit with the other effect alone}`` - each effect must add its own gain on its own
-        channels to what the other one does."""
+        channels to what the other one does.  An effect with a channel claim new to the model that does not pass
+        with every parameter free is fitted and judged again with the parameters it does not act on held at
+        ``current``'s values (:meth:`hold_for`); that version is kept when it passes (and then stays held)."""
+        fr = self._judge(selected, effs, start, current, rho, cur_score, rnd, without, self.hold_for(selected, current))
+        new = [e for e in effs if self.fitter.effects[e].channel_claim is not None and e not in self.claim_hold]
+        if fr.passed or not new:
+            return fr
+        hold = self.hold_for(tuple(selected) + tuple(effs), current, new)
+        held = self._judge(selected, effs, {**start, **hold}, current, rho, cur_score, rnd, without, hold)
+        if not held.passed:
+            return fr
+        held.held = hold
+        held.reason += (f" - with {', '.join(k for k in hold)} held at the current model's values (the law does not "
+                        f"act on them); with them free: {fr.reason}")
+        return held
+
+    def _judge(self, selected, effs, start, current, rho, cur_score, rnd, without, hold):
+        """:meth:`assess` for one set of held parameters."""
         f = self.fitter
-        fr = f.fit(tuple(selected) + tuple(effs), start=start, max_nfev=CAND_NFEV)
+        fr = f.fit(tuple(selected) + tuple(effs), start=start, max_nfev=CAND_NFEV, hold=hold)
         fr.score = _score(fr, self.ref)
         fr.bic = _bic(fr, rho)
         fr.dbic = fr.bic - current.bic
@@ -659,10 +734,20 @@ class _Run:
         fr.worsen = max(rm[c]["holdout"] / max(cm[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
         eff_params = [p.name for e in effs for p in self.fitter.effects[e].params]
         measured, min_gain, weak, own, off_note = self._own_channel_gains(fr, current, effs, rm, cm, src, without)
+        # an effect whose claim is verified on its own channel (Effect.channel_claim: its parameter significant
+        # there, by a HAC standard error, and the joint fit's size) is measured there, as a directly measured
+        # parameter is: any held-out gain confirms it (the other rules stay); tested only when it matters
+        claimed = False
+        if (not measured and 0.0 < fr.gain < MIN_GAIN and not weak
+                and all(f.effects[e].channel_claim is not None for e in effs)):
+            fr.claims = {e: self.channel_claim(e, fr) for e in effs}
+            claimed = all(x["ok"] for x in fr.claims.values())
+            min_gain = 0.0 if claimed else min_gain
         why = []
-        if fr.gain <= min_gain if measured else fr.gain < min_gain:
-            why.append(f"held-out score gain {fr.gain:.1%} {'<=' if measured else '<'} {min_gain:.0%}"
-                       + (" (its parameter measured directly)" if measured else ""))
+        if fr.gain <= min_gain if (measured or claimed) else fr.gain < min_gain:
+            why.append(f"held-out score gain {fr.gain:.1%} {'<=' if (measured or claimed) else '<'} {min_gain:.0%}"
+                       + (" (its parameter measured directly)" if measured else "")
+                       + (" (its claim verified on its channel)" if claimed else ""))
         elif weak:
             why.append(f"held-out gain on the channels the effect acts on < {min_gain:.0%} ({'; '.join(weak)})")
         if fr.worsen > MAX_WORSEN:
@@ -688,7 +773,11 @@ class _Run:
             return fr
         if fr.passed and self._not_supported(fr, effs, rnd):
             return fr
-        if not why:
+        if not why and claimed:
+            fr.reason = (f"passes: held-out score gain {fr.gain:.1%} > 0 with its claim verified on its channel ("
+                         + "; ".join(x["statement"] for x in fr.claims.values())
+                         + f"; the {MIN_GAIN:.0%} held-out gain is not needed for a law its channel measures)")
+        elif not why:
             fr.reason = "passes" + (" (its parameter measured directly: "
                                     + "; ".join(f"{k} = {f.measured[k]['value']:.4g} from {f.measured[k]['how']}"
                                                 for e in effs for k in (p.name for p in f.effects[e].params))
@@ -755,7 +844,7 @@ class _Run:
         full = self.model.full_values({k: v for k, v in fr.params.items() if k != "time_shift_s"})
         ev = [(e, x) for e in effs
               for x in [self.model.effect_evidence(e, f.ctx, full, f.meas) if f.effects[e].channel_claim is None
-                        else self.channel_claim(e, fr)] if x is not None and not x["ok"]]
+                        else (fr.claims or {}).get(e) or self.channel_claim(e, fr)] if x is not None and not x["ok"]]
         if ev:
             fr.passed = False
             fr.reason = "not supported by the record: " + "; ".join(x["statement"] for _, x in ev)
@@ -766,12 +855,41 @@ class _Run:
             return True
         return False
 
+    def hold_for(self, effects, current, new=()) -> dict:
+        """The parameters held in a fit of ``effects``: for each effect with a channel claim selected in its held
+        version (:meth:`assess`, ``claim_hold``) or named in ``new`` (a candidate's held version), the parameters
+        it does not act on (``Effect.channel_claim``'s held ones: the thermal ones under the cell's Arrhenius law)
+        at the values of the model it was added to (``current`` for a candidate).  Why: an electrical law reaches the
+        temperature only through the heat of the resistances it changes; with the thermal parameters free, the
+        joint fit trades the law against the temperature's model-form error (the PyBaMM Arrhenius record: Ea/R
+        2662 K, held-out voltage +12.7 %, temperature -35 %; held: 1598 K, truth 1413 K)."""
+        out = {}
+        for e in effects:
+            cc = self.fitter.effects[e].channel_claim
+            if cc is None:
+                continue
+            held = self.claim_hold.get(e)
+            if held is None and e in new:
+                held = {k: float(current.params[k]) for k in cc[1] if k in current.params}
+            out.update(held or {})
+        return out
+
+    def keep_hold(self, effects, fr) -> None:
+        """``effects`` were selected with ``fr``: when ``fr`` is a held version (:meth:`assess`), the parameters
+        their channel claims hold stay at these values while they are selected."""
+        if not fr.held:
+            return
+        for e in effects:
+            cc = self.fitter.effects[e].channel_claim
+            if cc is not None and e not in self.claim_hold:
+                self.claim_hold[e] = {k: float(fr.held[k]) for k in cc[1] if k in fr.held}
+
     def channel_claim(self, e, fr):
         """The claim of ``e`` tested on its own channel alone (``Effect.channel_claim``): e.g. "the resistances
         follow exp(Ea/R (1/T - 1/T_ref))" is a claim about the voltage; the temperature it also moves (through
         the circuit's heat, whose form is uncertain) cannot support it.  Its parameter is refitted on that
         channel alone from the candidate fit.  It must be significant there - more than ``CLAIM_SIGMA``
-        standard errors above its neutral value (one-sided 5 %; the residual's autocorrelation discounted, the
+        standard errors above its neutral value (one-sided 5 %; a HAC standard error, :meth:`Fitter.channel_only`, the
         electrical parameters free to trade against it) - and agree with the joint estimate: within a factor
         ``CLAIM_FACTOR``, or the joint value within ``CLAIM_SIGMA`` standard errors.  Why a factor and not only
         the interval: the interval is the statistical spread under a right model form, and the voltage's form
@@ -864,6 +982,7 @@ class _Run:
             best_score = min(fr.score for _, fr in ok)
             near = [(k, fr) for k, fr in ok if fr.score <= best_score * (1 + TIE)]
             k, fr = min(near, key=lambda x: (len(x[0]), x[1].bic))
+            self.keep_hold(k, fr)
             selected.extend(k)
             rounds[-1]["selected"] = "+".join(k)
             current = fr
@@ -902,6 +1021,8 @@ class _Run:
                 old, fr, row = best
                 self.say(f"exchange: {cand} replaces {old} (held-out score {cur_score:.3f} -> {fr.score:.3f})")
                 selected = [x for x in selected if x != old] + [cand]
+                self.claim_hold.pop(old, None)
+                self.keep_hold((cand,), fr)
                 current = fr
                 row["selected"] = True
         if tried:
@@ -914,7 +1035,7 @@ class _Run:
         f = self.fitter
         final = current
         if selected:
-            final = f.fit(tuple(selected), start=current.params)
+            final = f.fit(tuple(selected), start=current.params, hold=self.hold_for(selected, current))
             final.score = _score(final, self.ref)
         dropped = []
         while len(selected) >= 2:
@@ -922,7 +1043,8 @@ class _Run:
             for e in selected:
                 rest = tuple(x for x in selected if x != e)
                 own = {p.name for p in f.effects[e].params}
-                fr = f.fit(rest, start={k: v for k, v in final.params.items() if k not in own})
+                fr = f.fit(rest, start={k: v for k, v in final.params.items() if k not in own},
+                           hold=self.hold_for(rest, final))
                 fr.score = _score(fr, self.ref)
                 worse = max(fr.rmse[c]["holdout"] / max(final.rmse[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
                 trials.append((fr.score, e, fr, worse))
@@ -930,6 +1052,7 @@ class _Run:
             if score <= final.score * (1.0 + DROP_TOL) and worse <= DROP_TOL:
                 self.say(f"backward elimination: dropping {e} (held-out score {final.score:.3f} -> {score:.3f})")
                 selected.remove(e)
+                self.claim_hold.pop(e, None)
                 dropped.append({"effect": e, "score_with": final.score, "score_without": score})
                 final = fr
             else:
@@ -964,7 +1087,8 @@ class _Run:
                 continue
             rest = tuple(x for x in selected if x != e)
             without = self.fitter.fit(rest, start={k: v for k, v in final.params.items()
-                                                   if k not in {p.name for p in self.fitter.effects[e].params}})
+                                                   if k not in {p.name for p in self.fitter.effects[e].params}},
+                                      hold=self.hold_for(rest, final))
             without.score = _score(without, self.ref)
             out.append({"effect": e, "evidence": ev, "holdout_score_with": final.score,
                         "holdout_score_without": without.score,
@@ -972,6 +1096,7 @@ class _Run:
                                      f"read as a model-form discrepancy, not as the cause"})
             self.say(f"model-form discrepancy: {out[-1]['statement']}")
             selected.remove(e)
+            self.claim_hold.pop(e, None)
             final = without
         return final, out
 
@@ -986,7 +1111,8 @@ class _Run:
             return final, []
         f = self.fitter
         rest = tuple(x for x in selected if x != "timing")
-        without = f.fit(rest, start={k: v for k, v in final.params.items() if k != "time_shift_s"})
+        without = f.fit(rest, start={k: v for k, v in final.params.items() if k != "time_shift_s"},
+                        hold=self.hold_for(rest, final))
         without.score = _score(without, self.ref)
         share = {}
         for c in f.channels:

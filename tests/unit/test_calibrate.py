@@ -289,3 +289,24 @@ def test_real_panasonic_us06(tmp_path, name):
         # the simulator (battery component + overlay, stepped by the master) reproduces the fit
         assert rep["replay"][ch]["holdout"] == pytest.approx(rep["rmse_after"][ch]["holdout"], rel=0.01)
     assert (out / "params.toml").is_file() and (out / "ocv.csv").is_file()
+
+
+def test_hac_variance_is_the_long_run_variance_of_an_ar1_series():
+    """The channel claim's standard error (workflow ``_hac_var``: Bartlett weights, Andrews' AR(1) bandwidth)
+    against the analytical long-run variance of an AR(1) series x_t = phi x_t-1 + e_t: Var(sum x) / n ->
+    sigma^2 / (1 - phi)^2; white noise gives sigma^2 (the plain sum of squares), a persistent series many
+    times more (what a residual's slow model-form error does to a parameter that follows it)."""
+    from shevsim.calibrate.workflow import _hac_var
+    rng = np.random.default_rng(3)
+    n = 20000
+    for phi in (0.0, 0.5, 0.9):
+        ratios = []
+        for _ in range(5):
+            e = rng.normal(0.0, 1.0, n)
+            x = np.empty(n)
+            acc = 0.0
+            for k in range(n):
+                acc = phi * acc + e[k]
+                x[k] = acc
+            ratios.append(_hac_var(x) / n / (1.0 / (1.0 - phi) ** 2))
+        assert np.mean(ratios) == pytest.approx(1.0, abs=0.15), (phi, ratios)

@@ -533,15 +533,23 @@ def test_pybamm_entropic_record_names_entropic_heat_near_the_truth():
     assert cand["passed"]
 
 
-def test_arrhenius_record_states_that_the_voltage_does_not_resolve_the_temperature_law():
-    """Chen2020's own Arrhenius kinetics (truth 1413 K over a 25 -> 33 degC rise): the temperature law fitted on
-    both channels (about 2700 K) lowers the training voltage residual but not the held-out one; the report says
-    so and names nothing physical."""
+def test_arrhenius_record_names_the_law_its_voltage_shows():
+    """Chen2020's own Arrhenius kinetics (truth: apparent Ea/R 1413 K; the cell warms 25 -> 34 degC).  The law
+    refitted on the voltage alone, the thermal parameters held at the nominal fit's, is significant by its HAC
+    standard error (about 1430 +- 220 K) and of the joint fit's size, so the held-out part has only to confirm
+    it (any gain: 4 %; the held-out blocks sit within 3 K of the mean temperature, where the law moves the
+    voltage little against the circuit's 12 mV form error).  With the thermal parameters free the joint fit
+    traded the law against the temperature's form error (2662 K, held-out voltage +13 %)."""
     rep = _cell("arrhenius", effects=["arrhenius_resistance", "cooling_change"])
-    assert not set(rep["selected_effects"]) & PHYSICAL_CELL, rep["selected_effects"]
-    (d,) = _discrepancy_of(rep, "arrhenius_resistance")
-    (ev,) = d["evidence"]
-    assert ev["channel"] == "voltage_v" and ev["train_change"] < -0.05 and ev["holdout_change"] > -0.10
+    assert rep["selected_effects"] == ["arrhenius_resistance"], rep["selected_effects"]
+    truth = _cell_truth("arrhenius")["arrhenius_ea_r_k"]
+    assert rep["final_parameters"]["arrhenius_ea_r_k"] == pytest.approx(truth, rel=0.30)
+    cand = next(c for c in rep["candidates"] if c["name"] == "arrhenius_resistance")
+    assert cand["passed"] and "claim verified" in cand["reason"], cand["reason"]
+    assert 0.0 < cand["gain"] < 0.10                       # below MIN_GAIN: passed by its verified claim
+    # the thermal parameters stayed at the nominal fit's (held while the law is in the model)
+    for k in ("kt_w_mk", "cp_j_kgk", "h_conv_factor"):
+        assert rep["final_parameters"][k] == pytest.approx(rep["baseline_parameters"][k], rel=1e-9)
 
 
 @pytest.mark.slow
