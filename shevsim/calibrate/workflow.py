@@ -51,7 +51,7 @@ Steps (:func:`run_workflow`):
    values (:meth:`_Run.assess`, :meth:`_Run.hold_for`); when that version passes it is the candidate, and those
    parameters stay held while the effect is selected.  Why: free, they let the law trade the other channel's
    model-form error (measured on the PyBaMM Arrhenius record: Ea/R 2662 K with the held-out voltage +12.7 % and
-   temperature -35 %; held, 1598 K; truth 1413 K - before the slow-branch limit of e9e17e9; after it,
+   temperature -35 %; held, 1598 K; truth 1413 K; with the slow-branch limit of e9e17e9, since reverted,
    free: voltage +16.6 %; held: 1389 K); held always, they keep the compensation a model without the
    law made (the Panasonic -20 degC warm-up, whose free candidate passes: held, its final temperature error was
    1.07 K instead of 0.27 K).  A claim verified on its channel is a measurement there, as a directly measured
@@ -863,8 +863,7 @@ class _Run:
         at the values of the model it was added to (``current`` for a candidate).  Why: an electrical law reaches the
         temperature only through the heat of the resistances it changes; with the thermal parameters free, the
         joint fit trades the law against the temperature's model-form error (the PyBaMM Arrhenius record: Ea/R
-        2662 K, held-out voltage +12.7 %, temperature -35 %; held: 1598 K, truth 1413 K; on main after e9e17e9,
-        held: 1389 K)."""
+        2662 K, held-out voltage +12.7 %, temperature -35 %; held: 1598 K, truth 1413 K)."""
         out = {}
         for e in effects:
             cc = self.fitter.effects[e].channel_claim
