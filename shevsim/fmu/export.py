@@ -80,13 +80,20 @@ def _model_name(cls) -> str:
 
 
 def _bundle_sources(dest: Path) -> list[Path]:
-    """Copy the shevsim package source (no data, caches or tests) into ``dest``; return the folder.
+    """Copy the shevsim package source (no caches or tests) into ``dest``, and beside it the components'
+    default data tables (``components/``: the OCV and resistance tables, maps - what a component reads when no
+    ``*_file`` parameter names another file; ``shevsim.core.paths.DATA_ROOT`` is the package's parent folder
+    inside the FMU, ``resources/``); return the folders.  (Without them an exported battery pack failed to
+    instantiate in an environment without shevsim: ``a123_26650_ocv.csv: table file not found``.)
 
     (pythonfmu/pythonfmu3 embed their own runtime modules in every FMU they build.)"""
+    from ..core.paths import data_path
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "_data", "*.so", "*.fmu", "tests")
     pkg = Path(__file__).resolve().parents[1]
     shutil.copytree(pkg, dest / "shevsim", ignore=ignore)
-    return [dest / "shevsim"]
+    shutil.copytree(data_path("components"), dest / "components",
+                    ignore=shutil.ignore_patterns("*.md", "*.py", "__pycache__"))
+    return [dest / "shevsim", dest / "components"]
 
 
 @functools.lru_cache(maxsize=None)
