@@ -448,24 +448,15 @@ def test_no_effect_drive_stops_measure_the_offset_as_zero():
 
 
 @pytest.mark.slow
-def test_pybamm_drive_current_offset_named_whole_library():
-    rep = _cell("current_offset")
-    assert rep["selected_effects"] == ["current_offset"], rep["selected_effects"]
-    assert rep["final_parameters"]["current_offset_a"] == pytest.approx(0.1, rel=0.25)
-
-
-@pytest.mark.slow
-def test_pybamm_swing_capacity_named_whole_library():
-    rep = _cell("capacity_swing")
-    assert rep["selected_effects"] == ["capacity"], rep["selected_effects"]
-    assert rep["final_parameters"]["capacity_ah"] == pytest.approx(4.25, rel=0.05)
-
-
-@pytest.mark.slow
-def test_pybamm_swing_current_offset_named_whole_library():
-    rep = _cell("current_offset_swing")
-    assert rep["selected_effects"] == ["current_offset"], rep["selected_effects"]
-    assert rep["final_parameters"]["current_offset_a"] == pytest.approx(0.1, rel=0.25)
+@pytest.mark.parametrize("case, effect, param, truth, rel", [
+    ("current_offset", "current_offset", "current_offset_a", 0.1, 0.25),
+    ("capacity_swing", "capacity", "capacity_ah", 4.25, 0.05),
+    ("current_offset_swing", "current_offset", "current_offset_a", 0.1, 0.25),
+])
+def test_pybamm_one_effect_named_whole_library(case, effect, param, truth, rel):
+    rep = _cell(case)
+    assert rep["selected_effects"] == [effect], rep["selected_effects"]
+    assert rep["final_parameters"][param] == pytest.approx(truth, rel=rel)
 
 
 @pytest.mark.slow
