@@ -137,7 +137,9 @@ class BatteryPackParams:
         Current-sensor offset [A] per cell: the true cell current is the commanded (logged) current
         ``current_cmd_a / n_parallel`` minus this; ``cell_current_meas_a`` reads true + offset.
     lowsoc_r_gain, lowsoc_r_scale_frac : float
-        Low-SOC resistance rise ``x (1 + g exp(-SOC/s))`` [1], [1]; gain 0 = off.
+        Low-SOC resistance rise ``x (1 + g exp(-SOC/s))`` [1], [1]; gain 0 = off; a gain in (-1, 0)
+        makes the resistances fall towards low SOC (the calibration's Arrhenius claim test refits it with
+        either sign as the SOC trend a temperature law must show beside).
     dudt_soc_frac, dudt_v_k : list of float
         Entropic coefficient dU/dT [V/K] at SOC knots [1] (piecewise linear, clamped); when given it
         replaces the entropy table (and acts whatever ``entropic_heat`` says); empty = off.
@@ -199,9 +201,12 @@ class BatteryPackParams:
                   "lowsoc_r_scale_frac", "radius_m", "length_m", "density_kg_m3", "cp_j_kgk", "kt_w_mk"):
             if not getattr(self, f) > 0.0:
                 raise ScenarioError(f"{where}: {f} must be > 0, got {getattr(self, f)!r}")
-        for f in ("r2_scale", "arrhenius_ea_r_k", "hyst_rate", "lowsoc_r_gain", "h_change_width_s"):
+        for f in ("r2_scale", "arrhenius_ea_r_k", "hyst_rate", "h_change_width_s"):
             if getattr(self, f) < 0.0:
                 raise ScenarioError(f"{where}: {f} must be >= 0, got {getattr(self, f)!r}")
+        # (a negative gain: resistances that fall towards low SOC; > -1 keeps them positive at SOC 0)
+        if not self.lowsoc_r_gain > -1.0:
+            raise ScenarioError(f"{where}: lowsoc_r_gain must be > -1, got {self.lowsoc_r_gain!r}")
         if len(self.dudt_soc_frac) != len(self.dudt_v_k):
             raise ScenarioError(f"{where}: dudt_soc_frac and dudt_v_k must have the same length "
                                 f"({len(self.dudt_soc_frac)} != {len(self.dudt_v_k)})")
