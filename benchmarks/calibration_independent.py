@@ -129,6 +129,7 @@ CELL = {
     # no effect, with PyBaMM's heat of mixing: the cell warms more while its SOC falls (make_cell_pybamm.py)
     "none_mixing": ([], None, None, None, None, None),
     "none_2_mixing": ([], None, None, None, None, None),
+    "none_swing_mixing": ([], None, None, None, None, None),
     # the entropic record with the heat of mixing (the same truth)
     "entropic_mixing": (["entropic_heat"], "dU/dT rms error / rms truth",
                         lambda p, r: _dudt_rel_error(p, r, "entropic_mixing"), lambda t: 0.0, 0.5, False),

@@ -43,7 +43,7 @@ def test_nominal_pseudo_ocv_is_the_cells_equilibrium_curve_less_a_constant_c50_o
 
 DRIVE_CASES = ["none", "capacity", "current_offset", "cooling_change", "arrhenius", "none_2", "none_3",
                "contact_resistance", "entropic", "none_mixing", "none_2_mixing", "entropic_mixing"]
-SWING_CASES = ["none_swing", "capacity_swing", "current_offset_swing", "none_swing_2"]
+SWING_CASES = ["none_swing", "capacity_swing", "current_offset_swing", "none_swing_2", "none_swing_mixing"]
 
 
 @pytest.mark.parametrize("case", DRIVE_CASES)

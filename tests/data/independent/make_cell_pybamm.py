@@ -53,7 +53,8 @@ current 5 mA) and writes ``cell_<case>.csv``.  Effects in PyBaMM's own parameter
   while its SOC falls, and its resistance, which has no temperature law here (the exchange-current densities
   held at 25 degC; apparent Ea/R of the 10 s pulse resistance -212 K, from the thermal voltage), falls 6 %
   from 80 to 60 % SOC: a record on which the two trends can be taken for a temperature law;
-* ``entropic_mixing``: ``entropic`` with the heat of mixing (the same drive and cell; the same truth).
+* ``entropic_mixing``: ``entropic`` with the heat of mixing (the same drive and cell; the same truth);
+  ``none_swing_mixing``: ``none_swing`` with it.
 
 The user's nominal (``cell_nominal.toml``, the calibration's ``--params``): the rated capacity 5 A.h, a
 pseudo-OCV measured by PyBaMM at C/50 on the nominal cell, logged every 60 s as a cycler would (SOC = 1 -
@@ -110,6 +111,7 @@ CASES = {
     "none_2_mixing": {"seed": 26, "mixing": True},
     # the entropic record's drive and cell with the heat of mixing (its dU/dT measured beside the whole loss)
     "entropic_mixing": {"seed": 28, "entropic": True, "mixing": True},
+    "none_swing_mixing": {"seed": 31, "protocol": "swing", "mixing": True},
 }
 T_REF_K = 298.15
 EXCHANGE = ("Negative electrode exchange-current density [A.m-2]",
