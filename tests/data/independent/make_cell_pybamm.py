@@ -234,6 +234,17 @@ def pseudo_ocv():
     return grid, np.interp(grid, soc[order], v[order]), float(ah[-1])
 
 
+def log_record(path: Path, comment: str, rng, t, i_true, v, temp, offset_a: float = 0.0) -> None:
+    """The logger: current (+ ``offset_a``), voltage and temperature with white noise ``NOISE`` (drawn from
+    ``rng`` in that order), written as the record's CSV at 1 Hz under the ``comment`` line."""
+    i_log = i_true + offset_a + rng.normal(0.0, NOISE["current_a"], t.size)
+    v_log = v + rng.normal(0.0, NOISE["voltage_v"], t.size)
+    ts_log = temp + rng.normal(0.0, NOISE["t_surface_c"], t.size)
+    lines = [comment, "time_s,current_a,voltage_v,t_surface_c,t_ambient_c"]
+    lines += [f"{a:.1f},{b:.4f},{c:.5f},{d:.3f},25.0" for a, b, c, d in zip(t, i_log, v_log, ts_log)]
+    path.write_text("\n".join(lines) + "\n")
+
+
 def main() -> int:
     grid, ocv, cap = pseudo_ocv()
     grid[0] = 0.0   # the table's lowest point (the C/50 run ends at 2.5 V near SOC 0)
@@ -251,13 +262,8 @@ def main() -> int:
         proto = case.get("protocol", "drive")
         t, i_true = current_profile(rng, proto)
         v, temp = simulate(case, t, i_true)
-        i_log = i_true + case.get("offset_a", 0.0) + rng.normal(0.0, NOISE["current_a"], t.size)
-        v_log = v + rng.normal(0.0, NOISE["voltage_v"], t.size)
-        ts_log = temp + rng.normal(0.0, NOISE["t_surface_c"], t.size)
-        lines = [f"# PyBaMM {pybamm.__version__} SPMe/Chen2020 record, case '{name}' (make_cell_pybamm.py)",
-                 "time_s,current_a,voltage_v,t_surface_c,t_ambient_c"]
-        lines += [f"{a:.1f},{b:.4f},{c:.5f},{d:.3f},25.0" for a, b, c, d in zip(t, i_log, v_log, ts_log)]
-        (OUT / f"cell_{name}.csv").write_text("\n".join(lines) + "\n")
+        log_record(OUT / f"cell_{name}.csv", f"# PyBaMM {pybamm.__version__} SPMe/Chen2020 record, case '{name}' "
+                   "(make_cell_pybamm.py)", rng, t, i_true, v, temp, case.get("offset_a", 0.0))
         tr = {"capacity_ah": 5.0 * case.get("am_factor", 1.0), "current_offset_a": case.get("offset_a", 0.0),
               "h_change_factor": case.get("h_after", 10.0) / 10.0, "h_change_time_s": case.get("t_change_s"),
               "arrhenius_ea_r_k": ea_r if case.get("arrhenius") else 0.0,
