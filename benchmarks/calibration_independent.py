@@ -4,12 +4,16 @@ recovered, and how much does the held-out error fall?
     python benchmarks/calibration_independent.py            # all generators (about 5 minutes)
     python benchmarks/calibration_independent.py --only vehicle       # both vehicles (Zoe and Model 3)
     python benchmarks/calibration_independent.py --only vehicle_m3    # the Tesla Model 3 only
+    python benchmarks/calibration_independent.py --only cell          # both cells (Chen2020 NMC and the LFP)
+    python benchmarks/calibration_independent.py --only cell_lfp      # the flat-OCV LFP cell only
 
 Records: ``tests/data/independent/`` - vehicle records made by FASTSim 3.1 (``make_vehicle_fastsim.py``: its
 Renault Zoe, ``vehicle_*``, and a second vehicle the calibration was not developed on, its Tesla Model 3 RWD
 on other cycles, ``vehicle_m3_*``),
 cell records made by PyBaMM's SPMe with a lumped thermal model and the Chen2020 set
-(``make_cell_pybamm.py``), engine-generator soot records made by an independent plant script with a
+(``make_cell_pybamm.py``) and, a flat-OCV LFP cell, the Prada2013 set (A123 26650, ``make_cell_pybamm_lfp.py``:
+the initial SOC that the first rest voltage cannot give on the OCV's plateau, an OCV table from a C/20
+discharge), engine-generator soot records made by an independent plant script with a
 transient term of another form (``make_engine_soot.py``); seeds and truth in ``*_truth.json``; the
 user's nominal in ``*_nominal.toml`` (the engine: the component's defaults, transient term off).
 A case counts when the selected effects are exactly the expected ones (none for a no-effect record) and
@@ -18,7 +22,11 @@ offset 25 %, grade amplitude 25 %, regenerative power limit 10 %, time shift 0.2
 factor 30 %, apparent activation energy Ea/R of the cell's pulse resistance 30 %, analyser lag and offset
 25 %, soot-map scale 10 %; the cell's contact resistance: no effect named and the fitted ohmic resistance
 above the same drive's no-effect fit by the 10 mOhm within 25 %; the cell's entropic change: entropic_heat
-named and its dU/dT within 0.05 mV/K rms of O'Regan 2022's at the fitted knots).  Prints the table
+named and its dU/dT within 0.05 mV/K rms of O'Regan 2022's at the fitted knots; the LFP cell's initial SOC:
+initial_soc named and soc_init_pct within 2 percentage points - the C/50 table's offset, 2.2 mV, over the
+OCV's slope on its steps, 3.6 mV per %, is 0.6 point, while the first rest voltage on the plateau gives
+4.9-6.6 points off; its OCV correction: ocv_correction named and its knots within half the rms of the
+table's true error, equilibrium OCV - C/20 table, 4.5-6.8 mV).  Prints the table
 ``generator | case | named? | parameter fitted vs truth | held-out before -> after`` and, last,
 ``independent cases: N/M``.
 """
@@ -134,6 +142,25 @@ CELL = {
     "entropic_mixing": (["entropic_heat"], "dU/dT rms error / rms truth",
                         lambda p, r: _dudt_rel_error(p, r, "entropic_mixing"), lambda t: 0.0, 0.5, False),
 }
+def _ocv_rel_error(p, r, case="ocv_c20"):
+    """RMS over the knots of (fitted - true) OCV correction, relative to the RMS of the true one (equilibrium
+    OCV - the user's table, at the truth's knots over the SOC range visited; 0 fitted when not selected)."""
+    tr = json.loads((D / "cell_lfp_truth.json").read_text())["cases"][case]["truth"]
+    true = np.array(tr["ocv_delta_knots_v"])
+    fit = np.array([p.get(f"ocv_delta_v[{k}]", 0.0) for k in range(true.size)])
+    return float(np.sqrt(np.mean((fit - true) ** 2)) / np.sqrt(np.mean(true ** 2)))
+
+
+# the flat-OCV LFP cell (Prada2013): the initial SOC in percentage points (absolute), the OCV correction as above
+CELL_LFP = {
+    "none": ([], None, None, None, None, None),
+    "none_2": ([], None, None, None, None, None),
+    "plateau": (["initial_soc"], "soc_init_pct", lambda p, r: p.get("soc_init_pct"), lambda t: t["soc_init_pct"],
+                2.0, False),
+    "plateau_2": (["initial_soc"], "soc_init_pct", lambda p, r: p.get("soc_init_pct"), lambda t: t["soc_init_pct"],
+                  2.0, False),
+    "ocv_c20": (["ocv_correction"], "OCV correction rms error / rms truth", _ocv_rel_error, lambda t: 0.0, 0.5, False),
+}
 ENGINE = {
     "none": ([], "soot_scale_frac", lambda p, r: p.get("soot_scale_frac"), lambda t: t["soot_scale_frac"], 0.10, True),
     "transient": (["transient_soot"], None, None, None, None, None),
@@ -146,17 +173,19 @@ ENGINE = {
 GENERATORS = {"vehicle": ("FASTSim 3.1", VEHICLE, "vehicle"),
               "vehicle_m3": ("FASTSim 3.1 Tesla Model 3", VEHICLE_M3, "vehicle"),
               "cell": ("PyBaMM SPMe", CELL, "cell"),
+              "cell_lfp": ("PyBaMM SPMe LFP (Prada2013)", CELL_LFP, "cell"),
               "engine": ("independent soot script", ENGINE, "engine")}
 
 
 def run_case(group: str, case: str, spec, model: str | None = None) -> dict:
-    """One record ``<group>_<case>.csv`` (truth ``<group>_truth.json``, nominal ``<group>_nominal.toml``)
-    calibrated with ``model`` (default: the group's name)."""
+    """One record ``<group>_<case>.csv`` (truth ``<group>_truth.json``, nominal ``<group>_nominal.toml`` or the
+    one the case's truth names) calibrated with ``model`` (default: the group's name)."""
     model = model or group
-    truth = json.loads((D / f"{group}_truth.json").read_text())["cases"][case]["truth"]
+    tcase = json.loads((D / f"{group}_truth.json").read_text())["cases"][case]
+    truth = tcase["truth"]
     data = load_measured(str(D / f"{group}_{case}.csv"), model)
     t0 = time.perf_counter()
-    nominal = D / f"{group}_nominal.toml"
+    nominal = D / tcase.get("nominal", f"{group}_nominal.toml")     # a case may name its own nominal
     rep = run_workflow(model, data, load_params_toml(nominal) if nominal.is_file() else None, plots=False)
     REPORTS[(group, case)] = rep
     expected, label, fitted, true, tol, rel = spec
