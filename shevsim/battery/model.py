@@ -133,7 +133,8 @@ def _cell_electrical(d, ix, c, st, p_in, h, t_mean, y):
     if c[C_EA] != 0.0:
         sr = math.exp(c[C_EA] * (1.0 / (t_mean + 273.15) - 1.0 / (c[C_TREF] + 273.15)))
     if c[C_LS_G] != 0.0:
-        sr = sr * (1.0 + c[C_LS_G] * math.exp(-soc / c[C_LS_S]))
+        # (the SOC floored at 0: below it a negative gain would turn the resistances negative)
+        sr = sr * (1.0 + c[C_LS_G] * math.exp(-max(soc, 0.0) / c[C_LS_S]))
     rs = rs * c[C_RS] * sr
     r1 = r1 * c[C_R1] * sr
     c1 = c1 * c[C_C1]

@@ -66,9 +66,9 @@ class Effect:
     #: every other channel's weight 0 and the declared parameters named in ``fixed`` held at the candidate
     #: fit (the workflow's ``_Run.channel_claim``); it must be significant there and agree with the joint fit
     channel_claim: tuple | None = None
-    #: ``((effect, {parameter: (lo, hi)}, {parameter: start}), ...)``: the confounders of the channel claim -
-    #: effects of the library refitted beside it in that test (when the model does not have them already), with
-    #: these bounds, from these values: a law
+    #: ``((effect, {parameter: (lo, hi)}, ({parameter: start}, ...)), ...)``: the confounders of the channel
+    #: claim - effects of the library refitted beside it in that test (when the model does not have them
+    #: already), with these bounds, from each of these starts (the lowest cost kept): a law
     #: in a quantity that trends with another over the record (the cell's temperature with the SOC: both move
     #: with the charge passed) must show beside a law in the other, of either sign
     claim_nuisance: tuple = ()
