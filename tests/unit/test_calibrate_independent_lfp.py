@@ -158,6 +158,13 @@ def test_lfp_no_effect_records_whole_library_name_no_physical_effect(case):
 # nothing named on either record; the initial_soc candidate's fit 53.8 % on `plateau`, truth 60.1 %, rest
 # voltage 66.7 %, held-out gain 4 %; 87.5 % on `plateau_2`, truth 90.0 %, rest voltage 94.9 %, gain 11 %,
 # dBIC -7 > -10 - against the nominal's 10-40 mV model-form error).  A failing test, not an xfail.
+# Why, measured afterwards in PyBaMM (docs/calibration_independent.md, the LFP section): under load the
+# graphite's surface SOC lags its bulk by 4-9 points (Prada2013 graphite R^2/D = 8300 s; lag ~ C-rate R^2/(15 D)),
+# and the OCV step the voltage shows is the surface's, so a loaded drive places it several points early; the
+# initial SOC fitted freely lands 2.5-6 points low (53.8 / 87.5 %), and a diffusion term beside the circuit
+# (OCV read at SOC - g lag(i/Q, tau)) improves the voltage (42 -> 18 mV on `plateau`) but is confounded with the
+# initial SOC over a steady discharge.  The 2-point tolerance assumes a step under load shows the SOC to the
+# table's 0.6 point; the drive cannot - relaxed rests on a step (>~30 min here) can.  Kept as the open case.
 @pytest.mark.slow
 @pytest.mark.parametrize("case", ["plateau", "plateau_2"])
 def test_lfp_plateau_start_names_initial_soc_within_2_points(case):
