@@ -935,8 +935,12 @@ class _Run:
         out["ok"], why = self._claim_verdict(eff, fr, vals, se, channels, out["evidence"])
         if nuis:
             out["evidence"].update({k: float(vals[k]) for n, _ in nuis for k in f.effects[n].neutral})
+            def _nv(k, b):
+                lo, hi = b.get(k, (float("-inf"), float("inf")))
+                on = any(abs(vals[k] - x) <= 1e-6 * (hi - lo) for x in (lo, hi) if math.isfinite(x))
+                return f"{k} {vals[k]:.3g}" + (" at its bound" if on else "")
             why.append("beside " + ", ".join(n for n, _ in nuis) + " (" + ", ".join(
-                f"{k} {vals[k]:.3g}" for n, _ in nuis for k in f.effects[n].neutral) + ")")
+                _nv(k, b) for n, b in nuis for k in f.effects[n].neutral) + ")")
         confounded = False
         if nuis and not out["ok"]:
             # without its confounders would the channel show the law?  Then the record cannot tell the two apart
@@ -958,12 +962,16 @@ class _Run:
         self.say(f"{e}: " + out["statement"])
         return out
 
-    @staticmethod
-    def _claim_verdict(eff, fr, vals, se, channels, evidence):
+    def _claim_verdict(self, eff, fr, vals, se, channels, evidence):
         """``(ok, why)`` of a channel claim refitted to ``vals`` (standard errors ``se``) against the joint fit
-        ``fr`` (:meth:`channel_claim`); fills ``evidence``."""
+        ``fr`` (:meth:`channel_claim`); fills ``evidence``.  A refitted value on its bound is said so (its
+        standard error, from a one-sided optimum, means nothing there)."""
         ok_all, why = True, []
         for p in eff.params:
+            lo, hi = self.fitter.bounds_override.get(p.name, (p.lo, p.hi))
+            own_v = float(vals[p.name])
+            at = ("lower" if abs(own_v - lo) <= 1e-6 * (hi - lo) else
+                  "upper" if abs(own_v - hi) <= 1e-6 * (hi - lo) else "")
             joint, own, s = float(fr.params[p.name]), float(vals[p.name]), float(se.get(p.name, float("nan")))
             neutral = float(eff.neutral.get(p.name, 0.0))
             sig = math.isfinite(s) and own - neutral > CLAIM_SIGMA * s
@@ -974,7 +982,9 @@ class _Run:
             ok_all = ok_all and ok
             evidence.update({f"{p.name}_joint": joint, f"{p.name}_{'_'.join(channels)}_only": own,
                              f"{p.name}_se": s})
-            why.append(f"{p.name} refitted on {', '.join(channels)} alone is {own:.4g} +- {s:.2g} {p.unit} (joint fit "
+            size = (f"at its {at} bound {lo if at == 'lower' else hi:.4g} {p.unit}" if at
+                    else f"{own:.4g} +- {s:.2g} {p.unit}")
+            why.append(f"{p.name} refitted on {', '.join(channels)} alone is {size} (joint fit "
                        f"{joint:.4g})" + ("" if ok else (" - not significant" if not sig else " - not the joint value")))
         return ok_all, why
 
