@@ -138,8 +138,14 @@ def _lfp(case: str, effects=None):
 def _check_no_effect(rep):
     assert not set(rep["selected_effects"]) & PHYSICAL_CELL, rep["selected_effects"]
     # an SPMe LFP cell is not an equivalent circuit (its graphite's slow diffusion through a staged OCV): the
-    # nominal's 10 mV voltage residual, 10x the sensor noise, is stated as a model-form discrepancy
-    assert any(d.get("channel") == "voltage_v" for d in rep["model_form_discrepancy"]), rep["model_form_discrepancy"]
+    # nominal's ~10 mV voltage residual, about 10x the sensor noise, is stated as a model-form discrepancy
+    # whenever it is a baseline failure (10x the combined floor, the workflow's rule: `none` 10.0x; `none_2`
+    # is just below it and states none - the test asserted the statement on both until the slow run showed
+    # none_2 at the rule's edge)
+    failed = any(b["channel"] == "voltage_v" for b in rep["baseline_failure"])
+    stated = any(d.get("channel") == "voltage_v" for d in rep["model_form_discrepancy"])
+    assert stated == failed, (rep["baseline_failure"], rep["model_form_discrepancy"])
+    assert rep["rmse_before"]["voltage_v"]["holdout"] > 5.0 * 1e-3      # far above the 1 mV sensor noise either way
 
 
 def test_lfp_no_effect_record_names_neither_an_initial_soc_nor_an_ocv_correction():
