@@ -913,7 +913,10 @@ class _Run:
         channels, fixed = eff.channel_claim
         # the claim's confounders (Effect.claim_nuisance) the model does not have yet, refitted beside it with
         # their claim-test bounds and starts
-        use = [(n, b, st) for n, b, st in eff.claim_nuisance if n in f.effects and n not in fr.effects]
+        # (a confounder the model has already - selected, with the library's bounds - is refitted with the
+        # claim-test bounds too, from its fitted values as well as from the starts: either sign stays open)
+        use = [(n, b, st if n not in fr.effects else ({},) + tuple(st))
+               for n, b, st in eff.claim_nuisance if n in f.effects]
         nuis = [(n, b) for n, b, _ in use]
         saved = dict(f.bounds_override)
         try:
@@ -924,8 +927,8 @@ class _Run:
             combos = [{}] if not use else [dict(kv for d in c for kv in d.items())
                                            for c in itertools.product(*[st for _, _, st in use])]
             for x0 in combos:
-                got = f.channel_only(tuple(fr.effects) + tuple(n for n, _ in nuis), {**fr.params, **x0},
-                                     channels, fixed)
+                got = f.channel_only(tuple(fr.effects) + tuple(n for n, _ in nuis if n not in fr.effects),
+                                     {**fr.params, **x0}, channels, fixed)
                 if best is None or f.last_channel_cost < best[2]:
                     best = (*got, f.last_channel_cost)
             vals, se, _cost = best
@@ -950,7 +953,8 @@ class _Run:
             out["evidence"].update({f"without_confounders_{k}": x for k, x in ev0.items()})
             out["evidence"]["not_separable"] = confounded
             if confounded:
-                why.append("without " + ", ".join(n for n, _ in nuis) + ": " + "; ".join(why0))
+                why.append(", ".join(("with " + n + " within its library bounds") if n in fr.effects else ("without " + n)
+                                     for n, _ in nuis) + ": " + "; ".join(why0))
         out["statement"] = "; ".join(why) + ("" if out["ok"] else (
             f" (needed: > {CLAIM_SIGMA:g} standard errors and within a factor {CLAIM_FACTOR:g} of the joint fit): "
             + (f"{', '.join(channels)} alone shows the law only where {', '.join(n for n, _ in nuis)} could be the "
