@@ -906,15 +906,16 @@ class _Run:
         a factor 2 is the same order of magnitude, about the spread of activation energies between a cell's
         own resistances (ohmic vs charge transfer), which one lumped law stands for.  A law that only bends
         the heat refits on the voltage near 0, or not at all, or to another size.  The effect's confounders
-        (``Effect.claim_nuisance``) the model does not have yet are refitted beside it, from their given starts
-        within their given bounds; their values are in the evidence."""
+        (``Effect.claim_nuisance``) are refitted beside it within their claim-test bounds, from each of their
+        given starts (and, when the model has them already, from their fitted values), the lowest cost kept;
+        their values are in the evidence.  When the claim fails beside them but holds without them, the
+        statement says the record cannot tell the two apart."""
         f = self.fitter
         eff = f.effects[e]
         channels, fixed = eff.channel_claim
-        # the claim's confounders (Effect.claim_nuisance) the model does not have yet, refitted beside it with
-        # their claim-test bounds and starts
-        # (a confounder the model has already - selected, with the library's bounds - is refitted with the
-        # claim-test bounds too, from its fitted values as well as from the starts: either sign stays open)
+        # the claim's confounders (Effect.claim_nuisance), refitted beside it with their claim-test bounds and
+        # starts; one the model has already (selected, with the library's bounds) gets the claim-test bounds
+        # too, from its fitted values as well as from the starts: either sign stays open
         use = [(n, b, st if n not in fr.effects else ({},) + tuple(st))
                for n, b, st in eff.claim_nuisance if n in f.effects]
         nuis = [(n, b) for n, b, _ in use]
@@ -973,10 +974,9 @@ class _Run:
         ok_all, why = True, []
         for p in eff.params:
             lo, hi = self.fitter.bounds_override.get(p.name, (p.lo, p.hi))
-            own_v = float(vals[p.name])
-            at = ("lower" if abs(own_v - lo) <= 1e-6 * (hi - lo) else
-                  "upper" if abs(own_v - hi) <= 1e-6 * (hi - lo) else "")
             joint, own, s = float(fr.params[p.name]), float(vals[p.name]), float(se.get(p.name, float("nan")))
+            at = ("lower" if abs(own - lo) <= 1e-6 * (hi - lo) else
+                  "upper" if abs(own - hi) <= 1e-6 * (hi - lo) else "")
             neutral = float(eff.neutral.get(p.name, 0.0))
             sig = math.isfinite(s) and own - neutral > CLAIM_SIGMA * s
             same = (own - neutral) * (joint - neutral) > 0 and (
