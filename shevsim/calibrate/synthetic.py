@@ -231,7 +231,7 @@ def synth_vehicle(effects: dict | None = None, duration_s: float = 1800.0, dt_s:
     from ..components import get_component_class
     from ..core.master import Connection, Master, MasterSettings
     from ..core.params import load_params
-    from .vehicle import PARAM_FILES, OWNER
+    from .vehicle import PARAM_FILES, OWNERS
 
     rng = np.random.default_rng(seed)
     dt = 0.1
@@ -242,8 +242,8 @@ def synth_vehicle(effects: dict | None = None, duration_s: float = 1800.0, dt_s:
         vals.update(dict(VEHICLE_EFFECTS[name], **(over or {})))
     over = {"vehicle": {}, "motor": {}, "bus": {}}
     for k, x in vals.items():
-        if k in OWNER:
-            over[OWNER[k]][k] = x
+        for comp in OWNERS.get(k, ()):
+            over[comp][k] = x
     if vals.get("amplitude_frac", 0.0) or vals.get("offset_frac", 0.0):
         d_end = float(np.sum(v) * dt)
         kd = np.arange(0.0, d_end + 50.0, 50.0)

@@ -24,7 +24,10 @@ takes a parameter file of any of the three components (``[params]``; relative ``
 against the file's folder), the short form (``[params]`` with any of those names), or an overlay with
 tables ``[vehicle]``/``[motor]``/``[bus]`` - e.g. a previous calibration's ``params.toml``, so one
 calibration's result seeds the next (its fitted mass, drag, ... become the nominal; the effects stay
-candidates for a further change from it).  A given road grade (``grade_distance_m``/``grade_frac``) is
+candidates for a further change from it).  The vehicle's rotating inertia ``wheel_inertia_kg_m2`` (all wheels,
+with ``wheel_radius_m``, which the vehicle and the motor share: one tyre) is a known parameter like the others:
+the model's inertia is ``mass_kg + wheel_inertia_kg_m2 / wheel_radius_m^2`` and ``mass_kg`` (the
+``mass_error`` effect's parameter) stays the translational mass.  A given road grade (``grade_distance_m``/``grade_frac``) is
 the record's known grade; the ``road_grade`` effect adds its knots to it.  Unknown names fail (with a
 suggestion), as do names in another component's table and missing map files.  Fitted:
 
@@ -94,16 +97,21 @@ def _file_params() -> dict:
 
 
 def _owners(files: dict) -> dict:
-    """parameter name -> component name (the three files share no parameter name)."""
-    out = {}
+    """parameter name -> the components that have it, in :data:`PARAM_FILES`' order.  One name is shared:
+    ``wheel_radius_m`` (the vehicle's, for its wheels' equivalent mass ``J / r^2``, and the motor's, for its
+    speed and torque at the wheel: the same tyre, one value, as the scenario's shared quantity)."""
+    out: dict[str, tuple] = {}
     for comp, p in files.items():
         for f in dataclasses.fields(p):
-            out[f.name] = comp
+            out[f.name] = out.get(f.name, ()) + (comp,)
     return out
 
 
 _FILES = _file_params()
-OWNER = _owners(_FILES)
+#: parameter name -> the components that take it (``wheel_radius_m``: vehicle and motor)
+OWNERS = _owners(_FILES)
+#: parameter name -> its first component (for messages)
+OWNER = {k: v[0] for k, v in OWNERS.items()}
 
 
 def _as_dict(p) -> dict:
@@ -128,14 +136,19 @@ def _user_values(known: Mapping[str, Any] | None, where: str) -> dict:
         raise DataError(f"{where}: no [vehicle], [motor], [bus] or [params] table "
                         f"(tables: {', '.join(sorted(map(str, tables)))})")
     vals = dict(known)
+    table_of: dict[str, str] = {}
     for comp in ours:
         tab = tables[comp]
         if not isinstance(tab, Mapping):
             raise DataError(f"{where}: [{comp}] must be a table of name = value")
         for k, v in tab.items():
-            if k in OWNER and OWNER[k] != comp:
+            if k in OWNERS and comp not in OWNERS[k]:
                 raise DataError(f"{where}: [{comp}] {k}: '{k}' is a {OWNER[k]} parameter (table [{OWNER[k]}])")
+            if k in table_of and vals[k] != v:     # a parameter of two components (wheel_radius_m): one value
+                raise DataError(f"{where}: [{comp}] {k} = {v!r} contradicts [{table_of[k]}] {k} = {vals[k]!r} "
+                                f"(the {' and '.join(OWNERS[k])} share it: one tyre)")
             vals[k] = v
+            table_of[k] = comp
     for k in _IGNORED:
         vals.pop(k, None)
     resolve_known_files(vals, OWNER, base_dir, where, "map file")
@@ -175,7 +188,8 @@ def _sample(rec: np.ndarray, n_sub: int, n_g: int) -> np.ndarray:
 def _speed_following_power(vr, ar, h, vehicle, motor, aux):  # pragma: no cover - compiled
     """Bus power [W] at every master step of cycle -> vehicle (speed mode) -> motor -> bus (index 0 = initialise).
 
-    ``vehicle = (grade knots' distance [m], grade [-], mass [kg], c_aero, rolling coefficient, g [m/s^2])``,
+    ``vehicle = (grade knots' distance [m], grade [-], mass [kg], c_aero, rolling coefficient, g [m/s^2],
+    rotating parts' equivalent mass J / r^2 [kg])``,
     ``motor = (maps md, mi, k_w, k_tau, extrapolate, regen speed min [m/s], regen power max [W], efficiency
     scale, heat rate [1/s], initial heat index, regenerating efficiency scale)``
     (:func:`~shevsim.powertrain.motor.motor_step`'s arguments),
@@ -187,7 +201,7 @@ def _speed_following_power(vr, ar, h, vehicle, motor, aux):  # pragma: no cover 
     :func:`~shevsim.powertrain.motor.bus_balance` (:class:`~shevsim.components.bus.PowerBus`, no generator,
     aux input 0); ``vr``/``ar`` are the cycle's outputs at each step.  Only the state passes between them here.
     """
-    kd, kg, m, c, fr, g = vehicle
+    kd, kg, m, c, fr, g, m_rot = vehicle
     md, mi, k_w, k_tau, extrapolate, v_regen, p_regen, eff_scale, heat_rate, gamma0, regen_eff_scale = motor
     n = vr.shape[0] - 1
     rec = np.empty(n + 1)
@@ -200,7 +214,7 @@ def _speed_following_power(vr, ar, h, vehicle, motor, aux):  # pragma: no cover 
     h_prev = 1.0
     gamma = gamma0
     rec[0] = bus_balance(0.0, 0.0, 0.0, aux)[1]
-    vp = np.array([m, c, fr, g])                 # the vehicle's parameters (order of vehicle.VP)
+    vp = np.array([m, c, fr, g, m_rot])          # the vehicle's parameters (order of vehicle.VP)
     mp = np.array([k_w, k_tau, 1.0 if extrapolate else 0.0, v_regen, p_regen, eff_scale, heat_rate,
                    regen_eff_scale])             # the motor's (order of motor.P)
     for k in range(n):
@@ -235,7 +249,7 @@ class VehicleModel(CalibrationModel):
         # own parameter classes, once
         from ..core.params import make_params
         for comp, cls in _component_classes().items():
-            given = {k: v for k, v in self.known.items() if OWNER.get(k) == comp}
+            given = {k: v for k, v in self.known.items() if comp in OWNERS.get(k, ())}
             try:
                 prm = make_params(cls.Params, {**_as_dict(_FILES[comp]), **given}, f"{where}: {comp} parameters")
             except ShevsimError as exc:
@@ -290,11 +304,12 @@ class VehicleModel(CalibrationModel):
         """{component: params dataclass}: the files, the known parameters, then ``values`` (full)."""
         over = {n: {} for n in PARAM_FILES}
         for key, val in self.known.items():
-            if key in OWNER and val != getattr(_FILES[OWNER[key]], key):
-                over[OWNER[key]][key] = val
+            for comp in OWNERS.get(key, ()):
+                if val != getattr(_FILES[comp], key):
+                    over[comp][key] = val
         for key, val in (values or {}).items():
-            if key in OWNER:
-                over[OWNER[key]][key] = val
+            for comp in OWNERS.get(key, ()):
+                over[comp][key] = val
         gk = [float((values or {}).get(f"grade_frac[{j}]", 0.0)) for j in range(N_GRADE)]
         if any(x != 0.0 for x in gk) and grade_d is not None:
             d0, g0 = tuple(self.known["grade_distance_m"]), tuple(self.known["grade_frac"])
@@ -349,7 +364,7 @@ class VehicleModel(CalibrationModel):
         kd = np.array(vp.grade_distance_m, dtype=float)
         kg = np.array(vp.grade_frac, dtype=float)
         vehicle = (kd, kg, float(vp.mass_kg), float(vp.c_aero), float(vp.rolling_coefficient),
-                   float(vp.gravity_mps2))
+                   float(vp.gravity_mps2), float(vp.mass_rot_kg))
         motor = (ctx["md"], ctx["mi"], mp.gear_ratio / mp.wheel_radius_m, mp.wheel_radius_m / mp.gear_ratio,
                  bool(mp.extrapolate_speed), float(mp.regen_speed_min_mps), float(mp.regen_power_max_w),
                  float(mp.efficiency_scale_frac), float(mp.heat_rate_per_s), float(mp.heat_index_init_frac),

@@ -14,7 +14,8 @@ rules, for a component of each type:
 
 =================  =====================================================================================
 vehicle, driver    ``mass_kg``, ``frontal_area_m2``, ``drag_coefficient``, ``rolling_coefficient``,
-                   ``air_density_kg_m3`` (the driver's feed-forward is the vehicle's road-load model)
+                   ``air_density_kg_m3`` (the driver's feed-forward is the vehicle's road-load model);
+                   the vehicle also ``wheel_radius_m`` (its wheels' equivalent mass ``J / r^2``)
 motor              ``wheel_radius_m``; ``rated_power_w`` = ``motor_power_w`` (maps sized by rating)
 engine_generator   ``rated_power_w`` = ``engine_power_w`` (maps sized by rating, generator with the
                    engine); ``fuel_lhv_j_per_g``
@@ -94,7 +95,7 @@ _CELL_MAP = {p: f"cell_{p}" for p in CELL_PARAMS}
 
 #: component type -> {its parameter: the shared quantity it is}
 IDENTITY: dict[str, dict[str, str]] = {
-    "vehicle": {p: p for p in _BODY},
+    "vehicle": {**{p: p for p in _BODY}, "wheel_radius_m": "wheel_radius_m"},
     "driver": {p: p for p in _BODY},
     "motor": {"wheel_radius_m": "wheel_radius_m", "rated_power_w": "motor_power_w"},
     "engine_generator": {"rated_power_w": "engine_power_w", "fuel_lhv_j_per_g": "fuel_lhv_j_per_g"},

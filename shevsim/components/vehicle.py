@@ -5,6 +5,11 @@ exact per-step energy bookkeeping (work of each force = force x mean speed x h),
 ``traction_energy_j - brake_energy_j - rolling_energy_j - aero_energy_j - grade_energy_j ==
 kinetic_energy_j - kinetic_energy_j(t0)`` to round-off.
 
+Rotating inertia (parameter ``wheel_inertia_kg_m2`` = ``J``, default 0 = the seed's point mass): the wheels
+(and any drivetrain inertia referred to them) add the equivalent mass ``M_r = J / r^2`` (``r`` =
+``wheel_radius_m``) to the inertia, not to the weight: ``(M + M_r) dv/dt = F_prop - F_brk - F_rr - F_wr -
+M g sin(theta)``, and ``kinetic_energy_j`` = ``1/2 (M + M_r) v^2`` (translational + rotational).
+
 Road grade along distance (parameters ``grade_distance_m`` / ``grade_frac``, default empty = off): the
 grade ``tan(theta)`` interpolated between the knots at the distance travelled, held beyond the end knots
 (:func:`shevsim.powertrain.vehicle.grade_rad_at`), is *added* to the ``grade_rad`` input.
@@ -19,7 +24,8 @@ Outputs (state at t + h; none is direct feedthrough)
     ``speed_mps`` [m/s] (>= 0), ``accel_mps2`` [m/s2] mean over the step, ``distance_m`` [m];
     cumulative works [J]: ``traction_energy_j`` (signed: regen counts negative),
     ``brake_energy_j``, ``rolling_energy_j``, ``aero_energy_j``, ``grade_energy_j`` (energy taken
-    from the vehicle, >= 0 except grade downhill), and ``kinetic_energy_j`` = 1/2 M v^2 (state).
+    from the vehicle, >= 0 except grade downhill), and ``kinetic_energy_j`` = 1/2 (M + J / r^2) v^2 (state:
+    translational + the rotating parts').
 
 Ports (``input_mode = "speed"``: speed-following / backward, e.g. replaying a measured speed trace)
 ----------------------------------------------------------------------------------------------------
@@ -44,7 +50,7 @@ from shevsim.core.compiled import ERR_NAN_INPUT, CompiledStep, njit_step, port_i
 from shevsim.core.component import Component
 from shevsim.core.params import rng
 from shevsim.core.variables import inp, out
-from shevsim.powertrain.vehicle import (G_MPS2, XF, XS, grade_total_rad, vehicle_force_step,
+from shevsim.powertrain.vehicle import (G_MPS2, XF, XS, grade_total_rad, vehicle_force_step, vehicle_params,
                                        vehicle_speed_mode_step)
 
 INPUT_MODES = ("force", "speed")
@@ -57,7 +63,7 @@ class VehicleParams:
     Attributes
     ----------
     mass_kg : float
-        Vehicle mass (seed Table 5.1: 15554 kg).
+        Vehicle mass (seed Table 5.1: 15554 kg): the translational mass, which weighs (grade, rolling).
     frontal_area_m2 : float
         Frontal area (seed Table 5.1: 5.72 m2).
     drag_coefficient : float
@@ -68,6 +74,13 @@ class VehicleParams:
         rho [kg/m3].
     gravity_mps2 : float
         g [m/s2].
+    wheel_inertia_kg_m2 : float
+        Moment of inertia ``J`` [kg m2] of all wheels together (per wheel x number of wheels), plus whatever
+        drivetrain inertia is referred to the wheels (a motor's ``J_m G^2`` behind a ratio ``G``); >= 0,
+        default 0 (the seed's point mass).  It adds the equivalent mass ``J / r^2`` to the inertia only.
+    wheel_radius_m : float
+        Wheel (loaded tyre) radius ``r`` [m] of that equivalent mass; the shared quantity ``wheel_radius_m``
+        (the motor's too).  Default 0.55 m (the M-ATV's, ``vehicles/matv.toml``).
     speed_init_mps : float
         Initial speed [m/s] (force mode; in speed mode the prescribed speed).
     grade_distance_m, grade_frac : tuple of float
@@ -84,16 +97,18 @@ class VehicleParams:
     rolling_coefficient: float = 0.012
     air_density_kg_m3: float = 1.2
     gravity_mps2: float = field(default=G_MPS2, metadata=rng(gt=0.0))
+    wheel_inertia_kg_m2: float = field(default=0.0, metadata=rng(0.0, what="a rotating inertia (0: none)"))
+    wheel_radius_m: float = field(default=0.55, metadata=rng(gt=0.0, what="a wheel radius"))
     speed_init_mps: float = 0.0
     grade_distance_m: tuple[float, ...] = ()
     grade_frac: tuple[float, ...] = field(default=(), metadata=rng(-1.0, 1.0, what="road grade rise/run"))
     input_mode: str = "force"
 
     def __post_init__(self):
-        for k in ("mass_kg", "frontal_area_m2", "air_density_kg_m3", "gravity_mps2"):
+        for k in ("mass_kg", "frontal_area_m2", "air_density_kg_m3", "gravity_mps2", "wheel_radius_m"):
             if not getattr(self, k) > 0:
                 raise ValueError(f"parameter '{k}' must be > 0, got {getattr(self, k)!r}")
-        for k in ("drag_coefficient", "rolling_coefficient", "speed_init_mps"):
+        for k in ("drag_coefficient", "rolling_coefficient", "wheel_inertia_kg_m2", "speed_init_mps"):
             if not getattr(self, k) >= 0:
                 raise ValueError(f"parameter '{k}' must be >= 0, got {getattr(self, k)!r}")
         if self.input_mode not in INPUT_MODES:
@@ -111,6 +126,11 @@ class VehicleParams:
     def c_aero(self) -> float:
         """1/2 rho C_d A [kg/m]."""
         return 0.5 * self.air_density_kg_m3 * self.drag_coefficient * self.frontal_area_m2
+
+    @property
+    def mass_rot_kg(self) -> float:
+        """Equivalent mass of the rotating parts ``J / r^2`` [kg] (``wheel_inertia_kg_m2 / wheel_radius_m^2``)."""
+        return self.wheel_inertia_kg_m2 / (self.wheel_radius_m * self.wheel_radius_m)
 
 
 class Vehicle(CompiledStep, Component):
@@ -131,7 +151,7 @@ class Vehicle(CompiledStep, Component):
         out("rolling_energy_j", "J", 0.0, "cumulative rolling resistance loss"),
         out("brake_energy_j", "J", 0.0, "cumulative friction brake loss"),
         out("grade_energy_j", "J", 0.0, "cumulative work against gravity (+ climbing)"),
-        out("kinetic_energy_j", "J", 0.0, "kinetic energy 1/2 M v^2"),
+        out("kinetic_energy_j", "J", 0.0, "kinetic energy 1/2 (M + J/r^2) v^2, translational + rotating parts"),
     )
 
     _SPEED_INPUTS = ("speed_ref_mps", "accel_ref_mps2", "grade_rad")
@@ -147,13 +167,14 @@ class Vehicle(CompiledStep, Component):
         super().__init__(name, params)
         p = self.params
         self._m, self._c, self._fr, self._g = p.mass_kg, p.c_aero, p.rolling_coefficient, p.gravity_mps2
+        self._mr = p.mass_rot_kg
         self._kd = np.array(p.grade_distance_m, dtype=float)
         self._kg = np.array(p.grade_frac, dtype=float)
         self._knots = self._kd.size > 0
         self._speed = p.input_mode == "speed"
 
     DATA_MUTABLE = (3,)
-    _static = ("name", "params", "_m", "_c", "_fr", "_g", "_kd", "_kg", "_knots", "_speed", "_fn", "_u_names",
+    _static = ("name", "params", "_m", "_c", "_fr", "_g", "_mr", "_kd", "_kg", "_knots", "_speed", "_fn", "_u_names",
                "_y_names")
 
     def variables(self):
@@ -177,10 +198,10 @@ class Vehicle(CompiledStep, Component):
         return grade_total_rad(th_in, 0.0, self._kd, self._kg) if self._knots else th_in
 
     def initialize(self, t0: float) -> None:
-        """``data`` = ``(p, grade_distance_m, grade_frac, x)``: ``p = [mass, 0.5 rho cd A, rolling, g]`` (:data:`~shevsim.powertrain.vehicle.VP`),
-        ``x`` = :data:`XF` (force mode) or :data:`XS` (speed mode)."""
+        """``data`` = ``(p, grade_distance_m, grade_frac, x)``: ``p = [mass, 0.5 rho cd A, rolling, g, J / r^2]``
+        (:data:`~shevsim.powertrain.vehicle.VP`), ``x`` = :data:`XF` (force mode) or :data:`XS` (speed mode)."""
         y = self.y
-        p = [self._m, self._c, self._fr, self._g]          # order of VP
+        p = vehicle_params(self._m, self._c, self._fr, self._g, self._mr)
         if self._speed:
             v = max(self.u["speed_ref_mps"], 0.0)
             x = [v, 0.0, self._grade(self.u["grade_rad"]), 0.0, 0.0, 0.0, 0.0, 0.0]
@@ -188,14 +209,14 @@ class Vehicle(CompiledStep, Component):
         else:
             v = self.params.speed_init_mps
             x = [v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
-        self.data = (np.array(p, dtype=np.float64), np.ascontiguousarray(self._kd, dtype=np.float64),
+        self.data = (p, np.ascontiguousarray(self._kd, dtype=np.float64),
                      np.ascontiguousarray(self._kg, dtype=np.float64), np.array(x, dtype=np.float64))
         y["speed_mps"] = v
         y["accel_mps2"] = 0.0
         y["distance_m"] = 0.0
         for k in ("traction_energy_j", "brake_energy_j", "rolling_energy_j", "aero_energy_j", "grade_energy_j"):
             y[k] = 0.0
-        y["kinetic_energy_j"] = 0.5 * self._m * v * v
+        y["kinetic_energy_j"] = 0.5 * (self._m + self._mr) * v * v
         self._io()
 
     @property

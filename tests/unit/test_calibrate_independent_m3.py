@@ -35,7 +35,8 @@ CASES = ("none", "payload", "aux", "latency_2", "none_2")
 #: that wrote both
 FASTSIM_M3 = {
     "mass_kilograms": 1752.0, "drag_coef": 0.23, "frontal_area_square_meters": 2.22, "wheel_rr_coef": 0.007,
-    "wheel_radius_meters": 0.33435, "pwr_aux_base_watts": 250.0,
+    "wheel_radius_meters": 0.33435, "wheel_inertia_kilogram_square_meters": 0.815, "num_wheels": 4,
+    "pwr_aux_base_watts": 250.0,
     "em_pwr_out_max_watts": 239000.0, "transmission_eff": 0.98,
     "em_eff_grid": [0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.2, 0.4, 0.6, 0.8, 1.0],
     "em_eff_values": [0.84, 0.86, 0.88, 0.9, 0.91, 0.92, 0.94, 0.95, 0.95, 0.94, 0.93],
@@ -59,13 +60,15 @@ def _record(case: str):
 
 
 def test_m3_nominal_is_fastsims_published_vehicle():
-    """The user's nominal holds FASTSim's chassis numbers and base auxiliary load, and its map is FASTSim's
-    published machine curve (output-power fraction, read linearly) times the 0.98 transmission."""
+    """The user's nominal holds FASTSim's chassis numbers (the wheels' inertia: per wheel x wheel count) and
+    base auxiliary load, and its map is FASTSim's published machine curve (output-power fraction, read
+    linearly) times the 0.98 transmission."""
     p = load_params_toml(D / "vehicle_m3_nominal.toml")
     f = FASTSIM_M3
     assert p["mass_kg"] == f["mass_kilograms"] and p["drag_coefficient"] == f["drag_coef"]
     assert p["frontal_area_m2"] == f["frontal_area_square_meters"] and p["rolling_coefficient"] == f["wheel_rr_coef"]
     assert p["wheel_radius_m"] == f["wheel_radius_meters"] and p["aux_power_w"] == f["pwr_aux_base_watts"]
+    assert p["wheel_inertia_kg_m2"] == f["wheel_inertia_kilogram_square_meters"] * f["num_wheels"]
     assert p["gear_ratio"] == pytest.approx(9.036)
     assert _truth()["known"] == {k: v for k, v in p.items() if not k.startswith("__") and not k.endswith("_file")}
     eff = np.loadtxt(D / p["efficiency_map_file"], delimiter=",", skiprows=3)

@@ -253,12 +253,13 @@ def test_vehicle_functions_compiled_equal_py_func():
         h = float(rng.choice([0.01, 0.1, 1.0]))
         d = float(rng.uniform(-10.0, 250.0))
         _agree(road_forces, th, m, fr, G_MPS2)
-        _agree(traction_force_n, v0, v1, h, th, m, c, fr, G_MPS2)
-        _agree(step_vehicle, v0, float(rng.uniform(-4e4, 4e4)), float(rng.uniform(0, 2e4)), th, h, m, c, fr, G_MPS2)
+        mr = float(rng.choice([0.0, 29.16, 900.0]))      # rotating parts' equivalent mass J / r^2
+        _agree(traction_force_n, v0, v1, h, th, m, c, fr, G_MPS2, mr)
+        _agree(step_vehicle, v0, float(rng.uniform(-4e4, 4e4)), float(rng.uniform(0, 2e4)), th, h, m, c, fr, G_MPS2, mr)
         for k_d, k_g in ((kd, kg), (none, none)):
             _agree(grade_rad_at, d, k_d, k_g)
             _agree(grade_total_rad, th, d, k_d, k_g)
-            _agree(speed_follow_step, np.array([m, c, fr, G_MPS2]), k_d, k_g, v0, th, d, v1 - 0.5,
+            _agree(speed_follow_step, np.array([m, c, fr, G_MPS2, mr]), k_d, k_g, v0, th, d, v1 - 0.5,
                    float(rng.uniform(-3, 3)), th, h)
 
 
@@ -288,7 +289,7 @@ def test_calibration_loop_compiled_equals_py_func():
     ctx = m.prepare(data)
     mp = MotorParams()
     vehicle = (np.array([0.0, 200.0, 400.0]), np.array([0.0, 0.03, -0.02]), 16000.0, VehicleParams().c_aero, 0.013,
-               G_MPS2)
+               G_MPS2, 4 * 60.0 / 0.55 ** 2)
     motor = (ctx["md"], ctx["mi"], mp.gear_ratio / mp.wheel_radius_m, mp.wheel_radius_m / mp.gear_ratio, True, 0.5,
              40e3, 0.95, mp.heat_rate_per_s, 0.3, 0.9)
     args = (ctx["vr"], ctx["ar"], ctx["h"], vehicle, motor, 2e3)
@@ -298,7 +299,8 @@ def test_calibration_loop_compiled_equals_py_func():
 def test_speed_mode_component_is_speed_follow_step():
     """The component's speed-mode state is exactly the shared step's (no second copy of the physics)."""
     from shevsim.powertrain.vehicle import grade_total_rad, speed_follow_step
-    p = VehicleParams(input_mode="speed", grade_distance_m=(0.0, 30.0), grade_frac=(0.0, 0.06))
+    p = VehicleParams(input_mode="speed", grade_distance_m=(0.0, 30.0), grade_frac=(0.0, 0.06),
+                      wheel_inertia_kg_m2=240.0)
     veh = Vehicle("v", p)
     veh.u["grade_rad"] = 0.01
     veh.initialize(0.0)
@@ -309,7 +311,8 @@ def test_speed_mode_component_is_speed_follow_step():
         veh.u.update(speed_ref_mps=vr, accel_ref_mps2=ar)
         veh.do_step(0.1 * k, 0.1)
         v, d, th, f, *_ = speed_follow_step.py_func(np.array([p.mass_kg, p.c_aero, p.rolling_coefficient,
-                                                               p.gravity_mps2]), kd, kg, v, th, d, vr, ar, 0.01, 0.1)
+                                                               p.gravity_mps2, p.mass_rot_kg]), kd, kg, v, th, d, vr,
+                                                     ar, 0.01, 0.1)
         assert (veh.y["speed_mps"], veh.y["distance_m"], veh.y["force_req_n"]) == (v, d, f)
 
 

@@ -524,6 +524,105 @@ def test_vehicle_energy_balance_random_forces_grade_and_brakes_cannot_reverse():
     assert veh.y["speed_mps"] == 0.0
 
 
+# ----------------------------------------------------------------------------- vehicle: rotating inertia
+# Tesla Model 3 RWD (FASTSim 3.1's 2022 file): 1752 kg, 4 wheels x 0.815 kg m2, wheel radius 0.33435 m
+M3 = dict(mass_kg=1752.0, wheel_inertia_kg_m2=4 * 0.815, wheel_radius_m=0.33435)
+
+
+def test_vehicle_wheel_inertia_constant_force_analytical():
+    """Constant traction force on a flat road, no drag, no rolling: the acceleration is F / (M + J / r^2)
+    (exact: constant forces, the step is exact), and the traction work is the translational plus the
+    rotational kinetic energy, 1/2 M v^2 + 1/2 J (v / r)^2, to round-off."""
+    f, h, n = 1000.0, 0.1, 200
+    p = VehicleParams(drag_coefficient=0.0, rolling_coefficient=0.0, **M3)
+    m_r = M3["wheel_inertia_kg_m2"] / M3["wheel_radius_m"] ** 2
+    assert p.mass_rot_kg == m_r and 29.1 < m_r < 29.2           # FASTSim's 29.16 kg equivalent
+    veh = Vehicle("veh", p)
+    veh.u.update(traction_force_n=f, brake_force_n=0.0, grade_rad=0.0)
+    veh.initialize(0.0)
+    for k in range(n):
+        veh.do_step(k * h, h)
+        assert veh.y["accel_mps2"] == pytest.approx(f / (M3["mass_kg"] + m_r), rel=1e-12)
+    y, t = veh.y, n * h
+    v = f * t / (M3["mass_kg"] + m_r)
+    assert y["speed_mps"] == pytest.approx(v, rel=1e-12)
+    assert y["distance_m"] == pytest.approx(0.5 * v * t, rel=1e-12)
+    ke_trans = 0.5 * M3["mass_kg"] * v ** 2
+    ke_rot = 0.5 * M3["wheel_inertia_kg_m2"] * (v / M3["wheel_radius_m"]) ** 2
+    assert y["kinetic_energy_j"] == pytest.approx(ke_trans + ke_rot, rel=1e-12)
+    assert y["traction_energy_j"] == pytest.approx(ke_trans + ke_rot, rel=1e-12)
+    assert ke_rot / (ke_trans + ke_rot) == pytest.approx(m_r / (M3["mass_kg"] + m_r), rel=1e-12)
+    # the point mass (J = 0) under the same force: F / M, its kinetic energy 1/2 M v^2 only
+    p0 = VehicleParams(drag_coefficient=0.0, rolling_coefficient=0.0, mass_kg=M3["mass_kg"])
+    v0 = Vehicle("veh", p0)
+    v0.u.update(traction_force_n=f, brake_force_n=0.0, grade_rad=0.0)
+    v0.initialize(0.0)
+    for k in range(n):
+        v0.do_step(k * h, h)
+    assert v0.y["speed_mps"] == pytest.approx(f * t / M3["mass_kg"], rel=1e-12)
+    assert v0.y["speed_mps"] / y["speed_mps"] == pytest.approx(1.0 + m_r / M3["mass_kg"], rel=1e-12)
+
+
+def test_vehicle_wheel_inertia_acts_on_acceleration_only():
+    """The rotating parts do not weigh: on a 5 % grade a force equal to M g sin(theta) + f_r M g cos(theta)
+    holds the speed whatever J (grade and rolling forces are the translational mass's); and a coast-down on
+    rolling resistance alone decelerates at f_r M g / (M + J/r^2) and stops having turned all the kinetic
+    energy, rotational included, into rolling work."""
+    th = math.atan(0.05)
+    for j in (0.0, 50.0):
+        p = VehicleParams(drag_coefficient=0.0, mass_kg=1752.0, wheel_inertia_kg_m2=j, wheel_radius_m=0.33435)
+        veh = Vehicle("veh", p)
+        veh.initialize(0.0)
+        veh.v = 12.0
+        f = p.mass_kg * G_MPS2 * (math.sin(th) + p.rolling_coefficient * math.cos(th))
+        veh.u.update(traction_force_n=f, brake_force_n=0.0, grade_rad=th)
+        for k in range(100):
+            veh.do_step(0.1 * k, 0.1)
+        assert veh.y["speed_mps"] == pytest.approx(12.0, rel=1e-12)
+    p = VehicleParams(drag_coefficient=0.0, mass_kg=1752.0, wheel_inertia_kg_m2=50.0, wheel_radius_m=0.33435)
+    m_e = p.mass_kg + p.mass_rot_kg
+    veh, tr, _ = coast(p, 10.0, 200.0, 0.1)
+    a = p.rolling_coefficient * p.mass_kg * G_MPS2 / m_e
+    assert np.max(np.abs(tr[:, 1] - np.maximum(10.0 - a * tr[:, 0], 0.0))) < 1e-9
+    assert tr[-1, 1] == 0.0
+    assert veh.y["rolling_energy_j"] == pytest.approx(0.5 * m_e * 10.0 ** 2, rel=1e-10)
+    assert veh.y["distance_m"] == pytest.approx(10.0 ** 2 / (2 * a), rel=1e-9)
+
+
+def test_vehicle_wheel_inertia_energy_balance_random_and_speed_mode_inverse():
+    """Random forces, grades and brakes with J > 0: works = Delta KE (rotational included) to round-off; the
+    speed-mode force (traction_force_n) is the exact inverse of the forward step with the same J."""
+    from shevsim.powertrain.vehicle import step_vehicle, traction_force_n
+    rng = np.random.default_rng(12)
+    p = VehicleParams(wheel_inertia_kg_m2=4 * 60.0)             # M-ATV: four heavy wheels (assumed)
+    veh = Vehicle("veh", p)
+    veh.initialize(0.0)
+    for k in range(3000):
+        veh.u["traction_force_n"] = float(rng.uniform(-20e3, 40e3))
+        veh.u["brake_force_n"] = float(rng.uniform(0, 60e3)) if k % 7 == 0 else 0.0
+        veh.u["grade_rad"] = float(rng.uniform(-0.05, 0.08))
+        veh.do_step(0.1 * k, 0.1)
+    y = veh.y
+    lhs = y["traction_energy_j"] - y["brake_energy_j"] - y["rolling_energy_j"] - y["aero_energy_j"] - y["grade_energy_j"]
+    scale = y["rolling_energy_j"] + y["aero_energy_j"] + abs(y["traction_energy_j"])
+    assert abs(lhs - y["kinetic_energy_j"]) / scale < 1e-10
+    assert y["kinetic_energy_j"] == pytest.approx(0.5 * (p.mass_kg + p.mass_rot_kg) * y["speed_mps"] ** 2, rel=1e-14)
+    m, c, fr, mr = p.mass_kg, p.c_aero, p.rolling_coefficient, p.mass_rot_kg
+    for _ in range(200):
+        v0, v1, th = float(rng.uniform(0.1, 25)), float(rng.uniform(0.1, 25)), float(rng.uniform(-0.05, 0.05))
+        f = traction_force_n(v0, v1, 0.1, th, m, c, fr, G_MPS2, mr)
+        assert step_vehicle(v0, f, 0.0, th, 0.1, m, c, fr, G_MPS2, mr)[0] == pytest.approx(v1, rel=1e-12)
+        assert f - traction_force_n(v0, v1, 0.1, th, m, c, fr, G_MPS2) == pytest.approx(mr * (v1 - v0) / 0.1,
+                                                                                         rel=1e-9, abs=1e-6)
+
+
+def test_vehicle_wheel_inertia_bad_values_name_the_parameter():
+    with pytest.raises(ValueError, match="parameter 'wheel_inertia_kg_m2' must be >= 0"):
+        VehicleParams(wheel_inertia_kg_m2=-1.0)
+    with pytest.raises(ValueError, match="parameter 'wheel_radius_m' must be > 0"):
+        VehicleParams(wheel_inertia_kg_m2=1.0, wheel_radius_m=0.0)
+
+
 # ----------------------------------------------------------------------------- driver
 def drive_direct(driver, veh, v_ref, t_end, h=0.1, grade=0.0):
     driver.initialize(0.0)

@@ -112,6 +112,7 @@ def test_shipped_parameter_files_are_valid():
     ("bms.q_soc=nan", "q_soc"), ("bms.r_v=nan", "r_v"), ("bms.p0_soc=nan", "p0_soc"), ("bms.s0_r1=nan", "s0_r1"),
     ("battery.t_init_c=nan", "t_init_c"), ("battery.capacity_ah=-2.3", "capacity_ah"),
     ("vehicle.mass_kg=-15554", "mass_kg"), ("motor.wheel_radius_m=0", "wheel_radius_m"),
+    ("vehicle.wheel_inertia_kg_m2=-3.26", "wheel_inertia_kg_m2"),
     ("battery.soc_init_pct=150", "soc_init_pct"), ("engine_generator.fuel_lhv_j_per_g=0", "fuel_lhv_j_per_g"),
 ])
 def test_known_cases_refused_naming_the_set_option(setting, field):

@@ -48,8 +48,11 @@ A logger then samples the speed and the battery's electrical output power
   WVU interstate cycle (first 700 s), other noise seeds (the false-selection rate).
 
 The user's nominal (``vehicle_nominal.toml``, the calibration's ``--params``) is the published data of
-that vehicle in shevsim's terms: mass, frontal area, drag and rolling coefficients, wheel radius, base
-auxiliary load, a single-speed gear of 9.3, and the motor's published efficiency curve (FASTSim's
+that vehicle in shevsim's terms: mass, frontal area, drag and rolling coefficients, wheel radius, the
+wheels' rotating inertia (``wheel_inertia_kg_m2`` = FASTSim's per-wheel ``wheel_inertia_kilogram_square_meters``
+x ``num_wheels``, read from the file: 4 x 0.815 kg m2, an equivalent mass J / r^2 of 33.8 kg, which FASTSim
+books as ``pwr_whl_inertia``; added to the nominal after the records were made - the records and the truth's
+cases are unchanged), base auxiliary load, a single-speed gear of 9.3, and the motor's published efficiency curve (FASTSim's
 ``eff_interp_achieved`` over output-power fraction, times the transmission's 0.92) written as a
 speed x torque map (``zoe_motor_eff_map.csv``) with a 245 N.m / 100 kW torque curve
 (``zoe_motor_torque_curves.csv``).
@@ -75,7 +78,8 @@ instantaneous, 0.02 m/s and 100 W noise).  Files ``vehicle_m3_<case>.csv``, ``ve
 * Cases: ``none`` (UDDS 0-700 s), ``payload`` (1752 -> 2150 kg, +22.7 %), ``aux`` (250 -> 2250 W),
   ``latency_2`` (the ``none`` vehicle, power logged 2 s late), ``none_2`` (HWFET, the highway cycle,
   0-700 s; another seed).
-* The nominal: the file's chassis numbers, its 250 W base auxiliary load, the machine's published
+* The nominal: the file's chassis numbers (wheel inertia too: 4 x 0.815 kg m2, 29.2 kg equivalent at its
+  0.334 m radius), its 250 W base auxiliary load, the machine's published
   efficiency curve (``eff_interp_achieved`` over output-power fraction, read linearly between its points as
   a user reading a published curve would, times the transmission's 0.98) as a speed x torque map, a single
   gear of 9.036 (Tesla's published reduction ratio of the Model 3's rear drive unit) and a 420 N.m / 239 kW
@@ -246,10 +250,15 @@ def write_nominal(d: dict, veh_spec: dict | None = None) -> dict:
     (HERE / f"{mot}torque_curves.csv").write_text("\n".join(rows) + "\n")
     known = {"mass_kg": float(d["mass_kilograms"]), "frontal_area_m2": float(ch["frontal_area_square_meters"]),
              "drag_coefficient": float(ch["drag_coef"]), "rolling_coefficient": float(ch["wheel_rr_coef"]),
-             "wheel_radius_m": float(ch["wheel_radius_meters"]), "aux_power_w": float(d["pwr_aux_base_watts"]),
-             "air_density_kg_m3": 1.2, "gear_ratio": gear}
+             "wheel_radius_m": float(ch["wheel_radius_meters"]),
+             # all wheels' rotating inertia: FASTSim's per-wheel value x its wheel count (module docstring)
+             "wheel_inertia_kg_m2": float(ch["wheel_inertia_kilogram_square_meters"]) * int(ch["num_wheels"]),
+             "aux_power_w": float(d["pwr_aux_base_watts"]), "air_density_kg_m3": 1.2, "gear_ratio": gear}
+    note = {"wheel_inertia_kg_m2": f"  # all wheels: FASTSim's chassis {int(ch['num_wheels'])} x "
+                                   f"{float(ch['wheel_inertia_kilogram_square_meters'])!r} kg m2 "
+                                   "(wheel_inertia_kilogram_square_meters x num_wheels)"}
     lines = ["[meta]", f'source = "published {label} data (FASTSim resource); make_vehicle_fastsim.py"',
-             "[params]"] + [f"{k} = {v!r}" for k, v in known.items()]
+             "[params]"] + [f"{k} = {v!r}{note.get(k, '')}" for k, v in known.items()]
     lines += [f'efficiency_map_file = "{mot}eff_map.csv"', f'torque_curves_file = "{mot}torque_curves.csv"']
     (HERE / vs["nominal"]).write_text("\n".join(lines) + "\n")
     return known
