@@ -97,7 +97,7 @@ class VehicleParams:
     rolling_coefficient: float = 0.012
     air_density_kg_m3: float = 1.2
     gravity_mps2: float = field(default=G_MPS2, metadata=rng(gt=0.0))
-    wheel_inertia_kg_m2: float = field(default=0.0, metadata=rng(0.0, what="a rotating inertia (0: none)"))
+    wheel_inertia_kg_m2: float = field(default=0.0, metadata=rng(0.0, what="a moment of inertia, 0 = none"))
     wheel_radius_m: float = field(default=0.55, metadata=rng(gt=0.0, what="a wheel radius"))
     speed_init_mps: float = 0.0
     grade_distance_m: tuple[float, ...] = ()
