@@ -24,12 +24,13 @@ takes a parameter file of any of the three components (``[params]``; relative ``
 against the file's folder), the short form (``[params]`` with any of those names), or an overlay with
 tables ``[vehicle]``/``[motor]``/``[bus]`` - e.g. a previous calibration's ``params.toml``, so one
 calibration's result seeds the next (its fitted mass, drag, ... become the nominal; the effects stay
-candidates for a further change from it).  The vehicle's rotating inertia ``wheel_inertia_kg_m2`` (all wheels,
-with ``wheel_radius_m``, which the vehicle and the motor share: one tyre) is a known parameter like the others:
-the model's inertia is ``mass_kg + wheel_inertia_kg_m2 / wheel_radius_m^2`` and ``mass_kg`` (the
-``mass_error`` effect's parameter) stays the translational mass.  A given road grade (``grade_distance_m``/``grade_frac``) is
-the record's known grade; the ``road_grade`` effect adds its knots to it.  Unknown names fail (with a
-suggestion), as do names in another component's table and missing map files.  Fitted:
+candidates for a further change from it).  The vehicle's rotating inertia ``wheel_inertia_kg_m2`` (all
+wheels, with ``wheel_radius_m``, which the vehicle and the motor share: one tyre) is a known parameter like
+the others: the model's inertia is ``mass_kg + wheel_inertia_kg_m2 / wheel_radius_m^2`` and ``mass_kg`` (the
+``mass_error`` effect's parameter) stays the translational mass.  A given road grade
+(``grade_distance_m``/``grade_frac``) is the record's known grade; the ``road_grade`` effect adds its knots
+to it.  Unknown names fail (with a suggestion), as do names in another component's table and missing map
+files.  Fitted:
 
 * declared: ``efficiency_scale_frac`` (motor: actual / map efficiency) and ``regen_efficiency_scale_frac``
   (motor: generating / motoring efficiency on top of it).  Both are always fitted: the drive's efficiency

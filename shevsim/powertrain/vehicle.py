@@ -134,7 +134,8 @@ def speed_follow_step(p, knot_d, knot_frac, v0: float, grade0: float, d0: float,
     """One step of the speed-following (``input_mode = "speed"``) vehicle: the whole physics of
     :class:`shevsim.components.vehicle.Vehicle` in speed mode and of the vehicle calibration's loop.
 
-    ``p``: the vehicle's parameters (order of :data:`VP`, :func:`vehicle_params`); ``knot_d``, ``knot_frac``: the road grade's knots.
+    ``p``: the vehicle's parameters (order of :data:`VP`, :func:`vehicle_params`); ``knot_d``, ``knot_frac``:
+    the road grade's knots.
     The vehicle at ``v0`` (grade ``grade0`` [rad] held over the step, distance ``d0``) moves to
     ``v1 = max(v_ref, 0)`` over ``h``; the works are those of the force :func:`traction_force_n` that
     produced that change.  Then the grade at the new distance (:func:`grade_total_rad` of ``grade_in``) and
@@ -251,7 +252,8 @@ def vehicle_speed_mode_step(p, knot_d, knot_frac, x, v_ref: float, a_ref: float,
     is the motor's).
 
     Returns ``(accel_mps2, force_req_n, kinetic_energy_j)`` at t + h (``KE = 1/2 (M + M_r) v^2``; speed,
-    distance, grade and works are in ``x``).  The component (:class:`shevsim.components.vehicle.Vehicle`) calls it on both engines.
+    distance, grade and works are in ``x``).  The component (:class:`shevsim.components.vehicle.Vehicle`) calls
+    it on both engines.
     """
     v0 = x[XS.v]
     v1, d1, th1, f_req, dd, wp, wr, wa, wg = speed_follow_step(p, knot_d, knot_frac, v0, x[XS.th], x[XS.dist], v_ref,

@@ -164,6 +164,38 @@ def test_calibration_model_is_the_replay(tmp_path):
     np.testing.assert_allclose(rep, sim, rtol=1e-12, atol=1e-6)
 
 
+def test_wheel_inertia_is_known_and_reaches_model_replay_and_overlay(tmp_path):
+    """A known wheel inertia (all wheels, kg m2) and the tyre radius (the vehicle's and the motor's, one value)
+    reach the fit's compiled loop, the replay through the master and the overlay; the model's extra power is
+    the rotating parts' inertial power (J / r^2) a v; mass_kg stays the translational mass."""
+    data, _ = _data([], duration_s=120.0)
+    j, r = 4 * 60.0, 0.5
+    m0 = get_model("vehicle", {"wheel_radius_m": r})
+    m1 = get_model("vehicle", {"wheel_radius_m": r, "wheel_inertia_kg_m2": j})
+    assert m1.known["wheel_inertia_kg_m2"] == j and m1.known["mass_kg"] == m0.known["mass_kg"]
+    prm = m1._built(m1._params(m1.full_values({})))
+    assert prm["vehicle"].wheel_radius_m == prm["motor"].wheel_radius_m == r
+    assert prm["vehicle"].mass_rot_kg == pytest.approx(j / r ** 2)
+    ctx0, ctx1 = m0.prepare(data), m1.prepare(data)
+    p0, p1 = m0.simulate(ctx0, {})["power_w"], m1.simulate(ctx1, {})["power_w"]
+    # equal to a heavier translational mass with no rolling / grade weight: inertia only
+    m2 = get_model("vehicle", {"wheel_radius_m": r, "mass_kg": m0.known["mass_kg"] + j / r ** 2,
+                               "rolling_coefficient": m0.known["rolling_coefficient"] * m0.known["mass_kg"]
+                               / (m0.known["mass_kg"] + j / r ** 2)})
+    p2 = m2.simulate(m2.prepare(data), {})["power_w"]
+    np.testing.assert_allclose(p1, p2, rtol=1e-9, atol=1e-3)
+    assert np.max(np.abs(p1 - p0)) > 1e3
+    f = tmp_path / "p.toml"
+    ov = m1.overlay(m1.full_values({}), tmp_path)
+    assert ov["vehicle"]["wheel_inertia_kg_m2"] == j and ov["vehicle"]["wheel_radius_m"] == ov["motor"]["wheel_radius_m"]
+    _toml(f, ov)
+    np.testing.assert_allclose(m1.replay(data, f)["power_w"], p1, rtol=1e-12, atol=1e-6)
+    with pytest.raises(Exception, match=r"\[motor\] wheel_radius_m = 0.6 contradicts \[vehicle\] wheel_radius_m = 0.5"):
+        get_model("vehicle", {"__tables__": {"vehicle": {"wheel_radius_m": 0.5}, "motor": {"wheel_radius_m": 0.6}}})
+    with pytest.raises(Exception, match="wheel_inertia_kg_m2"):
+        get_model("vehicle", {"wheel_inertia_kg_m2": -1.0})
+
+
 # --------------------------------------------------------------------------------- the workflow
 
 @pytest.mark.parametrize("effect", EFFECTS)

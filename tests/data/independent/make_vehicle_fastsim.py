@@ -49,10 +49,11 @@ A logger then samples the speed and the battery's electrical output power
 
 The user's nominal (``vehicle_nominal.toml``, the calibration's ``--params``) is the published data of
 that vehicle in shevsim's terms: mass, frontal area, drag and rolling coefficients, wheel radius, the
-wheels' rotating inertia (``wheel_inertia_kg_m2`` = FASTSim's per-wheel ``wheel_inertia_kilogram_square_meters``
-x ``num_wheels``, read from the file: 4 x 0.815 kg m2, an equivalent mass J / r^2 of 33.8 kg, which FASTSim
-books as ``pwr_whl_inertia``; added to the nominal after the records were made - the records and the truth's
-cases are unchanged), base auxiliary load, a single-speed gear of 9.3, and the motor's published efficiency curve (FASTSim's
+wheels' rotating inertia (``wheel_inertia_kg_m2`` = FASTSim's per-wheel
+``wheel_inertia_kilogram_square_meters`` x ``num_wheels``, read from the file: 4 x 0.815 kg m2, an equivalent
+mass J / r^2 of 33.8 kg, which FASTSim books as ``pwr_whl_inertia``; added to the nominal after the records
+were made - the records and the truth's cases are unchanged), base auxiliary load, a single-speed gear of
+9.3, and the motor's published efficiency curve (FASTSim's
 ``eff_interp_achieved`` over output-power fraction, times the transmission's 0.92) written as a
 speed x torque map (``zoe_motor_eff_map.csv``) with a 245 N.m / 100 kW torque curve
 (``zoe_motor_torque_curves.csv``).
