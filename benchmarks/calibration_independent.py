@@ -4,8 +4,9 @@ recovered, and how much does the held-out error fall?
     python benchmarks/calibration_independent.py            # all generators (about 5 minutes)
     python benchmarks/calibration_independent.py --only vehicle       # both vehicles (Zoe and Model 3)
     python benchmarks/calibration_independent.py --only vehicle_m3    # the Tesla Model 3 only
-    python benchmarks/calibration_independent.py --only cell          # both cells (Chen2020 NMC and the LFP)
+    python benchmarks/calibration_independent.py --only cell          # the three cells (Chen2020, LFP, Ecker2015)
     python benchmarks/calibration_independent.py --only cell_lfp      # the flat-OCV LFP cell only
+    python benchmarks/calibration_independent.py --only cell_nmc2     # the second NMC cell (Ecker2015) only
 
 Records: ``tests/data/independent/`` - vehicle records made by FASTSim 3.1 (``make_vehicle_fastsim.py``: its
 Renault Zoe, ``vehicle_*``, and a second vehicle the calibration was not developed on, its Tesla Model 3 RWD
@@ -13,7 +14,9 @@ on other cycles, ``vehicle_m3_*``),
 cell records made by PyBaMM's SPMe with a lumped thermal model and the Chen2020 set
 (``make_cell_pybamm.py``) and, a flat-OCV LFP cell, the Prada2013 set (A123 26650, ``make_cell_pybamm_lfp.py``:
 the initial SOC that the first rest voltage cannot give on the OCV's plateau, an OCV table from a C/20
-discharge), engine-generator soot records made by an independent plant script with a
+discharge) and, a second NMC cell the calibration was not developed on, the Ecker2015 set (Kokam SLPB 75106100,
+7.5 A.h pouch, ``make_cell_pybamm_nmc2.py``: the swing protocol's no-effect, capacity and current-offset records
+and a no-effect drive, with the Chen2020 rows' tolerances), engine-generator soot records made by an independent plant script with a
 transient term of another form (``make_engine_soot.py``); seeds and truth in ``*_truth.json``; the
 user's nominal in ``*_nominal.toml`` (the engine: the component's defaults, transient term off).
 A case counts when the selected effects are exactly the expected ones (none for a no-effect record) and
@@ -161,6 +164,14 @@ CELL_LFP = {
                   2.0, False),
     "ocv_c20": (["ocv_correction"], "OCV correction rms error / rms truth", _ocv_rel_error, lambda t: 0.0, 0.5, False),
 }
+# the second NMC cell (Ecker2015, Kokam 7.5 A.h pouch): the swing cases of the Chen2020 cell, its tolerances
+# (capacity 5 %, offset 25 %; the offset 0.15 A, 0.02C), and a no-effect drive
+CELL_NMC2 = {
+    "none_swing": ([], None, None, None, None, None),
+    "capacity_swing": CELL["capacity_swing"],
+    "current_offset_swing": CELL["current_offset_swing"],
+    "none": ([], None, None, None, None, None),
+}
 ENGINE = {
     "none": ([], "soot_scale_frac", lambda p, r: p.get("soot_scale_frac"), lambda t: t["soot_scale_frac"], 0.10, True),
     "transient": (["transient_soot"], None, None, None, None, None),
@@ -174,6 +185,7 @@ GENERATORS = {"vehicle": ("FASTSim 3.1", VEHICLE, "vehicle"),
               "vehicle_m3": ("FASTSim 3.1 Tesla Model 3", VEHICLE_M3, "vehicle"),
               "cell": ("PyBaMM SPMe", CELL, "cell"),
               "cell_lfp": ("PyBaMM SPMe LFP (Prada2013)", CELL_LFP, "cell"),
+              "cell_nmc2": ("PyBaMM SPMe NMC (Ecker2015)", CELL_NMC2, "cell"),
               "engine": ("independent soot script", ENGINE, "engine")}
 
 
