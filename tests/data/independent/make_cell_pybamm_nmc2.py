@@ -62,8 +62,15 @@ import pybamm
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from make_cell_pybamm import (FIRST_REST_S, NOISE, SOC0, T_REF_K, current_profile,  # noqa: E402
-                              log_record)     # the same protocols, logger and noise
+# the same protocols, logger and noise
+from make_cell_pybamm import (
+    FIRST_REST_S,
+    NOISE,
+    SOC0,
+    T_REF_K,
+    current_profile,
+    log_record,
+)
 
 OUT = Path(os.environ.get("SHEVSIM_GEN_OUT", HERE))     # where to write (default: beside this script)
 RATED_AH = 7.5
@@ -93,13 +100,21 @@ HELD_AT_25C = {   # parameter -> its arguments (the temperature last)
 def equivalent_cylinder(volume_m3: float = POUCH_VOLUME_M3, area_m2: float = POUCH_AREA_M2):
     """The cylinder (radius, length) [m] with the pouch's volume and cooling surface: the thin root of
     pi r^2 L = V, 2 pi r L + 2 pi r^2 = A (bisection on r in (0, 2 V / A])."""
-    f = lambda r: 2.0 * volume_m3 / r + 2.0 * math.pi * r * r - area_m2      # noqa: E731
+    def f(r):
+        return 2.0 * volume_m3 / r + 2.0 * math.pi * r * r - area_m2
     lo, hi = 1e-4, 2.0 * volume_m3 / area_m2 * 1.5
     for _ in range(200):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if f(mid) > 0.0 else (lo, mid)
     r = 0.5 * (lo + hi)
     return r, volume_m3 / (math.pi * r * r)
+
+
+def _at_25c(f, n_args: int):
+    """The function ``f`` (the temperature its last of ``n_args`` arguments) evaluated at 25 degC whatever T."""
+    if n_args == 4:
+        return lambda a, b, c, T: f(a, b, c, T_REF_K)
+    return lambda a, T: f(a, T_REF_K)
 
 
 def params():
@@ -112,11 +127,7 @@ def params():
               "Ambient temperature [K]": T_REF_K, "Initial temperature [K]": T_REF_K,
               "Upper voltage cut-off [V]": 4.4})
     for k, n in HELD_AT_25C.items():
-        f = p[k]
-        if n == 4:
-            p[k] = (lambda f: lambda a, b, c, T: f(a, b, c, T_REF_K))(f)
-        else:
-            p[k] = (lambda f: lambda a, T: f(a, T_REF_K))(f)
+        p[k] = _at_25c(p[k], n)
     return p
 
 
@@ -154,9 +165,9 @@ def pseudo_ocv():
 def main() -> int:
     grid, ocv, cap = pseudo_ocv()
     r_m, l_m = equivalent_cylinder()
-    nom = ["[meta]", f'source = "PyBaMM {pybamm.__version__} Ecker2015 (Kokam SLPB 75106100, NMC/graphite): rated '
-           f'{RATED_AH} A.h; pseudo-OCV at C/50 (measured {cap:.3f} A.h); the pouch 7.5 x 106 x 100 mm as a cylinder '
-           f'of its volume and cooling surface; make_cell_pybamm_nmc2.py"',
+    nom = ["[meta]", (f'source = "PyBaMM {pybamm.__version__} Ecker2015 (Kokam SLPB 75106100, NMC/graphite): rated '
+                      f'{RATED_AH} A.h; pseudo-OCV at C/50 (measured {cap:.3f} A.h); the pouch 7.5 x 106 x 100 mm as a '
+                      f'cylinder of its volume and cooling surface; make_cell_pybamm_nmc2.py"'),
            "[params]", f"capacity_ah = {RATED_AH}", "soc0_frac = -1.0", "rc_pairs = 2",
            f"radius_m = {r_m:.6f}", f"length_m = {l_m:.5f}", f"h_conv_w_m2k = {H_W_M2K}",
            "[ocv]", "soc_frac = [" + ", ".join(f"{x:.4f}" for x in grid) + "]",
