@@ -7,7 +7,9 @@ Each step (sample time = the component's step h, seed 0.1 s), in the seed's orde
    R_s, R1, C1 are factors on the nominal (SOC, T, direction) maps at the previous step's T_mean
    estimate; ``"free"``: the seed's R_s state and R1, C1 parameters; ``v2_model = "nominal_maps"``,
    default: the plant's slow second RC branch V2 propagated from the nominal R2, C2 maps and
-   subtracted from the predicted voltage, ``"none"``: the seed's one-branch filter);
+   subtracted from the predicted voltage, ``"none"``: the seed's one-branch filter; ``rc_update =
+   "tracking"``, default: the R1 factor's parameter filter in physical units with the total-derivative
+   Jacobian, so that it tracks ageing, ``"seed"``: the seed's 5.24, under which it stays at ~1);
 2. heat-generation estimate (5.16) with the DEKF's estimates and the *previous* step's estimated
    mean temperature (Sec. 5.3.2);
 3. thermal DKF (:class:`shevsim.bms.thermal_estimators.ThermalDKF`, 3.10-3.15; KF or JEKF
@@ -109,6 +111,13 @@ class BMSParams(DEKFTuning, CellLimits, ThermalParams):
         the seed's R_s random walk / free R1, C1 parameters.  See :mod:`shevsim.bms.electrical`.
     factor_p0, factor_q : float
         Initial and per-step random-walk variance of those factors (1e-2, 1e-4).
+    rc_update, theta_r_v2, theta_window_s, r1_factor_q :
+        ``"tracking"`` (default): the R1 factor is updated with the total-derivative C^theta and an output
+        noise in V^2 (the innovation's running mean square over ``theta_window_s`` = 60 s, floored at the
+        voltage sensor's variance ``theta_r_v2`` = (1 mV)^2), random walk ``r1_factor_q`` = 1e-7 per step;
+        C1 stays at its nominal map.  The R1 factor then tracks ageing (within 1.4 % of a plant with R1
+        x 1.2 after 1000 s); ``"seed"``: the seed's 5.24 with Sigma_v = 1, under which the R1 factor stays
+        at ~1.00.  See :mod:`shevsim.bms.electrical`, "Tracking the R1 factor".
     v2_model : str
         ``"nominal_maps"`` (default): the DEKF propagates the plant-type's slow second RC branch V2 from
         the nominal R2, C2 maps and subtracts it from the predicted voltage (unbiased SOC against the
@@ -133,6 +142,7 @@ class BMSParams(DEKFTuning, CellLimits, ThermalParams):
     rs_model: str = "table_scaled"
     rc_model: str = "table_scaled"
     v2_model: str = "nominal_maps"
+    rc_update: str = "tracking"
     discharge_file: str = ""
     charge_file: str = ""
     rs_scale: float = 1.0
