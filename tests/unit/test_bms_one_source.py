@@ -90,13 +90,13 @@ def test_thermal_filter_steps_compiled_equal_py_func(make):
     assert abs(fast.h - make(True).h) > 0.01 or isinstance(fast, ThermalKF)   # the h estimate moved
 
 
-@pytest.mark.parametrize("rs_model,rc_model,v2_model", [("free", "free", "none"), ("table_scaled", "free", "none"),
-                                                        ("table_scaled", "table_scaled", "none"),
-                                                        ("table_scaled", "table_scaled", "nominal_maps"),
-                                                        ("free", "free", "nominal_maps")])
-def test_dekf_step_compiled_equals_py_func(rs_model, rc_model, v2_model):
+@pytest.mark.parametrize("rs_model,rc_model,v2_model,rc_update", [
+    ("free", "free", "none", "seed"), ("table_scaled", "free", "none", "seed"),
+    ("table_scaled", "table_scaled", "none", "seed"), ("table_scaled", "table_scaled", "nominal_maps", "seed"),
+    ("free", "free", "nominal_maps", "seed"), ("table_scaled", "table_scaled", "nominal_maps", "tracking")])
+def test_dekf_step_compiled_equals_py_func(rs_model, rc_model, v2_model, rc_update):
     prm = DEKFParams(q_soc=1e-5, q_v1=2e-3, q_rs=1e-8, q_c1=1e4, rs_model=rs_model, rc_model=rc_model,
-                     v2_model=v2_model)
+                     v2_model=v2_model, rc_update=rc_update)
     fast, ref = DEKF(prm), DEKF(prm, compiled=False)
     assert ref._step is el.dekf_step.py_func
     rng = np.random.default_rng(3)
@@ -108,6 +108,9 @@ def test_dekf_step_compiled_equals_py_func(rs_model, rc_model, v2_model):
         _close([fast.soc, fast.v1, fast.v2, fast.x2, fast.rs, fast.r1, fast.c1, fast.innovation, *fast.px,
                 *fast.pth], [ref.soc, ref.v1, ref.v2, ref.x2, ref.rs, ref.r1, ref.c1, ref.innovation, *ref.px,
                              *ref.pth])
+    _close(fast.xe, ref.xe)              # the whole state array (the tracking update's sensitivities too)
+    if rc_update == "tracking":
+        assert fast.th1 != 1.0 and fast.th2 == 1.0 and fast.xe[el.E.dv1_dk1] != 0.0
     if v2_model == "nominal_maps":
         assert abs(fast.v2) > 1e-4 and fast.r2 > 0.0      # the slow branch was propagated
     else:
