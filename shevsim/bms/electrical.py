@@ -107,8 +107,8 @@ start error, BMS tuning): kappa_1 within 3.2 % of the truth from 1000 s to 2000 
 test's aged cell, ends at 1.198), max SOC error 0.09 % there (seed update: kappa_1 1.002, SOC 1.7 %).
 
 What R1 is observable against (measured, innovation RMS with kappa_1 held, second half): R_s and R1
-scale the same current but are not collinear on this profile (2-15 s pulses; kappa_s converges to
-1.196-1.203 whatever kappa_1 is held at in 0.8-1.5).  The limits are elsewhere:
+scale the same current but are not collinear on this profile (2-15 s pulses; after 1000 s kappa_s stays in
+1.187-1.204 whatever kappa_1 is held at in 0.8-1.5).  The limits are elsewhere:
 
 - the slow branch: with ``v2_model = "none"`` the prediction error's minimum is at kappa_1 ~ 1.2 on the
   *nominal* plant and > 1.3 on the aged one (the one-branch V1 absorbs the plant's V2); the tracking update
