@@ -411,6 +411,21 @@ def test_pybamm_swing_capacity_named_within_5_percent():
     assert rep["rmse_after"]["voltage_v"]["holdout"] < 0.75 * rep["rmse_before"]["voltage_v"]["holdout"]
 
 
+def test_a_capacity_fitted_only_with_the_slow_branch_at_its_limit_is_not_named():
+    """The swing drive with PyBaMM's heat of mixing and no capacity error: the pair low_soc_resistance +
+    capacity fitted a capacity 4.7 % above the rated one, and passed, with the slow RC branch stretched to its
+    time-constant limit (the longest rest): a series capacitor split between the two.  A true capacity error
+    (the test above) does the opposite: the slow branch comes back from the limit once the capacity is in."""
+    rep = _cell("none_swing_mixing", effects=["low_soc_resistance", "capacity"])
+    assert not rep["selected_effects"], rep["selected_effects"]
+    tmax = rep["record_resolution"]["slow_branch_tau_max_s"]
+    (pair,) = [c for c in rep["rounds"][0]["pairs"] if c["name"] == "low_soc_resistance+capacity"]
+    assert not pair["passed"] and "slow RC branch at its time-constant limit" in pair["reason"], pair["reason"]
+    assert pair["parameters"]["capacity_ah"] > 1.02 * 5.0          # a sizeable capacity was fitted ...
+    assert pair["gain"] > 0.10                                     # ... and it would have passed on the fit
+    assert 500.0 < tmax < 700.0
+
+
 def test_pybamm_swing_current_offset_named_with_the_offset_its_rests_measure():
     rep = _cell("current_offset_swing", effects=SWING_EFFECTS)
     truth = _cell_truth("current_offset_swing")["current_offset_a"]
@@ -462,7 +477,7 @@ def test_pybamm_one_effect_named_whole_library(case, effect, param, truth, rel):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("case", ["none_swing", "none_swing_2"])
+@pytest.mark.parametrize("case", ["none_swing", "none_swing_2", "none_swing_mixing"])
 def test_no_effect_swing_records_whole_library_name_no_physical_effect(case):
     # none_swing_2 named ocv_hysteresis (+24 mV) and entropic_heat, then (hysteresis refused at its rests) an OCV
     # correction, then a capacity (4.76 A.h): each fitted to the SPMe's voltage under current, none where its rests

@@ -125,6 +125,27 @@ def test_the_plateau_starts_rest_voltage_gives_the_wrong_soc_the_step_starts_the
             assert abs(err) < 1.5, (case, err)
 
 
+def test_the_report_says_where_the_first_rest_cannot_give_the_initial_soc():
+    """The record's resolution (CellModel.record_resolution): the SOC interval that the first rest voltage
+    +- 2 mV (a C/50 pseudo-OCV's own overpotential: 1.8-3.3 mV on this cell, the generator's measurement) gives
+    through the user's table.  On the plateau starts it is wide, contains the truth, and the report says the
+    drive cannot give the SOC; on the step starts it is narrow and nothing is said."""
+    from shevsim.calibrate.cell import CellModel
+    from shevsim.calibrate.data import load_measured
+    from shevsim.calibrate.known import load_params_toml
+    for case in ("plateau", "plateau_2", "none", "none_2"):
+        m = CellModel(load_params_toml(D / "cell_lfp_nominal.toml"))
+        m.prepare(load_measured(str(D / f"cell_lfp_{case}.csv"), "cell"))
+        res = m.record_resolution()
+        lo, hi = res["initial_soc_from_first_rest"]["soc_pct_interval"]
+        truth = _truth()["cases"][case]["truth"]["soc_init_pct"]
+        flat = "flat part of the OCV table" in res["statement"]
+        if case.startswith("plateau"):
+            assert flat and hi - lo > 4.0 and lo <= truth <= hi, (case, lo, hi, truth)
+        else:
+            assert not flat and hi - lo < 4.0, (case, lo, hi)
+
+
 # ------------------------------------------------------------------ the calibration on them
 def _lfp(case: str, effects=None):
     from shevsim.calibrate.data import load_measured
