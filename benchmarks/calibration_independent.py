@@ -144,6 +144,9 @@ CELL = {
     # the entropic record with the heat of mixing (the same truth)
     "entropic_mixing": (["entropic_heat"], "dU/dT rms error / rms truth",
                         lambda p, r: _dudt_rel_error(p, r, "entropic_mixing"), lambda t: 0.0, 0.5, False),
+    # a reviewer's: 8 % lost capacity, the heat of mixing, 420 s rest stops (the slow branch at its limit)
+    "capacity_swing_420": (["capacity"], "capacity_ah", lambda p, r: p.get("capacity_ah"),
+                           lambda t: t["capacity_ah"], 0.05, True),
 }
 def _ocv_rel_error(p, r, case="ocv_c20"):
     """RMS over the knots of (fitted - true) OCV correction, relative to the RMS of the true one (equilibrium

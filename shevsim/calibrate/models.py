@@ -180,8 +180,9 @@ class CalibrationModel:
             out.append("units or sign of an input column (check --map, --current-sign / --power-sign)")
         return out
 
-    def effect_evidence(self, effect: str, ctx: dict, values: dict, meas: dict) -> dict | None:
+    def effect_evidence(self, effect: str, ctx: dict, values: dict, meas: dict, base: dict | None = None) -> dict | None:
         """A check of what ``effect`` claims, on the record itself, beyond a better fit (None: no check).
+        ``values``: the candidate fit's full values; ``base``: those of the model the effect is added to.
         Returns ``{"ok": bool, "statement": str, "evidence": {...}}``; a candidate that fits better but whose
         claim the record does not show (``ok`` False) is not selected, and the report says why."""
         return None

@@ -780,7 +780,7 @@ class _Run:
                                                 "holdout_gain": fr.gain})
             self.say(f"round {rnd + 1}: {'+'.join(effs)}: {fr.reason}")
             return fr
-        if fr.passed and self._not_supported(fr, effs, rnd):
+        if fr.passed and self._not_supported(fr, effs, rnd, current):
             return fr
         if not why and claimed:
             fr.reason = (f"passes: held-out score gain {fr.gain:.1%} > 0 with its claim verified on its channel ("
@@ -843,7 +843,7 @@ class _Run:
             off_note = "; ".join(f"{c} {v:+.1%}" for c, v in off.items() if v > MAX_WORSEN)
         return measured, min_gain, weak, own, off_note
 
-    def _not_supported(self, fr, effs, rnd) -> bool:
+    def _not_supported(self, fr, effs, rnd, current=None) -> bool:
         """True (and ``fr`` marked not passed, with the reason) when what an effect of ``effs`` claims does not
         show on the record itself."""
         f = self.fitter
@@ -851,8 +851,10 @@ class _Run:
         # (CalibrationModel.effect_evidence: e.g. a cooling change must change the cell's own rate of
         # heat loss per kelvin at the fitted time)
         full = self.model.full_values({k: v for k, v in fr.params.items() if k != "time_shift_s"})
+        base = (self.model.full_values({k: v for k, v in current.params.items() if k != "time_shift_s"})
+                if current is not None else None)
         ev = [(e, x) for e in effs
-              for x in [self.model.effect_evidence(e, f.ctx, full, f.meas) if f.effects[e].channel_claim is None
+              for x in [self.model.effect_evidence(e, f.ctx, full, f.meas, base=base) if f.effects[e].channel_claim is None
                         else (fr.claims or {}).get(e) or self.channel_claim(e, fr)] if x is not None and not x["ok"]]
         if ev:
             fr.passed = False

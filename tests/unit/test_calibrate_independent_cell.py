@@ -43,7 +43,8 @@ def test_nominal_pseudo_ocv_is_the_cells_equilibrium_curve_less_a_constant_c50_o
 
 DRIVE_CASES = ["none", "capacity", "current_offset", "cooling_change", "arrhenius", "none_2", "none_3",
                "contact_resistance", "entropic", "none_mixing", "none_2_mixing", "entropic_mixing"]
-SWING_CASES = ["none_swing", "capacity_swing", "current_offset_swing", "none_swing_2", "none_swing_mixing"]
+SWING_CASES = ["none_swing", "capacity_swing", "current_offset_swing", "none_swing_2", "none_swing_mixing",
+               "capacity_swing_420"]
 
 
 @pytest.mark.parametrize("case", DRIVE_CASES)
@@ -68,14 +69,17 @@ def test_cell_swing_records_are_two_hours_with_rest_stops_and_a_wide_soc_swing(c
     assert truth["cases"][case]["protocol"] == "swing"
     df = pd.read_csv(D / f"cell_{case}.csv", comment="#")
     t = df["time_s"].to_numpy()
-    assert np.all(np.diff(t) == 1.0) and t[-1] - t[0] == 7200.0
+    rest_s = truth["cases"][case]["pybamm_inputs"].get("rest_s", 600)     # capacity_swing_420: 420 s stops
+    assert np.all(np.diff(t) == 1.0) and t[-1] - t[0] == 60 + 3 * (1800 + rest_s) - 60
     assert np.std(df["voltage_v"].to_numpy()[:60]) == pytest.approx(truth["noise"]["voltage_v"], rel=0.3)
-    # pulses up to 1.6C and -0.7C; a rest stop of 10 min after each 30 min drive block, where the logged
-    # current is the sensor's offset and noise only
+    # pulses up to 1.6C and -0.7C; a rest stop of 10 min (or rest_s) after each 30 min drive block, where the
+    # logged current is the sensor's offset and noise only
     i = df["current_a"].to_numpy()
     assert i.max() > 7.0 and i.min() < -2.5
     off = truth["cases"][case]["truth"]["current_offset_a"]
-    for a, b in ((1860, 2460), (4260, 4860), (6660, 7200)):
+    for blk in range(3):
+        a = 60 + blk * (1800 + rest_s) + 1800
+        b = min(a + rest_s, t[-1])
         rest = i[(t >= a) & (t < b)]
         assert abs(rest.mean() - off) < 0.002 and rest.std() == pytest.approx(truth["noise"]["current_a"], rel=0.3)
     # a wide SOC swing (a capacity is identifiable only over one): half the rated capacity or more
@@ -411,19 +415,32 @@ def test_pybamm_swing_capacity_named_within_5_percent():
     assert rep["rmse_after"]["voltage_v"]["holdout"] < 0.75 * rep["rmse_before"]["voltage_v"]["holdout"]
 
 
-def test_a_capacity_fitted_only_with_the_slow_branch_at_its_limit_is_not_named():
+def test_a_capacity_that_pushes_the_slow_branch_onto_its_limit_is_not_named():
     """The swing drive with PyBaMM's heat of mixing and no capacity error: the pair low_soc_resistance +
-    capacity fitted a capacity 4.7 % above the rated one, and passed, with the slow RC branch stretched to its
-    time-constant limit (the longest rest): a series capacitor split between the two.  A true capacity error
-    (the test above) does the opposite: the slow branch comes back from the limit once the capacity is in."""
+    capacity fitted a capacity 4.7 % above the rated one, and passed, by pushing the slow RC branch from 321 s
+    onto its time-constant limit (the longest rest, 620 s): a series capacitor traded against the capacity.  A
+    true capacity error does not push it there (the test above and the next one)."""
     rep = _cell("none_swing_mixing", effects=["low_soc_resistance", "capacity"])
     assert not rep["selected_effects"], rep["selected_effects"]
     tmax = rep["record_resolution"]["slow_branch_tau_max_s"]
     (pair,) = [c for c in rep["rounds"][0]["pairs"] if c["name"] == "low_soc_resistance+capacity"]
-    assert not pair["passed"] and "slow RC branch at its time-constant limit" in pair["reason"], pair["reason"]
+    assert not pair["passed"] and "pushing the slowest RC branch onto its time-constant limit" in pair["reason"], pair["reason"]
     assert pair["parameters"]["capacity_ah"] > 1.02 * 5.0          # a sizeable capacity was fitted ...
     assert pair["gain"] > 0.10                                     # ... and it would have passed on the fit
     assert 500.0 < tmax < 700.0
+
+
+def test_a_true_capacity_fitted_with_the_slow_branch_at_its_limit_is_named():
+    """A reviewer's counter-record: 8 % lost capacity on the swing drive with rest stops of 420 s, barely longer
+    than the cell's own slow relaxation.  The baseline already stretches the slow branch past the limit to stand
+    in for the capacity, and the capacity's fit keeps it there: the capacity did not push it there, and it is
+    named (a rule that refused any capacity with the branch at the limit named a false OCV correction here)."""
+    rep = _cell("capacity_swing_420", effects=["capacity"])
+    tmax = rep["record_resolution"]["slow_branch_tau_max_s"]
+    assert 400.0 < tmax < 440.0, tmax
+    assert rep["selected_effects"] == ["capacity"], rep["selected_effects"]
+    cap = rep["final_parameters"]["capacity_ah"]
+    assert cap == pytest.approx(_cell_truth("capacity_swing_420")["capacity_ah"], rel=0.05), cap
 
 
 def test_pybamm_swing_current_offset_named_with_the_offset_its_rests_measure():
@@ -468,6 +485,7 @@ def test_no_effect_drive_stops_measure_the_offset_as_zero():
 @pytest.mark.parametrize("case, effect, param, truth, rel", [
     ("current_offset", "current_offset", "current_offset_a", 0.1, 0.25),
     ("capacity_swing", "capacity", "capacity_ah", 4.25, 0.05),
+    ("capacity_swing_420", "capacity", "capacity_ah", 4.6, 0.05),
     ("current_offset_swing", "current_offset", "current_offset_a", 0.1, 0.25),
 ])
 def test_pybamm_one_effect_named_whole_library(case, effect, param, truth, rel):
