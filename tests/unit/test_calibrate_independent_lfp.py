@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from pybamm_reference import equilibrium_ocv
 
 D = Path(__file__).resolve().parents[1] / "data" / "independent"
 CASES = ["none", "none_2", "plateau", "plateau_2", "ocv_c20"]
@@ -33,16 +34,8 @@ def _table(name: str = "cell_lfp_nominal.toml"):
 
 
 def _equilibrium(soc_table, q_ah: float) -> np.ndarray:
-    """PyBaMM's Prada2013 equilibrium OCV, U_p - U_n, at the nominal table's SOC (1 - discharged A.h / 2.3 A.h;
-    PyBaMM's SOC is the fraction of its stoichiometry window, whose capacity the C/50 run measured)."""
-    pybamm = pytest.importorskip("pybamm")
-    p = pybamm.ParameterValues("Prada2013")
-    x0, y0 = pybamm.lithium_ion.get_initial_stoichiometries(0.0, p)
-    x1, y1 = pybamm.lithium_ion.get_initial_stoichiometries(1.0, p)
-    u_n, u_p = p["Negative electrode OCP [V]"], p["Positive electrode OCP [V]"]
-    s = 1.0 - (1.0 - np.atleast_1d(np.asarray(soc_table, float))) * 2.3 / q_ah
-    return np.array([float(u_p(pybamm.Scalar(y0 + a * (y1 - y0))).evaluate())
-                     - float(u_n(pybamm.Scalar(x0 + a * (x1 - x0))).evaluate()) for a in s])
+    """PyBaMM's Prada2013 equilibrium OCV at the nominal table's SOC (:func:`pybamm_reference.equilibrium_ocv`)."""
+    return equilibrium_ocv("Prada2013", soc_table, q_ah, 2.3)
 
 
 @pytest.mark.parametrize("case", CASES)
