@@ -344,6 +344,15 @@ class CellModel(CalibrationModel):
             v0 = float(np.mean(df["voltage_v"].to_numpy(float)[:n0]))
             # the record's first rest, before any current: the cell is relaxed there (initial_soc's rest claim)
             self.first_rest_span = (0, n0 - 1) if n0 >= self.FIRST_REST_MIN_SAMPLES and not low.all() else None
+            if self.first_rest_span is not None:
+                # relaxed only if its voltage is still: a record that starts soon after current (its first "rest"
+                # still relaxing) gives a biased reading, which is what initial_soc corrects - not a check on it
+                vs = df["voltage_v"].to_numpy(float)[:n0]
+                w = max(3, int(0.1 * vs.size))
+                sd_v, q_v = self._noise(vs)
+                moved = abs(float(np.mean(vs[-w:])) - float(np.mean(vs[:w])))
+                if moved > max(self.REST_RELAX_SE * sd_v * math.sqrt(2.0 / w), q_v):
+                    self.first_rest_span = None
             xs = np.linspace(0.0, 1.0, 2001)
             ocv = np.array([tables.ocv(x) for x in xs])
             soc0 = float(np.interp(v0, ocv, xs)) if np.all(np.diff(ocv) > 0) else 0.5
@@ -488,6 +497,7 @@ class CellModel(CalibrationModel):
     #: enough for the relaxation test's first and last tenths (3 samples each) to tell a relaxing voltage
     OFFSET_REST_MIN_S = 20.0
     #: the first rest (before any current) joins initial_soc's rest claim when it has at least this many samples
+    #: and its voltage is still (its last tenth within REST_RELAX_SE standard errors of its first)
     FIRST_REST_MIN_SAMPLES = 10
     #: the slow branch counts as at its time-constant limit within this fraction of it (_capacity_pushes_slow_branch)
     SLOW_LIMIT_TOL = 1e-3

@@ -656,3 +656,27 @@ def test_energy_balance_recovers_a_lumped_cell_it_did_not_make():
                                                                     "h_change_factor": 1.0 / 3.0, **knots}), meas)
         assert ev["ok"] is bool(rev_on), ev["statement"]
         assert ev["evidence"]["reversible_heat_scale"] == pytest.approx(rev_on, abs=0.25)
+
+
+def test_the_first_rest_checks_the_initial_soc_only_when_it_is_relaxed(tmp_path):
+    """initial_soc's rest claim includes the record's first rest (before any current) - when the cell is relaxed
+    there.  A record whose logger starts 5 s into a rest stop (the none_swing drive from 1865 s: the voltage still
+    recovering from the drive block) reads a biased initial SOC, which is what initial_soc corrects: that first
+    "rest" is not evidence against it.  The records that start relaxed keep it."""
+    from shevsim.calibrate.cell import CellModel
+    from shevsim.calibrate.data import load_measured
+    from shevsim.calibrate.known import load_params_toml
+    nominal = load_params_toml(D / "cell_nominal.toml")
+    m = CellModel(nominal)
+    m.prepare(load_measured(str(D / "cell_none_swing.csv"), "cell"))
+    assert m.first_rest_span == (0, 59)
+    df = pd.read_csv(D / "cell_none_swing.csv", comment="#")
+    late = df[df["time_s"] >= 1865.0].copy()
+    late["time_s"] -= late["time_s"].iloc[0]
+    v = late["voltage_v"].to_numpy()[:60]
+    assert v[-6:].mean() - v[:6].mean() > 2e-3                      # still relaxing: up after the discharge
+    path = tmp_path / "late_start.csv"
+    late.to_csv(path, index=False)
+    m = CellModel(nominal)
+    m.prepare(load_measured(str(path), "cell"))
+    assert m.first_rest_span is None
