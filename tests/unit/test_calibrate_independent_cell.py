@@ -424,7 +424,7 @@ def test_a_capacity_that_pushes_the_slow_branch_onto_its_limit_is_not_named():
     assert not rep["selected_effects"], rep["selected_effects"]
     tmax = rep["record_resolution"]["slow_branch_tau_max_s"]
     (pair,) = [c for c in rep["rounds"][0]["pairs"] if c["name"] == "low_soc_resistance+capacity"]
-    assert not pair["passed"] and "pushing the slowest RC branch onto its time-constant limit" in pair["reason"], pair["reason"]
+    assert not pair["passed"] and "pushing the slow RC branch onto its time-constant limit" in pair["reason"], pair["reason"]
     assert pair["parameters"]["capacity_ah"] > 1.02 * 5.0          # a sizeable capacity was fitted ...
     assert pair["gain"] > 0.10                                     # ... and it would have passed on the fit
     assert 500.0 < tmax < 700.0
