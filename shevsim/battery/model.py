@@ -39,10 +39,14 @@ current offset       true current = commanded (sensor) current - ``current_offse
                      the measured current output reads true + offset
 low-SOC resistance   all resistances x ``1 + g exp(-SOC / s)``                            ``lowsoc_r_gain = 0``
 second RC branch     ``r2_scale > 0`` (``0`` removes the branch)                          component: 1
+solid diffusion      the OCV read at the particles' surface SOC, ``SOC + w - tau_d i/(105 Q)``, ``diffusion_time_s
+                     ``dw/dt = -30 w/tau_d - (12/7) i/Q`` (``tau_d = R^2/D``, the three-      = 0``
+                     parameter polynomial profile of a sphere); heat ``i (OCV(SOC) -
+                     OCV(surface))``
 ===================  ==================================================================  =============
 
 Packed parameter vector ``c`` (see :func:`pack_params`), state vector ``st`` =
-``[soc, v1, v2, hyst, x0 (T_mean), x1 (gamma), e_chem, e_loss, ah, clamps]`` (per cell, J and A.h), and
+``[soc, v1, v2, hyst, x0 (T_mean), x1 (gamma), e_chem, e_loss, ah, clamps, w (surface SOC - SOC, diffusion)]`` (per cell, J and A.h), and
 output vector ``y`` = ``[i, voc, v, t_core, t_surface, q, rs, t_mean, h_eff]``.
 """
 from __future__ import annotations
@@ -59,10 +63,15 @@ from shevsim.battery.cell import FARADAY_C_MOL  # noqa: E402  (one constant)
 # indices of the packed parameter vector
 (C_NP, C_NPACK, C_QAS, C_CURRENT_MODE, C_TDEP, C_ENTROPIC, C_F, C_RS, C_R1, C_C1, C_R2, C_C2, C_EA, C_TREF,
  C_HYST_M, C_HYST_G, C_IOFF, C_LS_G, C_LS_S, C_NDUDT, C_HFAC, C_HCH_T, C_HCH_F, C_HCH_W, C_RAD, C_LEN, C_RHO,
- C_CP, C_KT, C_KNOTS) = range(30)
-N_STATE = 10
+ C_CP, C_KT, C_TDIFF, C_KNOTS) = range(31)
+N_STATE = 11
 N_OUT = 9
-(S_SOC, S_V1, S_V2, S_HY, S_X0, S_X1, S_ECHEM, S_ELOSS, S_AH, S_CLAMPS) = range(N_STATE)
+(S_SOC, S_V1, S_V2, S_HY, S_X0, S_X1, S_ECHEM, S_ELOSS, S_AH, S_CLAMPS, S_WD) = range(N_STATE)
+# solid diffusion (the three-parameter polynomial profile of a sphere, Subramanian et al. 2005, in SOC units):
+# surface SOC = SOC + w - tau_d i / (105 Q), dw/dt = -30 w / tau_d - (12/7) i / Q; steady state: -tau_d i / (15 Q)
+DIFF_W_RATE = 30.0
+DIFF_W_GAIN = 2.0 / 35.0      # w_inf = -DIFF_W_GAIN tau_d i / Q
+DIFF_INSTANT = 1.0 / 105.0
 (Y_I, Y_VOC, Y_V, Y_TCORE, Y_TSURF, Y_Q, Y_RS, Y_TMEAN, Y_HEFF) = range(N_OUT)
 
 
@@ -77,7 +86,7 @@ def pack_params(p, capacity_ah=None) -> np.ndarray:
          p.rs_scale, p.r1_scale, p.c1_scale, p.r2_scale, p.c2_scale, p.arrhenius_ea_r_k, p.arrhenius_t_ref_c,
          p.hyst_max_v, p.hyst_rate, p.current_offset_a, p.lowsoc_r_gain, p.lowsoc_r_scale_frac,
          float(len(knots_s)), p.h_conv_factor, p.h_change_time_s, p.h_change_factor, p.h_change_width_s,
-         p.radius_m, p.length_m, p.density_kg_m3, p.cp_j_kgk, p.kt_w_mk]
+         p.radius_m, p.length_m, p.density_kg_m3, p.cp_j_kgk, p.kt_w_mk, p.diffusion_time_s]
     return np.array(c + knots_s + knots_v, dtype=np.float64)
 
 
@@ -145,8 +154,28 @@ def _cell_electrical(d, ix, c, st, p_in, h, t_mean, y):
     tau1 = r1 * c1
     ex1 = math.exp(-h / tau1)
     g1 = tau1 * (1.0 - ex1)
-    a = h * t1_value(d, oo, no, soc) - v1 * g1
+    td = c[C_TDIFF]
+    diff = td > 0.0
+    sv = soc           # the SOC the OCV is read at: the particles' surface with solid diffusion
+    w0 = 0.0
+    exw = 0.0
+    kw = 0.0
+    kd = 0.0
+    if diff:
+        w0 = st[S_WD]
+        sv = soc + w0
+        exw = math.exp(-h * DIFF_W_RATE / td)
+        gw = td / DIFF_W_RATE * (1.0 - exw)
+        kw = DIFF_W_GAIN * td / q_as
+        kd = DIFF_INSTANT * td / q_as
+    slope = t1_slope(d, oo, no, sv)
+    a = h * t1_value(d, oo, no, sv) - v1 * g1
     b = h * rs + r1 * (h - g1)
+    if diff:
+        # the surface's drift over the step, linear in the OCV's slope: w relaxes towards -kw i (time
+        # constant td / 30) and the instantaneous part -kd i acts over the whole step
+        a = a - slope * w0 * (h - gw)
+        b = b + slope * (kw * (h - gw) + kd * h)
     tau2 = 1.0
     ex2 = 0.0
     g2 = 0.0
@@ -156,7 +185,7 @@ def _cell_electrical(d, ix, c, st, p_in, h, t_mean, y):
         g2 = tau2 * (1.0 - ex2)
         a = a - v2 * g2
         b = b + r2 * (h - g2)
-    b = b + 0.5 * h * h * t1_slope(d, oo, no, soc) / q_as
+    b = b + 0.5 * h * h * slope / q_as
     m_h = c[C_HYST_M]
     hy = st[S_HY]
     if m_h != 0.0:
@@ -185,6 +214,16 @@ def _cell_electrical(d, ix, c, st, p_in, h, t_mean, y):
         sgn = 1.0 if i > 0.0 else (-1.0 if i < 0.0 else 0.0)
         hy = eh * hy - (1.0 - eh) * sgn
         e_loss = e_loss - i * m_h * hy * h
+    wn = 0.0
+    voc = t1_value(d, oo, no, soc_new)
+    vsurf = voc
+    if diff:
+        # the diffusion overpotential OCV(SOC) - OCV(surface SOC) dissipates i eta (mean of the step's ends)
+        wn = -kw * i + (w0 + kw * i) * exw
+        vsurf = t1_value(d, oo, no, soc_new + wn - kd * i)
+        eta = 0.5 * (t1_value(d, oo, no, soc) - t1_value(d, oo, no, soc + w0 - kd * i) + voc - vsurf)
+        q = q + i * eta
+        e_loss = e_loss + i * eta * h
     if c[C_NDUDT] > 0.0:
         q -= i * (t_mean + 273.15) * _dudt(c, 0.5 * (soc + soc_new))
     elif c[C_ENTROPIC] > 0.5:
@@ -197,12 +236,12 @@ def _cell_electrical(d, ix, c, st, p_in, h, t_mean, y):
     st[S_V1] = v1n
     st[S_V2] = v2n
     st[S_HY] = hy
-    voc = t1_value(d, oo, no, soc_new)
+    st[S_WD] = wn
     y[Y_I] = i
     y[Y_RS] = rs
     y[Y_Q] = q
     y[Y_VOC] = voc
-    y[Y_V] = voc - rs * i - v1n - v2n + m_h * hy
+    y[Y_V] = vsurf - rs * i - v1n - v2n + m_h * hy
     return q
 
 
@@ -264,7 +303,7 @@ def _run_profile(d, ix, c, st, t, p_in, t_amb, h_conv, out_v, out_ts, out_tc):
     th = np.full(16, np.nan)
     bad = 0
     # initial outputs (no step, as the component's initialize): the open-circuit voltage
-    out_v[0] = t1_value(d, ix[0], ix[1], st[S_SOC]) + c[C_HYST_M] * st[S_HY]
+    out_v[0] = t1_value(d, ix[0], ix[1], st[S_SOC] + st[S_WD]) + c[C_HYST_M] * st[S_HY]
     _thermal_outputs(c, st, t_amb[0], _effective_h(c, t[0], h_conv), y)
     out_ts[0] = y[Y_TSURF]
     out_tc[0] = y[Y_TCORE]

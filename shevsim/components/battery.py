@@ -60,7 +60,7 @@ Effects (model terms switched by parameters; the defaults reproduce the plain mo
 :mod:`shevsim.battery.model` - ``dudt_soc_frac``/``dudt_v_k`` (entropic heat dU/dT(SOC)),
 ``arrhenius_ea_r_k``, ``h_change_time_s``/``h_change_factor``/``h_change_width_s`` (convection change),
 ``hyst_max_v``/``hyst_rate``, ``capacity_ah``, ``current_offset_a``, ``lowsoc_r_gain``/``lowsoc_r_scale_frac``,
-``r2_scale`` (0 removes the second RC branch); scale factors ``rs_scale, r1_scale, c1_scale, r2_scale,
+``r2_scale`` (0 removes the second RC branch), ``diffusion_time_s`` (solid diffusion; 0 = off); scale factors ``rs_scale, r1_scale, c1_scale, r2_scale,
 c2_scale`` on the ECM tables and ``h_conv_factor`` on the convection input.
 
 The voltage/current pair reported at t + h is the left limit (current of the finished step,
@@ -148,6 +148,10 @@ class BatteryPackParams:
     h_change_time_s, h_change_factor, h_change_width_s : float
         Convection change: ``h`` times ``h_change_factor`` after ``h_change_time_s`` [s], logistic over
         ``h_change_width_s`` [s] (0: a step); factor 1 = off.
+    diffusion_time_s : float
+        Solid diffusion time ``R^2/D`` [s] of the active particles (0 = off): the OCV is read at the surface
+        SOC, which lags the bulk SOC under current (steady state ``-tau_d i / (15 Q)``) and relaxes at rest
+        with the time constant ``tau_d / 30`` (:mod:`shevsim.battery.model`).
     """
 
     n_series: int = 130
@@ -190,6 +194,7 @@ class BatteryPackParams:
     h_change_time_s: float = 0.0
     h_change_factor: float = 1.0
     h_change_width_s: float = 0.0
+    diffusion_time_s: float = dataclasses.field(default=0.0, metadata=rng(lo=0.0, what="R^2/D of the particles; 0 = off"))
 
     def __post_init__(self) -> None:
         where = "battery parameters"
@@ -201,7 +206,7 @@ class BatteryPackParams:
                   "lowsoc_r_scale_frac", "radius_m", "length_m", "density_kg_m3", "cp_j_kgk", "kt_w_mk"):
             if not getattr(self, f) > 0.0:
                 raise ScenarioError(f"{where}: {f} must be > 0, got {getattr(self, f)!r}")
-        for f in ("r2_scale", "arrhenius_ea_r_k", "hyst_rate", "h_change_width_s"):
+        for f in ("r2_scale", "arrhenius_ea_r_k", "hyst_rate", "h_change_width_s", "diffusion_time_s"):
             if getattr(self, f) < 0.0:
                 raise ScenarioError(f"{where}: {f} must be >= 0, got {getattr(self, f)!r}")
         # (a negative gain: resistances that fall towards low SOC; > -1 keeps them positive at SOC 0)

@@ -20,7 +20,7 @@ from shevsim.components.battery import BatteryPack, BatteryPackParams
 EFFECTS_ON = dict(arrhenius_ea_r_k=3500.0, hyst_max_v=0.02, hyst_rate=50.0, current_offset_a=0.05,
                   lowsoc_r_gain=2.0, lowsoc_r_scale_frac=0.1, dudt_soc_frac=(0.0, 0.5, 1.0),
                   dudt_v_k=(-4e-4, 1e-4, 2e-4), h_change_time_s=150.0, h_change_factor=0.3,
-                  h_change_width_s=10.0, rs_scale=1.2, c2_scale=0.8)
+                  h_change_width_s=10.0, rs_scale=1.2, c2_scale=0.8, diffusion_time_s=2000.0)
 
 
 def _with_and_without_jit(code: str) -> dict:
@@ -212,7 +212,8 @@ def test_low_soc_resistance_rise_and_convection_change():
 
 def test_neutral_effect_parameters_are_bit_identical_to_the_plain_model():
     neutral = dict(arrhenius_ea_r_k=0.0, hyst_max_v=0.0, current_offset_a=0.0, lowsoc_r_gain=0.0,
-                   dudt_soc_frac=(), dudt_v_k=(), h_change_factor=1.0, rs_scale=1.0, r2_scale=1.0, h_conv_factor=1.0)
+                   dudt_soc_frac=(), dudt_v_k=(), h_change_factor=1.0, rs_scale=1.0, r2_scale=1.0, h_conv_factor=1.0,
+                   diffusion_time_s=0.0)
     a = _drive(BatteryPack("b", BatteryPackParams()), "power", 800)
     b = _drive(BatteryPack("b", replace(BatteryPackParams(), **neutral)), "power", 800)
     assert np.array_equal(a, b)
