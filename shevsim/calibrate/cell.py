@@ -176,9 +176,28 @@ def ocv_correction(model) -> Effect:
                   "beyond)", ps, {p.name: 0.0 for p in ps}, ("voltage_v",))
 
 
+def solid_diffusion(model) -> Effect:
+    """The OCV is read at the particles' surface SOC, which lags the bulk under current (solid diffusion,
+    ``diffusion_time_s`` = R^2/D): its voltage is the OCV's slope times the lag, so it is large where the OCV
+    is steep (graphite staging, the ends of an LFP plateau) and nothing on a plateau - a shape no RC branch
+    with SOC-independent tables has."""
+    if model.base.diffusion_time_s > 0.0:
+        return None     # the nominal model has it already (a declared parameter)
+    def starts(ctx, base):
+        return [{"diffusion_time_s": tdv} for tdv in (300.0, 3000.0, 20000.0)]
+    return Effect("solid_diffusion", "solid diffusion: the OCV read at the surface SOC, lagging the bulk under "
+                  "current (diffusion time R^2/D)",
+                  (Param("diffusion_time_s", "s", 0.0, 2.0e5, 0.0, "diffusion time R^2/D"),),
+                  {"diffusion_time_s": 0.0}, ("voltage_v", "t_surface_c"), starts,
+                  # a claim about the voltage (the lag, the OCV's slope); its heat is the diffusion overpotential's,
+                  # whose timing is uncertain (dissipated at once here, in part on relaxation in a cell - PyBaMM's
+                  # heat of mixing): a fit that gains on the temperature alone is not the explanation
+                  evidence=("voltage_v",))
+
+
 #: the cell effect library: functions model -> Effect (or None when it does not apply); extend with one entry
 CELL_EFFECTS = [entropic_heat, arrhenius_resistance, cooling_change, ocv_hysteresis, capacity, current_offset,
-                low_soc_resistance, second_rc_branch, initial_soc, ocv_correction]
+                low_soc_resistance, second_rc_branch, initial_soc, ocv_correction, solid_diffusion]
 N_OCV_KNOTS = 5
 
 
@@ -309,6 +328,8 @@ class CellModel(CalibrationModel):
         if b.r2_scale > 0.0:
             ps += [Param("r2_scale", "1", 0.01, 100.0, b.r2_scale, "factor on the R_2 table", log=True),
                    Param("c2_scale", "1", 0.01, 100.0, b.c2_scale, "factor on the C_2 table", log=True)]
+        if b.diffusion_time_s > 0.0:      # the nominal declares solid diffusion: its time is fitted
+            ps += [Param("diffusion_time_s", "s", 10.0, 2.0e5, b.diffusion_time_s, "diffusion time R^2/D", log=True)]
         ps += [Param("kt_w_mk", "W/(m.K)", 0.05, 20.0, b.kt_w_mk, "radial thermal conductivity", log=True),
                Param("cp_j_kgk", "J/(kg.K)", 200.0, 5000.0, b.cp_j_kgk, "specific heat capacity", log=True),
                Param("h_conv_factor", "1", 0.05, 20.0, b.h_conv_factor, "factor on the convection coefficient",

@@ -39,6 +39,7 @@ CELL_EFFECTS = {
     "second_rc_branch": {"r2_scale": 1.0, "c2_scale": 1.0},
     "initial_soc": {"soc_init_pct": 80.0},           # the plant starts there; the nominal says soc0
     "ocv_correction": {"tilt_v": 0.03},      # the plant's OCV: the given curve + tilt (SOC - 0.5) (stays increasing)
+    "solid_diffusion": {"diffusion_time_s": 8000.0},
 }
 VEHICLE_TRUTH = {"efficiency_scale_frac": 0.96}
 VEHICLE_EFFECTS = {   # component parameters of the plant (vehicle / motor / bus), see synth_vehicle

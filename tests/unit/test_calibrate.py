@@ -310,3 +310,28 @@ def test_hac_variance_is_the_long_run_variance_of_an_ar1_series():
                 x[k] = acc
             ratios.append(_hac_var(x) / n / (1.0 / (1.0 - phi) ** 2))
         assert np.mean(ratios) == pytest.approx(1.0, abs=0.15), (phi, ratios)
+
+
+def test_a_candidate_with_more_parameters_must_beat_a_simpler_one_by_min_gain():
+    """The round's winner gives way to a passing candidate with fewer parameters unless it is at least
+    MIN_GAIN better (_Run.parsimonious): the rule every effect meets against the model it is added to."""
+    from types import SimpleNamespace as NS
+    from shevsim.calibrate.workflow import MIN_GAIN, _Run
+    effects = {"knots5": NS(params=(1, 2, 3, 4, 5)), "one": NS(params=(1,)), "two": NS(params=(1, 2))}
+    run = NS(fitter=NS(effects=effects), said=[])
+    run.say = run.said.append
+    pick = lambda ok: _Run.parsimonious(run, ok[0][0], ok[0][1], ok)   # noqa: E731  (ok[0]: the best score)
+    # 9 % better with four more parameters: the one-parameter candidate (the Ecker2015 capacity record's numbers)
+    ok = [(("knots5",), NS(score=0.616)), (("one",), NS(score=0.677))]
+    assert pick(ok)[0] == ("one",) and "is 10% better" in run.said[-1]
+    # 12 % better: the richer candidate keeps its place
+    ok = [(("knots5",), NS(score=0.60)), (("one",), NS(score=0.60 / (1.0 - MIN_GAIN) + 0.01))]
+    assert pick(ok)[0] == ("knots5",)
+    # the simplest candidate no richer one beats by MIN_GAIN: "one" is beaten by "knots5" (10.7 %), "two" is not
+    # (5.7 %); a pair counts its effects' parameters together
+    ok = [(("knots5",), NS(score=0.50)), (("two",), NS(score=0.53)), (("one",), NS(score=0.56))]
+    assert pick(ok)[0] == ("two",)
+    ok = [(("one", "two"), NS(score=0.50)), (("two",), NS(score=0.60))]
+    assert pick(ok)[0] == ("one", "two")
+    ok = [(("one", "two"), NS(score=0.50)), (("two",), NS(score=0.54))]
+    assert pick(ok)[0] == ("two",)

@@ -32,6 +32,7 @@ CASES = {
     "second_rc_branch": ("voltage_v", {}),
     "initial_soc": ("voltage_v", {}),
     "ocv_correction": ("voltage_v", {}),
+    "solid_diffusion": ("voltage_v", {}),
 }
 
 

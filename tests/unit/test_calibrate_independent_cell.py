@@ -122,7 +122,14 @@ def test_entropic_truth_is_the_published_lg_m50_entropic_change():
 # physical effect may be named for it.  Stated tolerance: the heat-transfer factor within 30 %.
 
 PHYSICAL_CELL = {"entropic_heat", "arrhenius_resistance", "cooling_change", "ocv_hysteresis", "capacity",
-                 "current_offset", "low_soc_resistance", "second_rc_branch", "initial_soc", "ocv_correction"}
+                 "current_offset", "low_soc_resistance", "second_rc_branch", "initial_soc", "ocv_correction",
+                 "solid_diffusion"}
+
+
+def test_every_cell_effect_of_the_library_counts_as_physical():
+    """A no-effect record may name none of the library's effects: the set the tests check covers it all."""
+    from shevsim.calibrate.cell import CELL_EFFECTS
+    assert {f.__name__ for f in CELL_EFFECTS} <= PHYSICAL_CELL
 
 
 def _cell(case: str, effects=None):

@@ -21,7 +21,8 @@ from pybamm_reference import equilibrium_ocv
 D = Path(__file__).resolve().parents[1] / "data" / "independent"
 CASES = ["none", "none_2", "plateau", "plateau_2", "ocv_c20"]
 PHYSICAL_CELL = {"entropic_heat", "arrhenius_resistance", "cooling_change", "ocv_hysteresis", "capacity",
-                 "current_offset", "low_soc_resistance", "second_rc_branch", "initial_soc", "ocv_correction"}
+                 "current_offset", "low_soc_resistance", "second_rc_branch", "initial_soc", "ocv_correction",
+                 "solid_diffusion"}
 
 
 def _truth() -> dict:

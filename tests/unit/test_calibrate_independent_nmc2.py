@@ -24,7 +24,8 @@ D = Path(__file__).resolve().parents[1] / "data" / "independent"
 SWING = ["none_swing", "capacity_swing", "current_offset_swing"]
 DRIVE = ["none"]
 PHYSICAL_CELL = {"entropic_heat", "arrhenius_resistance", "cooling_change", "ocv_hysteresis", "capacity",
-                 "current_offset", "low_soc_resistance", "second_rc_branch", "initial_soc", "ocv_correction"}
+                 "current_offset", "low_soc_resistance", "second_rc_branch", "initial_soc", "ocv_correction",
+                 "solid_diffusion"}
 RATED_AH = 7.5
 F_C_MOL = 96485.33212
 
@@ -224,3 +225,43 @@ def test_nmc2_an_ocv_correction_is_not_judged_at_rests_shorter_than_the_slow_rel
     assert res["rests_after_current_s"] and max(res["rests_after_current_s"]) < res["slow_branch_tau_nominal_s"]
     c = _candidate(rep, "ocv_correction")
     assert not c["passed"] and "as long as the slow relaxation's time constant" in c["reason"], c["reason"]
+
+
+# ------------------------------------------------------------------ solid diffusion in the model (default run)
+#
+# The cause of this cell's false selections, measured in PyBaMM: the graphite's surface SOC lags its bulk by 8-11
+# points under the drive's current, and the lag's voltage follows the OCV's slope.  The battery model has that
+# effect (diffusion_time_s, the OCV read at the surface SOC); a nominal that declares it fits its time.
+
+def test_nmc2_solid_diffusion_in_the_nominal_explains_part_of_the_form_error(tmp_path):
+    """The same nominal with solid diffusion declared (a start of 2000 s, fitted as a declared parameter): the
+    baseline's held-out voltage error on the no-effect drive falls by a quarter (measured 7.24 -> 5.34 mV), the
+    fitted time is inside its bounds, and the parameter reaches the overlay the simulator runs."""
+    from shevsim.calibrate.data import load_measured
+    from shevsim.calibrate.known import load_params_toml
+    from shevsim.calibrate.workflow import run_workflow
+    nominal = tmp_path / "nominal_diffusion.toml"
+    nominal.write_text((D / "cell_nmc2_nominal.toml").read_text().replace("rc_pairs = 2", "rc_pairs = 2\ndiffusion_time_s = 2000.0"))
+    data = load_measured(str(D / "cell_nmc2_none.csv"), "cell")
+    plain = run_workflow("cell", data, load_params_toml(D / "cell_nmc2_nominal.toml"), plots=False, effects=[])
+    diff = run_workflow("cell", data, load_params_toml(nominal), plots=False, effects=[], out_dir=tmp_path / "out")
+    v0, v1 = plain["rmse_before"]["voltage_v"]["holdout"], diff["rmse_before"]["voltage_v"]["holdout"]
+    assert v1 < 0.85 * v0, (v0, v1)
+    tau = diff["baseline_parameters"]["diffusion_time_s"]
+    assert 100.0 < tau < 1.0e5, tau
+    assert "diffusion_time_s" not in plain["baseline_parameters"]
+    overlay = tomllib.loads((tmp_path / "out" / "params.toml").read_text())
+    assert overlay["battery"]["diffusion_time_s"] == pytest.approx(tau)
+
+
+def test_nmc2_capacity_is_named_before_an_ocv_correction_that_is_not_min_gain_better():
+    """The capacity record: an OCV correction (five knots) and the capacity (one parameter) both pass; the
+    correction scored 9 % better and was named in the capacity's place.  Extra parameters must earn MIN_GAIN
+    over the simpler explanation (workflow _Run.parsimonious): the capacity is named, within 1 % of the truth."""
+    rep = _cell("capacity_swing", effects=["capacity", "ocv_correction"])
+    assert rep["selected_effects"] == ["capacity"], rep["selected_effects"]
+    truth = _truth()["cases"]["capacity_swing"]["truth"]["capacity_ah"]
+    assert rep["final_parameters"]["capacity_ah"] == pytest.approx(truth, rel=0.01)
+    first = {c["name"]: c for c in rep["rounds"][0]["candidates"]}
+    assert first["capacity"]["passed"] and first["ocv_correction"]["passed"]
+    assert first["ocv_correction"]["score"] < first["capacity"]["score"]       # the correction fitted better

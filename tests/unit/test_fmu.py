@@ -539,6 +539,30 @@ def test_battery_pack_round_trip(fmu_dir):
         comp.terminate()
 
 
+def test_battery_with_solid_diffusion_round_trip(fmu_dir, tmp_path):
+    """The battery's solid diffusion (a parameter and a state of the one cell model) travels into the FMU: the
+    exported pack with ``diffusion_time_s`` set steps as the native one, and differs from the pack without."""
+    from shevsim.components import get_component_class
+    from shevsim.components.battery import BatteryPackParams
+    cls = get_component_class("battery")
+    prm = tmp_path / "battery_diffusion.toml"
+    prm.write_text("[params]\ndiffusion_time_s = 1500.0\n")
+    path = export_component("battery", prm, fmu_dir / "battery_diffusion.fmu", fmi_version=2)
+    comp = FMUComponent("battery", path, expected_units=cls)
+    nat = cls("battery", BatteryPackParams(diffusion_time_s=1500.0))
+    plain = cls("battery")
+    try:
+        power = [60e3 * math.sin(0.02 * k) + 20e3 for k in range(600)]
+        a = run(comp, {"power_w": power}, 0.5, ["voltage_v", "current_a", "soc_pct", "heat_w"])
+        b = run(nat, {"power_w": power}, 0.5, ["voltage_v", "current_a", "soc_pct", "heat_w"])
+        c = run(plain, {"power_w": power}, 0.5, ["voltage_v"])
+        for key in a:
+            assert max(abs(x - y) for x, y in zip(a[key], b[key])) <= 1e-9 * (1 + max(abs(y) for y in b[key])), key
+        assert max(abs(x - y) for x, y in zip(b["voltage_v"], c["voltage_v"])) > 0.1   # the diffusion acts
+    finally:
+        comp.terminate()
+
+
 # ---------------------------------------------------------------- scenario swap through the master
 TWO_BODY = """
 [scenario]
