@@ -981,6 +981,18 @@ class CellModel(CalibrationModel):
             return self._rest_claim(ctx, values, meas, {"capacity_ah": self.base.capacity_ah}, "the capacity", 0)
         return None
 
+    def measurement_confirmed(self, effect, ctx, values, meas):
+        """A current-sensor offset measured at the rests (the logged current where the cell carries none) claims
+        that the charge the cell passed is the logged one less the offset: the relaxed rest voltages, read
+        through the OCV, sit where the corrected charge puts them (:meth:`_rest_claim`, at least two rests as
+        long as the slow relaxation).  Confirmed there, the offset is a fact about the logger whatever the fit
+        under current says (the Ecker2015 offset record: measured 0.1501 +- 0.0003 A, truth 0.15; with it the
+        rests' residuals go from -7.6, -9.2, -6.2, -16.8 mV to +5.1, -0.4, +1.4, -0.4 mV while the voltage under
+        current, whose form error the baseline had fitted with the drifting SOC, gets worse)."""
+        if effect != "current_offset" or not float(values.get("current_offset_a", 0.0)):
+            return None
+        return self._rest_claim(ctx, values, meas, {"current_offset_a": 0.0}, "the current offset", 2)
+
     def _limited_tau_s(self, full) -> float:
         """The second (slow) RC branch's time constant [s] of the full values ``full``: the table's mean time
         constant times the scales, clipped at ``tau2_max_s`` as :meth:`_component_params` does (0 without it)."""

@@ -187,6 +187,13 @@ class CalibrationModel:
         claim the record does not show (``ok`` False) is not selected, and the report says why."""
         return None
 
+    def measurement_confirmed(self, effect: str, ctx: dict, values: dict, meas: dict) -> dict | None:
+        """Whether the record confirms, beyond the direct measurement of its parameter, what ``effect`` claims
+        (None: no check), in the form of :meth:`effect_evidence`.  A directly measured, significant parameter
+        that the record's own check confirms is named even when the fit under load does not confirm it (the
+        workflow's ``_Run.assess``): the model's form error had compensated for it."""
+        return None
+
     def param_bounds(self, ctx: dict) -> dict:
         """Data-dependent bounds overriding the declared ones (name -> (lo, hi))."""
         return {}

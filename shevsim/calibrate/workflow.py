@@ -648,6 +648,9 @@ class _Run:
                 raise DataError(f"{why}; available: {', '.join(effs)}")
         self.implausible_candidates: list[dict] = []
         self.unsupported_candidates: list[dict] = []
+        #: effects named on a significant direct measurement that the record's own check confirmed (assess): kept
+        #: by the backward elimination, whose held-out rule they were not named by
+        self.measured_confirmed: set[str] = set()
         #: effect -> {parameter: value}: the parameters an effect with a channel claim does not act on (its
         #: ``channel_claim``'s held ones), held at the values of the model it was added to (hold_for)
         self.claim_hold: dict[str, dict] = {}
@@ -769,6 +772,17 @@ class _Run:
         absent = [k for k in eff_params if k in f.measured and not f.measured[k].get("significant", True)]
         halved = [] if weak else [c for c in (own or f.channels) if rm[c]["holdout"] <= HALVING * cm[c]["holdout"]]
         fr.passed = not absent and (not why or (bool(halved) and fr.worsen <= MAX_WORSEN))
+        confirmed = None
+        if (measured and not fr.passed and not absent
+                and all(f.measured[k].get("significant", False) for k in eff_params if k in f.measured)):
+            # measured directly and significant: the record's own check of its claim decides, not the fit under
+            # load (CalibrationModel.measurement_confirmed); the held-out loss is then the model's form error
+            full = self.model.full_values({k: v for k, v in fr.params.items() if k != "time_shift_s"})
+            xs = [self.model.measurement_confirmed(e, f.ctx, full, f.meas) for e in effs]
+            if xs and all(x is not None and x["ok"] for x in xs):
+                confirmed = xs
+                fr.passed = True
+                self.measured_confirmed.update(effs)
         if absent:
             why.insert(0, "measured as zero: " + "; ".join(
                 f"{k} = {f.measured[k]['value']:.3g} +- {f.measured[k]['se']:.2g} from {f.measured[k]['how']}"
@@ -794,6 +808,13 @@ class _Run:
                                                 for e in effs for k in (p.name for p in f.effects[e].params))
                                     + (f"; the refit of the declared parameters moves {off_note}" if off_note else "")
                                     + ")" if measured else "")
+        elif confirmed:
+            fr.reason = ("passes: its parameter measured directly ("
+                         + "; ".join(f"{k} = {f.measured[k]['value']:.4g} +- {f.measured[k]['se']:.2g} from "
+                                     f"{f.measured[k]['how']}" for k in eff_params if k in f.measured)
+                         + ") and confirmed at the record's relaxed rests (" + "; ".join(x["statement"] for x in confirmed)
+                         + f"); the fit under load does not confirm it ({'; '.join(why)}): the model's form error had "
+                         "compensated for it")
         elif fr.passed:
             # held-out evidence decides: the autocorrelation-corrected BIC has few effective samples
             # exactly when a systematic residual (a missing effect) makes the residual autocorrelated
@@ -1131,7 +1152,7 @@ class _Run:
         dropped = []
         while len(selected) >= 2:
             trials = []
-            for e in selected:
+            for e in [x for x in selected if x not in self.measured_confirmed]:
                 rest = tuple(x for x in selected if x != e)
                 own = {p.name for p in f.effects[e].params}
                 fr = f.fit(rest, start={k: v for k, v in final.params.items() if k not in own},
@@ -1139,6 +1160,8 @@ class _Run:
                 fr.score = _score(fr, self.ref)
                 worse = max(fr.rmse[c]["holdout"] / max(final.rmse[c]["holdout"], 1e-300) - 1.0 for c in f.channels)
                 trials.append((fr.score, e, fr, worse))
+            if not trials:
+                break
             score, e, fr, worse = min(trials, key=lambda x: x[0])
             if score <= final.score * (1.0 + DROP_TOL) and worse <= DROP_TOL:
                 self.say(f"backward elimination: dropping {e} (held-out score {final.score:.3f} -> {score:.3f})")
