@@ -355,6 +355,7 @@ class CellModel(CalibrationModel):
         d, ix = tables.packed()
         soc0 = float(self.known["soc0_frac"])
         self.soc0_interval = None
+        self.soc0_interval_wide = None
         self.first_rest_span = None
         if soc0 < 0:
             # invert the OCV at the start (the record starts at rest): mean voltage over the initial
@@ -383,6 +384,8 @@ class CellModel(CalibrationModel):
             if np.all(np.diff(ocv) > 0) and ocv[0] < v0 < ocv[-1]:    # (outside the table: no reading to judge)
                 dv = self.SOC0_TABLE_ERROR_V
                 self.soc0_interval = (float(np.interp(v0 - dv, ocv, xs)), float(np.interp(v0 + dv, ocv, xs)))
+                dw = self.FIRST_REST_MARGIN * dv
+                self.soc0_interval_wide = (float(np.interp(v0 - dw, ocv, xs)), float(np.interp(v0 + dw, ocv, xs)))
         self.soc0 = soc0
         self.t_init_c = float(ts_meas[0])
         # Arrhenius reference: the record's mean temperature (decouples Ea from the resistance scales)
@@ -518,6 +521,12 @@ class CellModel(CalibrationModel):
     #: the first rest (before any current) joins initial_soc's rest claim when it has at least this many samples
     #: and its voltage is still (its last tenth within REST_RELAX_SE standard errors of its first)
     FIRST_REST_MIN_SAMPLES = 10
+    #: a measured current offset is confirmed (measurement_confirmed) at no fewer rests after current than this
+    CONFIRM_MIN_RESTS = 3
+    #: an initial SOC is refused outside the relaxed first rest's reading widened by this factor on the table's
+    #: error (effect_evidence, when no rest after current can check it): room for a C/20 table, hysteresis, the
+    #: logger's resolution
+    FIRST_REST_MARGIN = 2.0
     #: the slow branch counts as at its time-constant limit within this fraction of it (_capacity_pushes_slow_branch)
     SLOW_LIMIT_TOL = 1e-3
     #: the voltage error of a user's OCV table at a rest (record_resolution): a pseudo-OCV measured at C/50 or
@@ -954,7 +963,9 @@ class CellModel(CalibrationModel):
         voltage too: checked at the rests (:meth:`_rest_claim`); a record without rests after current cannot show
         an OCV correction (refused, what it lacks said); a capacity is then not checked there (a wide swing's
         voltage under current shows it, and :meth:`record_resolution` says when the record cannot tell it from
-        the slow RC branch)."""
+        the slow RC branch).  An initial SOC is checked at the rests after current and the relaxed first rest;
+        with no rest after current as long as the slow relaxation, the relaxed first rest alone bounds it: its
+        voltage +- ``FIRST_REST_MARGIN`` x the table's own error (``SOC0_TABLE_ERROR_V``) through the table."""
         if effect == "cooling_change":
             return self._cooling_evidence(ctx, values, meas)
         if effect == "entropic_heat":
@@ -971,7 +982,25 @@ class CellModel(CalibrationModel):
             s0 = 100.0 * min(max(getattr(self, "soc0", 0.5), 0.0), 1.0)
             if float(values.get("soc_init_pct", s0)) == s0:
                 return None
-            return self._rest_claim(ctx, values, meas, {"soc_init_pct": s0}, "the initial SOC", 0, first_rest=True)
+            claim = self._rest_claim(ctx, values, meas, {"soc_init_pct": s0}, "the initial SOC", 0, first_rest=True)
+            if claim is None and self.first_rest_span is not None and self.soc0_interval is not None:
+                # no rest after current to regress on: the relaxed first rest alone reads the initial SOC within the
+                # interval its voltage +- FIRST_REST_MARGIN x the table's own error gives through the table; a value
+                # outside it contradicts the one relaxed voltage the record has (the Ecker2015 drive: 77.58 %
+                # fitted to the form error under current, first rest 78.1 %, truth 78.11 %)
+                lo, hi = self.soc0_interval_wide or self.soc0_interval
+                fit = float(values["soc_init_pct"])
+                ok = 100.0 * lo <= fit <= 100.0 * hi
+                claim = {"ok": ok, "evidence": {"first_rest_soc_interval_pct": [100.0 * lo, 100.0 * hi],
+                                                "soc_init_pct": fit},
+                         "statement": (f"the record's relaxed first rest (before any current) reads an initial SOC of "
+                                       f"{100.0 * lo:.2f}-{100.0 * hi:.2f} % (its voltage +- "
+                                       f"{1e3 * self.FIRST_REST_MARGIN * self.SOC0_TABLE_ERROR_V:.0f} mV through the "
+                                       f"table: {self.FIRST_REST_MARGIN:g}x its own error) and the fit puts "
+                                       f"it at {fit:.2f} %" + ("" if ok else ": outside, with no rest after current "
+                                       "long enough to say otherwise; it bends the model to the voltage's form error "
+                                       "under current"))}
+            return claim
         if effect == "capacity":
             if float(values.get("capacity_ah", self.base.capacity_ah)) == self.base.capacity_ah:
                 return None
@@ -991,7 +1020,10 @@ class CellModel(CalibrationModel):
         current, whose form error the baseline had fitted with the drifting SOC, gets worse)."""
         if effect != "current_offset" or not float(values.get("current_offset_a", 0.0)):
             return None
-        return self._rest_claim(ctx, values, meas, {"current_offset_a": 0.0}, "the current offset", 2)
+        # at least three rests (two degrees of freedom for the slope's scatter): with two, any drift of one sign
+        # at the rest ends would do
+        return self._rest_claim(ctx, values, meas, {"current_offset_a": 0.0}, "the current offset",
+                                self.CONFIRM_MIN_RESTS)
 
     def _limited_tau_s(self, full) -> float:
         """The second (slow) RC branch's time constant [s] of the full values ``full``: the table's mean time

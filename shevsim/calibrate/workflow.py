@@ -271,6 +271,8 @@ class FitResult:
     claims: dict | None = None
     #: parameters held at these values in this candidate fit (an effect with a channel claim, _Run.assess)
     held: dict | None = None
+    #: passed on a direct measurement the record's own check confirmed, not on the held-out rule (_Run.assess)
+    measured_confirmed: bool = False
 
     @property
     def judged(self) -> dict:
@@ -782,7 +784,7 @@ class _Run:
             if xs and all(x is not None and x["ok"] for x in xs):
                 confirmed = xs
                 fr.passed = True
-                self.measured_confirmed.update(effs)
+                fr.measured_confirmed = True
         if absent:
             why.insert(0, "measured as zero: " + "; ".join(
                 f"{k} = {f.measured[k]['value']:.3g} +- {f.measured[k]['se']:.2g} from {f.measured[k]['how']}"
@@ -1079,6 +1081,8 @@ class _Run:
             k, fr = min(near, key=lambda x: (len(x[0]), x[1].bic))
             k, fr = self.parsimonious(k, fr, ok)
             self.keep_hold(k, fr)
+            if fr.measured_confirmed:       # selected on its measurement: the backward elimination keeps it
+                self.measured_confirmed.update(k)
             selected.extend(k)
             rounds[-1]["selected"] = "+".join(k)
             current = fr
