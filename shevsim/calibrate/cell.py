@@ -1332,6 +1332,11 @@ class CellModel(CalibrationModel):
                         ov["dudt_v_k"] = list(p.dudt_v_k)
                     continue
                 val = getattr(p, key)
+                # an effect at its neutral value is not in the model (initial_soc's neutral is the record's own
+                # first-rest reading, not the component's default: a vehicle scenario given the overlay must not
+                # start at the record's SOC - the Panasonic 25 degC overlay carried 100 % and stopped at t = 0)
+                if prm.name in e.neutral and val == e.neutral[prm.name]:
+                    continue
                 if val != getattr(self.base, key):
                     ov[key] = val
         if p.arrhenius_ea_r_k != 0.0:

@@ -182,3 +182,15 @@ def test_arrhenius_claim_is_tested_on_the_voltage_alone():
     assert law["arrhenius_ea_r_k_se"] < 0.25 * 4000.0
     assert not out["none"]["ok"], out["none"]["statement"]
     assert "not" in out["none"]["statement"]
+
+
+def test_overlay_carries_the_initial_soc_only_when_the_effect_is_named(tmp_path):
+    """The record's own initial SOC (the effect's neutral value) is not a property of the cell: an overlay that
+    carried it started every scenario at the record's SOC (the Panasonic 25 degC overlay: 100 %, and a vehicle run
+    stopped at t = 0 with the SOC above 100 %).  A fitted, named initial SOC travels (the replay needs it)."""
+    df, _ = synth_cell({}, duration_s=600.0, seed=SEED)
+    m = CellModel(dict(CELL_NOMINAL))
+    m.prepare(as_measured(df, "cell"))
+    assert m.effects["initial_soc"].neutral["soc_init_pct"] == pytest.approx(95.0) != m.base.soc_init_pct
+    assert "soc_init_pct" not in m.overlay({}, tmp_path)["battery"]
+    assert m.overlay({"soc_init_pct": 80.0}, tmp_path)["battery"]["soc_init_pct"] == 80.0
