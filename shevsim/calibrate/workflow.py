@@ -118,7 +118,10 @@ errors, and its effect is not held to the ``MIN_GAIN`` held-out gain (its parame
 the residual): it passes when it improves the held-out error of its channels at all, worsens no channel by
 more than ``MAX_WORSEN`` and lowers the BIC by ``MIN_DBIC``, the BIC counting no complexity for a parameter held at
 its measurement (it is not inferred from the residual); measured as zero (not ``significant``), it does not pass.  The measurement is in the report
-(``measured_parameters``).
+(``measured_parameters``).  A significant measurement that fails those rules passes when the record's own
+check of what the effect claims confirms it (``CalibrationModel.measurement_confirmed``: the cell's offset at the
+relaxed rests, which no resistance reaches): the fit under load then carries the model's form error, and the
+report gives its verdict beside the measurement; such an effect is kept by the backward elimination.
 
 Sample timing (:mod:`shevsim.calibrate.timing`): the record's declared ``sample_convention`` moves the
 prediction once; the ``timing`` effect (a fitted time shift between inputs and outputs) is a candidate of
