@@ -179,8 +179,8 @@ def ocv_correction(model) -> Effect:
 def solid_diffusion(model) -> Effect:
     """The OCV is read at the particles' surface SOC, which lags the bulk under current (solid diffusion,
     ``diffusion_time_s`` = R^2/D): its voltage is the OCV's slope times the lag, so it is large where the OCV
-    is steep (graphite staging, the ends of an LFP plateau) and nothing on a plateau - a shape no RC branch
-    with SOC-independent tables has."""
+    is steep (graphite staging, the ends of an LFP plateau) and nothing on a plateau - a shape an RC branch
+    has only if its tables follow the OCV's slope (a foreign cell's nominal takes the A123 tables' shape)."""
     if model.base.diffusion_time_s > 0.0:
         return None     # the nominal model has it already (a declared parameter)
     def starts(ctx, base):
