@@ -134,6 +134,23 @@ V2 is a known input to the measurement (not a filter state; its error is not tra
 heat (5.16) gains V2^2 / R2,nom.  ``"none"`` (the ``DEKFParams`` default) is the seed's one-branch filter,
 bit for bit.  The power capability still predicts with the one-branch model.
 
+Solid diffusion (``diffusion_time_s``; departure from the seed)
+---------------------------------------------------------------
+A cell with solid diffusion (the battery's ``diffusion_time_s`` = tau_d = R^2/D, :mod:`shevsim.battery.model`)
+shows the OCV of its particles' *surface* SOC, which lags the bulk SOC under load.  A filter that reads the
+OCV at the bulk SOC takes the lag for a SOC error and biases the estimate by the lag itself.  With
+``diffusion_time_s > 0`` (0, the default, is the filter without it, bit for bit) the filter propagates the
+diffusion state w open loop, as V2: a known input to the measurement, not a filter state, with the plant's
+exact discretisation (current held over the step, Q = 3600 C_b)::
+
+    w_k   = -k_w i_k + (w_{k-1} + k_w i_k) exp(-30 dt / tau_d),    k_w = (2/35) tau_d / Q
+    s_k   = SOC_k + w_k - tau_d i_k / (105 Q)                       (the surface SOC)
+    V_t,k = V_oc(s_k) - V1_k - V2_k - R_s i_k,    C^x = [dV_oc/dSOC at s_k, -1, -R_s,nom i_k]
+
+(w does not depend on SOC: its error is not tracked by P_x.)  The heat (5.16) gains the diffusion
+overpotential's ``i (V_oc(SOC) - V_oc(s))``, as the plant's, and the power capability reads the OCV at the
+surface SOC along its horizon (:mod:`shevsim.bms.power_capability`).
+
 The filter is written once, as the numba-compatible pure function :func:`dekf_step` (floats and the
 packed tables in, a tuple out; 3x3 and 2x2 symmetric covariances unrolled), with the heat (5.16) in
 :func:`cell_heat`.  ``DEKF(compiled=True)`` (default) runs it compiled; ``compiled=False`` runs
@@ -150,7 +167,8 @@ import numpy as np
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
 from shevsim.core.compiled import field_index, njit_step
 from shevsim.core.lookup import HAVE_NUMBA, njit, t1_slope, t1_value, ecm_lookup
-from shevsim.core.errors import SimulationError
+from shevsim.battery.model import DIFF_INSTANT, DIFF_W_GAIN, DIFF_W_RATE
+from shevsim.core.errors import ScenarioError, SimulationError
 
 __all__ = ["DEKFParams", "DEKF", "dekf_step", "cell_heat"]
 
@@ -185,8 +203,13 @@ class DEKFTuning:
     theta_r_v2: float = 1e-6
     theta_window_s: float = 60.0
     r1_factor_q: float = 1e-7
+    diffusion_time_s: float = 0.0
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.diffusion_time_s, (int, float)) and math.isfinite(self.diffusion_time_s)
+                and self.diffusion_time_s >= 0.0):
+            raise ScenarioError(f"{type(self).__name__}: diffusion_time_s (R^2/D of the cell's particles; 0 = off) "
+                                f"must be finite and >= 0, got {self.diffusion_time_s!r}")
         for name in ("rs_model", "rc_model"):
             if getattr(self, name) not in ("free", "table_scaled"):
                 raise ValueError(f"DEKFParams: {name} must be 'free' or 'table_scaled', got {getattr(self, name)!r}")
@@ -253,6 +276,10 @@ class DEKFParams(DEKFTuning):
         Window [s] of the innovation's running mean square, the tracking update's output noise (60 s).
     r1_factor_q : float
         Random walk of kappa_1 per step in the tracking update [-] (1e-7).
+    diffusion_time_s : float
+        The cell's solid-diffusion time R^2/D [s] (the battery parameter of that name; 0 = off, the filter
+        bit for bit as without it): the diffusion state w is propagated open loop with the plant's
+        discretisation and the OCV read at the surface SOC (module docstring, "Solid diffusion").
     """
 
     soc0_frac: float = 0.5
@@ -281,10 +308,11 @@ def cell_heat(i_a, rs, v1, r1, t_c, ds):
 #: the filter's state array ``xe`` (:attr:`DEKF.xe`): estimates, the covariances ``P_x`` (p00 .. p22) and
 #: ``P_theta`` (s00 .. s11), the effective R_s, R1, C1, the slow branch (v2, r2), the last innovation [V]
 #: and, for ``rc_update = "tracking"``, the sensitivities d(SOC, V1, x2)/d(kappa_1) of the state estimate and the
-#: parameter filter's output-noise variance [V^2] (module docstring)
+#: parameter filter's output-noise variance [V^2] (module docstring), and the solid-diffusion state ``wd`` (surface
+#: SOC - SOC without the instantaneous part, propagated open loop; 0 with ``diffusion_time_s = 0``)
 E = field_index(("soc", "v1", "x2", "th1", "th2", "p00", "p01", "p02", "p11", "p12", "p22", "s00", "s01", "s11",
                  "rs", "r1", "c1", "v2", "r2", "innovation", "variance", "dsoc_dk1", "dv1_dk1", "dx2_dk1",
-                 "r_theta"), "E")
+                 "r_theta", "wd"), "E")
 
 
 @njit(cache=True, inline="always")
@@ -309,6 +337,23 @@ def _nominal_factors(d, ix, k, soc, t_mean_c, i_a, dt_s, v2_prev):
             a2 = math.exp(-dt_s / (r2n_t * c2n_t))
             v2 = a2 * v2_prev + r2n_t * (1.0 - a2) * i_a
     return rsn, r1n, c1n, v2, r2n
+
+
+@njit(cache=True, inline="always")
+def _diffusion(k, w_prev, i_a, dt_s):
+    """The solid-diffusion state after a step with the current ``i_a`` held over ``dt_s`` and the surface's
+    offset from the bulk SOC: ``(w, surface SOC - SOC)``; ``(0, 0)`` with ``k[19]`` (diffusion_time_s) = 0.
+    The plant's exact discretisation (:func:`shevsim.battery.model._cell_electrical`):
+    ``w = -k_w i + (w_prev + k_w i) exp(-30 dt / tau_d)``, surface = SOC + w - tau_d i / (105 Q)."""
+    td = k[19]
+    if not td > 0.0:
+        return 0.0, 0.0
+    q_as = 3600.0 * k[0]
+    exw = math.exp(-dt_s * DIFF_W_RATE / td)
+    kw = DIFF_W_GAIN * td / q_as
+    kd = DIFF_INSTANT * td / q_as
+    w = -kw * i_a + (w_prev + kw * i_a) * exw
+    return w, w - kd * i_a
 
 
 @njit(cache=True, inline="always")
@@ -363,7 +408,7 @@ def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
 
     ``d, ix`` = ``CellTables.packed()``; ``k = [capacity_ah, q_soc, q_v1, q_x2, r_v, q_th1, q_th2, r1_min,
     r1_max, c1_min, c1_max, rs_min, F, rs_scaled, rc_scaled, v2_nominal, rc_tracking, theta_r_v2,
-    theta_window_s]``; ``xe`` the filter's state array
+    theta_window_s, diffusion_time_s]``; ``xe`` the filter's state array
     (:data:`E`, read only): the estimates, the unrolled symmetric covariances ``P_x`` (p00 .. p22) and
     ``P_theta`` (s00 .. s11), the slow branch's voltage ``v2`` (propagated, not estimated, when
     ``k[15] > 0.5``; otherwise ignored and returned as 0).  Returns
@@ -372,7 +417,9 @@ def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     ``c1`` the effective values; ``e`` the innovation [V] and ``var`` its variance; ``v2`` the slow branch's
     voltage after the step and ``r2`` [Ohm] the nominal R2 it used, ``inf`` without it), then ``(dsoc_dk1,
     dv1_dk1, dx2_dk1, r_theta)`` (the tracking update's sensitivities and output-noise variance [V^2]; carried
-    unchanged otherwise); ``ok = 0`` when the innovation variance is unusable (the rest is then not an update).
+    unchanged otherwise), then ``wd`` (the solid-diffusion state after the step, propagated open loop when
+    ``k[19]`` = diffusion_time_s > 0, else 0); ``ok = 0`` when the innovation variance is unusable (the rest is
+    then not an update).
     """
     v1_prev, x2, th1, th2 = xe[E.v1], xe[E.x2], xe[E.th1], xe[E.th2]
     p00, p01, p02, p11, p12, p22 = xe[E.p00], xe[E.p01], xe[E.p02], xe[E.p11], xe[E.p12], xe[E.p22]
@@ -394,15 +441,17 @@ def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     p00 += k[1]
     p11 += k[2]
     p22 += k[3]
-    # 3. state measurement update (5.23); R_s = x2 * rsn (free: rsn = 1, x2 = R_s)
-    c0 = t1_slope(d, ix[0], ix[1], soc)
+    # solid diffusion (open loop, a known input like V2): the OCV is read at the surface SOC
+    wd, sd = _diffusion(k, xe[E.wd], i_a, dt_s)
+    # 3. state measurement update (5.23); R_s = x2 * rsn (free: rsn = 1, x2 = R_s); dV/dSOC at the surface
+    c0 = t1_slope(d, ix[0], ix[1], soc + sd)
     c2 = -i_a * rsn
-    e = v_meas_v - (t1_value(d, ix[0], ix[1], soc) - v1 - v2 - x2 * rsn * i_a)
+    e = v_meas_v - (t1_value(d, ix[0], ix[1], soc + sd) - v1 - v2 - x2 * rsn * i_a)
     h0, h1, h2, sden = _state_gain(p00, p01, p02, p11, p12, p22, c0, c2, k[4])
     ds, dv, dx, r_theta = xe[E.dsoc_dk1], xe[E.dv1_dk1], xe[E.dx2_dk1], xe[E.r_theta]
     if not (sden > 0.0 and math.isfinite(sden) and math.isfinite(e)):
         return (0, soc, v1, x2, x2 * rsn, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, sden,
-                0.0, v2, r2n, ds, dv, dx, r_theta)
+                0.0, v2, r2n, ds, dv, dx, r_theta, wd)
     k0 = h0 / sden
     k1 = h1 / sden
     k2 = h2 / sden
@@ -438,8 +487,11 @@ def dekf_step(d, ix, k, xe, i_a, v_meas_v, dt_s, t_mean_c):
     heat = cell_heat(i_a, rs, v1, r1, t_mean_c, t1_value(d, ix[2], ix[3], soc))
     if k[15] > 0.5:
         heat += v2 * v2 / r2n
+    if k[19] > 0.0:
+        # the diffusion overpotential dissipates i (OCV(SOC) - OCV(surface)) (the plant's heat term)
+        heat += i_a * (t1_value(d, ix[0], ix[1], soc) - t1_value(d, ix[0], ix[1], soc + sd))
     return (1, soc, v1, x2, rs, th1, th2, r1, c1, p00, p01, p02, p11, p12, p22, s00, s01, s11, e, sden, heat, v2, r2n,
-            ds, dv, dx, r_theta)
+            ds, dv, dx, r_theta, wd)
 
 
 @njit(cache=True, inline="always")
@@ -455,6 +507,7 @@ def store_update(xe, r):
     xe[E.v2] = r[21]
     xe[E.r2] = r[22]
     xe[E.dsoc_dk1], xe[E.dv1_dk1], xe[E.dx2_dk1], xe[E.r_theta] = r[23:27]
+    xe[E.wd] = r[27]
     return 1, r[20]
 
 
@@ -498,6 +551,9 @@ class DEKF:
     v2, r2 : float
         Slow second-branch voltage [V] propagated from the nominal maps and the nominal R2 [Ohm] of the
         last step (``v2_model = "nominal_maps"``; 0 and ``inf`` otherwise).
+    wd : float
+        Solid-diffusion state w [1] after the last step (``diffusion_time_s > 0``; 0 otherwise): the surface
+        SOC is ``SOC + w - tau_d i / (105 Q)`` (:meth:`surface_soc`).
     """
 
     soc = _xe_property("soc", "SOC estimate [1]")
@@ -511,6 +567,7 @@ class DEKF:
     v2 = _xe_property("v2", "slow branch voltage [V]")
     r2 = _xe_property("r2", "nominal R2 of the last step [Ohm]")
     innovation = _xe_property("innovation", "last innovation [V]")
+    wd = _xe_property("wd", "solid-diffusion state w [1] (surface SOC - SOC without the instantaneous part)")
 
     @property
     def px(self) -> list:
@@ -569,7 +626,7 @@ class DEKF:
                             p.r1_min_ohm, p.r1_max_ohm, p.c1_min_f, p.c1_max_f, p.rs_min_ohm, FARADAY_C_MOL,
                             1.0 if self.scaled else 0.0, 1.0 if self.rc_scaled else 0.0,
                             1.0 if p.v2_model == "nominal_maps" else 0.0, 1.0 if self.rc_tracking else 0.0,
-                            p.theta_r_v2, p.theta_window_s])
+                            p.theta_r_v2, p.theta_window_s, float(p.diffusion_time_s)])
         self.reset()
 
     def reset(self, soc0_frac: float | None = None) -> None:
@@ -591,17 +648,30 @@ class DEKF:
         self.innovation = 0.0
         self.xe[E.dsoc_dk1:E.dx2_dk1 + 1] = 0.0
         self.xe[E.r_theta] = p.theta_r_v2
+        self.xe[E.wd] = 0.0
 
     # -- model ------------------------------------------------------------------------------
+    def surface_soc(self, i_a: float) -> float:
+        """SOC at the particles' surface with the current ``i_a`` flowing [1]: ``SOC + w - tau_d i / (105 Q)``
+        (the SOC itself with ``diffusion_time_s = 0``)."""
+        td = self.params.diffusion_time_s
+        if not td > 0.0:
+            return self.soc
+        return self.soc + self.wd - DIFF_INSTANT * td * float(i_a) / (3600.0 * self.params.capacity_ah)
+
     def predict_voltage(self, i_a: float) -> float:
-        """Terminal voltage g(x, i) of the current estimate [V]."""
-        return self.tables.ocv(self.soc) - self.v1 - self.v2 - self.rs * i_a
+        """Terminal voltage g(x, i) of the current estimate [V] (the OCV at the surface SOC)."""
+        return self.tables.ocv(self.surface_soc(i_a)) - self.v1 - self.v2 - self.rs * i_a
 
     def heat(self, i_a: float, t_mean_c: float) -> float:
         """Heat generation estimate [W] (5.16 with the OCV-R-RC model): i^2 R_s + V1^2/R1 - i T dS/F
-        plus V2^2/R2,nom of the last step with ``v2_model = "nominal_maps"``."""
-        return cell_heat(float(i_a), self.rs, self.v1, self.r1, float(t_mean_c),
-                         self.tables.entropy_change(self.soc)) + self.v2 * self.v2 / self.r2
+        plus V2^2/R2,nom of the last step with ``v2_model = "nominal_maps"`` plus the diffusion overpotential's
+        ``i (OCV(SOC) - OCV(surface))`` with ``diffusion_time_s > 0``."""
+        q = cell_heat(float(i_a), self.rs, self.v1, self.r1, float(t_mean_c),
+                      self.tables.entropy_change(self.soc)) + self.v2 * self.v2 / self.r2
+        if self.params.diffusion_time_s > 0.0:
+            q += float(i_a) * (self.tables.ocv(self.soc) - self.tables.ocv(self.surface_soc(i_a)))
+        return q
 
     @property
     def rs_factor(self) -> float:

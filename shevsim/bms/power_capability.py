@@ -41,6 +41,20 @@ solved for its positive (discharge) and negative (charge) roots.  With it the pr
 temperature lands on T_c,max instead of below it (the 5.31 bound is conservative by up to
 ~1 K for a 10 s horizon at tens of amperes).
 
+Solid diffusion (``diffusion_time_s`` = tau_d > 0; departure from the seed): the cell shows the OCV of its
+particles' surface SOC (:mod:`shevsim.battery.model`).  Under the held current ``i`` the plant's exact
+propagation of the diffusion state w over ``N dt`` (e_N = exp(-30 N dt / tau_d), k_w = (2/35) tau_d / Q)
+gives the surface SOC after N steps::
+
+    s_{k+N} = SOC_k + w_k e_N - i [N dt / Q + k_w (1 - e_N) + tau_d / (105 Q)]
+
+and ``V_{k+N}`` reads the OCV there.  Within a 10 s horizon the surface moves several times further than the
+bulk SOC (tau_d = 3000 s, 2.3 A.h: 6.6e-3 per ampere against the bulk's 1.2e-3), so without it the discharge
+limit is optimistic, and so far that the OCV's linearisation (4.15e) fails in its knee: the currents that put
+``V_{k+N}`` on V_min / V_max are solved on the OCV table itself (Newton's iteration from the linearised
+solution, :func:`_surface_voltage_current`).  ``diffusion_time_s = 0`` is the prediction above,
+bit for bit.
+
 Limits (4.17 / 5.34): ``i_max = min(SOC_min, V_min, thermal[, rating])``,
 ``i_min = max(SOC_max, V_max, thermal[, rating])``; power (4.18-4.19 / 5.35-5.36):
 ``P = i V_{k+N}`` with ``V_{k+N}`` from the (nonlinear) OCV at the predicted SOC, times the
@@ -54,6 +68,7 @@ from collections import namedtuple
 from typing import NamedTuple
 
 from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
+from shevsim.battery.model import DIFF_INSTANT, DIFF_W_GAIN, DIFF_W_RATE
 from shevsim.battery.thermal import ThermalParams, two_state_ad_bd, two_state_out
 from shevsim.core.compiled import field_index
 from shevsim.core.lookup import HAVE_NUMBA, njit, py_func, t1_slope, t1_value
@@ -108,6 +123,9 @@ class PowerCapabilityParams(CellLimits):
         Cell capacity [A.h].
     n_series, n_parallel : int
         Pack configuration for the pack power.
+    diffusion_time_s : float
+        The cell's solid-diffusion time R^2/D [s] (0 = off, the seed's prediction bit for bit): the OCV is
+        read at the surface SOC along the horizon (module docstring, "Solid diffusion").
     """
 
     horizon_steps: int = 100
@@ -115,9 +133,13 @@ class PowerCapabilityParams(CellLimits):
     soc_min_frac: float = 0.3
     soc_max_frac: float = 0.7
     capacity_ah: float = 2.3
+    diffusion_time_s: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if not (math.isfinite(self.diffusion_time_s) and self.diffusion_time_s >= 0.0):
+            raise ScenarioError(f"power capability: diffusion_time_s must be finite and >= 0, "
+                                f"got {self.diffusion_time_s!r}")
         if self.horizon_steps < 1 or not self.dt_s > 0.0:
             raise ScenarioError("power capability: horizon_steps must be >= 1 and dt_s > 0")
         if not (self.soc_min_frac < self.soc_max_frac and self.v_min_v < self.v_max_v):
@@ -152,11 +174,12 @@ _CACHES: dict = {}
 # ---------------------------------------------------------------------------------------------
 def _constants(p: PowerCapabilityParams):
     """``k = [N, dt, soc_min, soc_max, v_min, v_max, t_core_max, i_cell_max, capacity_ah, n_pack, exact, F,
-    float(N)]`` of ``p``."""
+    float(N), diffusion_time_s]`` of ``p``."""
     import numpy as np
     return np.array([p.horizon_steps, p.dt_s, p.soc_min_frac, p.soc_max_frac, p.v_min_v, p.v_max_v,
                      p.t_core_max_c, p.i_cell_max_a, p.capacity_ah, float(p.n_series * p.n_parallel),
-                     1.0 if p.polarisation_heat == "exact" else 0.0, FARADAY_C_MOL, float(p.horizon_steps)])
+                     1.0 if p.polarisation_heat == "exact" else 0.0, FARADAY_C_MOL, float(p.horizon_steps),
+                     float(p.diffusion_time_s)])
 
 
 #: a row ``th`` of the thermal coefficients (:func:`thermal_coeffs`): ``A_N, B_N = ZOH(N dt)`` of the two-state
@@ -194,22 +217,64 @@ def _pole_sum(rho, th, n):
 
 
 @njit(cache=True)
-def _electrical_limits(d, ix, k, soc, v1, rs, r1, c1):
-    """``(i_soc_min, i_soc_max, i_v_min, i_v_max)`` [A], seed 5.28 (cell, + discharge)."""
+def _diffusion_horizon(k, wd):
+    """The surface SOC after N steps at a held current ``i`` is ``SOC + s0 - i g`` (diffusion state ``wd`` now,
+    the plant's exact propagation of :mod:`shevsim.battery.model` over ``N dt``): ``(s0, g)`` =
+    ``(wd e_N, N dt / Q + k_w (1 - e_N) + tau_d / (105 Q))``, ``e_N = exp(-30 N dt / tau_d)``."""
+    ndt = k[0] * k[1]
+    q_as = 3600.0 * k[8]
+    td = k[13]
+    exn = math.exp(-ndt * DIFF_W_RATE / td)
+    return wd * exn, ndt / q_as + DIFF_W_GAIN * td / q_as * (1.0 - exn) + DIFF_INSTANT * td / q_as
+
+
+@njit(cache=True)
+def _surface_voltage_current(d, ix, sf, g, r, free_rc, v_lim, i0):
+    """The held current ``i`` with ``OCV(sf - i g) - free_rc - i r = v_lim`` (the voltage after N steps with
+    solid diffusion on its limit), by Newton's iteration on the OCV table from the linearised solution ``i0``
+    (at most 30 steps, to 1e-9 V; the table is piecewise linear, so it ends in a segment exactly)."""
+    i = i0
+    for _ in range(30):
+        f = t1_value(d, ix[0], ix[1], sf - i * g) - free_rc - i * r - v_lim
+        if abs(f) < 1e-9:
+            break
+        i += f / (r + t1_slope(d, ix[0], ix[1], sf - i * g) * g)
+    return i
+
+
+@njit(cache=True)
+def _electrical_limits(d, ix, k, soc, v1, rs, r1, c1, wd=0.0):
+    """``(i_soc_min, i_soc_max, i_v_min, i_v_max)`` [A], seed 5.28 (cell, + discharge); with solid diffusion
+    (``k[13]`` > 0, diffusion state ``wd``) the OCV is read at the surface SOC after N steps, solved on the
+    OCV table itself (module docstring)."""
     ndt = k[0] * k[1]
     q_as = 3600.0 * k[8]
     aN = math.exp(-ndt / (r1 * c1))
-    gain = rs + r1 * (1.0 - aN) + t1_slope(d, ix[0], ix[1], soc) * ndt / q_as
-    free = t1_value(d, ix[0], ix[1], soc) - aN * v1
+    if k[13] > 0.0:
+        s0, g = _diffusion_horizon(k, wd)
+        r = rs + r1 * (1.0 - aN)
+        gain = r + t1_slope(d, ix[0], ix[1], soc + s0) * g
+        free = t1_value(d, ix[0], ix[1], soc + s0) - aN * v1
+        i_vmin = _surface_voltage_current(d, ix, soc + s0, g, r, aN * v1, k[4], (free - k[4]) / gain)
+        i_vmax = _surface_voltage_current(d, ix, soc + s0, g, r, aN * v1, k[5], (free - k[5]) / gain)
+        return (soc - k[2]) * q_as / ndt, (soc - k[3]) * q_as / ndt, i_vmin, i_vmax
+    else:
+        gain = rs + r1 * (1.0 - aN) + t1_slope(d, ix[0], ix[1], soc) * ndt / q_as
+        free = t1_value(d, ix[0], ix[1], soc) - aN * v1
     return (soc - k[2]) * q_as / ndt, (soc - k[3]) * q_as / ndt, (free - k[4]) / gain, (free - k[5]) / gain
 
 
 @njit(cache=True)
-def _voltage_after(d, ix, k, i_a, soc, v1, rs, r1, c1):
-    """Predicted cell terminal voltage after N steps at the held current ``i_a`` (5.36) [V]."""
+def _voltage_after(d, ix, k, i_a, soc, v1, rs, r1, c1, wd=0.0):
+    """Predicted cell terminal voltage after N steps at the held current ``i_a`` (5.36) [V]; with solid
+    diffusion (``k[13]`` > 0) the OCV at the surface SOC."""
     ndt = k[0] * k[1]
     aN = math.exp(-ndt / (r1 * c1))
-    soc_n = soc - i_a * ndt / (3600.0 * k[8])
+    if k[13] > 0.0:
+        s0, g = _diffusion_horizon(k, wd)
+        soc_n = soc + s0 - i_a * g
+    else:
+        soc_n = soc - i_a * ndt / (3600.0 * k[8])
     return t1_value(d, ix[0], ix[1], soc_n) - i_a * rs - aN * v1 - i_a * r1 * (1.0 - aN)
 
 
@@ -254,17 +319,17 @@ def _thermal_limits(d, ix, k, th, s, last_max, last_min):
 
 
 @njit(cache=True)
-def power_limits(d, ix, k, th, s, last_max, last_min):
+def power_limits(d, ix, k, th, s, last_max, last_min, wd=0.0):
     """One power-capability evaluation (4.17-4.19 / 5.34-5.36) from the estimates ``s`` (:data:`CellEstimate`)
-    with the thermal coefficients ``th`` (:data:`TH`) and the previous limits ``last_*`` [A]: the 12 fields of
-    :class:`PowerLimits`."""
+    with the thermal coefficients ``th`` (:data:`TH`), the previous limits ``last_*`` [A] and the solid-diffusion
+    state ``wd`` (read only with ``k[13]`` = diffusion_time_s > 0): the 12 fields of :class:`PowerLimits`."""
     soc, v1, rs, r1, c1 = s.soc, s.v1, s.rs, s.r1, s.c1
-    i_smin, i_smax, i_vmin, i_vmax = _electrical_limits(d, ix, k, soc, v1, rs, r1, c1)
+    i_smin, i_smax, i_vmin, i_vmax = _electrical_limits(d, ix, k, soc, v1, rs, r1, c1, wd)
     i_td, i_tc = _thermal_limits(d, ix, k, th, s, last_max, last_min)
     i_max = min(i_smin, i_vmin, i_td, k[7])
     i_min = max(i_smax, i_vmax, i_tc, -k[7])
-    v_d = _voltage_after(d, ix, k, i_max, soc, v1, rs, r1, c1)
-    v_c = _voltage_after(d, ix, k, i_min, soc, v1, rs, r1, c1)
+    v_d = _voltage_after(d, ix, k, i_max, soc, v1, rs, r1, c1, wd)
+    v_c = _voltage_after(d, ix, k, i_min, soc, v1, rs, r1, c1, wd)
     p_max = i_max * v_d * k[9]
     p_min = i_min * v_c * k[9]
     return (i_max, i_min, p_max if p_max > 0.0 else 0.0, p_min if p_min < 0.0 else 0.0,
@@ -417,18 +482,23 @@ class PowerCapability:
                          float(t_amb_c))
         return _thermal_limits(d, ix, self._k, self._thermal_coeffs(h_w_m2k), s, self.last_i_max_a, self.last_i_min_a)
 
-    def voltage_after(self, i_a: float, soc: float, v1: float, rs: float, r1: float, c1: float) -> float:
-        """Predicted cell terminal voltage after N steps at the held current (5.36) [V]."""
+    def voltage_after(self, i_a: float, soc: float, v1: float, rs: float, r1: float, c1: float,
+                      wd: float = 0.0) -> float:
+        """Predicted cell terminal voltage after N steps at the held current (5.36) [V] (``wd``: the
+        solid-diffusion state, read with ``diffusion_time_s > 0``)."""
         d, ix = self._tabs
-        return _voltage_after(d, ix, self._k, float(i_a), float(soc), float(v1), float(rs), float(r1), float(c1))
+        return _voltage_after(d, ix, self._k, float(i_a), float(soc), float(v1), float(rs), float(r1), float(c1),
+                              float(wd))
 
     def compute(self, soc: float, v1: float, rs: float, r1: float, c1: float, t_mean_c: float, gamma: float,
-                h_w_m2k: float, t_amb_c: float) -> PowerLimits:
-        """Current and power limits from the estimated states (SOC as a fraction, cell quantities)."""
+                h_w_m2k: float, t_amb_c: float, wd: float = 0.0) -> PowerLimits:
+        """Current and power limits from the estimated states (SOC as a fraction, cell quantities; ``wd`` the
+        solid-diffusion state, read with ``diffusion_time_s > 0``)."""
         d, ix = self._tabs
         s = CellEstimate(float(soc), float(v1), float(rs), float(r1), float(c1), float(t_mean_c), float(gamma),
                          float(t_amb_c))
-        r = self._limits(d, ix, self._k, self._thermal_coeffs(h_w_m2k), s, self.last_i_max_a, self.last_i_min_a)
+        r = self._limits(d, ix, self._k, self._thermal_coeffs(h_w_m2k), s, self.last_i_max_a, self.last_i_min_a,
+                         float(wd))
         self.last_i_max_a = r[0]
         self.last_i_min_a = r[1]
         return PowerLimits(*r)

@@ -9,7 +9,8 @@ Each step (sample time = the component's step h, seed 0.1 s), in the seed's orde
    default: the plant's slow second RC branch V2 propagated from the nominal R2, C2 maps and
    subtracted from the predicted voltage, ``"none"``: the seed's one-branch filter; ``rc_update =
    "tracking"``, default: the R1 factor's parameter filter in physical units with the total-derivative
-   Jacobian, so that it tracks ageing, ``"seed"``: the seed's 5.24, under which it stays at ~1);
+   Jacobian, so that it tracks ageing, ``"seed"``: the seed's 5.24, under which it stays at ~1;
+   ``diffusion_time_s > 0``: the cell's solid diffusion propagated open loop, the OCV read at the surface SOC);
 2. heat-generation estimate (5.16) with the DEKF's estimates and the *previous* step's estimated
    mean temperature (Sec. 5.3.2);
 3. thermal DKF (:class:`shevsim.bms.thermal_estimators.ThermalDKF`, 3.10-3.15; KF or JEKF
@@ -123,6 +124,14 @@ class BMSParams(DEKFTuning, CellLimits, ThermalParams):
         the nominal R2, C2 maps and subtracts it from the predicted voltage (unbiased SOC against the
         OCV-R-RC-RC plant, issue 14); ``"none"``: the seed's one-branch filter.  See
         :mod:`shevsim.bms.electrical`.
+    diffusion_time_s : float
+        The cell's solid-diffusion time R^2/D [s] (the battery parameter of that name; default 0 = off, the BMS
+        bit for bit as without it).  With it the DEKF propagates the diffusion state open loop with the plant's
+        discretisation and reads the OCV at the particles' surface SOC (unbiased SOC against a plant with
+        diffusion), its heat estimate gains the diffusion overpotential, and the power capability reads the
+        OCV at the surface SOC along its horizon.  In a scenario with ``[shared]`` it is the cell's
+        ``cell_diffusion_time_s`` (a calibration overlay's ``[battery] diffusion_time_s`` is lifted to it).
+        See :mod:`shevsim.bms.electrical`, "Solid diffusion".
     """
 
     soc0_pct: float = 50.0
@@ -254,7 +263,8 @@ class BMS(CompiledStep, Component):
                                      p0=(p.thermal_p0, p.thermal_p0))
         self.pc = PowerCapability(PowerCapabilityParams(
             horizon_steps=max(1, int(round(p.horizon_s / dt))), dt_s=dt, soc_min_frac=p.soc_min_pct / 100.0,
-            soc_max_frac=p.soc_max_pct / 100.0, capacity_ah=p.capacity_ah, **_fields_of(p, CellLimits)),
+            soc_max_frac=p.soc_max_pct / 100.0, capacity_ah=p.capacity_ah, diffusion_time_s=p.diffusion_time_s,
+            **_fields_of(p, CellLimits)),
             self.thermal_params, self.tables)
         self.xb[XB.i_max] = self.pc.last_i_max_a
         self.xb[XB.i_min] = self.pc.last_i_min_a
@@ -288,7 +298,7 @@ class BMS(CompiledStep, Component):
         d = self.dekf
         ns, np_ = self._ns, self._np
         lim = self.pc.compute(d.soc, d.v1, d.rs, d.r1, d.c1, self.t_mean, self.gamma, self.h_est,
-                              self.u["t_ambient_meas_c"])
+                              self.u["t_ambient_meas_c"], d.wd)
         self.xb[XB.i_max] = self.pc.last_i_max_a
         self.xb[XB.i_min] = self.pc.last_i_min_a
         y = self.y
@@ -376,7 +386,7 @@ def bms_step(data, u, y, t, h):
     c1 = xe[E.c1]
     slot = thermal_coeffs(tp, xb[XB.h], keys, vals)
     lim = power_limits(pd_, pix, pk, vals[slot], CellEstimate(soc, v1, rs, r1, c1, xb[XB.t_mean], xb[XB.gamma], ta),
-                       xb[XB.i_max], xb[XB.i_min])
+                       xb[XB.i_max], xb[XB.i_min], xe[E.wd])
     xb[XB.i_max] = lim[0]
     xb[XB.i_min] = lim[1]
     ns = p[0]

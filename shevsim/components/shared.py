@@ -21,8 +21,9 @@ engine_generator   ``rated_power_w`` = ``engine_power_w`` (maps sized by rating,
                    engine); ``fuel_lhv_j_per_g``
 battery            ``n_series``, ``n_parallel``; the cell: ``capacity_ah`` = ``cell_capacity_ah``, its
                    tables (``cell_ocv_file`` ...), thermal parameters, calibration factors
-                   (``cell_rs_scale`` ...) and ``temperature_dependent``
-bms                the same pack and cell (its nominal cell model is the plant's cell) plus the cell's
+                   (``cell_rs_scale`` ...), ``temperature_dependent`` and ``diffusion_time_s``
+bms                the same pack and cell (its nominal cell model is the plant's cell, with its solid
+                   diffusion ``cell_diffusion_time_s``) plus the cell's
                    voltage limits ``cell_v_min_v``/``cell_v_max_v`` and the SOC window ``soc_min_pct``/
                    ``soc_max_pct``; a cell without second RC branch (``cell_r2_scale = 0``) gives
                    ``v2_model = "none"``
@@ -62,7 +63,7 @@ from shevsim.core.paths import DATA_ROOT
 #: the cell's quantities: ``cell_<battery parameter>`` (the BMS takes the same names)
 CELL_PARAMS = ("capacity_ah", "ocv_file", "entropy_file", "discharge_file", "charge_file", "radius_m", "length_m",
                "density_kg_m3", "cp_j_kgk", "kt_w_mk", "rs_scale", "r1_scale", "c1_scale", "r2_scale", "c2_scale",
-               "temperature_dependent")
+               "temperature_dependent", "diffusion_time_s")
 #: the cell's limits (BMS only: the plant has none)
 CELL_LIMITS = ("v_min_v", "v_max_v")
 
@@ -150,7 +151,7 @@ def check_value(name: str, value: Any, where: str) -> Any:
     if name.endswith("_pct"):
         if not 0.0 <= value <= 100.0:
             raise ScenarioError(f"{where}: shared quantity '{name}' must be in [0, 100], got {value!r}")
-    elif name in ("cell_r2_scale", "aux_power_w"):
+    elif name in ("cell_r2_scale", "aux_power_w", "cell_diffusion_time_s"):
         if value < 0.0:
             raise ScenarioError(f"{where}: shared quantity '{name}' must be >= 0, got {value!r}")
     elif not value > 0.0:
