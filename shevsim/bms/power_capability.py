@@ -232,13 +232,15 @@ def _diffusion_horizon(k, wd):
 def _surface_voltage_current(d, ix, sf, g, r, free_rc, v_lim, i0):
     """The held current ``i`` with ``OCV(sf - i g) - free_rc - i r = v_lim`` (the voltage after N steps with
     solid diffusion on its limit), by Newton's iteration on the OCV table from the linearised solution ``i0``
-    (at most 30 steps, to 1e-9 V; the table is piecewise linear, so it ends in a segment exactly)."""
+    (at most 30 steps, to 1e-9 V; the table is piecewise linear, so it ends in a segment exactly; the
+    voltage falls with the current wherever the OCV rises with SOC, else the iteration stops)."""
     i = i0
     for _ in range(30):
         f = t1_value(d, ix[0], ix[1], sf - i * g) - free_rc - i * r - v_lim
-        if abs(f) < 1e-9:
+        den = r + t1_slope(d, ix[0], ix[1], sf - i * g) * g
+        if abs(f) < 1e-9 or not den > 0.0:     # on the limit, or an OCV table falling with SOC: keep i
             break
-        i += f / (r + t1_slope(d, ix[0], ix[1], sf - i * g) * g)
+        i += f / den
     return i
 
 
