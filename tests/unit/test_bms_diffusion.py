@@ -170,3 +170,21 @@ def test_calibration_overlay_with_diffusion_reaches_the_bms(tmp_path):
     c = _built(load_scenario("hd_udds_mpc", overlays=[str(ov)]))
     assert c["battery"].params.diffusion_time_s == 2489.0
     assert c["bms"].params.diffusion_time_s == 2489.0 and c["bms"].dekf.params.diffusion_time_s == 2489.0
+
+
+def test_compiled_step_heat_agrees_with_the_python_method_with_diffusion():
+    """The compiled step's heat is :meth:`DEKF.heat` at the new estimates, with the diffusion overpotential
+    ``i (OCV(SOC) - OCV(surface))`` (positive under discharge)."""
+    m = BMS("bms", BMSParams(diffusion_time_s=TAU_S))
+    rng = np.random.default_rng(0)
+    for k in range(200):
+        t_prev = m.t_mean
+        i = 3.0 + rng.normal(0.0, 1.0)
+        m.u.update(cell_current_meas_a=i, cell_voltage_meas_v=3.26 + rng.normal(0, 0.005),
+                   t_surface_meas_c=25.0, t_ambient_meas_c=25.0)
+        m.do_step(k * DT, DT)
+        assert m.q_est == pytest.approx(m.dekf.heat(i, t_prev), rel=1e-12, abs=1e-15)
+    d = m.dekf
+    assert d.wd < 0.0
+    eta = d.tables.ocv(d.soc) - d.tables.ocv(d.surface_soc(3.0))
+    assert eta > 0.0
