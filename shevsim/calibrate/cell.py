@@ -262,6 +262,7 @@ class CellModel(CalibrationModel):
                 raise DataError(f"{where}: table [{tname}] is not for the cell model (expected [battery] or [params])")
             known.update(vals)
         short_form = any(k in _LEGACY or k in ("thermal", "arrhenius_anchor") for k in known)
+        self.given = set(known)
         self.cell_limits: dict[str, float] = {}
         for k, v in known.items():
             if k in self.limits:
@@ -342,6 +343,32 @@ class CellModel(CalibrationModel):
             e = f(self)
             if e is not None:
                 out[e.name] = e
+        return out
+
+    #: the cell's own quantities a user should give (alternative keys); missing, the project's A123 26650 fills them in
+    SALIENT_DEFAULTS = ((("capacity_ah",), "capacity_ah"), (("ocv_file", "ocv_soc_frac"), "ocv_file"),
+                        (("radius_m",), "radius_m"), (("length_m",), "length_m"), (("h_conv_w_m2k",), "h_conv_w_m2k"),
+                        (("discharge_file", "charge_file"), "discharge_file"))
+
+    def defaults_used(self) -> list[dict]:
+        """The cell quantities the ``--params`` did not give: the project's A123 26650 (2.3 A.h LFP, 26 x 65 mm;
+        ``components/battery``) fills them in - its OCV curve, its R/C tables' shape (their levels are fitted),
+        its can - and the convection coefficient 20 W/(m2.K)."""
+        out = []
+        given = getattr(self, "given", set())
+        for keys, name in self.SALIENT_DEFAULTS:
+            if any(k in given for k in keys):
+                continue
+            if name == "h_conv_w_m2k":
+                v = self.known.get("h_conv_w_m2k")
+            else:
+                v = getattr(self.base, name, None)
+                if name.endswith("_file"):
+                    v = Path(v).name if v else "(built in)"
+            out.append({"parameter": name, "value": v,
+                        "default": "the calibration's default convection coefficient" if name == "h_conv_w_m2k" else
+                        "the project's A123 26650 LFP cell" + (" (the shape of its R/C tables; their levels are "
+                                                               "fitted)" if name == "discharge_file" else "")})
         return out
 
     # -- data

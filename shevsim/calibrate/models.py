@@ -162,6 +162,10 @@ class CalibrationModel:
         loaded :class:`~shevsim.calibrate.data.MeasuredData`) keeps the list to what the loader did not
         already verify (a current sign checked against the voltage response is not suggested again)."""
         out = []
+        used = self.defaults_used()
+        if used:
+            out.append(f"a nominal that is not this {self.name}'s: " + ", ".join(d["parameter"] for d in used)
+                       + f" are not in --params (taken from {used[0]['default']}; give your own)")
         if abs(diag["bias"]) > 0.5 * diag["rmse"]:
             out.append(f"a constant offset ({diag['bias']:+.4g}): sensor offset or a shifted curve/map")
         for c in diag["correlations"]:
@@ -173,9 +177,9 @@ class CalibrationModel:
         corr = sign.get("corr_dI_dV") if sign else None
         if corr is not None and corr < -0.3:
             how = "as stated" if sign.get("how") == "stated" else "guessed from the data"
-            out.append(f"an effect the model lacks, or the --params values (OCV curve, capacity, initial SOC): the "
-                       f"current sign ({sign.get('file')}, {how}) agrees with the voltage response (corr(dI, dV) = "
-                       f"{corr:+.2f}) and the columns passed the unit checks")
+            out.append(f"an effect the model lacks, or wrong --params values (OCV curve, capacity, initial SOC) - not "
+                       f"the inputs: the current sign ({sign.get('file')}, {how}) agrees with the voltage response "
+                       f"(corr(dI, dV) = {corr:+.2f}) and the columns passed the unit checks")
         else:
             out.append("units or sign of an input column (check --map, --current-sign / --power-sign)")
         return out
@@ -186,6 +190,13 @@ class CalibrationModel:
         Returns ``{"ok": bool, "statement": str, "evidence": {...}}``; a candidate that fits better but whose
         claim the record does not show (``ok`` False) is not selected, and the report says why."""
         return None
+
+    def defaults_used(self) -> list[dict]:
+        """The known quantities a user usually has of their own that the ``--params`` did not give, so that the
+        model took the project's defaults (the M-ATV truck's motor map, the A123 26650 cell): ``[{"parameter",
+        "value", "default"}]``, stated in the report - a result can be no better than the nominal it is given.
+        Default: none."""
+        return []
 
     def measurement_confirmed(self, effect: str, ctx: dict, values: dict, meas: dict) -> dict | None:
         """Whether the record confirms, beyond the direct measurement of its parameter, what ``effect`` claims

@@ -244,8 +244,15 @@ class VehicleModel(CalibrationModel):
     known_defaults = dict({k: getattr(p, k) for p in _FILES.values() for k in (f.name for f in dataclasses.fields(p))
                            if k not in _NOT_KNOWN}, substep_s=SUBSTEP_S)
 
+    #: the vehicle's own quantities a user should give; missing, the project's M-ATV (a 15.5 t truck) fills them in
+    SALIENT_DEFAULTS = ("mass_kg", "frontal_area_m2", "drag_coefficient", "rolling_coefficient", "wheel_radius_m",
+                        "wheel_inertia_kg_m2", "gear_ratio", "efficiency_map_file", "torque_curves_file",
+                        "rated_power_w", "maps_rated_power_w", "regen_power_max_w", "aux_power_w")
+
     def __init__(self, known: Mapping[str, Any] | None = None, where: str = "<params>"):
-        super().__init__(_user_values(known, where), where)
+        user = _user_values(known, where)
+        self.given = set(user)
+        super().__init__(user, where)
         # the known component parameters checked and typed (lists -> tuples, int -> float) by the components'
         # own parameter classes, once
         from ..core.params import make_params
@@ -257,6 +264,21 @@ class VehicleModel(CalibrationModel):
                 raise DataError(str(exc)) from exc
             for k in given:
                 self.known[k] = getattr(prm, k)
+
+    def defaults_used(self) -> list[dict]:
+        """The vehicle, motor and bus quantities the ``--params`` did not give: the project's M-ATV (15.5 t
+        series-hybrid truck; ``components/vehicle/matv.toml``, its 380 kW in-hub motor maps in
+        ``components/motor/default.toml``) fills them in."""
+        out = []
+        for k in self.SALIENT_DEFAULTS:
+            if k in self.given or k not in self.known:
+                continue
+            v = self.known[k]
+            out.append({"parameter": k, "value": Path(v).name if k.endswith("_file") and isinstance(v, str) else v,
+                        "default": "the project's M-ATV truck" + (" (its 380 kW in-hub motor)" if k in (
+                            "efficiency_map_file", "torque_curves_file", "rated_power_w", "maps_rated_power_w",
+                            "regen_power_max_w") else "")})
+        return out
 
     def _declared_for(self, known):
         return (Param("efficiency_scale_frac", "-", 0.8, 1.08, _FILES["motor"].efficiency_scale_frac,
