@@ -230,7 +230,9 @@ def run_case(group: str, case: str, spec, model: str | None = None) -> dict:
     sel = rep["selected_effects"]
     named = sorted(sel) == sorted(expected)
     row = {"case": case, "expected": expected, "selected": sel, "named": named,
-           "discrepancy": [d.get("effect") or d.get("channel") for d in rep["model_form_discrepancy"]],
+           "discrepancy": [d.get("effect") or d.get("channel") or ("declared parameters on a bound"
+                                                                  if d.get("declared_on_bound") else "?")
+                           for d in rep["model_form_discrepancy"]],
            "before": {c: v["holdout"] for c, v in rep["rmse_before"].items()},
            "after": {c: v["holdout"] for c, v in rep["rmse_after"].items()}, "elapsed_s": time.perf_counter() - t0,
            "time_shift_s": (rep.get("timing") or {}).get("time_shift_s"),
