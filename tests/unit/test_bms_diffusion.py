@@ -18,6 +18,7 @@ from shevsim.bms.electrical import DEKF, DEKFParams
 from shevsim.components.battery import BatteryPack, BatteryPackParams
 from shevsim.components.bms import BMS, BMSParams
 from shevsim.core.errors import ScenarioError
+from test_bms import drive_profile
 
 DT = 0.1
 TAU_S = 3000.0
@@ -25,17 +26,9 @@ _MEAS = ("cell_current_meas_a", "cell_voltage_meas_v", "t_surface_meas_c", "t_am
 
 
 def _drive_profile(n, dt, seed=1, scale=0.25):
-    """Pack-power profile with drive-cycle-like pulses (2-15 s holds, 20 % idle; the profile of
-    tests/unit/test_bms.py at a quarter of its power: cell currents up to ~4.4 A = 1.9 C)."""
-    rng = np.random.default_rng(seed)
-    p = np.zeros(n)
-    k = 0
-    while k < n:
-        m = int(rng.uniform(2.0, 15.0) / dt)
-        p[k:k + m] = rng.uniform(-60e3, 80e3) if rng.random() > 0.2 else 0.0
-        k += m
-    p -= 0.9 * p.mean()
-    return scale * p
+    """The pack-power profile of tests/unit/test_bms.py at a quarter of its power (cell currents up to ~4.4 A =
+    1.9 C)."""
+    return drive_profile(n, dt, seed=seed, scale=scale)
 
 
 def _step(b, bmss, k):
