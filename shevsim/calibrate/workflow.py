@@ -641,8 +641,11 @@ class _Run:
         self.model = model = get_model(model_name, known, params_where)
         used = model.defaults_used()
         if used:
+            by: dict = {}
+            for d in used:
+                by.setdefault(d["default"], []).append(d["parameter"])
             self.say("note: not in --params, the project's defaults are used (give your own): "
-                     + ", ".join(d["parameter"] for d in used) + f" ({used[0]['default']}...)")
+                     + "; ".join(f"{src}: {', '.join(ps)}" for src, ps in by.items()))
         if data.model != model_name:
             raise DataError(f"{data.path}: loaded for model '{data.model}', not '{model_name}'")
         self.t = data.df["time_s"].to_numpy(float)
