@@ -68,11 +68,11 @@ def build_parser() -> argparse.ArgumentParser:
                     default="instantaneous",
                     help="what a logged value stands for: the value at the sample time (default), the mean over "
                          "the period ending at it, or over the period starting at it (stated in the report)")
-    ap.add_argument("--sensor-noise", action="extend", nargs="+", default=[], metavar="CHANNEL=VALUE",
+    ap.add_argument("--sensor-noise", action="append", default=[], metavar="CHANNEL=VALUE[,CHANNEL=VALUE]",
                     help="declared sensor noise (1 sigma, SI) of an output channel (its sensor floor) or of a "
                          "measured input (propagated through the model into the outputs' floor); otherwise "
-                         "estimated from quiet segments and a local smoother; the method is stated.  Several at "
-                         "once or repeated: --sensor-noise power_w=300 speed_mps=0.02")
+                         "estimated from quiet segments and a local smoother; the method is stated.  Repeatable, "
+                         "or several separated by commas: --sensor-noise power_w=300,speed_mps=0.02")
     ap.add_argument("--effects", nargs="+", help="restrict the candidate effects to these names")
     ap.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     ap.add_argument("--decimate", type=_at_least_one, default=1, metavar="K",
@@ -100,7 +100,7 @@ def list_records() -> str:
 
 def _sensor_noise(items) -> dict:
     out = {}
-    for it in items:
+    for it in [x for item in items for x in str(item).split(",") if x.strip()]:
         name, sep, val = it.partition("=")
         try:
             v = float(val)

@@ -247,7 +247,7 @@ class VehicleModel(CalibrationModel):
     #: the vehicle's own quantities a user should give; missing, the project's M-ATV (a 15.5 t truck) fills them in
     SALIENT_DEFAULTS = ("mass_kg", "frontal_area_m2", "drag_coefficient", "rolling_coefficient", "wheel_radius_m",
                         "wheel_inertia_kg_m2", "gear_ratio", "efficiency_map_file", "torque_curves_file",
-                        "rated_power_w", "maps_rated_power_w", "regen_power_max_w", "aux_power_w")
+                        "rated_power_w", "maps_rated_power_w", "aux_power_w")
 
     def __init__(self, known: Mapping[str, Any] | None = None, where: str = "<params>"):
         user = _user_values(known, where)
@@ -276,8 +276,8 @@ class VehicleModel(CalibrationModel):
             v = self.known[k]
             out.append({"parameter": k, "value": Path(v).name if k.endswith("_file") and isinstance(v, str) else v,
                         "default": "the project's M-ATV truck" + (" (its 380 kW in-hub motor)" if k in (
-                            "efficiency_map_file", "torque_curves_file", "rated_power_w", "maps_rated_power_w",
-                            "regen_power_max_w") else "")})
+                            "efficiency_map_file", "torque_curves_file", "rated_power_w", "maps_rated_power_w")
+                                                                                        else "")})
         return out
 
     def _declared_for(self, known):

@@ -601,13 +601,13 @@ def test_a_resistance_that_falls_with_the_soc_as_the_cell_warms_is_not_an_arrhen
               for x in u["evidence"] if "lowsoc_r_gain" in x)
     assert ev["lowsoc_r_gain"] < 0.0, ev
     assert ev["arrhenius_ea_r_k_voltage_v_only"] < 1.645 * ev["arrhenius_ea_r_k_se"], ev
-    # without the SOC law the voltage alone reads the two trends as a law at t 1.7: at the 5 % level (1.645, until
-    # the eighth session) that was "the record cannot tell the two apart"; a claim now needs 3 standard errors
-    # (CLAIM_SIGNIFICANCE: an out-of-sample record passed a law at 2.4), so the voltage shows no law either way
+    # without the SOC law the voltage alone would show it (t 1.7): the report says the record cannot tell the two
+    # apart, not that the voltage shows no law (the claim vetoes a candidate that passed the held-out rule at the
+    # 5 % level; the 3 standard errors of CLAIM_SIGNIFICANCE are for a claim that waives the held-out gain)
     first = next(x for u in rep["model_form_discrepancy"] if u.get("effect") == "arrhenius_resistance"
                  for x in u["evidence"] if "not_separable" in x)
-    t0 = first["without_confounders_arrhenius_ea_r_k_voltage_v_only"] / first["without_confounders_arrhenius_ea_r_k_se"]
-    assert 1.0 < t0 < 3.0 and not first["not_separable"], first
+    assert first["not_separable"] and first["without_confounders_arrhenius_ea_r_k_voltage_v_only"] > 1.645 * first[
+        "without_confounders_arrhenius_ea_r_k_se"], first
 
 
 @pytest.mark.slow
