@@ -7,8 +7,8 @@ The file (TOML)::
     [params]                    # the component's own parameters (e.g. capacity_ah, mass_kg) - known
     capacity_ah = 2.9           # values or starting values; unknown names fail with a suggestion
     soc0_frac = 1.0             # cell short form: initial SOC (< 0: from the first rest voltage)
-    [ocv]                       # cell short form: open-circuit voltage curve
-    soc_frac = [0.0, 0.1, ...]
+    [ocv]                       # cell short form: open-circuit voltage curve (either order of SOC)
+    soc_frac = [0.0, 0.1, ...]  # or soc_pct = [0.0, 10.0, ...]
     ocv_v = [3.0, 3.4, ...]
 
 or a component parameter file (``components/battery/default.toml``...), or a calibration's own overlay
@@ -55,15 +55,21 @@ def load_params_toml(path) -> dict:
             out.update(body)
         elif sec == "ocv":
             for k in body:
-                if k not in ("soc_frac", "ocv_v"):
-                    raise DataError(f"{path}: [ocv] unknown key '{k}' (expected soc_frac, ocv_v)")
-            if "soc_frac" not in body or "ocv_v" not in body:
-                raise DataError(f"{path}: [ocv] needs both soc_frac and ocv_v")
+                if k not in ("soc_frac", "soc_pct", "ocv_v"):
+                    raise DataError(f"{path}: [ocv] unknown key '{k}' (expected soc_frac or soc_pct, and ocv_v)")
+            if ("soc_frac" in body) == ("soc_pct" in body) or "ocv_v" not in body:
+                raise DataError(f"{path}: [ocv] needs ocv_v and one of soc_frac, soc_pct")
+            key = "soc_frac" if "soc_frac" in body else "soc_pct"
             try:
-                out["ocv_soc_frac"] = tuple(float(x) for x in body["soc_frac"])
-                out["ocv_v"] = tuple(float(x) for x in body["ocv_v"])
+                soc = [float(x) / (100.0 if key == "soc_pct" else 1.0) for x in body[key]]
+                v = [float(x) for x in body["ocv_v"]]
             except (TypeError, ValueError) as exc:
-                raise DataError(f"{path}: [ocv] soc_frac and ocv_v must be lists of numbers ({exc})") from exc
+                raise DataError(f"{path}: [ocv] {key} and ocv_v must be lists of numbers ({exc})") from exc
+            # a discharge test lists the curve from full to empty: taken in increasing SOC (the pairs kept together)
+            if len(soc) >= 2 and len(soc) == len(v) and all(b < a for a, b in zip(soc, soc[1:])):
+                soc, v = soc[::-1], v[::-1]
+            out["ocv_soc_frac"] = tuple(soc)
+            out["ocv_v"] = tuple(v)
         elif sec in COMPONENT_TABLES:
             tables[sec] = dict(body)
         else:

@@ -118,3 +118,30 @@ def test_out_of_sample_offsets_whole_library(group, case):
     assert "current_offset" in rep["selected_effects"] and "capacity" not in rep["selected_effects"]
     assert "arrhenius_resistance" not in rep["selected_effects"], rep["selected_effects"]
     assert rep["final_parameters"]["current_offset_a"] == pytest.approx(truth["current_offset_a"], rel=0.25)
+
+
+def test_an_ocv_table_in_discharge_order_or_in_percent_is_the_same_curve(tmp_path):
+    """The trial's refused nominals: a C/50 discharge lists the curve from full to empty, and SOC in % is the
+    project's own convention elsewhere.  Both read as the increasing table; a table that is not monotonic, or gives
+    both keys, is still refused with the file named."""
+    from shevsim.calibrate.cell import CellModel
+    from shevsim.core.errors import DataError
+    base = load_params_toml(D / "cell_ai2020_nominal.toml")
+    soc, v = list(base["ocv_soc_frac"]), list(base["ocv_v"])
+    head = "[params]\ncapacity_ah = 2.28\nsoc0_frac = -1.0\n[ocv]\n"
+    desc = tmp_path / "desc.toml"
+    desc.write_text(head + f"soc_frac = {soc[::-1]}\nocv_v = {v[::-1]}\n")
+    pct = tmp_path / "pct.toml"
+    pct.write_text(head + f"soc_pct = {[100.0 * x for x in soc]}\nocv_v = {v}\n")
+    for f in (desc, pct):
+        k = load_params_toml(f)
+        assert k["ocv_soc_frac"] == pytest.approx(soc) and k["ocv_v"] == pytest.approx(v)
+        CellModel(k, str(f))                                   # the model takes it
+    bad = tmp_path / "bad.toml"
+    bad.write_text(head + f"soc_frac = {[soc[1], soc[0]] + soc[2:]}\nocv_v = {v}\n")
+    with pytest.raises(DataError, match="bad.toml"):
+        CellModel(load_params_toml(bad), str(bad))
+    both = tmp_path / "both.toml"
+    both.write_text(head + f"soc_frac = {soc}\nsoc_pct = {soc}\nocv_v = {v}\n")
+    with pytest.raises(DataError, match="both.toml.*one of soc_frac, soc_pct"):
+        load_params_toml(both)
