@@ -37,6 +37,13 @@ OCV's slope on its steps, 3.6 mV per %, is 0.6 point, while the first rest volta
 table's true error, equilibrium OCV - C/20 table, 4.5-6.8 mV).  Prints the table
 ``generator | case | named? | parameter fitted vs truth | held-out before -> after`` and, last,
 ``independent cases: N/M``.
+
+The generator's own physics: every PyBaMM record carries solid diffusion in its particles, which the user's
+nominal (an equivalent circuit) lacks, so ``solid_diffusion`` named on a PyBaMM record is not a false selection
+when its ``diffusion_time_s`` lies within the record's particles' R^2/D (``solid_diffusion_time_s`` of the truth
+file, ``diffusion_times.py``: the two electrodes' values) widened by ``PRESENT_TOL`` = 25 % each way; it is
+allowed beside the expected effects, never required, and the table says so on the row.  The strict count (any
+effect beyond the expected ones is wrong) is printed too.
 """
 from __future__ import annotations
 
@@ -215,6 +222,23 @@ GENERATORS = {"vehicle": ("FASTSim 3.1", VEHICLE, "vehicle"),
               "cell_mohtat2020": ("PyBaMM SPMe Mohtat2020 NMC532 (out of sample, 8th session)", CELL_OOS, "cell")}
 
 
+PRESENT_TOL = 0.25
+
+
+def _present(group: str, extra, final: dict):
+    """``extra`` (effects named beyond the expected ones) as the generator's own physics: a list of statements, or
+    None when one of them is not (only ``solid_diffusion`` is, on a PyBaMM record, with ``diffusion_time_s``
+    within the electrodes' R^2/D widened by ``PRESENT_TOL``)."""
+    truth = json.loads((D / f"{group}_truth.json").read_text()).get("solid_diffusion_time_s")
+    if truth is None or list(extra) != ["solid_diffusion"]:
+        return None
+    lo, hi = sorted((truth["negative"], truth["positive"]))
+    tau = float(final.get("diffusion_time_s", float("nan")))
+    if not (lo / (1.0 + PRESENT_TOL) <= tau <= hi * (1.0 + PRESENT_TOL)):
+        return None
+    return [f"solid_diffusion {tau:.4g} s: the particles' own, R^2/D {lo:.4g}-{hi:.4g} s"]
+
+
 def run_case(group: str, case: str, spec, model: str | None = None) -> dict:
     """One record ``<group>_<case>.csv`` (truth ``<group>_truth.json``, nominal ``<group>_nominal.toml`` or the
     one the case's truth names) calibrated with ``model`` (default: the group's name)."""
@@ -237,6 +261,15 @@ def run_case(group: str, case: str, spec, model: str | None = None) -> dict:
            "after": {c: v["holdout"] for c, v in rep["rmse_after"].items()}, "elapsed_s": time.perf_counter() - t0,
            "time_shift_s": (rep.get("timing") or {}).get("time_shift_s"),
            "at_bounds": [b["parameter"] for b in rep.get("parameters_at_bounds") or []]}
+    # the generator's own physics (solid diffusion in PyBaMM's particles), named beside the expected effects with
+    # the record's own time constant: right, not a false selection (the strict verdict is kept in the row)
+    row["named_strict"] = named
+    extra = [e for e in sel if e not in expected]
+    if not named and extra and set(expected) <= set(sel):
+        present = _present(group, extra, rep["final_parameters"])
+        if present is not None:
+            row["present"], named = present, True
+            row["named"] = True
     ok = named
     if label is not None and (named or expected or label.startswith("series R")):
         f, tv = fitted(rep["final_parameters"], rep), true(truth)
@@ -249,6 +282,8 @@ def run_case(group: str, case: str, spec, model: str | None = None) -> dict:
 
 def fmt(gen: str, r: dict) -> str:
     named = "yes" if r["named"] else f"no ({', '.join(r['selected']) or 'nothing'})"
+    if r.get("present"):
+        named += " (+ " + "; ".join(r["present"]) + ")"
     if r["discrepancy"]:
         named += f"; model-form discrepancy: {', '.join(map(str, r['discrepancy']))}"
     if r.get("parameter"):
@@ -282,10 +317,15 @@ def main(argv=None) -> int:
     for gen, _, _ in GENERATORS.values():
         nz = [r for r in rows if r["generator"] == gen and not r["expected"]]
         if nz:
-            false = sum(1 for r in nz if r["selected"])
-            print(f"false selections on no-effect records, {gen}: {false}/{len(nz)}")
+            false = sum(1 for r in nz if r["selected"] and not r.get("present"))
+            own = sum(1 for r in nz if r.get("present"))
+            print(f"false selections on no-effect records, {gen}: {false}/{len(nz)}"
+                  + (f" ({own} more name{'s' if own == 1 else ''} the generator's own solid diffusion at its particles' "
+                     f"R^2/D: counted right)" if own else ""))
     if a.json:
         Path(a.json).write_text(json.dumps(rows, indent=2, default=float))
+    strict = sum(r["ok"] and r.get("named_strict", r["named"]) for r in rows)
+    print(f"strictly (any effect beyond the expected ones wrong, the generator's own included): {strict}/{len(rows)}")
     print(f"independent cases: {sum(r['ok'] for r in rows)}/{len(rows)}")
     return 0
 

@@ -218,6 +218,9 @@ def main() -> int:
                                 "soc_table_range": [lo, hi]}
         print(name, f"V {v.min():.3f}-{v.max():.3f}  T max {temp.max():.2f} C  SOC {lo:.3f}-{hi:.3f}  "
               f"start {soc_init:.3f}, from the rest voltage {soc_rest:.3f}", flush=True)
+    # the particles' own solid diffusion (in every record): the truth of the solid_diffusion effect
+    from diffusion_times import electrode_diffusion_times_s
+    truth["solid_diffusion_time_s"] = electrode_diffusion_times_s('Prada2013')
     (OUT / "cell_lfp_truth.json").write_text(json.dumps(truth, indent=2) + "\n")
     return 0
 

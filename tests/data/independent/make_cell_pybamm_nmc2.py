@@ -199,6 +199,9 @@ def main() -> int:
                                 "soc_table_range": [float(soc_tab.min()), float(soc_tab.max())]}
         print(name, f"V {v.min():.3f}-{v.max():.3f}  T max {temp.max():.2f} C  SOC {soc_tab.min():.3f}-"
               f"{soc_tab.max():.3f}", flush=True)
+    # the particles' own solid diffusion (in every record): the truth of the solid_diffusion effect
+    from diffusion_times import electrode_diffusion_times_s
+    truth["solid_diffusion_time_s"] = electrode_diffusion_times_s('Ecker2015')
     (OUT / "cell_nmc2_truth.json").write_text(json.dumps(truth, indent=2) + "\n")
     return 0
 

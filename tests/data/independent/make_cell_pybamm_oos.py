@@ -146,6 +146,9 @@ def main():
                                 "capacity_ah": CAP * case.get("am_factor", 1.0), "v": [float(v.min()), float(v.max())],
                                 "t_max_c": float(temp.max()), "soc_approx": [float(soc.min()), float(soc.max())]}
         print(SET, name, f"V {v.min():.3f}-{v.max():.3f} Tmax {temp.max():.2f} SOC~{soc.min():.2f}", flush=True)
+    # the particles' own solid diffusion (in every record): the truth of the solid_diffusion effect
+    from diffusion_times import electrode_diffusion_times_s
+    truth["solid_diffusion_time_s"] = electrode_diffusion_times_s(SET)
     (OUT / f"{PRE}_truth.json").write_text(json.dumps(truth, indent=2) + "\n")
 
 if __name__ == "__main__":
