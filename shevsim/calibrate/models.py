@@ -42,6 +42,10 @@ class Param:
     #: the range a physical value of this parameter falls in (None: the bounds); a selected effect whose
     #: parameter lands outside it (or on a bound) is reported as a model-form discrepancy, not as the cause
     plausible: tuple | None = None
+    #: a declared parameter whose bounds are a plausibility guard inside a wider physical range: that range
+    #: (``(lo, hi)``, e.g. the component's valid values).  The calibration may profile it past its bounds, up to
+    #: these limits (``workflow._Run.screen_declared_bounds``); None: the bounds are the limits
+    limits: tuple | None = None
 
 
 @dataclass(frozen=True)

@@ -281,10 +281,12 @@ class VehicleModel(CalibrationModel):
         return out
 
     def _declared_for(self, known):
+        # the bounds are a plausibility guard (a given map within 8 % up, 20 % down); the motor takes (0, 2], capped
+        # at an efficiency of 1: the calibration may profile them past the guard when a map is further off
         return (Param("efficiency_scale_frac", "-", 0.8, 1.08, _FILES["motor"].efficiency_scale_frac,
-                      "motor: actual / map efficiency (motor + inverter)"),
+                      "motor: actual / map efficiency (motor + inverter)", limits=(0.0, 2.0)),
                 Param("regen_efficiency_scale_frac", "-", 0.8, 1.08, _FILES["motor"].regen_efficiency_scale_frac,
-                      "motor: generating / motoring efficiency on top of efficiency_scale_frac"))
+                      "motor: generating / motoring efficiency on top of efficiency_scale_frac", limits=(0.0, 2.0)))
 
     def _make_effects(self):
         k = self.known
