@@ -132,7 +132,8 @@ previous mean-temperature estimate and the measured current's sign, with the cur
 
 V2 is a known input to the measurement (not a filter state; its error is not tracked by P_x), and the
 heat (5.16) gains V2^2 / R2,nom.  ``"none"`` (the ``DEKFParams`` default) is the seed's one-branch filter,
-bit for bit.  The power capability still predicts with the one-branch model.
+bit for bit.  The power capability carries the V2 of the step over its horizon with the same maps
+(:mod:`shevsim.bms.power_capability`, "Slow second branch").
 
 Solid diffusion (``diffusion_time_s``; departure from the seed)
 ---------------------------------------------------------------

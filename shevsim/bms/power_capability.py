@@ -55,6 +55,27 @@ limit is optimistic, and so far that the OCV's linearisation (4.15e) fails in it
 solution, :func:`_surface_voltage_current`).  ``diffusion_time_s = 0`` is the prediction above,
 bit for bit.
 
+Slow second branch (``v2_model = "nominal_maps"``, the BMS component's default with its DEKF's of that name;
+departure from the seed): the plant is OCV-R-RC-RC and its second branch is slow (tau_2 = R2 C2 ~ 220-400 s)
+and large (19 mV after 300 s of 2C on the default tables).  The DEKF propagates its voltage V2 open loop from the
+nominal R2, C2 maps (:mod:`shevsim.bms.electrical`); the power capability carries that V2_k over the horizon with
+the plant's exact discretisation (current held, R2, C2 held at their values now)::
+
+    V2_{k+N} = a2^N V2_k + R2 (1 - a2^N) i,    a2^N = exp(-N dt / (R2 C2))
+    V_{k+N}  = V_oc(s_{k+N}) - a^N V1_k - a2^N V2_k - i [R_s + R1 (1 - a^N) + R2 (1 - a2^N)]
+
+(``s_{k+N}`` the SOC of the lines above: linearised at SOC_k without diffusion, the surface SOC on the OCV table
+with it).  R2, C2 are the nominal maps' at SOC_k and the mean-temperature estimate, of the direction of the test
+current as in the plant: the discharge table for the V_min limit, the charge table for the V_max limit, and for
+the voltage after N steps (5.36) the table of the limit current's sign.  A charged V2 moves both voltage limits
+by ``a2^N V2_k / gain``; from rest (V2_k = 0) a horizon short against R2 C2 adds only the branch's charge-up,
+``R2 (1 - a2^N) ~ N dt / C2`` (its capacitor), to the horizon's resistance.  Measured against the battery plant
+(tests/unit/test_bms_slow_branch.py): held at the predicted 10 s discharge limit after 300 s of 2C / 4C discharge
+the plant ends +2.4 / +0.04 mV from V_min (without V2: -20 / -41 mV), at the charge limit after 2C charge
+-0.06 mV from V_max (without: +23 mV).  ``v2_model = "none"`` (the :class:`PowerCapabilityParams` default) does
+not read V2: the seed's prediction above, bit for bit.  The thermal limit still takes the polarisation heat of
+V1 only (V2^2 / R2 is left out of its horizon).
+
 Limits (4.17 / 5.34): ``i_max = min(SOC_min, V_min, thermal[, rating])``,
 ``i_min = max(SOC_max, V_max, thermal[, rating])``; power (4.18-4.19 / 5.35-5.36):
 ``P = i V_{k+N}`` with ``V_{k+N}`` from the (nonlinear) OCV at the predicted SOC, times the
@@ -71,7 +92,7 @@ from shevsim.battery.cell import FARADAY_C_MOL, CellTables, default_tables
 from shevsim.battery.model import DIFF_INSTANT, DIFF_W_GAIN, DIFF_W_RATE
 from shevsim.battery.thermal import ThermalParams, two_state_ad_bd, two_state_out
 from shevsim.core.compiled import field_index
-from shevsim.core.lookup import HAVE_NUMBA, njit, py_func, t1_slope, t1_value
+from shevsim.core.lookup import HAVE_NUMBA, ecm_lookup, njit, py_func, t1_slope, t1_value
 from shevsim.bms.thermal_estimators import TwoStateDiscretiser
 from shevsim.core.errors import ScenarioError
 from shevsim.core.params import rng
@@ -126,6 +147,10 @@ class PowerCapabilityParams(CellLimits):
     diffusion_time_s : float
         The cell's solid-diffusion time R^2/D [s] (0 = off, the seed's prediction bit for bit): the OCV is
         read at the surface SOC along the horizon (module docstring, "Solid diffusion").
+    v2_model : str
+        ``"none"`` (the seed's one-branch prediction, bit for bit) or ``"nominal_maps"``: the slow second RC
+        branch V2 the DEKF propagates (its ``v2_model`` of that name) is carried over the horizon with the
+        nominal R2, C2 maps (module docstring, "Slow second branch").
     """
 
     horizon_steps: int = 100
@@ -134,9 +159,12 @@ class PowerCapabilityParams(CellLimits):
     soc_max_frac: float = 0.7
     capacity_ah: float = 2.3
     diffusion_time_s: float = 0.0
+    v2_model: str = "none"
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.v2_model not in ("none", "nominal_maps"):
+            raise ScenarioError(f"power capability: v2_model must be 'none' or 'nominal_maps', got {self.v2_model!r}")
         if not (math.isfinite(self.diffusion_time_s) and self.diffusion_time_s >= 0.0):
             raise ScenarioError(f"power capability: diffusion_time_s must be finite and >= 0, "
                                 f"got {self.diffusion_time_s!r}")
@@ -174,12 +202,12 @@ _CACHES: dict = {}
 # ---------------------------------------------------------------------------------------------
 def _constants(p: PowerCapabilityParams):
     """``k = [N, dt, soc_min, soc_max, v_min, v_max, t_core_max, i_cell_max, capacity_ah, n_pack, exact, F,
-    float(N), diffusion_time_s]`` of ``p``."""
+    float(N), diffusion_time_s, slow branch (1.0 with v2_model = "nominal_maps", else 0.0)]`` of ``p``."""
     import numpy as np
     return np.array([p.horizon_steps, p.dt_s, p.soc_min_frac, p.soc_max_frac, p.v_min_v, p.v_max_v,
                      p.t_core_max_c, p.i_cell_max_a, p.capacity_ah, float(p.n_series * p.n_parallel),
                      1.0 if p.polarisation_heat == "exact" else 0.0, FARADAY_C_MOL, float(p.horizon_steps),
-                     float(p.diffusion_time_s)])
+                     float(p.diffusion_time_s), 1.0 if p.v2_model == "nominal_maps" else 0.0])
 
 
 #: a row ``th`` of the thermal coefficients (:func:`thermal_coeffs`): ``A_N, B_N = ZOH(N dt)`` of the two-state
@@ -245,31 +273,57 @@ def _surface_voltage_current(d, ix, sf, g, r, free_rc, v_lim, i0):
 
 
 @njit(cache=True)
-def _electrical_limits(d, ix, k, soc, v1, rs, r1, c1, wd=0.0):
+def _slow_branch(d, ix, k, soc, t_c, v2, sign):
+    """The slow second branch's part of the voltage after N steps at a held current ``i`` of the sign of ``sign``:
+    ``V2_{k+N} = f2 + i r2`` with ``(f2, r2) = (a2^N V2_k, R2 (1 - a2^N))``, ``a2^N = exp(-N dt / (R2 C2))``, the
+    nominal R2, C2 at ``soc``, ``t_c`` of the table of that direction (discharge for ``sign >= 0``, the plant's
+    convention); ``(0, 0)`` without the slow branch (``k[14]`` = 0)."""
+    if not k[14] > 0.5:
+        return 0.0, 0.0
+    _rs, _r1, _c1, r2, c2 = ecm_lookup(d, ix, soc, t_c, sign)
+    a2n = math.exp(-(k[0] * k[1]) / (r2 * c2))
+    return a2n * v2, r2 * (1.0 - a2n)
+
+
+@njit(cache=True)
+def _electrical_limits(d, ix, k, soc, v1, rs, r1, c1, wd=0.0, v2=0.0, t_c=25.0):
     """``(i_soc_min, i_soc_max, i_v_min, i_v_max)`` [A], seed 5.28 (cell, + discharge); with solid diffusion
     (``k[13]`` > 0, diffusion state ``wd``) the OCV is read at the surface SOC after N steps, solved on the
-    OCV table itself (module docstring)."""
+    OCV table itself; with the slow branch (``k[14]`` = 1, its voltage ``v2`` now, the maps at ``t_c`` [degC])
+    ``V2_{k+N}`` of the discharge table for V_min, of the charge table for V_max (module docstring)."""
     ndt = k[0] * k[1]
     q_as = 3600.0 * k[8]
     aN = math.exp(-ndt / (r1 * c1))
+    f2d, r2d = _slow_branch(d, ix, k, soc, t_c, v2, 1.0)
+    f2c, r2c = _slow_branch(d, ix, k, soc, t_c, v2, -1.0)
     if k[13] > 0.0:
         s0, g = _diffusion_horizon(k, wd)
         r = rs + r1 * (1.0 - aN)
-        gain = r + t1_slope(d, ix[0], ix[1], soc + s0) * g
+        slope = t1_slope(d, ix[0], ix[1], soc + s0)
         free = t1_value(d, ix[0], ix[1], soc + s0) - aN * v1
-        i_vmin = _surface_voltage_current(d, ix, soc + s0, g, r, aN * v1, k[4], (free - k[4]) / gain)
-        i_vmax = _surface_voltage_current(d, ix, soc + s0, g, r, aN * v1, k[5], (free - k[5]) / gain)
+        if k[14] > 0.5:
+            i_vmin = _surface_voltage_current(d, ix, soc + s0, g, r + r2d, aN * v1 + f2d, k[4],
+                                              (free - f2d - k[4]) / (r + r2d + slope * g))
+            i_vmax = _surface_voltage_current(d, ix, soc + s0, g, r + r2c, aN * v1 + f2c, k[5],
+                                              (free - f2c - k[5]) / (r + r2c + slope * g))
+        else:
+            gain = r + slope * g
+            i_vmin = _surface_voltage_current(d, ix, soc + s0, g, r, aN * v1, k[4], (free - k[4]) / gain)
+            i_vmax = _surface_voltage_current(d, ix, soc + s0, g, r, aN * v1, k[5], (free - k[5]) / gain)
         return (soc - k[2]) * q_as / ndt, (soc - k[3]) * q_as / ndt, i_vmin, i_vmax
-    else:
-        gain = rs + r1 * (1.0 - aN) + t1_slope(d, ix[0], ix[1], soc) * ndt / q_as
-        free = t1_value(d, ix[0], ix[1], soc) - aN * v1
+    gain = rs + r1 * (1.0 - aN) + t1_slope(d, ix[0], ix[1], soc) * ndt / q_as
+    free = t1_value(d, ix[0], ix[1], soc) - aN * v1
+    if k[14] > 0.5:
+        return ((soc - k[2]) * q_as / ndt, (soc - k[3]) * q_as / ndt, (free - f2d - k[4]) / (gain + r2d),
+                (free - f2c - k[5]) / (gain + r2c))
     return (soc - k[2]) * q_as / ndt, (soc - k[3]) * q_as / ndt, (free - k[4]) / gain, (free - k[5]) / gain
 
 
 @njit(cache=True)
-def _voltage_after(d, ix, k, i_a, soc, v1, rs, r1, c1, wd=0.0):
+def _voltage_after(d, ix, k, i_a, soc, v1, rs, r1, c1, wd=0.0, v2=0.0, t_c=25.0):
     """Predicted cell terminal voltage after N steps at the held current ``i_a`` (5.36) [V]; with solid
-    diffusion (``k[13]`` > 0) the OCV at the surface SOC."""
+    diffusion (``k[13]`` > 0) the OCV at the surface SOC; with the slow branch (``k[14]`` = 1) less
+    ``V2_{k+N}`` of the table of the current's direction."""
     ndt = k[0] * k[1]
     aN = math.exp(-ndt / (r1 * c1))
     if k[13] > 0.0:
@@ -277,7 +331,11 @@ def _voltage_after(d, ix, k, i_a, soc, v1, rs, r1, c1, wd=0.0):
         soc_n = soc + s0 - i_a * g
     else:
         soc_n = soc - i_a * ndt / (3600.0 * k[8])
-    return t1_value(d, ix[0], ix[1], soc_n) - i_a * rs - aN * v1 - i_a * r1 * (1.0 - aN)
+    v = t1_value(d, ix[0], ix[1], soc_n) - i_a * rs - aN * v1 - i_a * r1 * (1.0 - aN)
+    if k[14] > 0.5:
+        f2, r2 = _slow_branch(d, ix, k, soc, t_c, v2, i_a)
+        v -= f2 + i_a * r2
+    return v
 
 
 @njit(cache=True)
@@ -321,17 +379,19 @@ def _thermal_limits(d, ix, k, th, s, last_max, last_min):
 
 
 @njit(cache=True)
-def power_limits(d, ix, k, th, s, last_max, last_min, wd=0.0):
+def power_limits(d, ix, k, th, s, last_max, last_min, wd=0.0, v2=0.0):
     """One power-capability evaluation (4.17-4.19 / 5.34-5.36) from the estimates ``s`` (:data:`CellEstimate`)
-    with the thermal coefficients ``th`` (:data:`TH`), the previous limits ``last_*`` [A] and the solid-diffusion
-    state ``wd`` (read only with ``k[13]`` = diffusion_time_s > 0): the 12 fields of :class:`PowerLimits`."""
-    soc, v1, rs, r1, c1 = s.soc, s.v1, s.rs, s.r1, s.c1
-    i_smin, i_smax, i_vmin, i_vmax = _electrical_limits(d, ix, k, soc, v1, rs, r1, c1, wd)
+    with the thermal coefficients ``th`` (:data:`TH`), the previous limits ``last_*`` [A], the solid-diffusion
+    state ``wd`` (read only with ``k[13]`` = diffusion_time_s > 0) and the slow branch's voltage ``v2`` [V] (read
+    only with ``k[14]`` = 1, v2_model = "nominal_maps"; its maps at ``s.t_mean_c``): the 12 fields of
+    :class:`PowerLimits`."""
+    soc, v1, rs, r1, c1, t_c = s.soc, s.v1, s.rs, s.r1, s.c1, s.t_mean_c
+    i_smin, i_smax, i_vmin, i_vmax = _electrical_limits(d, ix, k, soc, v1, rs, r1, c1, wd, v2, t_c)
     i_td, i_tc = _thermal_limits(d, ix, k, th, s, last_max, last_min)
     i_max = min(i_smin, i_vmin, i_td, k[7])
     i_min = max(i_smax, i_vmax, i_tc, -k[7])
-    v_d = _voltage_after(d, ix, k, i_max, soc, v1, rs, r1, c1, wd)
-    v_c = _voltage_after(d, ix, k, i_min, soc, v1, rs, r1, c1, wd)
+    v_d = _voltage_after(d, ix, k, i_max, soc, v1, rs, r1, c1, wd, v2, t_c)
+    v_c = _voltage_after(d, ix, k, i_min, soc, v1, rs, r1, c1, wd, v2, t_c)
     p_max = i_max * v_d * k[9]
     p_min = i_min * v_c * k[9]
     return (i_max, i_min, p_max if p_max > 0.0 else 0.0, p_min if p_min < 0.0 else 0.0,
@@ -485,22 +545,24 @@ class PowerCapability:
         return _thermal_limits(d, ix, self._k, self._thermal_coeffs(h_w_m2k), s, self.last_i_max_a, self.last_i_min_a)
 
     def voltage_after(self, i_a: float, soc: float, v1: float, rs: float, r1: float, c1: float,
-                      wd: float = 0.0) -> float:
+                      wd: float = 0.0, v2: float = 0.0, t_mean_c: float = 25.0) -> float:
         """Predicted cell terminal voltage after N steps at the held current (5.36) [V] (``wd``: the
-        solid-diffusion state, read with ``diffusion_time_s > 0``)."""
+        solid-diffusion state, read with ``diffusion_time_s > 0``; ``v2`` [V]: the slow branch's voltage, read
+        with ``v2_model = "nominal_maps"``, its maps at ``t_mean_c`` [degC])."""
         d, ix = self._tabs
         return _voltage_after(d, ix, self._k, float(i_a), float(soc), float(v1), float(rs), float(r1), float(c1),
-                              float(wd))
+                              float(wd), float(v2), float(t_mean_c))
 
     def compute(self, soc: float, v1: float, rs: float, r1: float, c1: float, t_mean_c: float, gamma: float,
-                h_w_m2k: float, t_amb_c: float, wd: float = 0.0) -> PowerLimits:
+                h_w_m2k: float, t_amb_c: float, wd: float = 0.0, v2: float = 0.0) -> PowerLimits:
         """Current and power limits from the estimated states (SOC as a fraction, cell quantities; ``wd`` the
-        solid-diffusion state, read with ``diffusion_time_s > 0``)."""
+        solid-diffusion state, read with ``diffusion_time_s > 0``; ``v2`` [V] the slow branch's voltage (the
+        DEKF's), read with ``v2_model = "nominal_maps"``)."""
         d, ix = self._tabs
         s = CellEstimate(float(soc), float(v1), float(rs), float(r1), float(c1), float(t_mean_c), float(gamma),
                          float(t_amb_c))
         r = self._limits(d, ix, self._k, self._thermal_coeffs(h_w_m2k), s, self.last_i_max_a, self.last_i_min_a,
-                         float(wd))
+                         float(wd), float(v2))
         self.last_i_max_a = r[0]
         self.last_i_min_a = r[1]
         return PowerLimits(*r)

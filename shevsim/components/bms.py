@@ -122,8 +122,9 @@ class BMSParams(DEKFTuning, CellLimits, ThermalParams):
     v2_model : str
         ``"nominal_maps"`` (default): the DEKF propagates the plant-type's slow second RC branch V2 from
         the nominal R2, C2 maps and subtracts it from the predicted voltage (unbiased SOC against the
-        OCV-R-RC-RC plant, issue 14); ``"none"``: the seed's one-branch filter.  See
-        :mod:`shevsim.bms.electrical`.
+        OCV-R-RC-RC plant, issue 14), and the power capability carries that V2 over its horizon (its decay
+        and its charge-up under the test current); ``"none"``: the seed's one-branch filter and prediction.
+        See :mod:`shevsim.bms.electrical` and :mod:`shevsim.bms.power_capability`.
     diffusion_time_s : float
         The cell's solid-diffusion time R^2/D [s] (the battery parameter of that name; default 0 = off, the BMS
         bit for bit as without it).  With it the DEKF propagates the diffusion state open loop with the plant's
@@ -264,7 +265,7 @@ class BMS(CompiledStep, Component):
         self.pc = PowerCapability(PowerCapabilityParams(
             horizon_steps=max(1, int(round(p.horizon_s / dt))), dt_s=dt, soc_min_frac=p.soc_min_pct / 100.0,
             soc_max_frac=p.soc_max_pct / 100.0, capacity_ah=p.capacity_ah, diffusion_time_s=p.diffusion_time_s,
-            **_fields_of(p, CellLimits)),
+            v2_model=p.v2_model, **_fields_of(p, CellLimits)),
             self.thermal_params, self.tables)
         self.xb[XB.i_max] = self.pc.last_i_max_a
         self.xb[XB.i_min] = self.pc.last_i_min_a
@@ -298,7 +299,7 @@ class BMS(CompiledStep, Component):
         d = self.dekf
         ns, np_ = self._ns, self._np
         lim = self.pc.compute(d.soc, d.v1, d.rs, d.r1, d.c1, self.t_mean, self.gamma, self.h_est,
-                              self.u["t_ambient_meas_c"], d.wd)
+                              self.u["t_ambient_meas_c"], d.wd, d.v2)
         self.xb[XB.i_max] = self.pc.last_i_max_a
         self.xb[XB.i_min] = self.pc.last_i_min_a
         y = self.y
@@ -386,7 +387,7 @@ def bms_step(data, u, y, t, h):
     c1 = xe[E.c1]
     slot = thermal_coeffs(tp, xb[XB.h], keys, vals)
     lim = power_limits(pd_, pix, pk, vals[slot], CellEstimate(soc, v1, rs, r1, c1, xb[XB.t_mean], xb[XB.gamma], ta),
-                       xb[XB.i_max], xb[XB.i_min], xe[E.wd])
+                       xb[XB.i_max], xb[XB.i_min], xe[E.wd], xe[E.v2])
     xb[XB.i_max] = lim[0]
     xb[XB.i_min] = lim[1]
     ns = p[0]

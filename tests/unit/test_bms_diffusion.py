@@ -92,8 +92,8 @@ def _plant_voltage_at(b, i_a, k0, steps):
 def test_discharge_limit_with_diffusion_keeps_the_plant_above_v_min_over_the_horizon():
     """Drive the plant at each BMS's discharge current limit for the horizon (10 s): with the diffusion model
     the terminal voltage stays on V_min within the estimation error (measured 2.8983 V for 2.9 V), without it
-    the limit (13.1 A against 6.8 A) takes the plant to 2.38 V.  (The one-branch plant isolates the diffusion:
-    the power capability still leaves the slow second branch out, which costs another ~20 mV here.)"""
+    the limit (13.1 A against 6.8 A) takes the plant to 2.38 V.  (The one-branch plant isolates the diffusion;
+    the same case with the plant's second branch and the BMS's V2 is in tests/unit/test_bms_slow_branch.py.)"""
     v_min = 2.9
     b, (plain, diff), n = _pulse_then_limits(v_min)
     steps = diff.pc.params.horizon_steps

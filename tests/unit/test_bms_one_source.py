@@ -136,9 +136,10 @@ def _pc_state(rng):
             rng.uniform(15.0, 40.0))
 
 
-@pytest.mark.parametrize("mode", ["exact", "seed"])
-def test_power_capability_functions_compiled_equal_py_func(mode):
-    prm = PowerCapabilityParams(polarisation_heat=mode, i_cell_max_a=60.0 if mode == "seed" else math.inf)
+@pytest.mark.parametrize("mode,v2_model", [("exact", "none"), ("seed", "none"), ("exact", "nominal_maps")])
+def test_power_capability_functions_compiled_equal_py_func(mode, v2_model):
+    prm = PowerCapabilityParams(polarisation_heat=mode, i_cell_max_a=60.0 if mode == "seed" else math.inf,
+                                v2_model=v2_model)
     fast, ref = PowerCapability(prm), PowerCapability(prm, compiled=False)
     assert ref._limits is pc_mod.power_limits.py_func
     d, ix = fast._tabs
@@ -147,16 +148,18 @@ def test_power_capability_functions_compiled_equal_py_func(mode):
     bound = set()
     for _ in range(2000):
         s = _pc_state(rng)
-        a, b = fast.compute(*s), ref.compute(*s)
+        v2 = rng.uniform(-0.06, 0.06)
+        a, b = fast.compute(*s, 0.0, v2), ref.compute(*s, 0.0, v2)
         _close(a, b)
         bound.add(min((b.i_soc_min_a, "soc"), (b.i_v_min_a, "v"), (b.i_t_dch_a, "t"))[1])
         soc, v1, rs, r1, c1, tm, gamma, h, ta = s
         th = fast._thermal_coeffs(h)
         last = (rng.uniform(-100.0, 100.0), rng.uniform(-100.0, 100.0))
-        _close(*_both(pc_mod._electrical_limits, d, ix, k, soc, v1, rs, r1, c1))
+        _close(*_both(pc_mod._electrical_limits, d, ix, k, soc, v1, rs, r1, c1, 0.0, v2, tm))
         _close(*_both(pc_mod._thermal_limits, d, ix, k, th, pc_mod.CellEstimate(soc, v1, rs, r1, c1, tm, gamma, ta),
                       *last))
-        _close(*_both(pc_mod._voltage_after, d, ix, k, rng.uniform(-100.0, 100.0), soc, v1, rs, r1, c1))
+        _close(*_both(pc_mod._voltage_after, d, ix, k, rng.uniform(-100.0, 100.0), soc, v1, rs, r1, c1, 0.0, v2,
+                      tm))
         for rho in (math.exp(-0.1 / (r1 * c1)), math.exp(-0.2 / (r1 * c1)), th[11]):   # incl. rho = eig
             _close(*_both(pc_mod._pole_sum, rho, th, float(prm.horizon_steps)))
     assert bound == {"soc", "v", "t"}

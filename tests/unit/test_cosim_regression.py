@@ -73,16 +73,32 @@
   44.0200443668655 %, fuel 195.91466106486396 g, soot 282.5379549822121 mg) to 2e-13 (checked below); the
   one-branch and DAQP-on-every-call references below run with the seed update (their values are bit for bit
   or to 6e-14 the previous ones).
+  Re-recorded a ninth time, on purpose - intended change of the power capability: with the DEKF's slow branch
+  (``bms.v2_model = "nominal_maps"``, the default) the power capability carries V2 over its horizon (its present
+  value decaying and its charge-up under the held test current, the nominal R2, C2 maps;
+  :mod:`shevsim.bms.power_capability`, "Slow second branch"; tests/unit/test_bms_slow_branch.py): the limits
+  move from t = 0 and the run from t = 68 s; SOC +5.4e-4, BMS SOC +5.6e-4, fuel +6.5e-4, soot -8.6e-4
+  relative at 120 s.  With the power capability built without the slow branch (``PC_WITHOUT_V2``, the BMS's
+  power capability given ``v2_model = "none"`` while its DEKF keeps V2) the run gives the previous values
+  (SOC 44.07242761154393 %, BMS SOC 44.008790465357926 %, fuel 195.99132484539052 g, soot
+  282.6513059332477 mg) bit for bit (checked below); the seed-update and DAQP-on-every-call references below
+  run that way too.  ``bms.v2_model = "none"`` leaves the power capability as it was, bit for bit: the
+  one-branch and seed-DEKF references are unchanged.
 * Two identical runs give bit-identical DataFrames (no wall-clock or other non-deterministic
   quantity among the recorded outputs; the battery's measurement noise is seeded).
 """
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
 
+import shevsim.components.bms as bms_component
+from shevsim.bms.power_capability import PowerCapabilityParams
 from shevsim.core.scenario import build_master, load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -92,13 +108,24 @@ SCENARIO = ROOT / "scenarios" / "hd_udds_mpc.toml"
 # slow-branch DEKF and its q_soc, with the limits held within the step and with the MPC's active-set guess;
 # stop_s = 120 s (module docstring)
 REFERENCE_120S = {
+    "battery.soc_pct": 44.09605111254506,
+    "bms.soc_pct": 44.03335131297234,
+    "engine_generator.fuel_mass_g": 196.11840794273903,
+    "engine_generator.soot_mass_mg": 282.40933297059155,
+}
+#: the run before the power capability carried the slow branch (module docstring, ninth re-recording): checked
+#: with ``PC_WITHOUT_V2``
+REFERENCE_120S_PC_WITHOUT_V2 = {
     "battery.soc_pct": 44.07242761154393,
     "bms.soc_pct": 44.008790465357926,
     "engine_generator.fuel_mass_g": 195.99132484539052,
     "engine_generator.soot_mass_mg": 282.6513059332477,
 }
+#: run with the BMS's power capability built without the slow branch (its DEKF keeps V2): the prediction before
+#: the power capability carried V2
+PC_WITHOUT_V2 = "power capability without V2"
 #: the BMS's parameter filter as in the seed (``bms.rc_update = "seed"``): the values before the R1-factor
-#: tracking (module docstring)
+#: tracking (module docstring; run with ``PC_WITHOUT_V2``, as then)
 SEED_RC_UPDATE = "bms.rc_update=seed"
 REFERENCE_120S_SEED_RC_UPDATE = {
     "battery.soc_pct": 44.069151608936835,
@@ -127,7 +154,8 @@ REFERENCE_120S_SEED_DEKF = {
 }
 
 #: the default run with DAQP on every call (``supervisor.warm_active_set = false``) and the seed's parameter update
-#: (``SEED_RC_UPDATE``): the values before issue 15's active-set guess, bit for bit
+#: (``SEED_RC_UPDATE``): the values before issue 15's active-set guess, bit for bit (run with ``PC_WITHOUT_V2``, as
+#: then)
 REFERENCE_120S_DAQP_EVERY_CALL = {
     "battery.soc_pct": 44.069278170207,
     "bms.soc_pct": 44.020171385366915,
@@ -141,10 +169,21 @@ REFERENCE_120S_DAQP_EVERY_CALL = {
 FORMER_ENGINE_SOOT = ("engine_generator.transient_soot_mg_per_g=10.0", "engine_generator.soot_scale_frac=1.0")
 
 
+def _pc_params_without_v2(**kw):
+    return dataclasses.replace(PowerCapabilityParams(**kw), v2_model="none")
+
+
 def _run(stop_s: float, sets=(), engine=FORMER_ENGINE_SOOT):
-    sc = load_scenario(SCENARIO, ["cycle.repeat=1", *engine, *sets])
-    m = build_master(sc)
-    return m.run(stop_s)
+    own = [x for x in sets if x != PC_WITHOUT_V2]
+    patch = (mock.patch.object(bms_component, "PowerCapabilityParams", _pc_params_without_v2)
+             if PC_WITHOUT_V2 in sets else contextlib.nullcontext())
+    with patch:
+        sc = load_scenario(SCENARIO, ["cycle.repeat=1", *engine, *own])
+        m = build_master(sc)
+        if PC_WITHOUT_V2 in sets:
+            assert m.components["bms"].pc.params.v2_model == "none"
+            assert m.components["bms"].dekf.params.v2_model == "nominal_maps"
+        return m.run(stop_s)
 
 
 def test_short_hd_udds_mpc_run_matches_pre_optimisation_reference():
@@ -154,6 +193,12 @@ def test_short_hd_udds_mpc_run_matches_pre_optimisation_reference():
     for name, ref in REFERENCE_120S.items():
         got = float(res[name][-1])
         assert got == pytest.approx(ref, rel=1e-9, abs=0.0), f"{name}: {got!r} vs reference {ref!r}"
+
+
+def test_the_power_capability_without_the_slow_branch_gives_the_values_before_it():
+    res = _run(120.0, (PC_WITHOUT_V2,))
+    for name, ref in REFERENCE_120S_PC_WITHOUT_V2.items():
+        assert float(res[name][-1]) == ref, name
 
 
 def test_the_seed_basis_soot_default_changes_the_soot_and_nothing_else():
@@ -183,7 +228,7 @@ def test_short_run_with_the_seed_dekf_matches_the_values_before_the_bms_change()
 
 
 def test_short_run_with_the_seed_parameter_update_matches_the_values_before_r1_tracking():
-    res = _run(120.0, (SEED_RC_UPDATE,))
+    res = _run(120.0, (SEED_RC_UPDATE, PC_WITHOUT_V2))
     assert res.termination == "completed"
     for name, ref in REFERENCE_120S_SEED_RC_UPDATE.items():
         got = float(res[name][-1])
@@ -191,7 +236,7 @@ def test_short_run_with_the_seed_parameter_update_matches_the_values_before_r1_t
 
 
 def test_daqp_on_every_call_gives_the_values_before_the_active_set_guess():
-    res = _run(120.0, ("supervisor.warm_active_set=false", SEED_RC_UPDATE))
+    res = _run(120.0, ("supervisor.warm_active_set=false", SEED_RC_UPDATE, PC_WITHOUT_V2))
     assert res.termination == "completed"
     for name, ref in REFERENCE_120S_DAQP_EVERY_CALL.items():
         assert float(res[name][-1]) == ref, name

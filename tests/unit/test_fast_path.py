@@ -62,7 +62,8 @@ def test_mpc_hd_udds_120s_agrees_with_the_master_on_every_signal():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sets", [("bms.v2_model=none",),
-                                  ("bms.rs_model=free", "bms.rc_model=free", "bms.v2_model=none")])
+                                  ("bms.rs_model=free", "bms.rc_model=free", "bms.v2_model=none"),
+                                  ("shared.cell_diffusion_time_s=2500",)])
 def test_mpc_hd_udds_120s_agrees_with_the_other_dekf_variants(sets):
     _compare("hd_udds_mpc", 120.0, sets)
 
