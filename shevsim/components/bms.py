@@ -180,7 +180,7 @@ class BMSParams(DEKFTuning, CellLimits, ThermalParams):
 
         Smaller SOC and R_s random walks and a freer C1 than Table 5.4.  ``q_soc = 1e-3`` with the slow
         branch propagated (``v2_model = "nominal_maps"``, the default): recovers from a 10 % SOC error in
-        ~575 s on the UAC proxy at <= 0.5 % closed-loop error on HD-UDDS (631 s with the R1 factor's tracking
+        ~575 s on the UAC proxy at <= 0.5 % closed-loop error on HD-UDDS (630 s with the R1 factor's tracking
         update, ``rc_update = "tracking"``, the default since); the one-branch filter needed
         1e-5 to keep the unmodelled V2 out of SOC (~4 % error with Table 5.4), at the price of a slow
         recovery (issue 14).
