@@ -301,6 +301,7 @@ class VehicleModel(CalibrationModel):
             return [{"regen_power_max_w": float(np.quantile(neg, q))} for q in (0.5, 0.8, 0.95)]
 
         m0 = float(k["mass_kg"])
+        f0, cd0 = float(k["rolling_coefficient"]), float(k["drag_coefficient"])
         effs = [
             Effect("road_grade", f"road grade, piecewise linear in distance ({N_GRADE} knots; vehicle grade_frac)",
                    g, {p.name: 0.0 for p in g}, ("power_w",)),
@@ -311,12 +312,17 @@ class VehicleModel(CalibrationModel):
                    (Param("mass_kg", "kg", 0.5 * m0, 2.0 * m0, m0, "vehicle mass", plausible=(0.8 * m0, 1.8 * m0)),),
                    {"mass_kg": m0}, ("power_w",)),
             Effect("rolling_error", "rolling-resistance coefficient differs from the nominal (tyres, surface)",
-                   (Param("rolling_coefficient", "-", 0.002, 0.06, float(k["rolling_coefficient"]),
-                          "rolling coefficient f_r", log=True),),
+                   # plausible: within a factor 2 of the given f_r (one tyre class on paved roads spans about that,
+                   # with pressure and temperature); a fit 3.6x the given one on a record with a constant grade (the
+                   # same force while the vehicle moves) was the grade, not the tyres (a new-user trial's Leaf)
+                   (Param("rolling_coefficient", "-", 0.002, 0.06, f0, "rolling coefficient f_r", log=True,
+                          plausible=(0.5 * f0, 2.0 * f0)),),
                    {"rolling_coefficient": float(k["rolling_coefficient"])}, ("power_w",)),
             Effect("aero_error", "aerodynamic drag differs from the nominal (body, wind; vehicle drag_coefficient)",
-                   (Param("drag_coefficient", "-", 0.1, 3.0, float(k["drag_coefficient"]), "drag coefficient C_d",
-                          log=True),),
+                   # plausible: within a factor 2 of the given C_d (a spec-sheet value against a record's effective
+                   # drag: roof loads, a trailer, a headwind's average add tens of percent; more is another body)
+                   (Param("drag_coefficient", "-", 0.1, 3.0, cd0, "drag coefficient C_d", log=True,
+                          plausible=(0.5 * cd0, 2.0 * cd0)),),
                    {"drag_coefficient": float(k["drag_coefficient"])}, ("power_w",)),
             Effect("regen_limit", "regenerative braking power limited (machine/inverter limit; motor regen_power_max_w)",
                    (Param("regen_power_max_w", "W", 1e3, 2e6, 5e4, "most regenerative electrical power"),),

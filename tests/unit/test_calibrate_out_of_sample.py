@@ -205,3 +205,20 @@ def test_an_ocv_table_in_discharge_order_or_in_percent_is_the_same_curve(tmp_pat
     both.write_text(head + f"soc_frac = {soc}\nsoc_pct = {soc}\nocv_v = {v}\n")
     with pytest.raises(DataError, match="both.toml.*one of soc_frac, soc_pct"):
         load_params_toml(both)
+
+
+def test_a_constant_grade_is_named_as_grade_not_as_tyres():
+    """A new user's trial (tests/data/independent/make_vehicle_fastsim_trial40.py): FASTSim's 2016 Nissan Leaf on
+    UDDS up a constant 2 % grade.  While the car moves a constant grade and the rolling resistance are the same
+    force; the rolling coefficient scored 0.2 % better and was named at f_r = 0.0287, 3.6x the given 0.008.  A
+    rolling coefficient is plausible within a factor 2 of the given one (one tyre class on paved roads): the grade
+    is named, each knot within 0.004 of the true 0.02."""
+    data = load_measured(str(D / "vehicle_trial40_leaf_grade.csv"), "vehicle",
+                         mapping={"time_s": "Time", "speed_mps": "VehSpd_kph", "power_w": "HVBatt_Pwr_kW"},
+                         units={"speed_mps": "kmh", "power_w": "kW"})
+    rep = run_workflow("vehicle", data, load_params_toml(D / "vehicle_trial40_leaf_nominal.toml"), plots=False)
+    assert rep["selected_effects"] == ["road_grade"], rep["selected_effects"]
+    knots = [rep["final_parameters"][f"grade_frac[{j}]"] for j in range(6)]
+    assert all(abs(g - 0.02) < 0.004 for g in knots), knots
+    said = [d for d in rep["model_form_discrepancy"] if d.get("effect") == "rolling_error"]
+    assert said and "plausible range" in said[0]["statement"], rep["model_form_discrepancy"]
