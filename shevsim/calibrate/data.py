@@ -12,8 +12,9 @@ transparently.  ``mapping`` renames file columns to canonical names (``{"current
 Sign conventions: ``current_sign="charge-positive"`` negates the current column (e.g. battery testers
 that log charge as positive); ``power_sign="delivered-positive"`` negates the vehicle power.
 
-Checks (each raises :class:`shevsim.core.errors.DataError` naming the file and column/row; file row
-numbers count every line of the file, 1-based, including comments and header):
+Checks (all problems of a file are raised together, as one :class:`shevsim.core.errors.DataError` naming the
+file and, per problem, the column/row and the option that fixes it; file row numbers count every line of the
+file, 1-based, including comments and header):
 missing columns (with the closest existing name), non-numeric values, NaN runs in a required column,
 non-increasing or duplicate time (identical duplicate rows may be dropped with
 ``drop_duplicate_rows=True``), implausible units (temperature looking like kelvin, speed looking like
@@ -54,7 +55,7 @@ COLUMN_INFO = {
     "t_ambient_c": ("ambient temperature [degC]", ("ambient", "chamber", "room", "environment", "env", "air",
                                                     "amb", "oven")),
     "t_core_c": ("core temperature [degC]", ("core", "internal", "centre", "center")),
-    "speed_mps": ("vehicle speed [m/s]", ("speed", "velocity", "vel", "v", "vspd")),
+    "speed_mps": ("vehicle speed [m/s]", ("speed", "velocity", "vel", "v", "vspd", "spd")),
     "power_w": ("power [W]", ("power", "p", "pwr", "load")),
     "soot_rate_mgps": ("soot mass rate [mg/s]", ("soot", "pm", "particulate", "particulates")),
 }
@@ -241,12 +242,16 @@ def guess_current_sign(current: np.ndarray, voltage: np.ndarray) -> tuple[str | 
 
 
 def _precheck(path: Path, raw: pd.DataFrame, model: str, mapping: dict, canon_all, current_sign: str,
-              drop_duplicate_rows: bool, line_of: np.ndarray) -> str | None:
+              drop_duplicate_rows: bool, line_of: np.ndarray) -> tuple:
     """Every problem the column layout shows at once (bad --map items, missing columns with candidates, repeated
-    rows, a current sign that contradicts the data); raises one DataError listing them all with the options
-    that fix them.  Returns the current sign guessed from the data (``current_sign="auto"``), else None."""
+    rows, a current sign that contradicts the data), with the options that fix them.  Returns ``(guessed,
+    problems, fixes, cols, note)``: the current sign guessed from the data (``current_sign="auto"``, else None),
+    the problems (text), ``{key: option}``, the file column of each required column (the candidate where one
+    is missing: what the unit checks read when the layout has problems) and what to add to the message (the
+    guessed sign)."""
     problems: list[str] = []
     fixes: dict[str, str] = {}
+    cand_units: dict[str, str] = {}
     for canon, col in mapping.items():
         if canon not in canon_all:
             problems.append(f"--map {canon}={col}: '{canon}' is not a canonical column of model '{model}' "
@@ -263,9 +268,14 @@ def _precheck(path: Path, raw: pd.DataFrame, model: str, mapping: dict, canon_al
         what = COLUMN_INFO.get(c, (c, ()))[0]
         if c in cands:
             col, why = cands[c]
+            fix = f"--map {c}={col}"
+            unit = _name_unit(c, col)
+            if unit is not None:                        # its name says its unit: converted with it
+                fix += f" --unit {c}={unit}"
+                cand_units[c] = unit
             problems.append(f"missing required column '{c}' ({what}) for model '{model}'; candidate '{col}' "
-                            f"({why}): use --map {c}={col} if that is it")
-            fixes[c] = f"--map {c}={col}"
+                            f"({why}): use {fix} if that is it")
+            fixes[f"map:{c}"] = fix
         else:
             problems.append(f"missing required column '{c}' ({what}) for model '{model}'; no column looks like it "
                             f"by name, unit and values; columns: {', '.join(raw.columns)}")
@@ -307,19 +317,33 @@ def _precheck(path: Path, raw: pd.DataFrame, model: str, mapping: dict, canon_al
                             f"pass --current-sign {sign} (or leave --current-sign out: it is then guessed from "
                             f"the data)")
             fixes["sign"] = f"--current-sign {sign}"
-    if problems:
-        if len(problems) == 1:
-            msg = f"{path}: {problems[0]}"
-        else:
-            msg = f"{path}: {len(problems)} problems (all of them; fix them together):\n" + "\n".join(
-                f"  - {p}" for p in problems)
-        if len(fixes) > 1 or (fixes and len(problems) > 1):
-            msg += "\n  the options that fix the fixable ones: " + " ".join(fixes.values())
-        if guessed:
-            msg += (f"\n  (current sign guessed from the data: {guessed}, corr(dI, dV) = {corr:+.2f}; "
-                    f"stated with --current-sign to override)")
-        raise DataError(msg)
-    return guessed
+    note = (f"\n  (current sign guessed from the data: {guessed}, corr(dI, dV) = {corr:+.2f}; "
+            f"stated with --current-sign to override)") if guessed else ""
+    return guessed, problems, fixes, {c: (col, cand_units.get(c)) for c, col in cols.items()}, note
+
+
+def _name_unit(canon: str, col: str) -> str | None:
+    """The non-SI unit a file column's name ends with (``HVBatt_Pwr_kW`` -> ``kw`` for ``power_w``), else None."""
+    import re
+    u = _unit_of(canon)
+    last = re.split(r"[^0-9a-zA-Z]+", str(col).strip())[-1]
+    if u is None or last == str(col).strip() or last.lower() not in u[2] or last.lower() == u[1][1:]:
+        return None
+    return last
+
+
+def _problems_error(path: Path, problems: list, fixes: dict, note: str = "") -> DataError:
+    """One DataError listing every problem of the file (one alone: as it is), with the options that fix them."""
+    if len(problems) == 1:
+        msg = f"{path}: {problems[0]}"
+    else:
+        msg = f"{path}: {len(problems)} problems (all of them; fix them together):\n" + "\n".join(
+            f"  - {p}" for p in problems)
+    opts = list(dict.fromkeys(fixes.values()))
+    if len(opts) > 1 or (opts and len(problems) > 1):
+        msg += "\n  the options that fix the fixable ones: " + " ".join(
+            o for o in opts if not any(o != x and o in x for x in opts))
+    return DataError(msg + note)
 
 
 def _row_of(df_index: int, line_of: np.ndarray) -> int:
@@ -439,32 +463,37 @@ def _rename_to_canonical(raw: pd.DataFrame, model: str, mapping: dict, path: Pat
     return df
 
 
-def _numeric_columns(df: pd.DataFrame, canon_all, path: Path, line_of: np.ndarray, notes: list) -> pd.DataFrame:
-    """Every column as float: a non-numeric or NaN canonical value is an error naming the line; an extra
-    column with either is dropped (said in ``notes``)."""
+def _numeric_columns(df: pd.DataFrame, canon_all, path: Path, line_of: np.ndarray, notes: list,
+                     problems: list | None = None) -> pd.DataFrame:
+    """Every column as float: a non-numeric or NaN canonical value is an error naming the line (appended to
+    ``problems`` when given, the value read as NaN; else raised); an extra column with either is dropped (said
+    in ``notes``)."""
+    def fail(msg):
+        if problems is None:
+            raise DataError(f"{path}: {msg}")
+        problems.append(msg)
+
     for col in list(df.columns):
         conv = pd.to_numeric(df[col], errors="coerce")
         bad = conv.isna() & df[col].notna() & (df[col].astype(str).str.strip().str.lower() != "nan")
         if bad.any():
             k = int(np.flatnonzero(bad.to_numpy())[0])
             if col in canon_all:
-                raise DataError(f"{path}: column '{col}', line {_row_of(k, line_of)}: non-numeric value "
-                                f"{df[col].iloc[k]!r}")
+                fail(f"column '{col}', line {_row_of(k, line_of)}: non-numeric value {df[col].iloc[k]!r}"
+                     + (f" ({int(bad.sum())} in all)" if bad.sum() > 1 else ""))
+                df[col] = conv.astype(float)
+                continue
             notes.append(f"extra column '{col}' is not numeric and was dropped")
             df = df.drop(columns=[col])
             continue
         df[col] = conv.astype(float)
-    # NaN runs in required/optional canonical columns
-    for col in canon_all:
-        if col not in df.columns:
-            continue
+        # NaN runs in required/optional canonical columns
         nan = df[col].isna().to_numpy()
-        if nan.any():
+        if col in canon_all and nan.any():
             runs = _runs(nan)
             a, b = runs[0]
-            raise DataError(f"{path}: column '{col}' has {int(nan.sum())} NaN value(s) in {len(runs)} run(s); "
-                            f"first run lines {_row_of(a, line_of)}-{_row_of(b, line_of)} "
-                            f"({b - a + 1} samples)")
+            fail(f"column '{col}' has {int(nan.sum())} NaN value(s) in {len(runs)} run(s); first run lines "
+                 f"{_row_of(a, line_of)}-{_row_of(b, line_of)} ({b - a + 1} samples)")
     for col in list(df.columns):
         if col not in canon_all and df[col].isna().any():
             notes.append(f"extra column '{col}' has NaN values and was dropped from the candidate signals")
@@ -473,8 +502,15 @@ def _numeric_columns(df: pd.DataFrame, canon_all, path: Path, line_of: np.ndarra
 
 
 def _check_time(df: pd.DataFrame, path: Path, line_of: np.ndarray, drop_duplicate_rows: bool,
-                notes: list) -> tuple[pd.DataFrame, np.ndarray]:
-    """Time must increase strictly; identical duplicate rows are dropped only when asked."""
+                notes: list, problems: list | None = None) -> tuple[pd.DataFrame, np.ndarray]:
+    """Time must increase strictly; identical duplicate rows are dropped only when asked.  A problem is appended
+    to ``problems`` when given (else raised)."""
+    if problems is not None:
+        try:
+            return _check_time(df, path, line_of, drop_duplicate_rows, notes)
+        except DataError as exc:
+            problems.append(str(exc).removeprefix(f"{path}: "))
+            return df, line_of
     t = df["time_s"].to_numpy()
     dt = np.diff(t)
     dup = np.flatnonzero(dt == 0)
@@ -541,8 +577,16 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
     raw, line_of = _read_table(path)
     mapping, declared = _column_mapping(raw, model, mapping, units, path)
     canon_all = REQUIRED[model] + OPTIONAL[model]
-    guessed = _precheck(path, raw, model, mapping, canon_all, current_sign if check_sign or current_sign == "auto"
-                        else "auto-skip", drop_duplicate_rows, line_of)
+    guessed, problems, fixes, cols, note = _precheck(
+        path, raw, model, mapping, canon_all, current_sign if check_sign or current_sign == "auto" else "auto-skip",
+        drop_duplicate_rows, line_of)
+    if problems:
+        # the columns' units too, read from the columns there are (a missing one's candidate), so that every
+        # problem of the file is listed at once
+        if check_units:
+            _unit_problems_into(_provisional_frame(raw, cols, declared), model, line_of,
+                                {d[0] for d in declared.values()}, problems, fixes)
+        raise _problems_error(path, problems, fixes, note)
     notes = []
     sign_how = "guessed" if current_sign == "auto" else "stated"
     if current_sign == "auto":
@@ -554,16 +598,20 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
                          f"{'rises' if guessed == 'charge-positive' else 'falls'} as the file's current rises); "
                          f"pass --current-sign to state it")
     df = _rename_to_canonical(raw, model, mapping, path)
-    df = _numeric_columns(df, canon_all, path, line_of, notes)
+    # the values (numbers, no NaN runs), the time (increasing) and every column's unit: all problems at once
+    problems, fixes = [], {}
+    df = _numeric_columns(df, canon_all, path, line_of, notes, problems)
     # declared units: converted to SI before any check
     for col, (canon, sc, off, unit) in declared.items():
         if canon in df.columns and (sc != 1.0 or off != 0.0):
             df[canon] = df[canon] * sc + off
             notes.append(f"column '{canon}' converted from {unit} (declared by "
                          f"{'the header' if col != canon else '--unit'})")
-    df, line_of = _check_time(df, path, line_of, drop_duplicate_rows, notes)
+    df, line_of = _check_time(df, path, line_of, drop_duplicate_rows, notes, problems)
     if check_units:
-        _check_units(df, model, path, line_of, {d[0] for d in declared.values()})
+        _unit_problems_into(df, model, line_of, {d[0] for d in declared.values()}, problems, fixes)
+    if problems:
+        raise _problems_error(path, problems, fixes)
     if model == "cell" and current_sign == "charge-positive":
         df["current_a"] = -df["current_a"]
         notes.append("current negated (file: charge positive -> canonical: discharge positive)")
@@ -579,82 +627,139 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
     return MeasuredData(df=df, path=str(path), model=model, notes=notes, checks=checks)
 
 
-def _check_units(df, model, path, line_of, declared=frozenset()):
-    def bad(col, msg, k):
-        raise DataError(f"{path}: column '{col}', line {_row_of(k, line_of)}: {msg}")
+def _provisional_frame(raw: pd.DataFrame, cols: dict, declared: dict) -> pd.DataFrame:
+    """The required columns found (or their candidates, in the unit their name says) as numbers in SI (declared
+    units converted): what the unit checks read when the column layout has problems of its own - the file as the
+    options the message offers would read it.  ``cols``: ``{canonical: (file column or None, unit or None)}``."""
+    out = {}
+    for canon, (col, unit) in cols.items():
+        if col is None or col not in raw.columns:
+            continue
+        x = pd.to_numeric(raw[col], errors="coerce").to_numpy(float)
+        if not np.isfinite(x).any():
+            continue
+        d = declared.get(col)
+        if d is not None and d[0] == canon:
+            x = x * d[1] + d[2]
+        elif unit is not None:
+            sc, off = _unit_of(canon)[2][unit.lower()]
+            x = x * sc + off
+        out[canon] = x
+    return pd.DataFrame(out)
 
-    t = df["time_s"].to_numpy()
-    dt = np.diff(t)
+
+def _check_units(df, model, path, line_of, declared=frozenset()):
+    """Every unit problem of the record's columns at once (:func:`_unit_problems_into`): one DataError."""
+    problems: list = []
+    fixes: dict = {}
+    _unit_problems_into(df, model, line_of, declared, problems, fixes)
+    if problems:
+        raise _problems_error(path, problems, fixes)
+
+
+def _unit_problems_into(df, model, line_of, declared, problems: list, fixes: dict) -> None:
+    """The unit checks of each canonical column there is (time in ms, current in mA, speed in km/h, power in kW,
+    temperature in K, voltage in mV, implausible values): each problem appended to ``problems`` as
+    ``column 'X', line N: what was detected; the option that fixes it``, the option into ``fixes``."""
+    def bad(col, msg, k, fix=None):
+        problems.append(f"column '{col}', line {_row_of(k, line_of)}: {msg}")
+        if fix:
+            fixes[f"unit:{col}"] = fix
+
+    def arr(col):
+        return df[col].to_numpy(float) if col in df else None
+
+    t = arr("time_s")
+    dt = np.diff(t) if t is not None else np.array([])
+    dt = dt[np.isfinite(dt)]
     if "time_s" not in declared and dt.size and float(np.median(dt)) >= MAX_PLAUSIBLE_STEP_S:
         bad("time_s", f"median sample step {float(np.median(dt)):g} s looks like milliseconds (calibration "
                       f"records are sampled every 0.01-1 s); name the column 'time_ms' or pass --unit time_s=ms "
-                      f"to convert (--unit time_s=s if the step really is that long)", 1)
-    if model == "vehicle" and "time_s" not in declared and dt.size:
-        s = df["speed_mps"].to_numpy()
-        acc = np.abs(np.diff(s)) / np.where(dt > 0, dt, np.inf)
-        if np.ptp(s) > 2.0 and acc.max() < 0.02:
-            bad("time_s", f"speed varies by {np.ptp(s):.3g} m/s but never faster than {acc.max():.2g} m/s^2: the "
-                          f"time column looks like milliseconds; name it 'time_ms' or pass --unit time_s=ms", 1)
-    if model == "cell" and "current_a" not in declared:
-        i = df["current_a"].to_numpy()
-        di, dv = np.diff(i), np.diff(df["voltage_v"].to_numpy())
-        big = np.abs(di) > 0.05 * max(np.abs(i).max(), 1e-12)
-        if big.sum() >= 5 and np.abs(i).max() > 50.0:
+                      f"to convert (--unit time_s=s if the step really is that long)", 1, "--unit time_s=ms")
+    elif model == "vehicle" and "time_s" not in declared and dt.size and "speed_mps" in df:
+        s = arr("speed_mps")
+        tt = np.diff(t)
+        acc = np.abs(np.diff(s)) / np.where(tt > 0, tt, np.inf)
+        if np.nanmax(s) - np.nanmin(s) > 2.0 and np.nanmax(acc) < 0.02:
+            bad("time_s", f"speed varies by {np.nanmax(s) - np.nanmin(s):.3g} m/s but never faster than "
+                          f"{np.nanmax(acc):.2g} m/s^2: the time column looks like milliseconds; name it 'time_ms' or "
+                          f"pass --unit time_s=ms", 1, "--unit time_s=ms")
+    if model == "cell" and "current_a" not in declared and "current_a" in df and "voltage_v" in df:
+        i = arr("current_a")
+        di, dv = np.diff(i), np.diff(arr("voltage_v"))
+        ok = np.isfinite(di) & np.isfinite(dv)
+        big = ok & (np.abs(np.nan_to_num(di)) > 0.05 * max(np.nanmax(np.abs(i)), 1e-12))
+        if big.sum() >= 5 and np.nanmax(np.abs(i)) > 50.0:
             r_app = float(np.median(np.abs(dv[big] / di[big])))
             if r_app < MIN_APPARENT_RESISTANCE_OHM:
                 bad("current_a", f"the voltage moves {r_app:.2g} V per unit of current, i.e. a cell resistance "
                                  f"of {r_app * 1e3:.3g} mOhm if the column is in A - implausibly small, while the "
-                                 f"largest current is {np.abs(i).max():.4g}: the column looks like milliamps; name "
-                                 f"it 'current_ma' or pass --unit current_a=mA", int(np.argmax(np.abs(i))))
+                                 f"largest current is {np.nanmax(np.abs(i)):.4g}: the column looks like milliamps; "
+                                 f"name it 'current_ma' or pass --unit current_a=mA", int(np.nanargmax(np.abs(i))),
+                    "--unit current_a=mA")
 
     if model == "cell":
         for col in ("t_surface_c", "t_ambient_c", "t_core_c"):
             if col not in df:
                 continue
-            x = df[col].to_numpy()
-            if np.median(x) > 150.0:
-                bad(col, f"median {np.median(x):.1f} looks like kelvin, expected degC (name the column '{col[:-2]}_k' or pass --unit {col}=K to convert)",
-                    int(np.argmax(x > 150)))
+            x = arr(col)
+            if np.nanmedian(x) > 150.0:
+                bad(col, f"median {np.nanmedian(x):.1f} looks like kelvin, expected degC (name the column "
+                         f"'{col[:-2]}_k' or pass --unit {col}=K to convert)", int(np.argmax(x > 150)),
+                    f"--unit {col}=K")
+                continue
             k = np.flatnonzero((x < -60.0) | (x > 150.0))
             if k.size:
                 bad(col, f"temperature {x[k[0]]} degC outside the plausible range [-60, 150]", int(k[0]))
-        v = df["voltage_v"].to_numpy()
-        if np.median(v) > 100:
-            bad("voltage_v", f"median {np.median(v):.0f} looks like millivolts, expected V (name the column 'voltage_mv' "
-                             f"or pass --unit voltage_v=mV to convert)", 0)
-        k = np.flatnonzero((v < 1.0) | (v > 5.5))
-        if k.size:
-            bad("voltage_v", f"cell voltage {v[k[0]]} V outside the plausible range [1, 5.5] V", int(k[0]))
-        i = df["current_a"].to_numpy()
-        k = np.flatnonzero(np.abs(i) > 1000.0)
-        if k.size:
-            bad("current_a", f"cell current {i[k[0]]} A implausible (> 1000 A): the column looks like milliamps; name "
-                             f"it 'current_ma' or pass --unit current_a=mA to convert", int(k[0]))
+        v = arr("voltage_v")
+        if v is not None:
+            if np.nanmedian(v) > 100:
+                bad("voltage_v", f"median {np.nanmedian(v):.0f} looks like millivolts, expected V (name the column "
+                                 f"'voltage_mv' or pass --unit voltage_v=mV to convert)", 0, "--unit voltage_v=mV")
+            else:
+                k = np.flatnonzero((v < 1.0) | (v > 5.5))
+                if k.size:
+                    bad("voltage_v", f"cell voltage {v[k[0]]} V outside the plausible range [1, 5.5] V", int(k[0]))
+        i = arr("current_a")
+        if i is not None and "unit:current_a" not in fixes:
+            k = np.flatnonzero(np.abs(i) > 1000.0)
+            if k.size:
+                bad("current_a", f"cell current {i[k[0]]} A implausible (> 1000 A): the column looks like milliamps; "
+                                 f"name it 'current_ma' or pass --unit current_a=mA to convert", int(k[0]),
+                    "--unit current_a=mA")
     elif model == "engine":
-        p = df["power_w"].to_numpy()
-        if np.abs(p).max() < 2000.0:
-            bad("power_w", f"largest engine power {np.abs(p).max():.3g} - looks like kW, expected W (name the column "
-                           f"'power_kw' or pass --unit power_w=kW to convert)",
-                int(np.argmax(np.abs(p))))
-        sr = df["soot_rate_mgps"].to_numpy()
-        k = np.flatnonzero(sr < -1.0)
-        if k.size:
-            bad("soot_rate_mgps", f"negative soot rate {sr[k[0]]} mg/s", int(k[0]))
+        p = arr("power_w")
+        if p is not None and np.nanmax(np.abs(p)) < 2000.0:
+            bad("power_w", f"largest engine power {np.nanmax(np.abs(p)):.3g} - looks like kW, expected W (name the "
+                           f"column 'power_kw' or pass --unit power_w=kW to convert)",
+                int(np.nanargmax(np.abs(p))), "--unit power_w=kW")
+        sr = arr("soot_rate_mgps")
+        if sr is not None:
+            k = np.flatnonzero(sr < -1.0)
+            if k.size:
+                bad("soot_rate_mgps", f"negative soot rate {sr[k[0]]} mg/s", int(k[0]))
     else:
-        s = df["speed_mps"].to_numpy()
-        k = np.flatnonzero(s < -0.5)
-        if k.size:
-            bad("speed_mps", f"negative speed {s[k[0]]} m/s", int(k[0]))
-        if s.max() > 70.0:
-            bad("speed_mps", f"speed {s.max():.1f} m/s (> 70 m/s = 252 km/h) looks like km/h; name the column 'speed_kmh' or "
-                "pass --unit speed_mps=kmh to convert",
-                int(np.argmax(s)))
-        p = df["power_w"].to_numpy()
-        moving = s > 5.0
-        if moving.sum() >= 5 and np.median(np.abs(p[moving])) < 500.0:
-            # any road vehicle above 5 m/s draws (or regenerates) well over 500 W
-            bad("power_w", f"median |power| while moving faster than 5 m/s is {np.median(np.abs(p[moving])):.3g}"
-                " - looks like kW, expected W", int(np.argmax(moving)))
+        s = arr("speed_mps")
+        kmh = False
+        if s is not None:
+            k = np.flatnonzero(s < -0.5)
+            if k.size:
+                bad("speed_mps", f"negative speed {s[k[0]]} m/s", int(k[0]))
+            if np.nanmax(s) > 70.0:
+                kmh = True
+                bad("speed_mps", f"speed {np.nanmax(s):.1f} m/s (> 70 m/s = 252 km/h) looks like km/h; name the "
+                                 f"column 'speed_kmh' or pass --unit speed_mps=kmh to convert", int(np.nanargmax(s)),
+                    "--unit speed_mps=kmh")
+        p = arr("power_w")
+        if s is not None and p is not None:
+            # moving: faster than 5 m/s (18 km/h; in the file's km/h when the speed looks like km/h)
+            moving = np.nan_to_num(s / (3.6 if kmh else 1.0)) > 5.0
+            if moving.sum() >= 5 and np.nanmedian(np.abs(p[moving])) < 500.0:
+                # any road vehicle above 5 m/s draws (or regenerates) well over 500 W
+                bad("power_w", f"median |power| while moving faster than 5 m/s is "
+                               f"{np.nanmedian(np.abs(p[moving])):.3g} - looks like kW, expected W (name the column "
+                               f"'power_kw' or pass --unit power_w=kW to convert)", int(np.argmax(moving)),
+                    "--unit power_w=kW")
 
 
 # ------------------------------------------------------------------------------ shipped measured records

@@ -116,3 +116,47 @@ def test_failure_hint_reflects_the_checks(tmp_path, cell_df):
     assert not any("--current-sign" in c or "units or sign" in c for c in causes)
     assert any("charge-positive, as stated) agrees with the voltage response" in c for c in causes)
     assert any("units or sign" in c for c in model.likely_causes("voltage_v", diag))      # nothing verified
+
+
+def test_every_unit_problem_of_a_file_at_once_with_the_options_that_fix_each(tmp_path):
+    """Trial 40: a vehicle record with the speed in km/h and the power in kW was refused for the speed alone, and
+    the kW power was reported only on the second run.  Every column's unit check (and every layout problem: a
+    missing column beside them) is one message, each with its option, and the options given load the file."""
+    from shevsim.calibrate.synthetic import synth_vehicle
+    df, _ = synth_vehicle({}, seed=SEED, duration_s=300.0)
+    p = tmp_path / "logger.csv"
+    df.assign(speed_mps=df["speed_mps"] * 3.6, power_w=df["power_w"] / 1000.0).to_csv(p, index=False)
+    with pytest.raises(DataError) as ei:
+        load_measured(p, "vehicle")
+    msg = str(ei.value)
+    assert msg.startswith(f"{p}: 2 problems"), msg
+    assert "column 'speed_mps'" in msg and "looks like km/h" in msg and "column 'power_w'" in msg and "looks like kW" in msg
+    assert msg.rstrip().endswith("the options that fix the fixable ones: --unit speed_mps=kmh --unit power_w=kW"), msg
+    d = load_measured(p, "vehicle", units={"speed_mps": "kmh", "power_w": "kW"})
+    np.testing.assert_allclose(d.df["power_w"].to_numpy(), df["power_w"].to_numpy(), rtol=1e-12)
+    # a missing column beside a unit problem: both in one message, each with its option (the candidate's unit
+    # read from its name is part of its --map fix)
+    p2 = tmp_path / "logger2.csv"
+    df.assign(speed_mps=df["speed_mps"] * 3.6, power_w=df["power_w"] / 1000.0).rename(
+        columns={"time_s": "Time", "power_w": "HVBatt_Pwr_kW"}).to_csv(p2, index=False)
+    with pytest.raises(DataError) as ei:
+        load_measured(p2, "vehicle")
+    msg = str(ei.value)
+    assert msg.startswith(f"{p2}: 3 problems"), msg
+    assert "--map time_s=Time" in msg and "--map power_w=HVBatt_Pwr_kW --unit power_w=kW" in msg and \
+        "--unit speed_mps=kmh" in msg, msg
+    d = load_measured(p2, "vehicle", {"time_s": "Time", "power_w": "HVBatt_Pwr_kW"},
+                      units={"speed_mps": "kmh", "power_w": "kW"})
+    np.testing.assert_allclose(d.df["speed_mps"].to_numpy(), df["speed_mps"].to_numpy(), rtol=1e-12)
+    # a cell: voltage in mV, the surface temperature in kelvin and a non-numeric current value, all at once
+    cdf, _ = synth_cell({}, seed=SEED, duration_s=300.0)
+    cdf = cdf.assign(voltage_v=cdf["voltage_v"] * 1000.0, t_surface_c=cdf["t_surface_c"] + 273.15).astype(object)
+    cdf.loc[20, "current_a"] = "1,2"
+    p3 = tmp_path / "cell.csv"
+    cdf.to_csv(p3, index=False)
+    with pytest.raises(DataError) as ei:
+        load_measured(p3, "cell", current_sign="discharge-positive")
+    msg = str(ei.value)
+    assert "3 problems" in msg and "non-numeric value '1,2'" in msg and "looks like millivolts" in msg and \
+        "looks like kelvin" in msg, msg
+    assert "fixable ones: --unit t_surface_c=K --unit voltage_v=mV" in msg, msg
