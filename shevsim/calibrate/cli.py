@@ -1,5 +1,9 @@
 """cli.py - ``shevsim calibrate MODEL DATA.csv --out DIR [--params PARAMS.toml] [--map canonical=column ...]
-[--holdout FRACTION] [--sample-convention instantaneous|mean-ending|mean-starting] [--sensor-noise CHANNEL=VALUE]``.
+[--holdout FRACTION] [--sample-convention instantaneous|mean-ending|mean-starting] [--sensor-noise CHANNEL=VALUE]
+[--ambient-c DEGC]``.
+
+``--ambient-c`` gives a cell record without an ambient-temperature column a constant ambient (a chamber or a room
+at one temperature; ``t_ambient_c = 25.0`` in ``--params`` ``[params]`` does the same), stated in the report.
 
 ``--sample-convention`` says what a logged value stands for (default ``instantaneous``: the value at the
 sample time); a time shift between inputs and outputs is fitted as the ``timing`` effect of every model.
@@ -73,6 +77,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "measured input (propagated through the model into the outputs' floor); otherwise "
                          "estimated from quiet segments and a local smoother; the method is stated.  Repeatable, "
                          "or several separated by commas: --sensor-noise power_w=300,speed_mps=0.02")
+    ap.add_argument("--ambient-c", type=float, default=None, metavar="DEGC",
+                    help="cell: the ambient temperature as a constant [degC], for a record without an ambient column "
+                         "(a chamber or a room at one temperature; also t_ambient_c = DEGC in --params [params]); "
+                         "stated in the report")
     ap.add_argument("--effects", nargs="+", help="restrict the candidate effects to these names")
     ap.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     ap.add_argument("--decimate", type=_at_least_one, default=1, metavar="K",
@@ -129,7 +137,7 @@ def main_calibrate(argv=None) -> int:
                               units=args.unit, effects=args.effects, plots=not args.no_plots,
                               decimate=args.decimate, allow_large=args.allow_large, log=log, progress_every_s=15.0,
                               sample_convention=args.sample_convention,
-                              sensor_noise=_sensor_noise(args.sensor_noise))
+                              sensor_noise=_sensor_noise(args.sensor_noise), ambient_c=args.ambient_c)
     except ShevsimError as exc:
         hint = ""
         if isinstance(exc, DataError) and Path(args.data).is_file():

@@ -242,13 +242,13 @@ def guess_current_sign(current: np.ndarray, voltage: np.ndarray) -> tuple[str | 
 
 
 def _precheck(path: Path, raw: pd.DataFrame, model: str, mapping: dict, canon_all, current_sign: str,
-              drop_duplicate_rows: bool, line_of: np.ndarray) -> tuple:
+              drop_duplicate_rows: bool, line_of: np.ndarray, ambient: tuple | None = None) -> tuple:
     """Every problem the column layout shows at once (bad --map items, missing columns with candidates, repeated
     rows, a current sign that contradicts the data), with the options that fix them.  Returns ``(guessed,
     problems, fixes, cols, note)``: the current sign guessed from the data (``current_sign="auto"``, else None),
     the problems (text), ``{key: option}``, the file column of each required column (the candidate where one
     is missing: what the unit checks read when the layout has problems) and what to add to the message (the
-    guessed sign)."""
+    guessed sign).  ``ambient``: ``(value_degc, where)`` of a constant ambient given instead of a column."""
     problems: list[str] = []
     fixes: dict[str, str] = {}
     cand_units: dict[str, str] = {}
@@ -262,10 +262,17 @@ def _precheck(path: Path, raw: pd.DataFrame, model: str, mapping: dict, canon_al
             problems.append(f"column '{col}' (mapped to {canon}) not found{hint}; columns: {', '.join(raw.columns)}")
     have = {canon: (mapping[canon] if canon in mapping else canon) for canon in canon_all
             if (canon in mapping and mapping[canon] in raw.columns) or (canon not in mapping and canon in raw.columns)}
-    missing = [c for c in REQUIRED[model] if c not in have and c not in mapping]
+    if ambient is not None and "t_ambient_c" in have:
+        problems.append(f"the file has an ambient column ('{have['t_ambient_c']}') and {ambient[1]} gives a constant "
+                        f"{ambient[0]:g} degC: keep one (drop {ambient[1].split(' in ')[0]} to use the column)")
+    missing = [c for c in REQUIRED[model] if c not in have and c not in mapping
+               and not (c == "t_ambient_c" and ambient is not None)]
     cands = _candidates(raw, missing, set(have.values()) | set(mapping.values()))
     for c in missing:
         what = COLUMN_INFO.get(c, (c, ()))[0]
+        # a chamber or a room at one temperature: a constant, not a column
+        alt = (f"; for a constant ambient pass {AMBIENT_OPTION} DEGC (or t_ambient_c = DEGC in the --params "
+               f"file's [params])" if c == "t_ambient_c" else "")
         if c in cands:
             col, why = cands[c]
             fix = f"--map {c}={col}"
@@ -274,11 +281,13 @@ def _precheck(path: Path, raw: pd.DataFrame, model: str, mapping: dict, canon_al
                 fix += f" --unit {c}={unit}"
                 cand_units[c] = unit
             problems.append(f"missing required column '{c}' ({what}) for model '{model}'; candidate '{col}' "
-                            f"({why}): use {fix} if that is it")
+                            f"({why}): use {fix} if that is it{alt}")
             fixes[f"map:{c}"] = fix
         else:
             problems.append(f"missing required column '{c}' ({what}) for model '{model}'; no column looks like it "
-                            f"by name, unit and values; columns: {', '.join(raw.columns)}")
+                            f"by name, unit and values; columns: {', '.join(raw.columns)}{alt}")
+            if alt:
+                fixes[f"map:{c}"] = f"{AMBIENT_OPTION} DEGC"
     cols = {c: have.get(c) or (cands[c][0] if c in cands else None) for c in REQUIRED[model]}
     # repeated rows (identical to the previous row in every column): a logger repeat
     if cols.get("time_s"):
@@ -391,6 +400,29 @@ def _sniff_format(path: Path) -> dict:
     return {}
 
 
+#: the command-line option that gives a cell record's ambient temperature as a constant
+AMBIENT_OPTION = "--ambient-c"
+#: the plausible range of an ambient temperature [degC] (a column's: the unit checks')
+AMBIENT_RANGE_C = (-60.0, 150.0)
+
+
+def check_ambient(value, where: str = AMBIENT_OPTION, model: str = "cell") -> float:
+    """A constant ambient temperature [degC] as a float; a DataError naming ``where`` (the option or the
+    ``--params`` key that gave it) when it is not a number in :data:`AMBIENT_RANGE_C` or the model has no
+    ambient input."""
+    if model != "cell":
+        raise DataError(f"{where}: a constant ambient temperature is an input of model 'cell' only, not '{model}'")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise DataError(f"{where}: ambient temperature {value!r} is not a number (degC)") from None
+    lo, hi = AMBIENT_RANGE_C
+    if not (lo <= v <= hi):
+        raise DataError(f"{where} {value!r}: ambient temperature outside the plausible range [{lo:g}, {hi:g}] degC "
+                        f"(degC, not kelvin or degF)")
+    return v
+
+
 def _check_options(model: str, current_sign: str, power_sign: str) -> None:
     """Refuse an unknown model or sign convention before the file is opened."""
     if model not in REQUIRED:
@@ -449,13 +481,14 @@ def _column_mapping(raw: pd.DataFrame, model: str, mapping, units, path: Path) -
     return mapping, declared
 
 
-def _rename_to_canonical(raw: pd.DataFrame, model: str, mapping: dict, path: Path) -> pd.DataFrame:
-    """Rename mapped columns to their canonical names; refuse a missing required column with a best match."""
+def _rename_to_canonical(raw: pd.DataFrame, model: str, mapping: dict, path: Path, supplied=()) -> pd.DataFrame:
+    """Rename mapped columns to their canonical names; refuse a missing required column (not in ``supplied``: given
+    otherwise) with a best match."""
     rename = {col: canon for canon, col in mapping.items()}
     # a canonical name already present in the file and also mapped from another column: the mapped wins
     df = raw.drop(columns=[c for c in raw.columns if c in mapping and c not in rename]).rename(columns=rename)
     for col in REQUIRED[model]:
-        if col not in df.columns:
+        if col not in df.columns and col not in supplied:
             best = difflib.get_close_matches(col, list(df.columns), n=1, cutoff=0.3)
             hint = f"; use --map {col}={best[0]} if that is it" if best else ""
             raise DataError(f"{path}: missing required column '{col}' for model '{model}'{hint}; "
@@ -557,7 +590,8 @@ def _check_current_sign(df: pd.DataFrame, path: Path, current_sign: str) -> None
 def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
                   current_sign: str = "discharge-positive", power_sign: str = "drawn-positive",
                   drop_duplicate_rows: bool = False, check_sign: bool = True,
-                  units: Mapping[str, str] | None = None, check_units: bool = True) -> MeasuredData:
+                  units: Mapping[str, str] | None = None, check_units: bool = True,
+                  ambient_c: float | None = None, ambient_from: str = "--ambient-c") -> MeasuredData:
     """Load and check a measured CSV for calibration model ``model`` (``cell`` or ``vehicle``).
 
     Columns in other units are converted when the unit is declared: by the header (``time_ms``,
@@ -567,6 +601,11 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
     it.  Spreadsheet quirks are read as they come: UTF-8 byte-order mark, CRLF, ``;`` with decimal commas,
     tabs, trailing empty columns.
 
+    ``ambient_c`` (a cell record without an ambient column: a chamber or a room at one temperature) gives
+    ``t_ambient_c`` as that constant [degC], stated in ``notes`` with ``ambient_from`` (what gave it: the
+    option ``--ambient-c`` or ``t_ambient_c`` in a ``--params`` file); a value outside [-60, 150] degC, a model
+    other than ``cell`` or a file that has an ambient column too is refused naming it.
+
     Returns
     -------
     MeasuredData
@@ -574,12 +613,13 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
     """
     path = Path(path)
     _check_options(model, current_sign, power_sign)
+    ambient = None if ambient_c is None else (check_ambient(ambient_c, ambient_from, model), ambient_from)
     raw, line_of = _read_table(path)
     mapping, declared = _column_mapping(raw, model, mapping, units, path)
     canon_all = REQUIRED[model] + OPTIONAL[model]
     guessed, problems, fixes, cols, note = _precheck(
         path, raw, model, mapping, canon_all, current_sign if check_sign or current_sign == "auto" else "auto-skip",
-        drop_duplicate_rows, line_of)
+        drop_duplicate_rows, line_of, ambient)
     if problems:
         # the columns' units too, read from the columns there are (a missing one's candidate), so that every
         # problem of the file is listed at once
@@ -597,7 +637,10 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
             notes.append(f"current sign guessed from the data: {guessed} (the voltage "
                          f"{'rises' if guessed == 'charge-positive' else 'falls'} as the file's current rises); "
                          f"pass --current-sign to state it")
-    df = _rename_to_canonical(raw, model, mapping, path)
+    df = _rename_to_canonical(raw, model, mapping, path, ("t_ambient_c",) if ambient else ())
+    if ambient:
+        df["t_ambient_c"] = ambient[0]
+        notes.append(f"ambient: constant {ambient[0]:g} degC, given by {ambient[1]}")
     # the values (numbers, no NaN runs), the time (increasing) and every column's unit: all problems at once
     problems, fixes = [], {}
     df = _numeric_columns(df, canon_all, path, line_of, notes, problems)

@@ -265,8 +265,8 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
                     units: Mapping[str, str] | Sequence[str] | None = None, effects: Sequence[str] | None = None,
                     plots: bool = True, decimate: int = 1, allow_large: bool = False,
                     log: Callable[[str], None] | None = None, progress_every_s: float | None = None,
-                    sample_convention: str | None = None, sensor_noise: Mapping[str, float] | None = None
-                    ) -> CalibrationReport:
+                    sample_convention: str | None = None, sensor_noise: Mapping[str, float] | None = None,
+                    ambient_c: float | None = None) -> CalibrationReport:
     """Calibrate ``model`` on the measured CSV ``data`` and return a `CalibrationReport`.
 
     Parameters
@@ -301,6 +301,10 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
         (`shevsim.calibrate.timing`); stated in the report.
     sensor_noise : mapping, optional
         Declared sensor noise per channel (``{"power_w": 300.0}``), used as its noise floor.
+    ambient_c : float, optional
+        A cell record without an ambient-temperature column: the ambient as a constant [degC] (a chamber or a
+        room at one temperature; ``--ambient-c``), stated in the report.  ``t_ambient_c`` in the ``params``
+        file's ``[params]`` does the same; this option overrides it.
 
     Raises
     ------
@@ -317,9 +321,16 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
     data_path, mapping, current_sign, drop_duplicate_rows, params = _shipped_record_options(
         data, model, mapping, current_sign, drop_duplicate_rows, params, say)
     known = load_params_toml(params) if params else {}
+    ambient_from = "--ambient-c"
+    if model == "cell" and "t_ambient_c" in known:   # a constant ambient in --params: the record's input, not a parameter
+        v = known.pop("t_ambient_c")
+        if ambient_c is None:
+            ambient_c, ambient_from = v, f"t_ambient_c in {params}"
+        else:
+            say(f"note: --ambient-c {ambient_c} overrides t_ambient_c = {v} in {params}")
     measured = load_measured(data_path, model, mapping, current_sign=current_sign or "auto",
                              power_sign=power_sign, drop_duplicate_rows=drop_duplicate_rows,
-                             units=parse_units(_pairs(units)))
+                             units=parse_units(_pairs(units)), ambient_c=ambient_c, ambient_from=ambient_from)
     if decimate > 1:
         before = len(measured.df)
         measured.df = measured.df.iloc[::decimate].reset_index(drop=True)

@@ -4,6 +4,7 @@ voltage response and stated, the shipped measured records listed and named in pl
 baseline-failure hint reflecting what was already verified."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -160,3 +161,43 @@ def test_every_unit_problem_of_a_file_at_once_with_the_options_that_fix_each(tmp
     assert "3 problems" in msg and "non-numeric value '1,2'" in msg and "looks like millivolts" in msg and \
         "looks like kelvin" in msg, msg
     assert "fixable ones: --unit t_surface_c=K --unit voltage_v=mV" in msg, msg
+
+
+def test_constant_ambient_given_on_the_command_line_or_in_params(tmp_path, capsys):
+    """Trial 40: a cell record without an ambient column was refused ("missing required column 't_ambient_c'")
+    with no way round it but editing the file.  A chamber or a room at one temperature is a constant: given by
+    --ambient-c (or t_ambient_c in --params), stated in the report; the refusal names the option; an implausible
+    value, a vehicle, or a file with its own ambient column too is a clear error naming what gave it."""
+    df, _ = synth_cell({}, seed=SEED, duration_s=600.0)
+    p = tmp_path / "no_ambient.csv"
+    df.drop(columns=["t_ambient_c"]).to_csv(p, index=False)
+    with pytest.raises(DataError, match=r"missing required column 't_ambient_c'.*for a constant ambient pass "
+                                        r"--ambient-c DEGC \(or t_ambient_c = DEGC in the --params file's \[params\]\)"):
+        load_measured(p, "cell")
+    d = load_measured(p, "cell", ambient_c=25.0)
+    assert (d.df["t_ambient_c"] == 25.0).all() and "ambient: constant 25 degC, given by --ambient-c" in d.notes
+    np.testing.assert_allclose(d.df["voltage_v"].to_numpy(), df["voltage_v"].to_numpy())
+    out = tmp_path / "o"
+    for bad in ("-300", "400", "nan"):
+        assert main_calibrate(["cell", str(p), "--out", str(out), "--ambient-c", bad, "-q"]) == 2
+        err = capsys.readouterr().err
+        assert f"--ambient-c {float(bad)!r}: ambient temperature outside the plausible range [-60, 150] degC" in err, err
+    assert main_calibrate(["vehicle", str(p), "--out", str(out), "--ambient-c", "25", "-q"]) == 2
+    assert "--ambient-c: a constant ambient temperature is an input of model 'cell' only" in capsys.readouterr().err
+    both = tmp_path / "with_ambient.csv"
+    df.to_csv(both, index=False)
+    with pytest.raises(DataError, match=r"the file has an ambient column \('t_ambient_c'\) and --ambient-c gives a "
+                                        r"constant 20 degC: keep one"):
+        load_measured(both, "cell", ambient_c=20.0)
+    assert not out.exists()                                           # nothing written on bad input
+    # the whole command, end to end: the constant stated in the report
+    params = tmp_path / "nominal.toml"
+    params.write_text("[params]\ncapacity_ah = 2.3\nt_ambient_c = 25.0\n")
+    assert main_calibrate(["cell", str(p), "--out", str(out), "--params", str(params), "--no-plots", "-q",
+                           "--effects", "capacity"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert f"ambient: constant 25 degC, given by t_ambient_c in {params}" in rep["data"]["notes"]
+    assert f"- note: ambient: constant 25 degC, given by t_ambient_c in {params}" in (out / "report.md").read_text()
+    params.write_text("[params]\ncapacity_ah = 2.3\nt_ambient_c = 400.0\n")
+    assert main_calibrate(["cell", str(p), "--out", str(tmp_path / "o2"), "--params", str(params), "-q"]) == 2
+    assert f"t_ambient_c in {params} 400.0: ambient temperature outside" in capsys.readouterr().err
