@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 from ..core.errors import DataError
+from ..report.calibration_text import BASELINE_COLUMN, baseline_values, md_parameters  # noqa: F401
 
 MARKER = "report.json"
 #: a record longer than this (rows, after --decimate) is refused unless --allow-large: a calibration

@@ -652,9 +652,12 @@ def calibration_page(rep: dict, traces=None, title: str | None = None) -> Page:
     rounds = rep.get("rounds") or []
     if rounds:
         _evidence_sections(page, rep, rounds)
-    prm = [(k, fmt(rep.get("baseline_parameters", {}).get(k)), fmt(v), split_unit_text(k))
-           for k, v in (rep.get("final_parameters") or {}).items()]
+    from .calibration_text import BASELINE_COLUMN, baseline_values
+    bv = baseline_values(rep)
+    prm = [(k, "-" if bv[k][0] is None else fmt(bv[k][0]) + (" (nominal)" if bv[k][1] == "nominal" else ""),
+            fmt(v), split_unit_text(k)) for k, v in (rep.get("final_parameters") or {}).items()]
     page.section("Parameters", table(["Parameter", "Baseline", "Final", "Unit (SI)"], prm, num_cols=[1, 2])
+                 + f'<p class="note">Baseline column: {esc(BASELINE_COLUMN)}.</p>'
                  + (f'<p class="note">Use them with: <code>shevsim run SCENARIO --params '
                     f'{esc(rep["overlay"]["file"])}</code></p>' if rep.get("overlay") else ""))
     return page
