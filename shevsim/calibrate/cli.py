@@ -167,6 +167,10 @@ def report_lines(rep: dict) -> list[str]:
     if rep.get("not_identifiable"):
         lines.append("not identifiable from this record (values are not measurements): "
                      + ", ".join(rep["not_identifiable"]))
+    from ..report.calibration_text import decimate_advice
+    adv = decimate_advice(rep)
+    if adv:
+        lines.append("advice: " + adv.replace("`", ""))
     return lines
 
 

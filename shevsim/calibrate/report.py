@@ -25,7 +25,8 @@ from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 from ..core.errors import DataError
-from ..report.calibration_text import BASELINE_COLUMN, baseline_values, md_parameters  # noqa: F401
+from ..report.calibration_text import (BASELINE_COLUMN, baseline_values, decimate_advice,  # noqa: F401
+                                       md_parameters)
 
 MARKER = "report.json"
 #: a record longer than this (rows, after --decimate) is refused unless --allow-large: a calibration

@@ -637,6 +637,10 @@ def calibration_page(rep: dict, traces=None, title: str | None = None) -> Page:
         body += f"<p>Not identifiable from this record: {esc(', '.join(rep['not_identifiable']))}</p>"
     for n in d.get("notes") or []:
         body += f'<p class="note">note: {esc(n)}</p>'
+    from .calibration_text import decimate_advice
+    adv = decimate_advice(rep)
+    if adv:
+        body += f"<p><b>{esc(adv.replace('`', ''))}</b></p>"
     page.section("Result", body)
     chans = list((rep.get("rmse_before") or {}).keys())
     hold = (rep.get("split") or {}).get("holdout_intervals_s") or []

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import pytest
 
-from shevsim.calibrate.report import baseline_values, md_parameters, run_calibration
+from shevsim.calibrate.cli import report_lines
+from shevsim.calibrate.report import baseline_values, decimate_advice, md_parameters, run_calibration
 from shevsim.calibrate.synthetic import synth_vehicle
 
 SEED = 7
@@ -38,3 +39,29 @@ def test_baseline_column_shows_the_nominal_value_of_an_effects_parameter(tmp_pat
             "effect_neutral": {"aux_power_w": 300.0}}
     assert baseline_values(rep2) == {"grade_frac[1]": (0.01, "nominal"), "grade_frac[3]": (None, "-"),
                                      "aux_power_w": (300.0, "nominal")}
+
+
+def test_fast_record_whose_floor_is_its_inputs_noise_is_told_to_decimate(tmp_path, nominal):
+    df, _ = synth_vehicle({"aux_load": {}}, duration_s=300.0, dt_s=0.1, seed=SEED)
+    df.to_csv(tmp_path / "rec10hz.csv", index=False)
+    fast = run_calibration("vehicle", tmp_path / "rec10hz.csv", params=nominal, effects=["aux_load"], plots=False)
+    nf = fast.report["noise_floor"]["power_w"]
+    assert nf["propagated_inputs"]["value"] > 10.0 * nf["sensor"]["value"]      # speed noise differentiated at 0.1 s
+    adv = decimate_advice(fast.report)
+    assert adv is not None and "`--decimate 10` (keeps every 10th row: sample interval 0.1 s -> 1 s" in adv, adv
+    assert any(line.startswith("advice: ") and "--decimate 10" in line for line in report_lines(fast.report))
+    assert "--decimate 10" in fast.to_html()
+    # the advice taken: the inputs' part of the floor falls (about the 10x said, >= 4x), and no advice remains
+    slow = run_calibration("vehicle", tmp_path / "rec10hz.csv", params=nominal, effects=["aux_load"], plots=False,
+                           decimate=10)
+    nf10 = slow.report["noise_floor"]["power_w"]
+    assert nf10["propagated_inputs"]["value"] < nf["propagated_inputs"]["value"] / 4.0, (nf, nf10)
+    assert decimate_advice(slow.report) is None
+    # the rule: an inputs' part > 3x the sensor's on a record sampled faster than 1 s
+    rep = {"timing": {"sample_interval_s": 0.2},
+           "noise_floor": {"power_w": {"sensor": {"value": 100.0}, "propagated_inputs": {"value": 290.0}}}}
+    assert decimate_advice(rep) is None
+    rep["noise_floor"]["power_w"]["propagated_inputs"]["value"] = 310.0
+    assert "--decimate 5" in decimate_advice(rep)
+    rep["timing"]["sample_interval_s"] = 1.0
+    assert decimate_advice(rep) is None
