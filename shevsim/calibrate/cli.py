@@ -18,6 +18,8 @@ estimated (quiet segments, a local smoother; :mod:`shevsim.calibrate.timing`) an
     [params]                    # the component's own parameters (e.g. capacity_ah, mass_kg) - known
     capacity_ah = 2.9           # values or starting values; unknown names fail with a suggestion
     soc0_frac = 1.0             # cell short form: initial SOC (< 0: from the first rest voltage)
+    discharge_file = "ecm.csv"  # cell: R/C tables, CSV soc_frac,t_c,rs_ohm,r1_ohm,c1_f,r2_ohm,c2_f (a full SOC x
+    charge_file = "ecm.csv"     # temperature grid; relative to this file); docs/getting_started.md has an example
     [ocv]                       # cell short form: open-circuit voltage curve
     soc_frac = [0.0, 0.1, ...]
     ocv_v = [3.0, 3.4, ...]
@@ -52,7 +54,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("data", help="measured CSV (or .csv.gz; '#' lines are comments), or a shipped record's name "
                                  "(shevsim calibrate --records)")
     ap.add_argument("-o", "--out", required=True, help="output directory (report.json, report.md, plots)")
-    ap.add_argument("-p", "--params", help="TOML with known parameters / starting values / OCV curve")
+    ap.add_argument("-p", "--params", help="TOML with the nominal: known parameters / starting values ([params]), an "
+                                           "OCV curve ([ocv]), a cell's R/C tables (discharge_file, charge_file: CSV "
+                                           "soc_frac,t_c,rs_ohm,r1_ohm,c1_f,r2_ohm,c2_f); format and examples: "
+                                           "docs/getting_started.md, 'Calibrating your own record'")
     ap.add_argument("--map", action="append", default=[], metavar="CANONICAL=COLUMN",
                     help="use file column COLUMN as canonical column CANONICAL (repeatable)")
     ap.add_argument("--holdout", type=float, default=0.3, help="held-out fraction (default 0.3)")
