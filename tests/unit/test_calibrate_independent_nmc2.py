@@ -260,17 +260,20 @@ def test_nmc2_solid_diffusion_in_the_nominal_explains_part_of_the_form_error(tmp
     assert overlay["battery"]["diffusion_time_s"] == pytest.approx(tau)
 
 
-def test_nmc2_capacity_is_named_before_an_ocv_correction_that_is_not_min_gain_better():
-    """The capacity record: an OCV correction (five knots) and the capacity (one parameter) both pass; the
-    correction scored 9 % better and was named in the capacity's place.  Extra parameters must earn MIN_GAIN
-    over the simpler explanation (workflow _Run.parsimonious): the capacity is named, within 1 % of the truth."""
+def test_nmc2_capacity_is_named_not_an_ocv_correction_its_rests_do_not_show():
+    """The capacity record: an OCV correction (five knots) and the capacity (one parameter).  Until the ninth
+    session both passed, the correction scored 9 % better and the parsimony rule (_Run.parsimonious, tested on its
+    own in test_calibrate.py) named the capacity.  Since a rest's end voltage counts only within the relaxation
+    still under way there (CellModel._unrelaxed: the residual's own tail), the correction is refused at the rests:
+    the first rest after current ended 27 mV from where the model without it put it, but was still relaxing by up
+    to 18 mV towards it.  The capacity is named, within 1 % of the truth."""
     rep = _cell("capacity_swing", effects=["capacity", "ocv_correction"])
     assert rep["selected_effects"] == ["capacity"], rep["selected_effects"]
     truth = _truth()["cases"]["capacity_swing"]["truth"]["capacity_ah"]
     assert rep["final_parameters"]["capacity_ah"] == pytest.approx(truth, rel=0.01)
     first = {c["name"]: c for c in rep["rounds"][0]["candidates"]}
-    assert first["capacity"]["passed"] and first["ocv_correction"]["passed"]
-    assert first["ocv_correction"]["score"] < first["capacity"]["score"]       # the correction fitted better
+    assert first["capacity"]["passed"]
+    assert not first["ocv_correction"]["passed"] and "still relaxing" in first["ocv_correction"]["reason"]
 
 
 def test_nmc2_a_measured_offset_the_rests_confirm_is_named_though_the_fit_under_load_worsens():
