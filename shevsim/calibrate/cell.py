@@ -368,7 +368,10 @@ class CellModel(CalibrationModel):
             out.append({"parameter": name, "value": v,
                         "default": "the calibration's default convection coefficient" if name == "h_conv_w_m2k" else
                         "the project's A123 26650 LFP cell" + (" (the shape of its R/C tables; their levels are "
-                                                               "fitted)" if name == "discharge_file" else "")})
+                                                               "fitted; your own: discharge_file and charge_file, CSV "
+                                                               "soc_frac,t_c,rs_ohm,r1_ohm,c1_f,r2_ohm,c2_f - "
+                                                               "docs/getting_started.md)"
+                                                               if name == "discharge_file" else "")})
         return out
 
     # -- data
