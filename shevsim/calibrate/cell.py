@@ -32,7 +32,7 @@ logged current at rest, its standard error from the rests' effective sample size
 ``current_offset_a`` there).  A rest (:meth:`CellModel._rest_spans`) is where the cell carries no current: the
 logged current at one level no larger than C/20 (absolute thresholds from the nominal capacity and the current
 channel's own noise and resolution, not from the record's peak), without a trend, and the voltage relaxing
-the way a cell relaxes after the current before it - a CV taper (current decaying, voltage held) or a small
+the way the nominal's RC branches relax after the current before it - a CV taper (current decaying, voltage held) or a small
 constant charge is not a rest.
 
 Effects: :data:`CELL_EFFECTS`, a list of functions ``f(model) -> Effect | None`` (None: does not apply
@@ -433,14 +433,18 @@ class CellModel(CalibrationModel):
         # sensor logs at zero current (record_resolution, measured_params)
         refused: list = []
         v_meas = df["voltage_v"].to_numpy(float)
-        spans = self._rest_spans(t, i, v_meas, self.base.capacity_ah, min_s=self.SLOW_REST_MIN_S, why=refused)
+        # the nominal's RC branches (R, tau) over the SOC range the record visits: which way a rest relaxes
+        self.rc_branches = self._nominal_branches(tables, self.base, lo, hi)
+        spans = self._rest_spans(t, i, v_meas, self.base.capacity_ah, min_s=self.SLOW_REST_MIN_S, why=refused,
+                                 branches=self.rc_branches)
         self.rests_s = [float(t[b] - t[a]) for a, b in spans]
         self.rest_spans = list(spans)
         self._rest_t = t
         self.rests_refused = refused
         # the sensor offset is read in every rest long enough to be recognised as one (its relaxation tested), not
         # only in those long enough to show the slow branch: a drive's 20-90 s stops are rests too
-        offset_spans = self._rest_spans(t, i, v_meas, self.base.capacity_ah, min_s=self.OFFSET_REST_MIN_S)
+        offset_spans = self._rest_spans(t, i, v_meas, self.base.capacity_ah, min_s=self.OFFSET_REST_MIN_S,
+                                        branches=self.rc_branches)
         # the slow RC branch's time constant is limited to the longest rest: a relaxation that no rest shows
         # decaying cannot be told from a series capacitor - that is, from a capacity or a current offset
         # (over a swing where the OCV is near linear in the charge).  A record whose rests are all shorter than
@@ -577,6 +581,11 @@ class CellModel(CalibrationModel):
     REST_DRIFT_C_RATE = 1.0 / 2000.0
     #: and its voltage relaxes: it moves in the relaxation's direction by more than this many standard errors
     REST_RELAX_SE = 4.0
+    #: ... in either direction when the nominal's RC branches relax it both ways over the span, the smaller part at
+    #: least this fraction of the larger (_relaxation_expected: a recent charge on the fast branch, an older net
+    #: discharge on the slow one): the cell's split between its branches is not known to a factor of 10 before the
+    #: fit (the default tables are another cell's), so the measured direction cannot be checked against it
+    REST_MIXED_RATIO = 0.1
 
     @staticmethod
     def _noise(x) -> tuple[float, float]:
@@ -608,8 +617,52 @@ class CellModel(CalibrationModel):
             tau += 2.0 * float(ac[k])
         return max(tau, 1.0)
 
+    @staticmethod
+    def _nominal_branches(tables, base, lo: float = 0.0, hi: float = 1.0) -> tuple:
+        """The nominal's RC branches ``((r_ohm, tau_s), ...)``: the discharge table's R_j and R_j C_j at 25 degC
+        averaged over the SOC range ``lo..hi``, times the declared scales (the second branch only when the nominal
+        has it)."""
+        xs = np.linspace(lo, hi, 21) if hi > lo else np.array([lo])
+        p = np.array([tables.params(float(x), 25.0, 1.0) for x in xs])
+        out = [(float(np.mean(p[:, 1])) * base.r1_scale, float(np.mean(p[:, 1] * p[:, 2])) * base.r1_scale * base.c1_scale)]
+        if base.r2_scale > 0.0:
+            out.append((float(np.mean(p[:, 3])) * base.r2_scale,
+                        float(np.mean(p[:, 3] * p[:, 4])) * base.r2_scale * base.c2_scale))
+        return tuple(out)
+
     @classmethod
-    def _rest_spans(cls, t, i, v=None, capacity_ah: float | None = None, min_s: float = 60.0, why=None):
+    def _relaxation_expected(cls, t, i, k: int, w_a: slice, w_c: slice, level: float, branches) -> list[float]:
+        """Which way, and by how much, each of the nominal's RC branches ``branches`` (``((r_ohm, tau_s), ...)``)
+        moves the voltage from the rest's window ``w_a`` (its first tenth) to ``w_c`` (its last), the rest starting
+        at sample ``k`` [V per branch, > 0: up, the relaxation after a discharge].  Each branch holds the polarisation of the current
+        before ``k`` (relative to the rest's level: a sensor offset is not current), a sample's current weighted
+        by ``(1 - exp(-dt/tau))`` and by ``exp(-age/tau)``, how much of it is still there; during the rest it
+        decays as ``exp(-s/tau)``, and the windows' mean decay tells what the span can show of it: a branch much
+        faster than the first tenth has relaxed before it, a branch much slower than the span barely moves.  So
+        a recent charge whose fast polarisation still decays over the span sets the direction even after a long
+        net discharge, and an old discharge's slow polarisation sets it when nothing recent competes."""
+        tk = float(t[k])
+        sa, sc = t[w_a] - tk, t[w_c] - tk
+        out = []
+        for r, tau in branches:
+            tau = max(float(tau), 1e-9)
+            pre = (t >= tk - 20.0 * tau) & (np.arange(t.size) < k)
+            if not pre.any():
+                out.append(0.0)
+                continue
+            tp = t[pre]
+            dt = np.diff(np.append(tp, tk))           # the current of a sample holds until the next one
+            pol = float(np.sum((i[pre] - level) * (1.0 - np.exp(-dt / tau)) * np.exp(-(tk - tp - dt) / tau)))
+            out.append(r * pol * (float(np.mean(np.exp(-sa / tau))) - float(np.mean(np.exp(-sc / tau)))))
+        return out
+
+    #: the RC branches ``_rest_spans`` assumes when the caller gives none: the default (A123 26650) tables' at
+    #: SOC 0.5, 25 degC (filled on first use)
+    _DEFAULT_BRANCHES: tuple | None = None
+
+    @classmethod
+    def _rest_spans(cls, t, i, v=None, capacity_ah: float | None = None, min_s: float = 60.0, why=None,
+                    branches=None):
         """Index spans ``(first, last)`` of the record's rests after current has flowed (a rest before any
         current shows no relaxation).  A rest is where the cell carries no current, whatever its sensor logs:
 
@@ -621,18 +674,28 @@ class CellModel(CalibrationModel):
           (autocorrelation counted), 2 resolution steps or ``REST_DRIFT_C_RATE`` of the capacity - a CV taper,
           whose current decays while the voltage is held at its limit, is not a rest;
         * and, given the voltage ``v``, the voltage relaxes: it moves, from the span's first tenth to its last,
-          the way a cell relaxes after the current before it (up after a discharge, down after a charge), by more
-          than ``REST_RELAX_SE`` standard errors of the voltage noise (a CV hold keeps the voltage flat; a small
-          constant charge after a charge keeps it rising).
+          the way the nominal's RC branches relax after the current before it (:meth:`_relaxation_expected`: up when
+          the polarisation still decaying over the span is a discharge's, down when it is a charge's; either way
+          when the branches relax it both ways, within ``REST_MIXED_RATIO`` - a 20 s charge just before a rest
+          after a long drive: the fast branch down, the slow one up), by more than ``REST_RELAX_SE`` standard
+          errors of the voltage noise (a CV hold keeps the voltage flat; a small constant charge after a charge
+          keeps it rising).
 
-        ``capacity_ah`` (the nominal's) sets the absolute current scale; without it, 1 A h.  ``why``: a list that
-        receives ``(t_start_s, duration_s, reason)`` for each candidate span >= ``min_s`` refused."""
+        ``capacity_ah`` (the nominal's) sets the absolute current scale; without it, 1 A h.  ``branches``: the
+        nominal's RC branches ``((r_ohm, tau_s), ...)`` (:meth:`_nominal_branches`); without them, the default
+        tables' at SOC 0.5, 25 degC.  ``why``: a list that receives ``(t_start_s, duration_s, reason)`` for each
+        candidate span >= ``min_s`` refused."""
         from scipy.ndimage import median_filter
         t, i = np.asarray(t, float), np.asarray(i, float)
         n = i.size
         if n < 5:
             return []
         cap = float(capacity_ah) if capacity_ah and capacity_ah > 0 else 1.0
+        if branches is None:
+            if cls._DEFAULT_BRANCHES is None:
+                from ..battery.cell import default_tables
+                CellModel._DEFAULT_BRANCHES = cls._nominal_branches(default_tables(), BatteryPackParams(), 0.5, 0.5)
+            branches = cls._DEFAULT_BRANCHES
         level_max = cls.REST_LEVEL_C_RATE * cap
         m = median_filter(i, size=5, mode="nearest")
         quiet = np.abs(m) <= level_max
@@ -648,7 +711,7 @@ class CellModel(CalibrationModel):
             while j + 1 < n and quiet[j + 1] and abs(m[j + 1] - m[k]) <= band:
                 j += 1
             if t[j] - t[k] >= min_s:
-                reason = cls._not_a_rest(t, i, v, k, j, q_i, cap)
+                reason = cls._not_a_rest(t, i, v, k, j, q_i, cap, branches)
                 if reason is None:
                     out.append((k, j))
                 elif why is not None:
@@ -657,7 +720,7 @@ class CellModel(CalibrationModel):
         return out
 
     @classmethod
-    def _not_a_rest(cls, t, i, v, k, j, q_i, cap):
+    def _not_a_rest(cls, t, i, v, k, j, q_i, cap, branches=()):
         """Why the still span ``k..j`` is not a rest (None: it is one); see :meth:`_rest_spans`."""
         ts, xs = t[k:j + 1], i[k:j + 1]
         tc = ts - ts.mean()
@@ -679,22 +742,31 @@ class CellModel(CalibrationModel):
             return None
         v = np.asarray(v, float)
         vs = v[k:j + 1]
-        # the current before the span relative to the span's level, weighted by its recency on the span's own time
-        # scale (what the voltage relaxes from over the span): its sign is the polarisation
+        # which way the RC branches relax over the span after the current before it (relative to the span's level):
+        # the polarisation still decaying between the span's first tenth and its last (_relaxation_expected)
         level = float(np.median(xs))
-        pre = (t >= t[k] - 5.0 * dur) & (np.arange(t.size) < k)
-        if not pre.any():
-            return "no current before it"
-        before = float(np.sum((i[pre] - level) * np.exp((t[pre] - t[k]) / max(dur, 1e-9))))
-        if before == 0.0:
-            return "no current before it"
         w = max(3, int(0.1 * vs.size))
+        if k == 0:
+            return "no current before it"
+        parts = cls._relaxation_expected(t, i, k, slice(k, k + w), slice(j + 1 - w, j + 1), level, branches)
+        up, down = sum(x for x in parts if x > 0.0), -sum(x for x in parts if x < 0.0)
+        if up == 0.0 and down == 0.0:
+            return "no current before it"
         a, c = float(np.mean(vs[:w])), float(np.mean(vs[-w:]))
         sd_v, q_v = cls._noise(vs)
         se = sd_v * math.sqrt(2.0 / w)
-        rise = (c - a) * math.copysign(1.0, before)      # + : relaxes (up after a discharge, down after a charge)
+        if min(up, down) >= cls.REST_MIXED_RATIO * max(up, down):
+            # a recent current of one sign on the fast branch, an older one of the other on the slow: the direction
+            # is the cell's split of its polarisation between them, which the nominal does not know: either way
+            if abs(c - a) <= max(cls.REST_RELAX_SE * se, q_v):
+                return (f"the voltage does not relax after the mixed current before it (a recent "
+                        f"{'charge' if parts[0] < 0 else 'discharge'} and an older "
+                        f"{'discharge' if parts[0] < 0 else 'charge'}; {1e3 * (c - a):+.2f} mV over "
+                        f"{float(ts[-1] - ts[0]):.0f} s)")
+            return None
+        rise = (c - a) * (1.0 if up > down else -1.0)    # + : relaxes (up after a discharge, down after a charge)
         if rise <= max(cls.REST_RELAX_SE * se, q_v):
-            side = "discharge" if before > 0 else "charge"
+            side = "discharge" if up > down else "charge"
             return (f"the voltage does not relax after the {side} before it ({1e3 * (c - a):+.2f} mV over "
                     f"{float(ts[-1] - ts[0]):.0f} s)")
         return None
