@@ -154,6 +154,10 @@ class CalibrationModel:
     #: what the model's predicted value at a sample stands for (:mod:`shevsim.calibrate.timing`)
     native_convention: str = "instantaneous"
 
+    #: inputs the model differentiates (the vehicle's speed into acceleration): their noise reaches the prediction
+    #: divided by the sample interval, so a fast record's floor is theirs (the report's ``--decimate`` advice)
+    differentiated_inputs: tuple = ()
+
     def quiet_mask(self, ctx: dict):
         """Samples where the model's inputs are still (standstill, rest): for the sensor-noise floor; None = none."""
         return None
@@ -169,7 +173,8 @@ class CalibrationModel:
         used = self.defaults_used()
         if used:
             out.append(f"a nominal that is not this {self.name}'s: " + ", ".join(d["parameter"] for d in used)
-                       + f" are not in --params (taken from {used[0]['default']}; give your own)")
+                       + f" {'is' if len(used) == 1 else 'are'} not in --params (taken from {used[0]['default']}; "
+                         f"give your own: docs/getting_started.md, 'Calibrating your own record')")
         if abs(diag["bias"]) > 0.5 * diag["rmse"]:
             out.append(f"a constant offset ({diag['bias']:+.4g}): sensor offset or a shifted curve/map")
         for c in diag["correlations"]:

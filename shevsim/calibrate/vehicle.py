@@ -405,6 +405,7 @@ class VehicleModel(CalibrationModel):
         return {"power_w": np.interp(ctx["t"], ctx["tg"], pg)}
 
     native_convention = "mean-ending"
+    differentiated_inputs = ("speed_mps",)      # the acceleration of the road-load equation
 
     def quiet_mask(self, ctx):
         """Standstill: measured speed below 0.05 m/s."""

@@ -1785,6 +1785,9 @@ def _report(run, selected, final, *, dropped, discrepancy, diag_before, diag_aft
                            "min_bic_drop": MIN_DBIC, "tie_fraction": TIE, "bic": "autocorrelation-corrected",
                            "halving_passes": HALVING},
         "baseline_parameters": base.params,
+        # the value each effect's parameter starts from (the effect off: the nominal's), the baseline of its row
+        "effect_neutral": {k: float(v) for e in model.effects.values() for k, v in e.neutral.items()},
+        "differentiated_inputs": list(getattr(model, "differentiated_inputs", ())),
         "measured_parameters": f.measured,
         "record_resolution": (model.record_resolution() if hasattr(model, "record_resolution") else {}),
         "selected_effects": selected,
@@ -1935,6 +1938,10 @@ def _md_timing_noise(rep: dict) -> list[str]:
                      + (", ".join(f"{k} {_g(v['value'])} {v['method']}" for k, v in pr["inputs"].items()) or "none")
                      + ")")
         L.append(line + ".")
+    from ..report.calibration_text import decimate_advice
+    adv = decimate_advice(rep)
+    if adv:
+        L.append(f"**Advice:** {adv}")
     return L + [""]
 
 
@@ -1960,9 +1967,8 @@ def _md_evidence(rep: dict) -> list[str]:
             pr = ", ".join(f"{k}={_g(v)}" for k, v in own.items())
             L.append(f"| {c['name']} | {c['score']:.3f} | {c['gain']:+.1%} | {c['delta_bic']:+.1f} | {hr} | {pr} | {c['reason']} |")
         L.append("")
-    L += ["## Parameters", "", "| parameter | baseline | final |", "|---|---|---|"]
-    for k, v in rep["final_parameters"].items():
-        L.append(f"| {k} | {_g(rep['baseline_parameters'].get(k, float('nan')))} | {_g(v)} |")
+    from ..report.calibration_text import md_parameters
+    L += md_parameters(rep, _g)
     L += ["", "## Residual diagnostics (held-out part)", "",
           "| channel | when | bias | RMSE | drift /h | acf lag 1 | Ljung-Box p | noise floor | top correlations |",
           "|---|---|---|---|---|---|---|---|---|"]

@@ -67,8 +67,14 @@ def decimate_advice(rep: dict) -> str | None:
     dt = (rep.get("timing") or {}).get("sample_interval_s")
     if not dt or not (0.0 < float(dt) < DECIMATE_BELOW_S):
         return None
+    # only an input the model differentiates carries its noise divided by the interval (a cell's current is
+    # integrated into heat and charge: the Panasonic -20 degC record at 10 Hz, whose temperature floor is the
+    # current's noise through the heat, would not gain by decimation)
+    diff = set(rep.get("differentiated_inputs") or ())
     worst = None
     for c, nf in (rep.get("noise_floor") or {}).items():
+        if not diff & set(((nf.get("propagated_inputs") or {}).get("inputs") or {})):
+            continue
         pr = (nf.get("propagated_inputs") or {}).get("value")
         sn = (nf.get("sensor") or {}).get("value")
         if pr is None or sn is None or not pr > DECIMATE_PROPAGATED_RATIO * max(float(sn), 1e-300):
