@@ -1273,6 +1273,20 @@ class _Run:
     #: how far past its bound a declared parameter is tried (a fraction of its range, in the fit's scale)
     BEYOND_STEP = 0.05
 
+    def _on_bounds(self, fr, held=()):
+        """The declared parameters of ``fr`` on a bound (not measured, not in ``held``): ``(param, value, lo, hi,
+        upper?)``, the bounds those the fit ran in."""
+        f = self.fitter
+        for prm in self.model.declared:
+            v = fr.params.get(prm.name)
+            if v is None or prm.name in f.measured or prm.name in held:
+                continue
+            lo, hi = f.bounds_override.get(prm.name, (prm.lo, prm.hi))
+            pos = _bound_position(prm, v, lo, hi)
+            if BOUND_TOL < pos < 1.0 - BOUND_TOL:
+                continue
+            yield prm, v, lo, hi, pos >= 1.0 - BOUND_TOL
+
     def binding_bounds(self, fr, held=()) -> list[dict]:
         """The declared parameters of ``fr`` (the nominal's own freedom: an efficiency scale, the circuit's
         factors) that sit on a bound the record pushes against: with the parameter moved ``BEYOND_STEP`` of its
@@ -1283,15 +1297,7 @@ class _Run:
         rho = self.rho_of(fr)
         b0 = _bic(fr, rho)
         out = []
-        for prm in self.model.declared:
-            v = fr.params.get(prm.name)
-            if v is None or prm.name in f.measured or prm.name in held:
-                continue
-            lo, hi = f.bounds_override.get(prm.name, (prm.lo, prm.hi))
-            pos = _bound_position(prm, v, lo, hi)
-            if BOUND_TOL < pos < 1.0 - BOUND_TOL:
-                continue
-            up = pos >= 1.0 - BOUND_TOL
+        for prm, v, lo, hi, up in self._on_bounds(fr, held):
             sgn = 1.0 if up else -1.0
             if prm.log:
                 if not (lo > 0.0 and hi > 0.0):
@@ -1317,17 +1323,10 @@ class _Run:
         """The declared parameters of ``fr`` with physical limits past their bounds (``Param.limits``) that sit on
         a bound (not held, not measured): ``(param, upper?, (lo, hi), (lo', hi'))``, the bound on that side moved
         ``PROFILE_WIDEN`` of the range past it, at most to the limit."""
-        f = self.fitter
         out = []
-        for prm in self.model.declared:
-            v = fr.params.get(prm.name)
-            if prm.limits is None or v is None or prm.name in f.measured or prm.name in held:
+        for prm, _v, lo, hi, up in self._on_bounds(fr, held):
+            if prm.limits is None:
                 continue
-            lo, hi = f.bounds_override.get(prm.name, (prm.lo, prm.hi))
-            pos = _bound_position(prm, v, lo, hi)
-            if BOUND_TOL < pos < 1.0 - BOUND_TOL:
-                continue
-            up = pos >= 1.0 - BOUND_TOL
             w = self.PROFILE_WIDEN * (hi - lo)
             nb = (lo, min(hi + w, prm.limits[1])) if up else (max(lo - w, prm.limits[0]), hi)
             if nb != (lo, hi):
@@ -1481,21 +1480,28 @@ class _Run:
                                      f"held-out score, <= {DROP_TOL:.0%}) - it stood in for the declared freedom the "
                                      f"nominal lacks, a model-form discrepancy, not the cause (removed; held-out score "
                                      f"{final.score:.3f} with it, {new_final.score:.3f} without)"})
+        return self._drop_said(selected, [r["effect"] for r in removed], out, new_final)
+
+    def _drop_said(self, selected, gone, out, fit):
+        """Remove the effects ``gone`` from ``selected`` (and their held parameters), say the discrepancies ``out``,
+        and screen a remaining timing effect again on ``fit`` (the refit without them): ``(fit, out)``."""
+        for e in gone:
             selected.remove(e)
             self.claim_hold.pop(e, None)
         for x in out:
             self.say(f"model-form discrepancy: {x['statement']}")
         if gone and "timing" in selected:
-            new_final, again = self.screen_timing(selected, new_final)
+            fit, again = self.screen_timing(selected, fit)
             out += again
-        return new_final, out
+        return fit, out
 
     def _remove_beside_pinned(self, selected, final, pinned):
         """Declared parameters without physical limits past their bounds (``Param.limits``: the cell's circuit and
         thermal factors, whose bounds span decades) held by a bound the record pushes against
         (:meth:`binding_bounds`): the nominal cannot follow the record within its declared freedom, so an effect
         that passes on top of it may stand in for that (the rule was made on a vehicle given without its motor map,
-        whose efficiency scales are profiled since: :meth:`_profile_bounds`).  The physical effects selected are removed, refitted without, and reported as a model-form discrepancy
+        whose efficiency scales are profiled since: :meth:`_profile_bounds`).  The physical effects selected are
+        removed, refitted without, and reported as a model-form discrepancy
         with the evidence; a timing effect (the logger, not the model) stays.  Returns ``(final, discrepancy)``."""
         if not pinned:
             return final, []
@@ -1526,14 +1532,7 @@ class _Run:
                                      f"the effect may stand in for that - read as a model-form discrepancy, not as "
                                      f"the cause (removed; held-out score {final.score:.3f} with it, "
                                      f"{without.score:.3f} without)"})
-            selected.remove(e)
-            self.claim_hold.pop(e, None)
-        for x in out:
-            self.say(f"model-form discrepancy: {x['statement']}")
-        if "timing" in selected:
-            without, again = self.screen_timing(selected, without)
-            out += again
-        return without, out
+        return self._drop_said(selected, phys, out, without)
 
     def screen_timing(self, selected, final):
         """A selected time shift must be the main explanation of what it repairs: a logger latency is a pure
