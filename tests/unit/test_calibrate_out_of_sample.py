@@ -242,3 +242,23 @@ def test_a_rest_still_relaxing_does_not_confirm_a_capacity():
     (ev,) = [x for x in d["evidence"] if "still_relaxing_v" in x]
     assert max(abs(x) for x in ev["still_relaxing_v"]) > max(abs(x) for x in ev["rest_end_deviation_v"]), ev
     assert "still relaxing" in d["statement"]
+
+
+def test_a_capacity_the_nominal_already_mimics_is_said_to_be_inseparable():
+    """A new user's trial: PyBaMM's Marquis2019 (Kokam 0.68 A.h pouch) with 12 % lost capacity.  The baseline
+    stretches its slow RC branch (r2_scale 3.15, c2_scale 35) to stand in for it; the capacity then fits 0.615 A.h
+    (2.7 % from the truth) but gains 0.2 % held-out, the branch going back (0.85, 0.29) - the record cannot tell
+    the two apart.  Not named; before, the report did not say why."""
+    from shevsim.calibrate.report import run_calibration
+    m = {"time_s": "Test_Time(s)", "current_a": "Current(A)", "voltage_v": "Voltage(V)",
+         "t_surface_c": "Aux_Temperature_1(C)"}
+    rep = run_calibration("cell", D / "cell_trial40_marquis2019_capacity.csv", map=m, ambient_c=25.0,
+                          params=D / "cell_trial40_marquis2019_nominal.toml", effects=["capacity"], plots=False).report
+    assert rep["selected_effects"] == [], rep["selected_effects"]
+    (d,) = [d for d in rep["model_form_discrepancy"] if d.get("effect") == "capacity"]
+    assert "cannot tell the two apart" in d["statement"], d["statement"]
+    (moved,) = [x["declared_moved"] for x in d["evidence"] if "declared_moved" in x]
+    assert {"r2_scale", "c2_scale"} <= set(moved), moved
+    truth = json.loads((D / "cell_trial40_marquis2019_truth.json").read_text())["cases"]["capacity"]["truth"]
+    (cap,) = [x["value"] for x in d["evidence"] if x.get("parameter") == "capacity_ah"]
+    assert cap == pytest.approx(truth["capacity_ah"], rel=0.05)     # the fit was right: the record cannot say so
