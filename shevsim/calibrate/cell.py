@@ -1297,6 +1297,11 @@ class CellModel(CalibrationModel):
             return np.array(fit), np.array(dev), v - without
         return np.array(fit), np.array(dev)
 
+    #: :meth:`_unrelaxed` counts a rest's residual slope as relaxation still under way only beyond this many of its
+    #: standard errors (the sensor's noise alone gives a slope too: 1 mV of noise on an 8-minute rest read 1.5 mV
+    #: "still to come" at the median, 4.3 mV at the 90th percentile, before the slope had to be told from it)
+    RELAXATION_SLOPE_SIGMA = 2.0
+
     def _unrelaxed(self, resid, spans) -> np.ndarray:
         """Per rest of ``spans``: the relaxation still to come after its end that the model does not make [V,
         signed], from ``resid`` (the measured voltage less the model's, which relaxes through its own RC branches:
@@ -1305,29 +1310,44 @@ class CellModel(CalibrationModel):
         quarter before give ``a + 1 = ln(s_3 / s_4) / ln(t_4 / t_3)``, and what remains after the end ``T`` is
         ``c T^-a = T dV/dt / a``.  ``a`` is at least 1/2, solid diffusion's tail (``2 T dV/dt``, the slowest a cell
         relaxes); an exponential tail (an RC branch) steepens the slopes' fall, a larger ``a``, less to come.  Slopes
-        of another sign or not falling: the diffusion bound.  The record's first rest, before any current, is
+        of another sign or not falling: the diffusion bound.  Against the sensor's noise (least-squares standard
+        errors on the quarters' samples): the last quarter's slope within ``RELAXATION_SLOPE_SIGMA`` of its error
+        is a relaxed rest (0 to come), and ``a`` is read from the slopes' ratio at its least within that many
+        errors each (the allowance is a bound: noise on the ratio must not shrink it; 1 mV on a 10 mV diffusion
+        tail put the plain ratio's ``a`` anywhere in 0.5-2.5).  A quarter is at least 3 samples.  The record's first rest, before any current, is
         relaxed (0)."""
         v = np.asarray(resid, float)
         t = getattr(self, "_rest_t", None)
+        zs = self.RELAXATION_SLOPE_SIGMA
         out = []
         for a, b in spans:
             if (a, b) == getattr(self, "first_rest_span", None) or t is None:
                 out.append(0.0)
                 continue
-            k = max(10, (b - a + 1) // 4)
+            k = max(3, (b - a + 1) // 4)
             if b + 1 - 2 * k < a:
                 out.append(0.0)
                 continue
 
             def slope(lo, hi):
-                tt, vv = t[lo:hi], v[lo:hi]
-                return float(np.polyfit(tt - tt[0], vv, 1)[0]) if np.ptp(tt) > 0.0 else 0.0
-            s4, s3 = slope(b + 1 - k, b + 1), slope(b + 1 - 2 * k, b + 1 - k)
+                """Least-squares slope of the residual on ``[lo, hi)`` and its standard error."""
+                tt, vv = t[lo:hi] - t[lo], v[lo:hi]
+                sxx = float(np.sum((tt - tt.mean()) ** 2))
+                if sxx <= 0.0 or tt.size < 3:
+                    return 0.0, float("inf")
+                s = float(np.sum((tt - tt.mean()) * (vv - vv.mean()))) / sxx
+                r = vv - vv.mean() - s * (tt - tt.mean())
+                return s, math.sqrt(float(r @ r) / (tt.size - 2) / sxx)
+            (s4, e4), (s3, e3) = slope(b + 1 - k, b + 1), slope(b + 1 - 2 * k, b + 1 - k)
+            if not abs(s4) > zs * e4:
+                out.append(0.0)
+                continue
             t4 = float(np.mean(t[b + 1 - k:b + 1]) - t[a])
             t3 = float(np.mean(t[b + 1 - 2 * k:b + 1 - k]) - t[a])
             alpha = 0.5
-            if s3 * s4 > 0.0 and abs(s3) > abs(s4) and t4 > t3 > 0.0:
-                alpha = max(0.5, math.log(s3 / s4) / math.log(t4 / t3) - 1.0)
+            lo = (abs(s3) - zs * e3) / (abs(s4) + zs * e4)      # the slopes' fall, at its least within their errors
+            if s3 * s4 > 0.0 and lo > 1.0 and t4 > t3 > 0.0:
+                alpha = max(0.5, math.log(lo) / math.log(t4 / t3) - 1.0)
             out.append(float(t[b] - t[a]) * s4 / alpha)
         return np.array(out, float)
 
@@ -1375,20 +1395,32 @@ class CellModel(CalibrationModel):
         sxx = float(fit @ fit)
         slope = float(fit @ dev) / sxx if sxx > 0.0 else float("nan")
         se = math.sqrt(float((dev - slope * fit) @ (dev - slope * fit)) / (n - 1) / sxx) if sxx > 0.0 else float("inf")
-        ok = (math.isfinite(se) and slope > q * se and slope > 0.0
-              and (abs(math.log(slope)) <= math.log(self.REST_CLAIM_FACTOR) or abs(slope - 1.0) <= q * se))
+        # the record's first rest is where the fit's initial state was read (its deviation is ~0 by construction),
+        # so with one rest after current beside it the scatter about the line is not measured: the t-test has
+        # nothing to test against, and the claim is judged by its size alone (a reviewer's finding: its standard
+        # error came out of the first rest's microvolts)
+        scatter = not (first_rest and getattr(self, "first_rest_span", None) is not None and len(after) < 2)
+        if scatter:
+            ok = (math.isfinite(se) and slope > q * se and slope > 0.0
+                  and (abs(math.log(slope)) <= math.log(self.REST_CLAIM_FACTOR) or abs(slope - 1.0) <= q * se))
+        else:
+            ok = math.isfinite(slope) and slope > 0.0 and abs(math.log(slope)) <= math.log(self.REST_CLAIM_FACTOR)
         ev.update(rest_end_t_s=[float(ctx["t"][b]) for _a, b in spans], fitted_at_rest_ends_v=[float(x) for x in fit],
                   rest_deviation_v=[float(x) for x in dev], rest_end_deviation_v=[float(x) for x in dev_end],
-                  still_relaxing_v=[float(x) for x in rem], slope=slope, se=se)
+                  still_relaxing_v=[float(x) for x in rem], slope=slope, se=se if scatter else None,
+                  t_test=scatter)
         why = (f"at the ends of the record's {n} rests {'(its first, before any current, and those after current)' if first_rest and getattr(self, 'first_rest_span', None) is not None else 'after current'} {what} moves the model's voltage by "
                + ", ".join(f"{1e3 * x:+.1f}" for x in fit) + " mV and the relaxed voltage differs from the model's "
                "without it by " + ", ".join(f"{1e3 * x:+.1f}" for x in dev) + " mV" + (
                    " (at the rest ends " + ", ".join(f"{1e3 * x:+.1f}" for x in dev_end) + " mV, still relaxing by up "
                    "to " + ", ".join(f"{1e3 * x:+.1f}" for x in rem) + " mV: the interval's point nearest to no effect)"
-                   if np.any(dev != dev_end) else "") + f": slope {slope:.2f} +- {se:.2f}")
+                   if np.any(dev != dev_end) else "") + (f": slope {slope:.2f} +- {se:.2f}" if scatter else (
+                   f": slope {slope:.2f} (one rest after current: the rests' scatter is not measured, so the claim is "
+                   f"judged by its size alone, no t-test)")))
+        need = (f"> {q:.2f} standard errors, Student's t with {n - 1} degrees of freedom, and within a factor "
+                f"{self.REST_CLAIM_FACTOR:g} of 1" if scatter else f"within a factor {self.REST_CLAIM_FACTOR:g} of 1")
         return {"ok": ok, "evidence": ev, "statement": why + ("" if ok else (
-            f" (needed: > {q:.2f} standard errors, Student's t with {n - 1} degrees of freedom, and within a factor "
-            f"{self.REST_CLAIM_FACTOR:g} of 1): the rests do not sit where it puts them; it bends the model to the "
+            f" (needed: {need}): the rests do not sit where it puts them; it bends the model to the "
             f"voltage's model-form error under current"))}
 
     def _hysteresis_evidence(self, ctx, values, meas):

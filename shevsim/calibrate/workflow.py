@@ -1368,7 +1368,6 @@ class _Run:
         f = self.fitter
         keep = [e for e in selected if e == "timing" or e in self.measured_confirmed]
         phys = [e for e in selected if e not in keep]
-        judged = bool(phys)
         removed = []
         saved = dict(f.bounds_override)
         try:
@@ -1425,11 +1424,14 @@ class _Run:
         rho = self.rho_of(bounded)
         dbic_past = _bic(top, rho) - _bic(bounded, rho)
         outside = [(prm, up, old) for prm, up, old, _nb in at if not old[0] <= float(top.params[prm.name]) <= old[1]]
-        # the profile's fit is the final one only where it judged effects: with none selected, the declared
-        # parameters past their bounds are one explanation among the candidates that did not pass (the Leaf's
-        # payload record: the two efficiency scales took the payload's inertial power, regen 1.17, dBIC -108,
-        # where the mass alone had dBIC -158 and a held-out gain of 8.8 %) - stated, not adopted
-        adopt = judged and bool(outside) and dbic_past <= -MIN_DBIC
+        # the profile's fit is the final one whatever was selected: the declared parameters are the nominal's own
+        # freedom, fitted before any effect, and the profile only moves their plausibility guard.  (Until the
+        # ninth session's review it was adopted only where effects were judged: the Bolt's no-effect record with
+        # the curve x 0.88 ended on the profile's scale once the mass it had selected was removed, while the
+        # Leaf's payload record, nothing selected, ended on the guard - two records naming nothing, two kinds of
+        # final model.  On the Leaf the scales past the guard take the payload's inertial power, regen 1.17, dBIC
+        # -108, where the mass alone had dBIC -158 and 8.8 % held-out gain: the report says both.)
+        adopt = bool(outside) and dbic_past <= -MIN_DBIC
         new_final = top if adopt else bounded
         if adopt:
             # the declared range as the profile extended it: the report's bounds are the ones the final was fitted in
@@ -1449,13 +1451,9 @@ class _Run:
                         f"range), and that fit is the final one" + (
                             " (" + ", ".join(f"{k} = {float(top.params[k]):.4g}" for k in kept)
                             + f"; {', '.join(f'{k} = {float(bounded.params[k]):.4g}' for k in kept)} with the "
-                            f"bound held)" if kept else ""))
-            elif outside and dbic_past <= -MIN_DBIC:
-                tail = (f"; profiled up to {self.PROFILE_WIDEN:.0%} of the declared range past the bound, the record "
-                        f"takes it past (" + ", ".join(f"{prm.name} {float(top.params[prm.name]):.4g}"
-                                                        for prm, _up, _old in outside)
-                        + f", dBIC {dbic_past:+.0f}); not adopted: no effect was selected beside it, and a candidate "
-                        f"that did not pass may explain the same (the evidence below)")
+                            f"bound held)" if kept else "") + (
+                            "; no physical effect is named beside it, and a candidate that did not pass may explain "
+                            "part of the same (its evidence is in the candidates)" if not set(rest) - set(keep) else ""))
             else:
                 tail = ""
             out.append({"declared_on_bound": [
