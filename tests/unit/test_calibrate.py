@@ -62,7 +62,8 @@ def test_vehicle_names_small_effects(effect):
     assert rep["rmse_after"]["power_w"]["holdout"] < 0.85 * rep["rmse_before"]["power_w"]["holdout"]
 
 
-def test_vehicle_recovers_parameters():
+@pytest.mark.slow     # the default run recovers both on FASTSim's records (test_calibrate_independent.py: the payload's
+def test_vehicle_recovers_parameters():     # mass within 5 %, the regenerative limit within 10 %)
     rep, truth = _vehicle(["mass_error"])
     assert rep["final_parameters"]["mass_kg"] == pytest.approx(truth["mass_kg"], rel=0.05)
     assert rep["final_parameters"]["efficiency_scale_frac"] == pytest.approx(truth["efficiency_scale_frac"], abs=0.02)
