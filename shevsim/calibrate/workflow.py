@@ -1327,8 +1327,7 @@ class _Run:
         for prm, _v, lo, hi, up in self._on_bounds(fr, held):
             if prm.limits is None:
                 continue
-            w = self.PROFILE_WIDEN * (hi - lo)
-            nb = (lo, min(hi + w, prm.limits[1])) if up else (max(lo - w, prm.limits[0]), hi)
+            nb = _widened(prm, up, lo, hi, self.PROFILE_WIDEN)
             if nb != (lo, hi):
                 out.append((prm, up, (lo, hi), nb))
         return out
@@ -1405,7 +1404,8 @@ class _Run:
         for prm, up, old, nb in at:
             v = float(top.params[prm.name])
             if not BOUND_TOL < _bound_position(prm, v, *nb) < 1.0 - BOUND_TOL:
-                still.append({"parameter": prm.name, "value": v, "unit": prm.unit, "bound": "upper" if up else "lower",
+                still.append({"parameter": prm.name, "value": v, "unit": prm.unit,
+                              "bound": "upper" if _bound_position(prm, v, *nb) >= 0.5 else "lower",
                               "beyond": v, "declared_range": list(old), "profile_range": list(nb),
                               "dbic_beyond": float(_bic(top, rho) - _bic(final, rho))})
         if still:
@@ -1690,6 +1690,17 @@ TRADE_GAIN = 0.02       # a candidate gaining less than this held-out ...
 TRADE_AWAY = 0.05       # ... with its parameter this far from neutral, the declared ones moved 2x: said, not named
 TIMING_SHARE = 0.5      # a kept time shift removes more than half of the residual variance above the noise floor
 AT_NOISE = 1.5          # a channel whose nominal held-out residual is <= 1.5x its noise floor (variance <= 2.25x) has nothing to explain
+
+
+def _widened(prm: Param, up: bool, lo: float, hi: float, frac: float) -> tuple[float, float]:
+    """The bounds ``(lo, hi)`` with the upper (``up``) or lower one moved ``frac`` of the range past it, at most to
+    ``prm.limits``; for a parameter fitted in logs the range and the move are ratios (a linear move could reach 0 or
+    below, where its log is not defined: the bound then stays positive whatever the limit)."""
+    if prm.log and lo > 0.0:
+        r = (hi / lo) ** frac
+        return (lo, min(hi * r, prm.limits[1])) if up else (max(lo / r, prm.limits[0]), hi)
+    w = frac * (hi - lo)
+    return (lo, min(hi + w, prm.limits[1])) if up else (max(lo - w, prm.limits[0]), hi)
 
 
 def _bound_position(prm: Param, v: float, lo: float, hi: float) -> float:

@@ -69,3 +69,4 @@ def test_the_sensors_noise_alone_is_not_relaxation(n_rest):
     assert np.mean(reads != 0.0) < expect + 4 * np.sqrt(expect * (1 - expect) / reads.size), np.mean(reads != 0.0)
     if n_rest >= 60:
         assert np.percentile(np.abs(reads), 90) == 0.0
+
