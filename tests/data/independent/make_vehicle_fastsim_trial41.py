@@ -25,6 +25,8 @@ Loggers ("a data-logger export": columns ``time_s``, ``speed_kmh`` (km/h, 2 deci
 * ``instantaneous`` (the default): the 0.1 s signal at the sample time;
 * ``mean-ending``: both channels the mean of the 0.1 s signal over the period ending at the sample (the ten
   steps in (t - 1 s, t]; the first sample the value at 0);
+* ``mean-ending-power``: the power the mean over the period ending at the sample (an energy counter read each
+  second: the ten steps in (t - 1 s, t]), the speed instantaneous (a CAN snapshot);
 * 2 Hz (``none_2hz``): instantaneous at 0.5 s.
 
 Cases set through FASTSim's own inputs:
@@ -35,7 +37,8 @@ Cases set through FASTSim's own inputs:
 * ``latency_2`` (hu): the power channel two samples (2 s) late against the speed;
 * ``grade`` (u): a constant road grade of +1.5 % (FASTSim's cycle ``grade``);
 * ``none_mean`` (hu, mean-ending), ``payload_mean`` (hu, +350 kg, mean-ending);
-* ``none_2hz`` (u, 2 Hz instantaneous).
+* ``none_2hz`` (u, 2 Hz instantaneous);
+* ``none_pmean`` (hu, mean-ending-power), ``payload_pmean`` (hu, +350 kg, mean-ending-power).
 
 The user's nominal ``vehicle_trial41_emv_nominal.toml`` from the vehicle's data: mass 2698 kg, the chassis
 values above, 700 W auxiliaries, air 1.2 kg/m3, a 9.0 gear (rated 150 kW, 360 N.m: torque curves
@@ -74,7 +77,9 @@ CASES = {"none": {"seed": 4121, "cyc": HU},
          "grade": {"seed": 4126, "cyc": U, "grade": 0.015},
          "none_mean": {"seed": 4127, "cyc": HU, "logger": "mean-ending"},
          "payload_mean": {"seed": 4128, "cyc": HU, "dmass": 350.0, "logger": "mean-ending"},
-         "none_2hz": {"seed": 4129, "cyc": U, "dt_s": 0.5}}
+         "none_2hz": {"seed": 4129, "cyc": U, "dt_s": 0.5},
+         "none_pmean": {"seed": 4130, "cyc": HU, "logger": "mean-ending-power"},
+         "payload_pmean": {"seed": 4131, "cyc": HU, "dmass": 350.0, "logger": "mean-ending-power"}}
 
 
 def cycle(names):
@@ -122,11 +127,11 @@ def run(case):
     return t, va, p, bool(all(o["history"]["cyc_met"])), d
 
 
-def log(t, x, ts, logger, lag=0.0):
+def log(t, x, ts, logger, lag=0.0, power=False):
     """The logged value of the 0.1 s signal ``x`` at the sample times ``ts`` (``lag``: the channel late by it)."""
-    if logger == "instantaneous":
+    if logger == "instantaneous" or (logger == "mean-ending-power" and not power):
         return np.interp(ts - lag, t, x, left=x[0])
-    n = int(round(1.0 / H))                         # mean over (ts - 1 s, ts]: the n steps ending at ts
+    n = round(1.0 / H)                         # mean over (ts - 1 s, ts]: the n steps ending at ts
     idx = np.round(ts / H).astype(int)
     c = np.concatenate([[0.0], np.cumsum(x)])
     lo = np.maximum(idx + 1 - n, 0)
@@ -172,11 +177,11 @@ def main():
         logger = case.get("logger", "instantaneous")
         ts = np.round(np.arange(0.0, t[-1] + 1e-9, dt), 6)
         lag = case.get("lag_s", 0.0)
-        pl = log(t, p, ts, logger, lag)
+        pl = log(t, p, ts, logger, lag, power=True)
         sp = np.maximum(log(t, va, ts, logger) * 3.6 + rng.normal(0, NOISE["speed_kmh"], ts.size), 0.0)
         pw = (pl + rng.normal(0, NOISE["power_w"], ts.size)) / 1000.0
-        lines = [f"# FASTSim {fsim.__version__} electric minivan case {name}, logger {logger} {dt:g} s "
-                 "(tests/data/independent/make_vehicle_fastsim_trial41.py)", "time_s,speed_kmh,batt_power_kw"]
+        lines = [(f"# FASTSim {fsim.__version__} electric minivan case {name}, logger {logger} {dt:g} s "
+                  "(tests/data/independent/make_vehicle_fastsim_trial41.py)"), "time_s,speed_kmh,batt_power_kw"]
         lines += [f"{a:.1f},{b:.2f},{c:.3f}" for a, b, c in zip(ts, sp, pw)]
         fname = f"{PRE}_{name}.csv"
         (OUT / fname).write_text("\n".join(lines) + "\n")
