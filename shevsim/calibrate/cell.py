@@ -1310,15 +1310,20 @@ class CellModel(CalibrationModel):
         quarter before give ``a + 1 = ln(s_3 / s_4) / ln(t_4 / t_3)``, and what remains after the end ``T`` is
         ``c T^-a = T dV/dt / a``.  ``a`` is at least 1/2, solid diffusion's tail (``2 T dV/dt``, the slowest a cell
         relaxes); an exponential tail (an RC branch) steepens the slopes' fall, a larger ``a``, less to come.  Slopes
-        of another sign or not falling: the diffusion bound.  Against the sensor's noise (least-squares standard
-        errors on the quarters' samples): the last quarter's slope within ``RELAXATION_SLOPE_SIGMA`` of its error
-        is a relaxed rest (0 to come), and ``a`` is read from the slopes' ratio at its least within that many
-        errors each (the allowance is a bound: noise on the ratio must not shrink it; 1 mV on a 10 mV diffusion
-        tail put the plain ratio's ``a`` anywhere in 0.5-2.5).  A quarter is at least 3 samples.  The record's first rest, before any current, is
+        of another sign or not falling: the diffusion bound.  Against the residual's noise (least-squares standard
+        errors on the quarters' samples, counted ``n / tau`` with ``tau`` their residual's integrated
+        autocorrelation time: a real logger's rest residual is not white, lag-1 correlation 0.4-0.7 on the
+        Panasonic 18650PF, and white-noise errors there read noise as relaxation on half of the rests): the last
+        quarter's slope within Student's quantile of its error (the normal's ``RELAXATION_SLOPE_SIGMA``, two-sided,
+        with ``n / tau - 2`` degrees of freedom) is a relaxed rest (0 to come), and ``a`` is read from the slopes'
+        ratio at its least within that quantile each (the allowance is a bound: noise on the ratio must not shrink
+        it; 1 mV on a 10 mV diffusion tail put the plain ratio's ``a`` anywhere in 0.5-2.5).  Below its detection
+        limit (about 5 mV still to come under 1 mV of noise on an 8-minute rest) a tail reads as relaxed.  A quarter is at least 3 samples.  The record's first rest, before any current, is
         relaxed (0)."""
+        from scipy import stats
         v = np.asarray(resid, float)
         t = getattr(self, "_rest_t", None)
-        zs = self.RELAXATION_SLOPE_SIGMA
+        level = float(stats.norm.cdf(self.RELAXATION_SLOPE_SIGMA))     # one-sided: the normal's 2 sigma, two-sided
         out = []
         for a, b in spans:
             if (a, b) == getattr(self, "first_rest_span", None) or t is None:
@@ -1330,22 +1335,26 @@ class CellModel(CalibrationModel):
                 continue
 
             def slope(lo, hi):
-                """Least-squares slope of the residual on ``[lo, hi)`` and its standard error."""
+                """Least-squares slope of the residual on ``[lo, hi)``, its standard error (the samples counted
+                ``n / tau``, ``tau`` the integrated autocorrelation time of the fit's residual) and the quantile a
+                slope must pass (Student's t with ``n / tau - 2`` degrees of freedom, at least 1)."""
                 tt, vv = t[lo:hi] - t[lo], v[lo:hi]
                 sxx = float(np.sum((tt - tt.mean()) ** 2))
                 if sxx <= 0.0 or tt.size < 3:
-                    return 0.0, float("inf")
+                    return 0.0, float("inf"), float("inf")
                 s = float(np.sum((tt - tt.mean()) * (vv - vv.mean()))) / sxx
                 r = vv - vv.mean() - s * (tt - tt.mean())
-                return s, math.sqrt(float(r @ r) / (tt.size - 2) / sxx)
-            (s4, e4), (s3, e3) = slope(b + 1 - k, b + 1), slope(b + 1 - 2 * k, b + 1 - k)
-            if not abs(s4) > zs * e4:
+                tau = CellModel._tau_int(r)
+                se = math.sqrt(float(r @ r) / (tt.size - 2) / sxx * tau)
+                return s, se, float(stats.t.ppf(level, max(1.0, tt.size / tau - 2.0)))
+            (s4, e4, q4), (s3, e3, q3) = slope(b + 1 - k, b + 1), slope(b + 1 - 2 * k, b + 1 - k)
+            if not abs(s4) > q4 * e4:
                 out.append(0.0)
                 continue
             t4 = float(np.mean(t[b + 1 - k:b + 1]) - t[a])
             t3 = float(np.mean(t[b + 1 - 2 * k:b + 1 - k]) - t[a])
             alpha = 0.5
-            lo = (abs(s3) - zs * e3) / (abs(s4) + zs * e4)      # the slopes' fall, at its least within their errors
+            lo = (abs(s3) - q3 * e3) / (abs(s4) + q4 * e4)      # the slopes' fall, at its least within their errors
             if s3 * s4 > 0.0 and lo > 1.0 and t4 > t3 > 0.0:
                 alpha = max(0.5, math.log(lo) / math.log(t4 / t3) - 1.0)
             out.append(float(t[b] - t[a]) * s4 / alpha)
@@ -1395,11 +1404,14 @@ class CellModel(CalibrationModel):
         sxx = float(fit @ fit)
         slope = float(fit @ dev) / sxx if sxx > 0.0 else float("nan")
         se = math.sqrt(float((dev - slope * fit) @ (dev - slope * fit)) / (n - 1) / sxx) if sxx > 0.0 else float("inf")
-        # the record's first rest is where the fit's initial state was read (its deviation is ~0 by construction),
-        # so with one rest after current beside it the scatter about the line is not measured: the t-test has
-        # nothing to test against, and the claim is judged by its size alone (a reviewer's finding: its standard
-        # error came out of the first rest's microvolts)
-        scatter = not (first_rest and getattr(self, "first_rest_span", None) is not None and len(after) < 2)
+        # the record's first rest, before any current: where an effect does not act there (a capacity: no charge
+        # has passed; under 1 % of what it does at the rest after current) its point is (0, ~0) - the initial SOC was read there - and with one rest after current
+        # beside it the scatter about the line is not measured: the t-test has nothing to test against, and the
+        # claim is judged by its size alone (a reviewer's finding: its standard error came out of the first rest's
+        # microvolts).  Where the effect acts there (an initial SOC) the first rest is evidence, and the t-test
+        # keeps it (a fit that moves the first rest where the record does not is refused)
+        scatter = not (first_rest and getattr(self, "first_rest_span", None) is not None and len(after) < 2
+                       and abs(float(fit[0])) <= 0.01 * float(np.max(np.abs(fit[1:]), initial=0.0)))
         if scatter:
             ok = (math.isfinite(se) and slope > q * se and slope > 0.0
                   and (abs(math.log(slope)) <= math.log(self.REST_CLAIM_FACTOR) or abs(slope - 1.0) <= q * se))

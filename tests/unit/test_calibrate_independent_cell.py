@@ -169,7 +169,10 @@ def test_no_effect_pybamm_record_names_no_physical_effect():
 
 
 def test_pybamm_cooling_change_named_with_its_factor_and_time():
-    _check_cooling(_cell("cooling_change", effects=["cooling_change", "entropic_heat"]))
+    rep = _cell("cooling_change", effects=["cooling_change", "entropic_heat"])
+    _check_cooling(rep)
+    # the overlay written, run through the battery component by the master, reproduces the fit (the replay)
+    assert rep["replay_max_relative_deviation"] < 0.01, rep["replay"]
 
 
 @pytest.mark.slow
@@ -659,6 +662,8 @@ def test_arrhenius_record_names_the_law_its_voltage_shows():
     # the thermal parameters stayed at the nominal fit's (held while the law is in the model)
     for k in ("kt_w_mk", "cp_j_kgk", "h_conv_factor"):
         assert rep["final_parameters"][k] == pytest.approx(rep["baseline_parameters"][k], rel=1e-9)
+    # the overlay written, run through the battery component by the master, reproduces the fit (the replay)
+    assert rep["replay_max_relative_deviation"] < 0.01, rep["replay"]
 
 
 def test_a_resistance_that_falls_with_the_soc_as_the_cell_warms_is_not_an_arrhenius_law():

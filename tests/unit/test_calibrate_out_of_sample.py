@@ -89,16 +89,21 @@ def test_a_map_too_pessimistic_is_profiled_past_its_bound_not_read_as_mass(tmp_p
     """The Bolt's no-effect record given its published curve x 0.88 (x 0.84): the motor efficiency scale ends on
     its 1.08 guard and a mass 6 % low took the push it could not follow (named before the profile: a false
     selection the one-parameter probe did not see).  Profiled past the guard the record needs no mass: nothing
-    named, the mass stated as a stand-in, and the scale the record takes is the map's error - 1/factor times the
-    scale fitted with the true curve (an exact compensation the test knows independently of the fit)."""
+    named, the mass stated as a stand-in, and the scale the record takes past the guard is the map's error - 1/factor
+    times the scale fitted with the true curve (an exact compensation the test knows independently of the fit).
+    With no effect named the final model keeps the declared range and the profile is stated, not adopted."""
     rep, _ = _run("vehicle_bolt", "none", "vehicle", nominal=_scaled_curve_nominal(tmp_path, factor))
     ref, _ = _run("vehicle_bolt", "none", "vehicle")
     assert rep["selected_effects"] == [], rep["selected_effects"]
     gone = [d for d in rep["model_form_discrepancy"] if d.get("effect") == "mass_error"]
     assert gone and "stood in for the declared freedom" in gone[0]["statement"], rep["model_form_discrepancy"]
+    (said,) = [d for d in rep["model_form_discrepancy"] if d.get("declared_on_bound")]
+    (scale,) = [b for b in said["declared_on_bound"] if b["parameter"] == "efficiency_scale_frac" and not b.get("probe")]
     want = ref["final_parameters"]["efficiency_scale_frac"] / factor
-    assert rep["final_parameters"]["efficiency_scale_frac"] == pytest.approx(want, rel=0.02)
-    assert rep["rmse_after"]["power_w"]["holdout"] == pytest.approx(ref["rmse_after"]["power_w"]["holdout"], rel=0.02)
+    assert scale["profiled_value"] == pytest.approx(want, rel=0.02)
+    assert "not adopted" in said["statement"], said["statement"]
+    lo, hi = scale["declared_range"]
+    assert lo <= rep["final_parameters"]["efficiency_scale_frac"] <= hi
 
 
 @pytest.mark.parametrize("case, param, factor", [
@@ -281,26 +286,30 @@ def test_the_inseparable_statement_is_not_made_from_a_shape_parameter_or_a_decla
     assert not said, [d["statement"] for d in said]
 
 
-def test_a_profile_past_the_guard_is_the_final_model_whether_or_not_an_effect_is_named():
-    """A reviewer's finding on the ninth session: the profile past a plausibility guard was the final model on the
-    Bolt's no-effect record with its curve x 0.88 (the mass it had selected removed as a stand-in: nothing named)
-    but not on the Leaf's payload record (nothing selected: the fit held on the guard) - two records naming nothing,
-    two kinds of final model.  The Leaf's payload record (FASTSim, +300 kg; its two efficiency scales can take the
-    payload's inertial power between them, so no mass is named): the final model is the profile's, its scales past
-    the guard, the report says so and that no effect is named beside it, and it fits the held-out part no worse
-    than the fit held on the guard (the nominal's, nothing selected; measured 1081 W against 1087 W: the profile's
-    dBIC -108 is the training part's)."""
+def test_with_no_effect_named_a_profile_past_the_guard_is_stated_not_adopted():
+    """Two reviewers' findings.  The ninth session adopted the profile past a plausibility guard as the final model
+    when effects had been selected going in: the Bolt's no-effect record with its curve x 0.88 ended past the guard
+    (the mass removed as a stand-in, nothing named) while the Leaf's payload record, nothing selected, ended on it.
+    Adopted everywhere, the Leaf's final model put the payload's inertial power into a regenerative efficiency
+    1.14-1.17 (the truth is +250 kg), and on payload_2 fitted the held-out part worse (1551 W against 1539 W).  With
+    no effect named the final model keeps the declared ranges, on both records, and the profile is stated with its
+    numbers (FASTSim's 2016 Leaf, +250 kg: the mass candidate fits 1917 kg against the truth 1926 kg but gains 8.8 %
+    held out, under the 10 % rule)."""
     data = load_measured(str(D / "vehicle_trial40_leaf_payload.csv"), "vehicle",
                          mapping={"time_s": "Time", "speed_mps": "VehSpd_kph", "power_w": "HVBatt_Pwr_kW"},
                          units={"speed_mps": "kmh", "power_w": "kW"})
     rep = run_workflow("vehicle", data, load_params_toml(D / "vehicle_trial40_leaf_nominal.toml"), plots=False)
     assert rep["selected_effects"] == [], rep["selected_effects"]
     (said,) = [d for d in rep["model_form_discrepancy"] if d.get("declared_on_bound")]
-    assert "that fit is the final one" in said["statement"] and "no physical effect is named" in said["statement"]
+    assert "not adopted" in said["statement"], said["statement"]
+    past = 0
     for b in said["declared_on_bound"]:
         if b.get("probe"):
             continue
         lo, hi = b["declared_range"]
-        assert not lo <= rep["final_parameters"][b["parameter"]] <= hi, (b, rep["final_parameters"])
-        assert rep["final_parameters"][b["parameter"]] == pytest.approx(b["profiled_value"])
-    assert rep["rmse_after"]["power_w"]["holdout"] < rep["rmse_before"]["power_w"]["holdout"]
+        assert lo <= rep["final_parameters"][b["parameter"]] <= hi, (b, rep["final_parameters"])
+        past += not lo <= b["profiled_value"] <= hi
+    assert past >= 1, said
+    assert {p["parameter"] for p in rep["parameters_at_bounds"]} & {b["parameter"] for b in said["declared_on_bound"]}
+    (mass,) = [c for c in rep["candidates"] if c["name"] == "mass_error"]
+    assert mass["parameters"]["mass_kg"] == pytest.approx(1926.0, rel=0.05) and not mass["passed"]
