@@ -1211,8 +1211,18 @@ class CellModel(CalibrationModel):
         ok = abs(lr) > self.ENERGY_BALANCE_SIGMA * se_ln and lr * lf > 0 and abs(lr - lf) < abs(lr)
         why = (f"the record's own energy balance puts the heat loss per kelvin after {tc:.0f} s at {ratio:.2f}x the "
                f"loss before (+-{se_ln:.2f} in logs; fitted factor {f:.2f})")
-        return {"ok": ok, "evidence": ev, "statement": why + ("" if ok else ": no such change of the thermal time "
-                "constant there, the step bends the model to a thermal model-form error")}
+        k = self.ENERGY_BALANCE_SIGMA
+        if ok:
+            tail = ""
+        elif not abs(lr) > k * se_ln:        # a new user's trial: "no such change" beside a ratio of 2.57 +- 1.30
+            tail = (f": within {k:g} standard errors of no change, so the record's own balance cannot show it (too "
+                    f"little heating against the temperature's noise); the step is not named on the fit alone, where "
+                    f"it may bend the model to a thermal model-form error (a record that heats the cell more can "
+                    f"show it)")
+        else:
+            tail = (": the balance's change is not the fitted one (of the other sign, or nearer no change than the "
+                    "fitted factor): the step bends the model to a thermal model-form error")
+        return {"ok": ok, "evidence": ev, "statement": why + tail}
 
     def _reversible_heat(self, ctx, values, meas):
         """The fitted reversible heat ``-i T dU/dT(SOC)`` [W] (measured ``T``), or None when ``values`` have none."""

@@ -1,5 +1,5 @@
 """cli.py - ``shevsim calibrate MODEL DATA.csv --out DIR [--params PARAMS.toml] [--map canonical=column ...]
-[--holdout FRACTION] [--sample-convention instantaneous|mean-ending|mean-starting] [--sensor-noise CHANNEL=VALUE]
+[--holdout FRACTION] [--sample-convention CONVENTION|CHANNEL=CONVENTION,...] [--sensor-noise CHANNEL=VALUE]
 [--ambient-c DEGC]``.
 
 ``--ambient-c`` gives a cell record without an ambient-temperature column a constant ambient (a chamber or a room
@@ -73,10 +73,12 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--unit", action="append", default=[], metavar="CANONICAL=UNIT",
                     help="unit of a column in the file, converted to SI (time_s=ms, current_a=mA, speed_mps=kmh, "
                          "power_w=kW, t_surface_c=K, voltage_v=mV; CANONICAL=its SI unit skips the unit sniffing)")
-    ap.add_argument("--sample-convention", choices=("instantaneous", "mean-ending", "mean-starting"),
-                    default="instantaneous",
-                    help="what a logged value stands for: the value at the sample time (default), the mean over "
-                         "the period ending at it, or over the period starting at it (stated in the report)")
+    ap.add_argument("--sample-convention", default=None, metavar="CONVENTION | CHANNEL=CONVENTION[,...]",
+                    help="what a logged value stands for: instantaneous (the value at the sample time; the "
+                         "default), mean-ending (the mean over the period ending at it) or mean-starting (over the "
+                         "period starting at it); one for every channel, inputs included, or per channel, the "
+                         "others instantaneous (a logger averaging only the power: power_w=mean-ending); stated "
+                         "in the report")
     ap.add_argument("--sensor-noise", action="append", default=[], metavar="CHANNEL=VALUE[,CHANNEL=VALUE]",
                     help="declared sensor noise (1 sigma, SI) of an output channel (its sensor floor) or of a "
                          "measured input (propagated through the model into the outputs' floor); otherwise "

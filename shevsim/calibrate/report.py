@@ -298,9 +298,11 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
         Called with each progress line (default: silent).
     progress_every_s : float, optional
         Also report the time elapsed this often while the fit runs (the command line: 15 s).
-    sample_convention : str, optional
+    sample_convention : str or mapping, optional
         What a logged value stands for: ``instantaneous`` (default), ``mean-ending`` or ``mean-starting``
-        (`shevsim.calibrate.timing`); stated in the report.
+        (`shevsim.calibrate.timing`), for every channel (inputs included), or per channel
+        (``"power_w=mean-ending"`` or ``{"power_w": "mean-ending"}``: the others instantaneous); stated in the
+        report.
     sensor_noise : mapping, optional
         Declared sensor noise per channel (``{"power_w": 300.0}``), used as its noise floor.
     ambient_c : float, optional

@@ -282,8 +282,9 @@ def synth_vehicle(effects: dict | None = None, duration_s: float = 1800.0, dt_s:
 
 
 #: the sample convention of this module's records: the vehicle plant's power is the mean over the period
-#: ending at the sample; cell and engine records are the plant's values at the sample time
-SYNTH_CONVENTION = {"vehicle": "mean-ending", "cell": "instantaneous", "engine": "instantaneous"}
+#: ending at the sample, its speed the value at the sample time; cell and engine records are the plant's values at
+#: the sample time
+SYNTH_CONVENTION = {"vehicle": "power_w=mean-ending", "cell": "instantaneous", "engine": "instantaneous"}
 
 
 def as_measured(df: pd.DataFrame, model: str, convention: str | None = None, path: str = "<synthetic>") -> MeasuredData:

@@ -153,7 +153,7 @@ from scipy import optimize, stats
 
 from ..core.errors import DataError, ShevsimError
 from .models import CalibrationModel, Param, get_model
-from .timing import (CONVENTIONS, DEFAULT_CONVENTION, PropagatedInputNoise, combined_floor, convention_offset_s,
+from .timing import (DEFAULT_CONVENTION, PropagatedInputNoise, combined_floor, convention_offset_s, convention_offsets, convention_text, parse_conventions,
                      input_noise_floor, median_dt, sensor_noise_floor, shift_prediction, timing_effect)
 
 MIN_GAIN = 0.10
@@ -304,8 +304,16 @@ class Fitter:
         # ``timing`` effect (a fitted time shift) is a candidate of every model
         self.t = df["time_s"].to_numpy(float)
         self.dt = median_dt(self.t)
-        self.sample_convention = sample_convention
-        self.conv_offset = convention_offset_s(sample_convention, model.native_convention, self.dt)
+        conv = parse_conventions(sample_convention)
+        self.sample_convention = convention_text(conv)
+        convention_offset_s(DEFAULT_CONVENTION, model.native_convention, self.dt)      # the model's own is known
+        inputs = [c for c in getattr(model, "inputs", ()) if c in df.columns]
+        self.conv_offsets, self.conventions = convention_offsets(conv, self.channels, inputs,
+                                                                 model.native_convention, self.dt)
+        self.input_convention = self.conventions[inputs[0]] if inputs else None
+        offs = set(self.conv_offsets.values())
+        #: the offset [s] of every output channel's read when they share it, else ``{channel: s}``
+        self.conv_offset = offs.pop() if len(offs) == 1 else dict(self.conv_offsets)
         self.effects = dict(model.effects)
         self.effects["timing"] = timing_effect(self.channels, self.dt)
         self.meas = {c: df[c].to_numpy(float) for c in self.channels}
@@ -373,9 +381,13 @@ class Fitter:
         own = {k: v for k, v in values.items() if k != "time_shift_s"}
         return shift_prediction(model.simulate(ctx, own), self.t, self.shift_of(values))
 
-    def shift_of(self, values) -> float:
-        """Offset [s] at which the model's prediction is read: sample convention and fitted time shift."""
-        return self.conv_offset - float(values.get("time_shift_s", 0.0))
+    def shift_of(self, values):
+        """Offset [s] at which the model's prediction is read: sample convention and fitted time shift (a number,
+        or ``{channel: s}`` when the record's output channels have different conventions)."""
+        ts = float(values.get("time_shift_s", 0.0))
+        if isinstance(self.conv_offset, dict):
+            return {c: o - ts for c, o in self.conv_offset.items()}
+        return self.conv_offset - ts
 
     def _resid(self, values):
         pred = self.simulate(values)
@@ -606,7 +618,8 @@ def run_workflow(model_name: str, data, known: dict | None = None, holdout: floa
                  sensor_noise: dict | None = None) -> dict:
     """Run the whole calibration loop on ``data`` (:class:`~shevsim.calibrate.data.MeasuredData`).
 
-    ``sample_convention``: what a logged value stands for (:data:`shevsim.calibrate.timing.CONVENTIONS`;
+    ``sample_convention``: what a logged value stands for (:data:`shevsim.calibrate.timing.CONVENTIONS`: one for
+    every channel, or ``CHANNEL=NAME[,...]`` for some, :func:`~shevsim.calibrate.timing.parse_conventions`;
     default ``data.sample_convention`` when the data carry one, else ``instantaneous``); ``sensor_noise``:
     ``{channel: noise}`` declared sensor noise (otherwise estimated, :func:`~shevsim.calibrate.timing.sensor_noise_floor`).
     Returns the report dictionary (also written to ``out_dir/report.json`` with ``report.md`` and plots
@@ -614,10 +627,9 @@ def run_workflow(model_name: str, data, known: dict | None = None, holdout: floa
     installed): the least-squares SVDs of tall, thin Jacobians are ~100x slower when BLAS threads fight
     over a shared machine's cores.
     """
-    conv = sample_convention or getattr(data, "sample_convention", None) or DEFAULT_CONVENTION
-    if conv not in CONVENTIONS:
-        raise DataError(f"sample convention '{conv}': expected one of {', '.join(CONVENTIONS)}")
-    opts = {"sample_convention": conv, "sensor_noise": dict(sensor_noise or {})}
+    given = sample_convention or getattr(data, "sample_convention", None)
+    conv = convention_text(parse_conventions(given))        # an unknown convention: a DataError naming it
+    opts = {"sample_convention": conv, "sensor_noise": dict(sensor_noise or {}), "convention_declared": bool(given)}
     args = (model_name, data, known, holdout, split, out_dir, effects, plots, params_where, log, opts)
     try:
         from threadpoolctl import threadpool_limits
@@ -652,6 +664,7 @@ class _Run:
         self.t = data.df["time_s"].to_numpy(float)
         self.train, self.hold, self.split_info = make_split(self.t, holdout, split)
         self.fitter = Fitter(model, data, self.train, self.hold, opts["sample_convention"])
+        self.opts = opts
         self.fitter.progress = log
         self.sensor_noise = opts["sensor_noise"]
         self.inputs = [c for c in model.inputs if c in data.df.columns]
@@ -1829,7 +1842,9 @@ def _report(run, selected, final, *, dropped, discrepancy, diag_before, diag_aft
     f, model, data, base = run.fitter, run.model, run.data, run.base
     replay_dev = (max(abs(replay[c][part] / max(final.rmse[c][part], 1e-300) - 1.0)
                       for c in replay for part in ("train", "holdout")) if replay and "error" not in replay else None)
-    timing = {"sample_convention": f.sample_convention, "model_convention": model.native_convention,
+    timing = {"sample_convention": f.sample_convention, "declared": bool(run.opts.get("convention_declared", True)),
+              "channel_conventions": dict(f.conventions), "input_convention": f.input_convention,
+              "model_convention": model.native_convention,
               "convention_offset_s": f.conv_offset, "sample_interval_s": f.dt,
               "time_shift_s": float(final.params.get("time_shift_s", 0.0)) if "timing" in selected else 0.0}
     return {
@@ -1983,8 +1998,14 @@ def _md_timing_noise(rep: dict) -> list[str]:
     L = []
     tm = rep.get("timing")
     if tm:
-        L.append(f"Sample timing: the record is read as `{tm['sample_convention']}` (declared; the model's "
-                 f"prediction is `{tm['model_convention']}`, read {tm['convention_offset_s']:+.3g} s later); "
+        off = tm["convention_offset_s"]
+        off = (", ".join(f"`{c}` {o:+.3g} s" for c, o in off.items()) if isinstance(off, dict) else f"{off:+.3g} s")
+        inp = tm.get("input_convention")
+        L.append(f"Sample timing: the record is read as `{tm['sample_convention']}` ("
+                 + ("declared" if tm.get("declared", True) else "the default: no --sample-convention was given")
+                 + (f"; its driving input `{inp}`" if inp else "")
+                 + f"; the model's prediction is `{tm['model_convention']}` from inputs taken at their sample "
+                 f"times, read {off} later); "
                  f"sample interval {_g(tm['sample_interval_s'])} s; fitted time shift {_g(tm['time_shift_s'])} s "
                  f"(> 0: the output lags).")
     for c, nf in (rep.get("noise_floor") or {}).items():

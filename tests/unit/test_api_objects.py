@@ -118,7 +118,7 @@ def test_run_calibration_in_a_notebook(tmp_path, monkeypatch):
     before = sorted(p.name for p in tmp_path.iterdir())
     cal = shevsim.run_calibration("vehicle", csv, params=params, map={"power_w": "P_bus", "speed_mps": "v"},
                                   power_sign="delivered-positive",
-                                  sample_convention="mean-ending")   # synth_vehicle logs the period's mean power
+                                  sample_convention="power_w=mean-ending")   # synth_vehicle: the period's mean power, the speed at t
     assert isinstance(cal, CalibrationReport) and sorted(p.name for p in tmp_path.iterdir()) == before
     assert cal.selected_effects == ["regen_limit"]
     ba = cal.before_after

@@ -139,10 +139,10 @@ def test_cli_end_to_end_report(tmp_path):
     out = tmp_path / "out"
     rc = main_calibrate(["vehicle", str(csv), "--out", str(out), "--params", str(params), "--map", "power_w=P_bus",
                          "--map", "speed_mps=v", "--power-sign", "delivered-positive", "--holdout", "0.3", "-q",
-                         "--sample-convention", "mean-ending"])    # synth_vehicle logs the period's mean power
+                         "--sample-convention", "power_w=mean-ending"])    # synth_vehicle: the mean power, the speed at t
     assert rc == 0
     rep = json.loads((out / "report.json").read_text())
-    assert rep["timing"]["sample_convention"] == "mean-ending" and rep["timing"]["convention_offset_s"] == 0.0
+    assert rep["timing"]["sample_convention"] == "power_w=mean-ending" and rep["timing"]["convention_offset_s"] == 0.0
     for key in ("model", "selected_effects", "candidates", "rmse_before", "rmse_after", "split"):
         assert key in rep
     assert rep["selected_effects"] == ["regen_limit"]
@@ -151,7 +151,7 @@ def test_cli_end_to_end_report(tmp_path):
     assert set(rep["rmse_before"]["power_w"]) == {"train", "holdout"}
     assert rep["data"]["extra_columns"] == ["extra_signal"]   # kept as a candidate explanatory signal
     md = (out / "report.md").read_text()
-    assert "regen_limit" in md and "fit_before_after.png" in md and "`mean-ending` (declared" in md
+    assert "regen_limit" in md and "fit_before_after.png" in md and "`power_w=mean-ending` (declared" in md
     for p in rep["plots"]:
         assert (out / p).stat().st_size > 1000
     assert not list(out.glob(".*.tmp"))     # atomic writes leave no temp files
