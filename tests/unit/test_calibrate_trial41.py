@@ -2,8 +2,9 @@
 ``make_vehicle_fastsim_trial41.py``, runner ``eval_trial41_calibrate.py``): records of models and parameter sets the
 project had never used - PyBaMM's DFN (not the SPMe of the earlier records) on Ramadass2004 (an 18650 LCO cell) and
 OKane2022 (LG M50 21700), and FASTSim 3.1 with an electric minivan (the Pacifica's chassis, the Bolt's powertrain) -
-given with a user's nominal only.  The cases the calibration gets right are kept here as regression cases; the ones
-it does not (a false Arrhenius law on a Ramadass2004 drive, a solid diffusion for a capacity on its 300 s parks, a
+given with a user's nominal only.  The cases the calibration gets right are kept here as regression cases (and the
+false Arrhenius law the trial found on a Ramadass2004 drive, now refused); the ones it does not (a solid diffusion
+for a capacity on Ramadass2004's 300 s parks, a
 cooling change its energy balance cannot show, an OKane2022 capacity 5.002 % low, an OKane2022 offset that loses to
 the initial SOC on the held-out part) are in ``docs/calibration_independent.md``, "A third new-user trial"."""
 from __future__ import annotations
@@ -27,7 +28,7 @@ PHYSICAL = {"mass_error", "aux_load", "road_grade", "rolling_error", "aero_error
 PRE = {"ra": "cell_trial41_ramadass2004", "ok": "cell_trial41_okane2022", "emv": "vehicle_trial41_emv"}
 
 
-def _run(gen: str, case: str, convention=None):
+def _run(gen: str, case: str, convention=None, effects=None):
     pre = PRE[gen]
     truth = json.loads((D / f"{pre}_truth.json").read_text())
     c = truth["cases"][case]
@@ -38,7 +39,7 @@ def _run(gen: str, case: str, convention=None):
         data = load_measured(str(D / c["file"]), "cell", mapping=CELL, current_sign="auto")
         model = "cell"
     rep = run_workflow(model, data, load_params_toml(D / f"{pre}_nominal.toml"), plots=False,
-                       sample_convention=convention)
+                       sample_convention=convention, effects=effects)
     return rep, c["truth"]
 
 
@@ -49,7 +50,7 @@ def test_minivan_payload_is_named_as_mass_within_5_percent():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("gen, case", [("ra", "none"), ("ok", "none"), ("ok", "none_2"), ("ok", "none_swing"),
+@pytest.mark.parametrize("gen, case", [("ra", "none"), ("ra", "none_2"), ("ok", "none"), ("ok", "none_2"), ("ok", "none_swing"),
                                        ("emv", "none"), ("emv", "none_2"), ("emv", "none_2hz"),
                                        ("emv", "none_mean")])
 def test_no_effect_records_name_no_physical_effect(gen, case):
@@ -82,3 +83,16 @@ def test_minivan_grade_is_named_with_its_mean_grade():
     assert rep["selected_effects"] == ["road_grade"], rep["selected_effects"]
     g = [v for k, v in rep["final_parameters"].items() if k.startswith("grade_frac[")]
     assert sum(g) / len(g) == pytest.approx(truth["grade_frac"], rel=0.25)
+
+
+@pytest.mark.slow
+def test_a_drive_and_park_warming_is_not_read_as_a_temperature_law():
+    """Ramadass2004 (DFN, no temperature dependence: the generator holds its kinetics at 25 degC) warms 1.3-2.2 K
+    over four 10-minute drives with 5-minute parks.  ``arrhenius_resistance`` was named at Ea/R 1709 K, passed by
+    its claim on the voltage alone (2466 +- 440 K beside the SOC law): the particles' diffusion overpotential
+    builds under current and relaxes at rest, as the temperature rises and falls.  Beside the diffusion too the
+    voltage alone shows no law (0 K, at its bound), and the report says the record cannot tell them apart."""
+    rep, _ = _run("ra", "none_2", effects=["arrhenius_resistance"])
+    assert rep["selected_effects"] == [], rep["selected_effects"]
+    (c,) = [c for c in rep["rounds"][0]["candidates"] if c["name"] == "arrhenius_resistance"]
+    assert not c["passed"]
