@@ -2104,9 +2104,22 @@ def render_markdown(rep: dict) -> str:
                      + f"; most correlated with {cs or 'nothing'}; likely causes: "
                      + "; ".join(b["likely_causes"])
                      + (" (the selected effects bring it within range)" if b["fixed_by_selected_effects"] else ""))
-    if rep.get("model_form_discrepancy"):
-        L += ["", "**Model-form discrepancy** (not explained by any effect of the library; the evidence):"]
-        for d in rep["model_form_discrepancy"]:
+    # a candidate refused or removed (its fit bends the model to an error of another form) is not the same news as
+    # a residual the final model leaves (a new user read "not explained by any effect" beside a grade that took the
+    # record's error from 3562 W to 740 W, and two implausible drag and rolling fits listed under it)
+    mfd = rep.get("model_form_discrepancy") or []
+    refused = [d for d in mfd if d.get("effect")]
+    left = [d for d in mfd if not d.get("effect")]
+    if refused:
+        L += ["", "**Candidates refused or removed as explanations** (each fitted the record only by bending the model "
+              "to an error of another form - outside its plausible range, its claim not shown by the record, or "
+              "standing in for another freedom; the evidence):"]
+        for d in refused:
+            L.append(f"- {d['statement']}")
+    if left:
+        L += ["", "**Model-form discrepancy** (what the final model, with the selected effects, does not explain; the "
+              "evidence):"]
+        for d in left:
             L.append(f"- {d['statement']}")
     if rep.get("measured_parameters"):
         fp = rep.get("final_parameters") or {}

@@ -43,6 +43,26 @@ def _run(gen: str, case: str, convention=None, effects=None):
     return rep, c["truth"]
 
 
+def test_the_report_tells_refused_candidates_from_what_the_model_leaves(tmp_path):
+    """A new user's reading of the minivan's grade record: road_grade takes the held-out error from 3562 W to 740 W,
+    and report.md listed an implausible rolling coefficient and drag under "Model-form discrepancy (not explained by
+    any effect of the library)".  They are candidates refused as explanations; the discrepancy section is what the
+    final model leaves."""
+    import re
+    pre = PRE["emv"]
+    truth = json.loads((D / f"{pre}_truth.json").read_text())
+    data = load_measured(str(D / truth["cases"]["grade"]["file"]), "vehicle", mapping=VEH,
+                         units={"speed_mps": "kmh", "power_w": "kW"})
+    rep = run_workflow("vehicle", data, load_params_toml(D / f"{pre}_nominal.toml"), plots=False, out_dir=tmp_path)
+    assert rep["selected_effects"] == ["road_grade"], rep["selected_effects"]
+    md = (tmp_path / "report.md").read_text()
+    refused = [d["effect"] for d in rep["model_form_discrepancy"] if d.get("effect")]
+    assert refused, rep["model_form_discrepancy"]
+    sec = re.search(r"\*\*Candidates refused or removed as explanations\*\*.*?(?:\n\n|\Z)", md, re.S)
+    assert sec and all(f"'{e}'" in sec.group(0) for e in refused), md
+    assert "not explained by any effect of the library" not in md
+
+
 def test_minivan_payload_is_named_as_mass_within_5_percent():
     rep, truth = _run("emv", "payload")
     assert rep["selected_effects"] == ["mass_error"], rep["selected_effects"]
