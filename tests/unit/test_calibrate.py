@@ -77,7 +77,8 @@ def test_vehicle_nothing_missing_selects_nothing():
     assert all(not c["passed"] for c in rep["candidates"])
 
 
-def test_vehicle_two_effects_found_or_reported():
+@pytest.mark.slow     # the default run names two effects on FASTSim's record (test_calibrate_independent.py:
+def test_vehicle_two_effects_found_or_reported():     # the payload with a half-sample shift, mass and timing)
     rep, _ = _vehicle(["mass_error", "regen_limit"])
     sel = set(rep["selected_effects"])
     assert sel <= {"mass_error", "regen_limit"}, sel

@@ -59,11 +59,12 @@ def test_every_effect_of_the_library_has_a_case():
     assert len(CELL_EFFECTS) == len(CASES)
 
 
-# in the slow run (the default run's ~10-minute budget): the two effects the default run names on records the
+# in the slow run (the default run's ~10-minute budget): the effects the default run names on records the
 # project did not make - PyBaMM's Arrhenius kinetics (test_calibrate_independent_cell.py,
-# test_arrhenius_record_names_the_law_its_voltage_shows) and its heat-transfer change at a time
-# (test_pybamm_cooling_change_named_with_its_factor_and_time)
-_SLOW_HERE = {"arrhenius_resistance", "cooling_change"}
+# test_arrhenius_record_names_the_law_its_voltage_shows), its heat-transfer change at a time
+# (test_pybamm_cooling_change_named_with_its_factor_and_time) and the Leaf cell's entropic heat
+_SLOW_HERE = {"arrhenius_resistance", "cooling_change", "entropic_heat"}   # entropic heat: the Nissan Leaf cell's record
+                                                                            # (test_calibrate_leaf.py), real data
 
 
 @pytest.mark.parametrize("effect", [pytest.param(e, marks=pytest.mark.slow) if e in _SLOW_HERE else e

@@ -63,6 +63,7 @@ def test_the_report_tells_refused_candidates_from_what_the_model_leaves(tmp_path
     assert "not explained by any effect of the library" not in md
 
 
+@pytest.mark.slow     # the default run: the grade record above (named, and its report)
 def test_minivan_payload_is_named_as_mass_within_5_percent():
     rep, truth = _run("emv", "payload")
     assert rep["selected_effects"] == ["mass_error"], rep["selected_effects"]
