@@ -90,14 +90,6 @@ def median_dt(t: np.ndarray) -> float:
     return float(np.median(np.diff(np.asarray(t, float))))
 
 
-def convention_offset_s(record: str, native: str, dt: float) -> float:
-    """Time offset [s] at which a prediction in convention ``native`` is read to give convention ``record``."""
-    for name in (record, native):
-        if name not in CONVENTIONS:
-            raise DataError(f"sample convention '{name}': expected one of {', '.join(CONVENTIONS)}")
-    return (CONVENTIONS[record] - CONVENTIONS[native]) * dt
-
-
 def parse_conventions(spec) -> dict:
     """A record's declared sample convention(s): a convention name (every channel of the record: ``mean-ending``),
     ``CHANNEL=NAME[,CHANNEL=NAME]`` (those channels; every other one ``instantaneous``: a logger that averages the
@@ -143,6 +135,8 @@ def convention_offsets(conv: dict, outputs, inputs, native: str, dt: float) -> t
     convention applied to the power alone cost 1713 W held out against 829 W, and a -0.45 s timing was named).
     Returns ``(offsets, conventions)``: ``{output: s}`` and every named channel's convention.  A channel named in
     ``conv`` that the record does not have is a :class:`DataError` listing those it has."""
+    if native not in CONVENTIONS:       # the model's own declaration (``native_convention``)
+        raise DataError(f"sample convention '{native}' of the model: expected one of {', '.join(CONVENTIONS)}")
     known = list(outputs) + [c for c in inputs if c not in outputs]
     bad = [k for k in conv if k != "*" and k not in known]
     if bad:

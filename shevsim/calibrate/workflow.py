@@ -153,7 +153,8 @@ from scipy import optimize, stats
 
 from ..core.errors import DataError, ShevsimError
 from .models import CalibrationModel, Param, get_model
-from .timing import (DEFAULT_CONVENTION, PropagatedInputNoise, combined_floor, convention_offset_s, convention_offsets, convention_text, parse_conventions,
+from .timing import (DEFAULT_CONVENTION, PropagatedInputNoise, combined_floor, convention_offsets, convention_text,
+                     parse_conventions,
                      input_noise_floor, median_dt, sensor_noise_floor, shift_prediction, timing_effect)
 
 MIN_GAIN = 0.10
@@ -306,7 +307,6 @@ class Fitter:
         self.dt = median_dt(self.t)
         conv = parse_conventions(sample_convention)
         self.sample_convention = convention_text(conv)
-        convention_offset_s(DEFAULT_CONVENTION, model.native_convention, self.dt)      # the model's own is known
         inputs = [c for c in getattr(model, "inputs", ()) if c in df.columns]
         self.conv_offsets, self.conventions = convention_offsets(conv, self.channels, inputs,
                                                                  model.native_convention, self.dt)
