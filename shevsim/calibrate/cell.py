@@ -245,6 +245,7 @@ class CellModel(CalibrationModel):
     optional_channels = ("t_core_c",)
     inputs = ("current_a", "t_ambient_c")
     known_defaults = {"soc0_frac": -1.0, "h_conv_w_m2k": 20.0, "change_width_s": 20.0}
+    effect_functions = CELL_EFFECTS
     #: the cell's voltage limits (data sheet / test record): not fitted, carried to the overlay's [shared]
     #: table (``cell_v_min_v``, ``cell_v_max_v``), where a scenario's BMS takes them
     limits = ("v_min_v", "v_max_v")
@@ -347,7 +348,7 @@ class CellModel(CalibrationModel):
 
     def _make_effects(self):
         out = {}
-        for f in CELL_EFFECTS:
+        for f in self.effect_functions:
             e = f(self)
             if e is not None:
                 out[e.name] = e

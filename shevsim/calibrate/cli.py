@@ -49,7 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
                                  description="Fit a model to measured data, trace the residual to a missing "
                                              "effect, add it and report the error before and after.",
                                  epilog="shevsim calibrate --records lists the shipped measured records, each with "
-                                        "the command that calibrates it (DATA may be a record's name).")
+                                        "the command that calibrates it (DATA may be a record's name). "
+                                        "shevsim calibrate MODEL --help shows a model's columns, parameters and "
+                                        "candidate effects.")
     ap.add_argument("model", choices=sorted(MODELS), help="calibration model")
     ap.add_argument("data", help="measured CSV (or .csv.gz; '#' lines are comments), or a shipped record's name "
                                  "(shevsim calibrate --records)")
@@ -113,6 +115,119 @@ def list_records() -> str:
     return "\n".join(lines)
 
 
+def _help_model(argv) -> str | None:
+    """The model named among the positional arguments of a ``--help`` command line (None: none)."""
+    return next((a for a in argv if not a.startswith("-") and a in MODELS), None)
+
+
+def _param_names(params) -> str:
+    """Parameter names with units, the elements of a list parameter as one (``dudt_v_k[0..3] [V/K]``)."""
+    groups: dict = {}
+    for p in params:
+        base, sep, _ = p.name.partition("[")
+        groups.setdefault((base if sep else p.name, bool(sep), p.unit), []).append(p.name)
+    return ", ".join(f"{base}[0..{len(names) - 1}] [{unit}]" if is_list else f"{base} [{unit}]"
+                     for (base, is_list, unit), names in groups.items())
+
+
+def model_help(name: str, width: int | None = None) -> str:
+    """What ``shevsim calibrate MODEL --help`` adds to the generic help, all of it read from the code: the
+    columns (:data:`~shevsim.calibrate.data.REQUIRED`, ``OPTIONAL``, ``COLUMN_INFO``, ``UNITS``, ``SIGNED``,
+    ``CONSTANT_COLUMNS``; inputs and fitted channels from the model), the declared parameters and the candidate
+    effects of the model built as the command builds it without ``--params``
+    (:func:`~shevsim.calibrate.models.get_model`), the ``timing`` effect every calibration adds
+    (:func:`~shevsim.calibrate.timing.timing_effect`) and an example command (a shipped record of the model, if
+    any).  Reads no data file and writes nothing."""
+    import importlib
+    import re
+    import shutil
+    import textwrap
+    from .data import (COLUMN_INFO, CONSTANT_COLUMNS, OPTIONAL, REQUIRED, SIGNED, UNITS, measured_records,
+                       record_command)
+    from .models import get_model
+    from .timing import timing_effect
+    width = width or max(60, shutil.get_terminal_size().columns - 2)
+    model = get_model(name, {}, "<params>")
+
+    def block(rows, indent=2):
+        """Rows ``(key, text)`` as a table: the keys aligned, the texts wrapped beside them."""
+        w = indent + max(len(k) for k, _ in rows) + 2
+        return [textwrap.fill(text, width, initial_indent=(" " * indent + k).ljust(w), subsequent_indent=" " * w,
+                              break_on_hyphens=False, break_long_words=False) for k, text in rows]
+
+    def para(text, indent=0):
+        return textwrap.fill(text, width, initial_indent=" " * indent, subsequent_indent=" " * (indent + 2),
+                             break_on_hyphens=False, break_long_words=False)
+
+    summary = (importlib.import_module(type(model).__module__).__doc__ or "").strip().splitlines()[0]
+    summary = summary.split(" - ", 1)[-1].rstrip(".")
+    lines = ["", para(f"model {name}: {summary}"), ""]
+
+    # -- columns
+    lines.append(para("columns (canonical name; a file's own names: --map CANONICAL=COLUMN; other units: "
+                      "--unit CANONICAL=UNIT or a header suffix such as time_ms):"))
+    rows = []
+    for c in REQUIRED[name] + OPTIONAL[name]:
+        what, unit = COLUMN_INFO.get(c, (c, ()))[0], ""
+        m = re.match(r"(.*) \[(.*)\]$", what)
+        if m:
+            what, unit = m.groups()
+        role = ("time base" if c == "time_s" else "input" if c in model.inputs
+                else "fitted output" if c in model.channels + model.optional_channels else "used")
+        text = f"{'required' if c in REQUIRED[name] else 'optional'}, {role}: {what} [{unit}]"
+        if c in SIGNED.get(name, {}):
+            option, signs = SIGNED[name][c]
+            text += f"; sign: {signs[0]} (a file's other: {option} {'|'.join(signs[1:])})"
+        suffix = next((s for s in UNITS if c.endswith(s)), None)
+        if suffix:
+            other = [u for u in UNITS[suffix] if u != suffix[1:]]
+            if other:
+                text += f"; other units: {', '.join(other)}"
+        if c in CONSTANT_COLUMNS.get(name, {}):
+            text += f"; or a constant: {CONSTANT_COLUMNS[name][c]} VALUE"
+        rows.append((c, text))
+    lines += block(rows) + [""]
+
+    # -- parameters
+    lines.append(para("fitted parameters (declared; default: the nominal's value without --params, the fit's "
+                      "start - --params [params] NAME = VALUE sets it; bounds of the fit):"))
+    rows = []
+    for p in model.declared:
+        text = f"{p.doc or p.name} [{p.unit}]: default {p.default:g}, bounds {p.lo:g}..{p.hi:g}"
+        if p.limits:
+            text += f" (may be profiled to {p.limits[0]:g}..{p.limits[1]:g})"
+        rows.append((p.name, text))
+    lines += block(rows)
+    used = model.defaults_used()
+    if used:
+        by: dict = {}
+        for d in used:
+            by.setdefault(d["default"], []).append(f"{d['parameter']} = {d['value']}")
+        lines.append(para("without --params the nominal takes (give your own in --params): "
+                          + "; ".join(f"from {src}: {', '.join(ps)}" for src, ps in by.items()), 2))
+    else:
+        lines.append(para(f"without --params the nominal is the {model.component} component's default parameters", 2))
+    lines.append("")
+
+    # -- effects
+    lines.append(para("candidate effects (--effects NAME ... restricts them; each adds its parameters to the fit):"))
+    effects = list(model.effects.values()) + [timing_effect(model.channels + model.optional_channels, 1.0)]
+    lines += block([(e.name, f"{e.description}; adds {_param_names(e.params)}") for e in effects])
+    off = [f.__name__ for f in model.effect_functions if f(model) is None]
+    if off:
+        lines.append(para(f"in the library but not a candidate for this nominal (a --params nominal may make "
+                          f"{'it one' if len(off) == 1 else 'them ones'}): {', '.join(off)}", 2))
+    lines.append("")
+
+    # -- example
+    recs = [r for r in measured_records() if r["model"] == name]
+    own = f"shevsim calibrate {name} DATA.csv --out DIR --params NOMINAL.toml"
+    if recs:
+        lines.append(f"example: {record_command(recs[0])}   (a shipped record: shevsim calibrate --records)")
+    lines.append(f"{'your own record' if recs else 'example'}: {own}")
+    return "\n".join(lines)
+
+
 def _sensor_noise(items) -> dict:
     out = {}
     for it in [x for item in items for x in str(item).split(",") if x.strip()]:
@@ -134,6 +249,11 @@ def main_calibrate(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if "--records" in argv or argv[:1] == ["records"]:
         print(list_records())
+        return 0
+    name = _help_model(argv) if {"-h", "--help"} & set(argv) else None
+    if name is not None:                # shevsim calibrate MODEL --help: the generic help, then the model's own
+        build_parser().print_help()
+        print(model_help(name))
         return 0
     args = build_parser().parse_args(argv)
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))

@@ -68,6 +68,11 @@ UNIT_WORDS = {"_s": ("s", "sec", "secs", "seconds", "ms", "min", "h"), "_a": ("a
 #: plausible value ranges of a candidate column (a column outside it is not offered)
 PLAUSIBLE = {"_v": (0.5, 6.0), "_c": (-60.0, 150.0), "_mps": (-1.0, 120.0)}
 POWER_SIGNS = ("drawn-positive", "delivered-positive")
+#: the canonical columns with a sign convention, per model: column -> (the option that states the file's
+#: convention, the conventions it takes - the first is the canonical one; :func:`load_measured` negates a column
+#: given in the other)
+SIGNED = {"cell": {"current_a": ("--current-sign", CURRENT_SIGNS)},
+          "vehicle": {"power_w": ("--power-sign", POWER_SIGNS)}, "engine": {}}
 
 #: Units a column may be declared in (a header suffix ``time_ms`` or ``--unit time_s=ms``), converted to the
 #: canonical SI column on load: unit -> (scale, offset), SI = value * scale + offset; per canonical suffix.
@@ -404,13 +409,15 @@ def _sniff_format(path: Path) -> dict:
 AMBIENT_OPTION = "--ambient-c"
 #: the plausible range of an ambient temperature [degC] (a column's: the unit checks')
 AMBIENT_RANGE_C = (-60.0, 150.0)
+#: required columns a record may give as a constant instead, per model: column -> the option that gives it
+CONSTANT_COLUMNS = {"cell": {"t_ambient_c": AMBIENT_OPTION}}
 
 
 def check_ambient(value, where: str = AMBIENT_OPTION, model: str = "cell") -> float:
     """A constant ambient temperature [degC] as a float; a DataError naming ``where`` (the option or the
     ``--params`` key that gave it) when it is not a number in :data:`AMBIENT_RANGE_C` or the model has no
     ambient input."""
-    if model != "cell":
+    if "t_ambient_c" not in CONSTANT_COLUMNS.get(model, {}):
         raise DataError(f"{where}: a constant ambient temperature is an input of model 'cell' only, not '{model}'")
     try:
         v = float(value)
@@ -655,10 +662,10 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
         _unit_problems_into(df, model, line_of, {d[0] for d in declared.values()}, problems, fixes)
     if problems:
         raise _problems_error(path, problems, fixes)
-    if model == "cell" and current_sign == "charge-positive":
+    if "current_a" in SIGNED[model] and current_sign == CURRENT_SIGNS[1]:
         df["current_a"] = -df["current_a"]
         notes.append("current negated (file: charge positive -> canonical: discharge positive)")
-    if model == "vehicle" and power_sign == "delivered-positive":
+    if "power_w" in SIGNED[model] and power_sign == POWER_SIGNS[1]:
         df["power_w"] = -df["power_w"]
         notes.append("power negated (file: delivered positive -> canonical: drawn positive)")
     checks: dict = {"mapped": dict(mapping), "units": {c: u for c, (_, _, _, u) in declared.items()}}

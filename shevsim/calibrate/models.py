@@ -87,6 +87,9 @@ class CalibrationModel:
     declared: tuple[Param, ...] = ()
     known_defaults: dict = {}
     effects: dict
+    #: the effect library when the model keeps it as one list of functions ``f(model) -> Effect | None`` (None:
+    #: the effect does not apply to this nominal, e.g. the nominal has it already); () when built otherwise
+    effect_functions: list | tuple = ()
 
     def __init__(self, known: Mapping[str, Any] | None = None, where: str = "<params>"):
         known = dict(known or {})
