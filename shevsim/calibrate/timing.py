@@ -57,9 +57,9 @@ half amplitude, ``N_INPUT_SEEDS`` fixed seeds; the rms over the held-out samples
 prediction's change proportional to the noise; the model's own simulation, so any model - vehicle, cell,
 engine - with its nonlinearity, time stepping and sample timing).  An input's floor
 (:func:`input_noise_floor`) is ``declared`` (``--sensor-noise`` accepts input channels) or the
-``differences`` estimate (:func:`difference_noise`: the smallest over orders 1-6 of the k-th differences'
-robust std, read clear of a clip; the 7-sample smoother read a 1 Hz drive's speed at 1.2-3.4x its noise,
-the cycle's own shape), taken as zero (method ``none``, no noise to propagate) below ``MIN_REL_INPUT_NOISE``
+``differences`` estimate (:func:`difference_noise`: the k-th differences' robust std, orders 1-6, pooled
+where they agree, read clear of held values; the 7-sample smoother read a 1 Hz drive's speed at up to 2.4x
+its noise, the cycle's own shape), taken as zero (method ``none``, no noise to propagate) below ``MIN_REL_INPUT_NOISE``
 = 1e-9 x the channel's scale (the larger of its rms and its range: a constant ambient's 6e-15 degC, a
 noise-free command's 1.6e-10 W are floating-point rounding, not a sensor's noise; a 24-bit ADC resolves
 6e-8 of its range); the ``quiet`` estimate is not used for an input: its quiet segments are selected on
@@ -85,6 +85,9 @@ SG_WINDOW = 7
 MAX_DIFF_ORDER = 6           # difference_noise: the highest order of differences
 CLIP_SHARE = 0.01            # difference_noise: an extreme value repeated in this share of the samples is a clip
 CLIP_MARGIN = 4.0            # ... read only this many noise estimates away from it
+POOL_SE = 1.0                # difference_noise: orders within this many standard errors of the smallest are pooled
+MIN_ORDERS = 3               # ... and at least this many orders read (fewer: too short a record to tell signal from noise)
+MAD_SE = 1.166               # the standard error of a MAD-based std / the std, times sqrt(n) (normal samples)
 N_INPUT_SEEDS = 4
 GAP_STEPS = 10.0             # band_limited_read: a step over this x the median step splits the record
 MIN_REL_INPUT_NOISE = 1e-9   # an input noise below this x the channel's scale is rounding (a 24-bit ADC: 6e-8)
@@ -238,38 +241,67 @@ def smoother_noise(y: np.ndarray) -> float:
     return _robust_std(r[SG_WINDOW:-SG_WINDOW]) / math.sqrt(max(1.0 - h0, 1e-6))
 
 
-def difference_noise(y: np.ndarray) -> float:
-    """The smallest over the orders ``k`` = 1 .. ``MAX_DIFF_ORDER`` of the robust std of the ``k``-th differences
-    of ``y`` / sqrt(C(2k, k)) (each an unbiased estimate of white noise's std, inflated by the signal's own
-    ``k``-th differences: a step-like signal - a drive current - is least inflated at a low order, a smooth one
-    - a vehicle's speed at 1 Hz - at a high order), over the stencils clear of a clip: a channel whose extreme
-    value repeats (``CLIP_SHARE`` of its samples or more at exactly its minimum or maximum: a speed logger at
-    standstill reads 0, its noise cut off below) is read only where every sample of the stencil is more than
-    ``CLIP_MARGIN`` x the first differences' estimate away from that value.  Measured on 43 FASTSim speed
-    records (true noise 0.014-0.028 m/s): 0.88-1.16 x the truth, where the 7-sample quadratic smoother read
-    1.2-3.4 x (the shape of a drive cycle's speed between samples, not noise)."""
-    y = np.asarray(y, float)
-    y = y[np.isfinite(y)]
-    if y.size < 3 * SG_WINDOW:
-        return float("nan")
-    keep = np.ones(y.size, bool)
-    e1 = _robust_std(np.diff(y)) / math.sqrt(2.0)
-    for v in (float(y.min()), float(y.max())):
-        at = y == v
-        if int(at.sum()) >= CLIP_SHARE * y.size and math.isfinite(e1):
-            keep &= np.abs(y - v) > CLIP_MARGIN * e1
-    best = float("nan")
+def _difference_orders(y: np.ndarray, keep: np.ndarray) -> float:
+    """:func:`difference_noise` over the samples ``keep``: the pooled estimate, ``0.0`` when an order's differences
+    are mostly exactly zero (no noise there to read), nan when no order has enough stencils."""
+    est = []
     for k in range(1, MAX_DIFF_ORDER + 1):
+        c = math.comb(2 * k, k)
+        # the k-th differences of white noise are an MA(k) series: autocorrelation (-1)^j C(2k, k + j) / C(2k, k)
+        # at lag j; the variance of a scale estimate from them is (1 + 2 sum rho_j^2) times an independent one's
+        infl = 1.0 + 2.0 * sum((math.comb(2 * k, k + j) / c) ** 2 for j in range(1, k + 1))
         d = np.diff(y, k)
         ok = np.ones(d.size, bool)
         for j in range(k + 1):
             ok &= keep[j:j + d.size]
-        if int(ok.sum()) < MIN_QUIET:
+        m = int(ok.sum())
+        if m < MIN_QUIET * infl:
             continue
-        e = _robust_std(d[ok]) / math.sqrt(math.comb(2 * k, k))
-        if math.isfinite(e) and e > 0.0 and not (e >= best):    # 0: most differences exactly 0 (a held
-            best = e                                                # or quantised value), nothing read
-    return best
+        e = _robust_std(d[ok]) / math.sqrt(c)
+        if e == 0.0:
+            return 0.0
+        est.append((e, MAD_SE * e * math.sqrt(infl / m)))
+    if len(est) < MIN_ORDERS:      # a short record: its low orders alone would read the signal's shape as noise
+        return float("nan")
+    e0, s0 = min(est)
+    return float(np.mean([e for e, se in est if e - e0 <= POOL_SE * math.hypot(se, s0)]))
+
+
+def difference_noise(y: np.ndarray) -> float:
+    """White noise's std in ``y`` (a measured input) from its differences: for each order ``k`` = 1 ..
+    ``MAX_DIFF_ORDER`` the robust std of the ``k``-th differences / sqrt(C(2k, k)) - unbiased for white noise,
+    inflated by the signal's own ``k``-th differences (a step-like signal - a drive's current - least at a low
+    order, a smooth one - a vehicle's speed at 1 Hz - at a high order) - and, of the orders within ``POOL_SE``
+    standard error of the smallest, their mean (the smallest alone is low by chance on noise: 0.95x at 300
+    samples; pooled 1.00x).  Nan (the caller falls back on the smoother) with fewer than ``MIN_ORDERS`` orders
+    of enough stencils (at least ``MIN_QUIET`` x the order's variance inflation): a short record.  Samples at a held value are left out: an exact value taken by at least 3 and ``CLIP_SHARE`` of the
+    samples (a clip, a dead band, a hold, a speed logger's standstill read as 0: no noise there); at a held value
+    with fewer than ``CLIP_SHARE`` of the samples beyond it (a clip at the bottom or the top of the range: the noise
+    of the samples near it is cut off on one side) the samples within ``CLIP_MARGIN`` x the first pass's estimate
+    of it are left out too.  An order whose differences are mostly exactly zero reads no noise: 0 (a noise-free
+    piecewise-polynomial command).  A value below the channel's resolution (the smallest step between its distinct
+    values, a quantiser's) is raised to the resolution's own error, step / sqrt 12.  Measured on the FASTSim speed
+    records shipped (true noise 0.014-0.028 m/s): 0.89-1.19x the truth, where the 7-sample quadratic smoother read
+    up to 2.4x (the shape of a drive cycle between its samples); the PyBaMM records' current 1.01-1.25x (the
+    smoother up to 2.35x)."""
+    y = np.asarray(y, float)
+    y = y[np.isfinite(y)]
+    n = y.size
+    if n < 3 * SG_WINDOW:
+        return float("nan")
+    vals, counts = np.unique(y, return_counts=True)
+    held = vals[counts >= max(3.0, CLIP_SHARE * n)]
+    keep = ~np.isin(y, held)
+    est = _difference_orders(y, keep)
+    if not math.isfinite(est) or est == 0.0:
+        return est
+    for h in held:
+        if min(int((y < h).sum()), int((y > h).sum())) < CLIP_SHARE * n:     # a clip: at an end of the range
+            keep &= np.abs(y - h) > CLIP_MARGIN * est
+    est2 = _difference_orders(y, keep)
+    est = est2 if math.isfinite(est2) else est
+    step = float(np.min(np.diff(vals))) if vals.size > 1 else 0.0
+    return max(est, step / math.sqrt(12.0)) if est > 0.0 else est
 
 
 def quiet_noise(y: np.ndarray, quiet: np.ndarray | None) -> float:
@@ -299,16 +331,16 @@ def sensor_noise_floor(meas: np.ndarray, residual: np.ndarray, quiet, declared: 
 
 def input_noise_floor(y: np.ndarray, declared: float | None = None) -> dict:
     """``{"value", "method", "estimates"}``: the noise floor of a measured *input* (module docstring): declared,
-    or the differences' estimate (:func:`difference_noise`; the local smoother's where it has none); value 0 (method ``none``, saying why) when the channel has none: a
-    noise-free command, a constant, or an estimate below ``MIN_REL_INPUT_NOISE`` x the channel's scale
+    or the differences' estimate (:func:`difference_noise`; the local smoother's where it has none: a short
+    record); value 0 (method ``none``, saying why) when the channel has none: a noise-free command, a constant, or an estimate below ``MIN_REL_INPUT_NOISE`` x the channel's scale
     (max of its rms and its range) - floating-point rounding, not noise."""
     if declared is not None:
         return {"value": float(declared), "method": "declared", "estimates": {"declared": float(declared)}}
     y = np.asarray(y, float)
     ests = {"differences": difference_noise(y), "smoother": smoother_noise(y)}
-    # the differences' estimate, read clear of a clip; the smoother only where it has none (too few stencils):
-    # the smoother reads a clipped channel's standstill too, where the noise is cut (0.78-0.98 x the truth on a
-    # drive stopped 30 % of the time, tests/unit/test_calibrate_input_noise.py)
+    # the differences' estimate, read clear of held values; the smoother only where it has none (too few stencils
+    # for three orders: a short record): the smoother reads a clipped channel's standstill too, where the noise
+    # is cut (0.78-0.86 x the truth on drives stopped 30 % of the time, tests/unit/test_calibrate_input_noise.py)
     k = "differences" if math.isfinite(ests["differences"]) else "smoother"
     est = ests[k]
     fin = y[np.isfinite(y)]
