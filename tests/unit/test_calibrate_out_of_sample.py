@@ -243,6 +243,14 @@ def test_a_rest_still_relaxing_does_not_confirm_a_capacity():
     rep = run_workflow("cell", data, load_params_toml(D / "cell_trial40_oregan2022_nominal.toml"), plots=False,
                        effects=["capacity"])
     assert rep["selected_effects"] == [], rep["selected_effects"]
+    (cand,) = [c for c in rep["rounds"][0]["candidates"] if c["name"] == "capacity"]
+    # Whether the capacity tempts the held-out rule at all depends on the baseline's local optimum, which depends on
+    # the floating-point environment (the same code and packages: 10.0 % on the tenth session's machine; on an AMD
+    # EPYC's OpenBLAS kernels the baseline lands elsewhere and the capacity gains -3.4 %, refused by the held-out
+    # rule).  Where it passes the held-out rule, its claim at the still-relaxing rest is what refuses it.
+    if cand["gain"] < 0.10:
+        assert not cand["passed"] and "held-out" in cand["reason"], cand
+        return
     (d,) = [d for d in rep["model_form_discrepancy"] if d.get("effect") == "capacity"]
     (ev,) = [x for x in d["evidence"] if "still_relaxing_v" in x]
     assert max(abs(x) for x in ev["still_relaxing_v"]) > max(abs(x) for x in ev["rest_end_deviation_v"]), ev
