@@ -243,7 +243,8 @@ def smoother_noise(y: np.ndarray) -> float:
 
 def _difference_orders(y: np.ndarray, keep: np.ndarray) -> float:
     """:func:`difference_noise` over the samples ``keep``: the pooled estimate, ``0.0`` when an order's differences
-    are mostly exactly zero (no noise there to read), nan when no order has enough stencils."""
+    are mostly exactly zero (no noise there to read), nan when fewer than ``MIN_ORDERS`` orders have enough
+    stencils."""
     est = []
     for k in range(1, MAX_DIFF_ORDER + 1):
         c = math.comb(2 * k, k)
@@ -274,8 +275,8 @@ def difference_noise(y: np.ndarray) -> float:
     order, a smooth one - a vehicle's speed at 1 Hz - at a high order) - and, of the orders within ``POOL_SE``
     standard error of the smallest, their mean (the smallest alone is low by chance on noise: 0.95x at 300
     samples; pooled 1.00x).  Nan (the caller falls back on the smoother) with fewer than ``MIN_ORDERS`` orders
-    of enough stencils (at least ``MIN_QUIET`` x the order's variance inflation): a short record.  Samples at a held value are left out: an exact value taken by at least 3 and ``CLIP_SHARE`` of the
-    samples (a clip, a dead band, a hold, a speed logger's standstill read as 0: no noise there); at a held value
+    of enough stencils (at least ``MIN_QUIET`` x the order's variance inflation): a short record.  Samples at a
+    held value are left out: an exact value taken by at least 3 and ``CLIP_SHARE`` of the samples (a clip, a dead band, a hold, a speed logger's standstill read as 0: no noise there); at a held value
     with fewer than ``CLIP_SHARE`` of the samples beyond it (a clip at the bottom or the top of the range: the noise
     of the samples near it is cut off on one side) the samples within ``CLIP_MARGIN`` x the first pass's estimate
     of it are left out too.  An order whose differences are mostly exactly zero reads no noise: 0 (a noise-free
