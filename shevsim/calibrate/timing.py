@@ -86,7 +86,7 @@ MAX_DIFF_ORDER = 6           # difference_noise: the highest order of difference
 CLIP_SHARE = 0.01            # difference_noise: an extreme value repeated in this share of the samples is a clip
 CLIP_MARGIN = 4.0            # ... read only this many noise estimates away from it
 POOL_SE = 1.0                # difference_noise: orders within this many standard errors of the smallest are pooled
-MIN_ORDERS = 3               # ... and at least this many orders read (fewer: too short a record to tell signal from noise)
+MIN_ORDERS = 3               # ... and at least this many orders read (fewer: a record too short to tell)
 MAD_SE = 1.166               # the standard error of a MAD-based std / the std, times sqrt(n) (normal samples)
 N_INPUT_SEEDS = 4
 GAP_STEPS = 10.0             # band_limited_read: a step over this x the median step splits the record
@@ -276,7 +276,8 @@ def difference_noise(y: np.ndarray) -> float:
     standard error of the smallest, their mean (the smallest alone is low by chance on noise: 0.95x at 300
     samples; pooled 1.00x).  Nan (the caller falls back on the smoother) with fewer than ``MIN_ORDERS`` orders
     of enough stencils (at least ``MIN_QUIET`` x the order's variance inflation): a short record.  Samples at a
-    held value are left out: an exact value taken by at least 3 and ``CLIP_SHARE`` of the samples (a clip, a dead band, a hold, a speed logger's standstill read as 0: no noise there); at a held value
+    held value are left out: an exact value taken by at least 3 and ``CLIP_SHARE`` of the samples (a clip, a dead
+    band, a hold, a speed logger's standstill read as 0: no noise there); at a held value
     with fewer than ``CLIP_SHARE`` of the samples beyond it (a clip at the bottom or the top of the range: the noise
     of the samples near it is cut off on one side) the samples within ``CLIP_MARGIN`` x the first pass's estimate
     of it are left out too.  An order whose differences are mostly exactly zero reads no noise: 0 (a noise-free
