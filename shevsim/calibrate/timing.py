@@ -334,8 +334,9 @@ def sensor_noise_floor(meas: np.ndarray, residual: np.ndarray, quiet, declared: 
 def input_noise_floor(y: np.ndarray, declared: float | None = None) -> dict:
     """``{"value", "method", "estimates"}``: the noise floor of a measured *input* (module docstring): declared,
     or the differences' estimate (:func:`difference_noise`; the local smoother's where it has none: a short
-    record); value 0 (method ``none``, saying why) when the channel has none: a noise-free command, a constant, or an estimate below ``MIN_REL_INPUT_NOISE`` x the channel's scale
-    (max of its rms and its range) - floating-point rounding, not noise."""
+    record); value 0 (method ``none``, saying why) when the channel has none: a noise-free command, a constant,
+    or an estimate below ``MIN_REL_INPUT_NOISE`` x the channel's scale (max of its rms and its range) -
+    floating-point rounding, not noise."""
     if declared is not None:
         return {"value": float(declared), "method": "declared", "estimates": {"declared": float(declared)}}
     y = np.asarray(y, float)
