@@ -192,11 +192,15 @@ def test_a_stopped_run_into_a_new_folder_saves_there(tmp_path, engine):
 
 @pytest.mark.parametrize("which", ["export", "export-ssp"])
 def test_exports_do_not_overwrite_without_force(tmp_path, which):
+    """The SSP case exports the two-component verification scenario: the refusal and --force are the same
+    code for any scenario, and the HD-UDDS scenario's eleven FMUs took ~45 s (its SSP export is built and
+    checked in tests/integration/test_fmu_ssp.py)."""
     pytest.importorskip("fmpy")
     target = tmp_path / ("model.fmu" if which == "export" else "system.ssp")
     target.write_bytes(b"the user's own file")
     args = (["fmu", "export", "vehicle", "--params", str(ROOT / "components/vehicle/matv.toml"), "-o", target]
-            if which == "export" else ["fmu", "export-ssp", "hd_udds_rule", "-o", target])
+            if which == "export" else
+            ["fmu", "export-ssp", str(ROOT / "scenarios/verification/two_body.toml"), "-o", target])
     r = _shevsim(*args, cwd=tmp_path)
     assert r.returncode == 2, r.stderr
     assert "exists" in r.stderr and "--force" in r.stderr
