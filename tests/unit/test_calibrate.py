@@ -47,6 +47,10 @@ def _check_single(rep, effect, channel):
 
 # ------------------------------------------------------------------------------- synthetic: vehicle
 
+# slow (the default run's ~10-minute budget): the default run names each of these four effects, halves the
+# held-out power error and replays the overlay on 600 s records of the same plant
+# (test_calibrate_vehicle.py::test_names_single_undeclared_effect_and_replay_agrees); these are 1800 s records
+@pytest.mark.slow
 @pytest.mark.parametrize("effect", VEHICLE_CASES)
 def test_vehicle_names_single_undeclared_effect(effect):
     rep, _ = _vehicle([effect])
