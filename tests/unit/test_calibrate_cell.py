@@ -69,8 +69,8 @@ _SLOW_HERE = {"arrhenius_resistance", "cooling_change", "entropic_heat"}   # ent
 # run keeps three (initial_soc, low_soc_resistance, second_rc_branch) of this test; capacity and current_offset are
 # named in the default run by test_cli_accepts_a_component_parameter_file (capacity) and
 # test_overlay_is_a_battery_parameter_set_and_shevsim_run_uses_it (current_offset, its value within 0.03 A) here, and
-# on PyBaMM's records (test_calibrate_independent_cell.py); ocv_hysteresis by
-# test_two_effects_are_both_found_or_the_remainder_reported (with cooling_change, or the remainder reported);
+# on PyBaMM's records (test_calibrate_independent_cell.py); ocv_hysteresis is one of the two effects of
+# test_two_effects_are_both_found_or_the_remainder_reported (both named, or the remainder reported);
 # ocv_correction and solid_diffusion are named on this plant's records in the slow run only
 _SLOW_HERE |= {"capacity", "current_offset", "ocv_hysteresis", "ocv_correction", "solid_diffusion"}
 
