@@ -65,14 +65,16 @@ def test_every_effect_of_the_library_has_a_case():
 # (test_pybamm_cooling_change_named_with_its_factor_and_time) and the Leaf cell's entropic heat
 _SLOW_HERE = {"arrhenius_resistance", "cooling_change", "entropic_heat"}   # entropic heat: the Nissan Leaf cell's record
                                                                             # (test_calibrate_leaf.py), real data
-# also in the slow run (the default run took ~21 minutes on a 2-core machine): five more of these cases. The default
-# run keeps three (initial_soc, low_soc_resistance, second_rc_branch) of this test; capacity and current_offset are
+# also in the slow run (the default run took ~21 minutes on a 2-core machine): four more of these cases. The default
+# run keeps four (initial_soc, low_soc_resistance, second_rc_branch, and ocv_correction: no other default test names
+# an OCV correction) of this test; capacity and current_offset are
 # named in the default run by test_cli_accepts_a_component_parameter_file (capacity) and
 # test_overlay_is_a_battery_parameter_set_and_shevsim_run_uses_it (current_offset, its value within 0.03 A) here, and
 # on PyBaMM's records (test_calibrate_independent_cell.py); ocv_hysteresis is one of the two effects of
 # test_two_effects_are_both_found_or_the_remainder_reported (both named, or the remainder reported);
-# ocv_correction and solid_diffusion are named on this plant's records in the slow run only
-_SLOW_HERE |= {"capacity", "current_offset", "ocv_hysteresis", "ocv_correction", "solid_diffusion"}
+# solid_diffusion is named on this plant's records in the slow run only (a nominal with it is fitted in the default
+# run: test_calibrate_independent_nmc2.py::test_nmc2_solid_diffusion_in_the_nominal_explains_part_of_the_form_error)
+_SLOW_HERE |= {"capacity", "current_offset", "ocv_hysteresis", "solid_diffusion"}
 
 
 @pytest.mark.parametrize("effect", [pytest.param(e, marks=pytest.mark.slow) if e in _SLOW_HERE else e
