@@ -8,7 +8,7 @@ voltage scaled by 1, 1 + 1e-12 and 1 - 1e-12 (training costs equal within 2e-4 o
 from the baseline, so a verdict could follow the CPU a record was calibrated on.  The fits now carry a weak prior
 (``Fitter._prior``: the nominal value, one bound range as its standard deviation), which decides only the
 directions the record leaves flat; the baseline's first stage starts from several deterministic points and keeps
-the best (``BASELINE_ENDS``).
+the best (``BASELINE_STEP``).
 
 Independent reference: a change of the record far below any sensor's resolution (1e-12 of the voltage, 4 fV)
 cannot carry information about the cell, so it must not move what the calibration reports; and a parameter the
@@ -58,7 +58,7 @@ def test_the_baseline_reaches_the_lower_of_a_degenerate_circuits_optima():
     fast first RC branch (``c1_scale`` on its lower bound, training cost 25.65 with the first stage's weights) or a
     larger series resistance (26.65), as the rounding went; the second put the held-out temperature at 0.131 K
     (0.104 K from the first) and let an ``entropic_heat`` pass on this no-effect record.  The first stage now also
-    starts from the nominal with one parameter at a time at each end of its range (``BASELINE_ENDS``)."""
+    starts from the nominal with one parameter at a time moved a quarter of its range either way (``BASELINE_STEP``)."""
     data = load_measured(str(D / "cell_none_swing_2.csv"), "cell")
     opts = {"sample_convention": "instantaneous", "sensor_noise": {}, "convention_declared": False}
     run = workflow._Run("cell", data, load_params_toml(D / "cell_nominal.toml"), 0.3, "blocks", None, "<params>",
