@@ -635,6 +635,13 @@ def calibration_page(rep: dict, traces=None, title: str | None = None) -> Page:
                    "after, held-out", "Held-out change"], rows, num_cols=range(1, 6))
     if rep.get("not_identifiable"):
         body += f"<p>Not identifiable from this record: {esc(', '.join(rep['not_identifiable']))}</p>"
+    dl = [x for x in rep.get("detection_limits") or [] if x.get("limit") is not None]
+    if dl:
+        g = (rep.get("detection_rule") or {}).get("min_holdout_gain", 0.1)
+        body += (f"<p>What this record can detect (the smallest change of an effect not selected whose own signal "
+                 f"gains {g:.0%} held-out): "
+                 + esc("; ".join(f"{x['effect']} {x['parameter']} ±{fmt(x['limit'])} {x['unit']}" for x in dl))
+                 + "</p>")
     for n in d.get("notes") or []:
         body += f'<p class="note">note: {esc(n)}</p>'
     from .calibration_text import decimate_advice
