@@ -179,6 +179,13 @@ def main():
             if ok:
                 good.append(f"{gen}_{label}")
         mark = "" if ok is None else (" (ok)" if ok else " (MISS)")
+        if ok is False:      # a miss read against what the record can detect (the report's detection_limits)
+            dl = [x for x in r.get("detection_limits") or [] if x["effect"] == EXPECT.get(case)
+                  and x["limit"] is not None and x["parameter"] in c["truth"]]
+            if dl:
+                size = abs(float(c["truth"][dl[0]["parameter"]]) - dl[0]["neutral"])
+                text += (f"; detection limit +-{dl[0]['limit']:.4g} {dl[0]['unit']}, truth {size:.4g}: "
+                         + ("below it, the record's miss" if size < dl[0]["limit"] else "above it, the rules' miss"))
         print(f"| {gen} | {label} | {named} | {exp}{mark} | {text} | {ho} | {wall:.0f} |", flush=True)
     print()
     for g in n_none:
