@@ -238,6 +238,9 @@ def _sensor_noise(items) -> dict:
             v = float("nan")
         if not sep or not name or not (v > 0 and v < float("inf")):
             raise DataError(f"--sensor-noise {it!r}: expected CHANNEL=VALUE with a positive number (e.g. power_w=300)")
+        if name.strip() in out and out[name.strip()] != v:
+            raise DataError(f"--sensor-noise {name.strip()}={out[name.strip()]:g} and {name.strip()}={v:g}: "
+                            f"'{name.strip()}' given twice with different values; give it once")
         out[name.strip()] = v
     return out
 

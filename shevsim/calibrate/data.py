@@ -85,6 +85,9 @@ UNITS = {
     "_c": {"c": (1.0, 0.0), "k": (1.0, -273.15)},
     "_mgps": {"mgps": (1.0, 0.0), "gps": (1e3, 0.0)},
 }
+#: A value of this magnitude or more (or an infinite one) in a canonical column is no measurement: an instrument's
+#: overload code (9.9E+37 of many meters and loggers) or an overflow; refused naming the column and line.
+OVERLOAD_VALUE = 1e30
 #: Largest plausible sample step of a calibration record (s): 10 or more "seconds" looks like milliseconds.
 MAX_PLAUSIBLE_STEP_S = 10.0
 #: Smallest plausible cell resistance seen through dV/dI (ohm): below it, with large current numbers, the
@@ -153,8 +156,16 @@ def parse_mapping(items) -> dict:
         if "=" not in it:
             raise DataError(f"--map '{it}': expected canonical=column")
         k, v = it.split("=", 1)
-        out[k.strip()] = v.strip()
+        _once("--map", out, k.strip(), v.strip())
     return out
+
+
+def _once(option: str, out: dict, key: str, value) -> None:
+    """``out[key] = value``, refusing a key given twice with different values (which one was meant?)."""
+    if key in out and out[key] != value:
+        raise DataError(f"{option} {key}={out[key]} and {option} {key}={value}: '{key}' given twice with different "
+                        f"values; give it once")
+    out[key] = value
 
 
 def parse_units(items) -> dict:
@@ -164,7 +175,7 @@ def parse_units(items) -> dict:
         if "=" not in it:
             raise DataError(f"--unit '{it}': expected canonical=unit (e.g. time_s=ms)")
         k, v = it.split("=", 1)
-        out[k.strip()] = v.strip()
+        _once("--unit", out, k.strip(), v.strip())
     return out
 
 
@@ -534,9 +545,19 @@ def _numeric_columns(df: pd.DataFrame, canon_all, path: Path, line_of: np.ndarra
             a, b = runs[0]
             fail(f"column '{col}' has {int(nan.sum())} NaN value(s) in {len(runs)} run(s); first run lines "
                  f"{_row_of(a, line_of)}-{_row_of(b, line_of)} ({b - a + 1} samples)")
+        # an infinite value, or an instrument's overload code (9.9E+37): no measurement, and it would carry
+        # through every fit and RMSE as inf/NaN
+        x = df[col].to_numpy(float)
+        over = ~nan & ~(np.abs(x) < OVERLOAD_VALUE)
+        if col in canon_all and over.any():
+            k = np.flatnonzero(over)
+            fail(f"column '{col}', line {_row_of(int(k[0]), line_of)}: value {x[k[0]]:.4g} is "
+                 f"{'infinite' if not np.isfinite(x[k[0]]) else 'no measurement (an overload or error code)'}"
+                 + (f" ({k.size} in all)" if k.size > 1 else "") + "; fix or remove those rows")
+            df[col] = np.where(over, np.nan, x)
     for col in list(df.columns):
-        if col not in canon_all and df[col].isna().any():
-            notes.append(f"extra column '{col}' has NaN values and was dropped from the candidate signals")
+        if col not in canon_all and not np.isfinite(df[col].to_numpy(float)).all():
+            notes.append(f"extra column '{col}' has NaN or infinite values and was dropped from the candidate signals")
             df = df.drop(columns=[col])
     return df
 
@@ -578,6 +599,33 @@ def _check_time(df: pd.DataFrame, path: Path, line_of: np.ndarray, drop_duplicat
         raise DataError(f"{path}: column 'time_s': time goes backwards at line {_row_of(k + 1, line_of)} "
                         f"({t[k]} -> {t[k + 1]} s); time must increase strictly")
     return df, line_of
+
+
+def time_gaps(t: np.ndarray) -> tuple[np.ndarray, float]:
+    """The sample steps of ``t`` longer than ``GAP_STEPS`` x its median step (a logger dropout; the same rule as
+    :func:`shevsim.calibrate.timing.band_limited_read`): ``(indices k of the steps t[k] -> t[k+1], median step)``."""
+    from .timing import GAP_STEPS
+    dt = np.diff(np.asarray(t, float))
+    if dt.size < 2:
+        return np.array([], dtype=int), float(dt[0]) if dt.size else 0.0
+    h = float(np.median(dt))
+    return np.flatnonzero(dt > GAP_STEPS * h), h
+
+
+def gap_note(t: np.ndarray, line_of: np.ndarray | None = None) -> str | None:
+    """What the report says of a record's time gaps (None: none): how many, the longest and where, and that the
+    model's inputs are interpolated linearly across a gap (the record is simulated on its median-step grid)."""
+    k, h = time_gaps(t)
+    if not k.size:
+        return None
+    t = np.asarray(t, float)
+    j = int(k[np.argmax(t[k + 1] - t[k])])
+    where = (f"lines {_row_of(j, line_of)}-{_row_of(j + 1, line_of)}" if line_of is not None
+             else f"t = {t[j]:g} s")
+    return (f"time gaps: {k.size} sample step(s) longer than 10x the median step {h:g} s, the longest "
+            f"{t[j + 1] - t[j]:g} s ({where}, {t[j]:g} -> {t[j + 1]:g} s); the model's inputs are interpolated "
+            f"linearly across a gap - if the logger was off there, cut the record at the gap and calibrate the "
+            f"parts")
 
 
 def _check_current_sign(df: pd.DataFrame, path: Path, current_sign: str) -> None:
@@ -658,6 +706,10 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
             notes.append(f"column '{canon}' converted from {unit} (declared by "
                          f"{'the header' if col != canon else '--unit'})")
     df, line_of = _check_time(df, path, line_of, drop_duplicate_rows, notes, problems)
+    if not problems:
+        gap = gap_note(df["time_s"].to_numpy(float), line_of)
+        if gap:
+            notes.append(gap)
     if check_units:
         _unit_problems_into(df, model, line_of, {d[0] for d in declared.values()}, problems, fixes)
     if problems:
@@ -753,6 +805,8 @@ def _unit_problems_into(df, model, line_of, declared, problems: list, fixes: dic
             if col not in df:
                 continue
             x = arr(col)
+            if not np.isfinite(x).any():        # no value (NaN or refused as infinite): said by the value checks
+                continue
             if np.nanmedian(x) > 150.0:
                 bad(col, f"median {np.nanmedian(x):.1f} looks like kelvin, expected degC (name the column "
                          f"'{col[:-2]}_k' or pass --unit {col}=K to convert)", int(np.argmax(x > 150)),
@@ -797,7 +851,7 @@ def _unit_problems_into(df, model, line_of, declared, problems: list, fixes: dic
                 bad("speed_mps", f"negative speed {s[k[0]]} m/s", int(k[0]))
             if np.nanmax(s) > 70.0:
                 kmh = True
-                bad("speed_mps", f"speed {np.nanmax(s):.1f} m/s (> 70 m/s = 252 km/h) looks like km/h; name the "
+                bad("speed_mps", f"speed {np.nanmax(s):.4g} m/s (> 70 m/s = 252 km/h) looks like km/h; name the "
                                  f"column 'speed_kmh' or pass --unit speed_mps=kmh to convert", int(np.nanargmax(s)),
                     "--unit speed_mps=kmh")
         p = arr("power_w")

@@ -116,6 +116,9 @@ def parse_conventions(spec) -> dict:
             if not sep or not k.strip():
                 raise DataError(f"sample convention '{spec}': expected a convention ({', '.join(CONVENTIONS)}) or "
                                 f"CHANNEL=CONVENTION[,CHANNEL=CONVENTION]")
+            if k.strip() in out and out[k.strip()] != v.strip():
+                raise DataError(f"sample convention '{spec}': channel '{k.strip()}' given twice with different "
+                                f"conventions; give it once")
             out[k.strip()] = v.strip()
     else:
         out = {"*": str(spec).strip()}
