@@ -209,6 +209,7 @@ def check_record_size(data, model_name: str, known: dict, allow_large: bool, log
     import time as _time
     from .models import get_model
     n = len(data.df)
+    grid_too_large(data, allow_large)
     if n <= 20_000 and not allow_large:
         return
     try:
@@ -228,6 +229,30 @@ def check_record_size(data, model_name: str, known: dict, allow_large: bool, log
                         f"takes without --allow-large{est}. Decimate it (--decimate {k}: keeps 1 row in {k}, sample "
                         f"step {dt:g} s -> {dt * k:g} s) or give --allow-large to calibrate on all of it")
     log(f"record: {n:,} rows{est} (progress is reported as it goes)")
+
+
+def grid_too_large(data, allow_large: bool) -> None:
+    """Refuse (DataError) a record whose sampling grid - its span at the median sample step, what every model
+    simulates (:func:`~shevsim.calibrate.models.sampling_grid`) - has more than `MAX_RECORD_ROWS` points while its
+    rows do not: time gaps (a logger stopped for days) would make a few hundred rows a simulation of millions of
+    steps per fit.  ``allow_large`` calibrates it as it is."""
+    import numpy as np
+    from .data import time_gaps
+    t = data.df["time_s"].to_numpy(float)
+    if allow_large or t.size < 3 or t.size > MAX_RECORD_ROWS:
+        return
+    k, h = time_gaps(t)
+    if not h > 0 or not k.size:
+        return
+    n_grid = int(round((t[-1] - t[0]) / h)) + 1
+    if n_grid <= MAX_RECORD_ROWS:
+        return
+    j = int(k[np.argmax(t[k + 1] - t[k])])
+    raise DataError(f"{data.path}: the record's {t.size:,} rows span {t[-1] - t[0]:g} s, which at its median sample "
+                    f"step {h:g} s is a grid of {n_grid:,} points to simulate, more than the {MAX_RECORD_ROWS:,} a "
+                    f"calibration takes without --allow-large: {k.size} time gap(s), the longest {t[j + 1] - t[j]:g} s "
+                    f"({t[j]:g} -> {t[j + 1]:g} s). Cut the record at its gaps and calibrate the parts, or give "
+                    f"--allow-large to calibrate it as it is (the inputs interpolated across the gaps)")
 
 
 class _Ticker:
@@ -320,6 +345,8 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
     from .data import load_measured, parse_mapping, parse_units
     from .workflow import run_workflow
     _check_calibration_options(model, split, current_sign, power_sign, decimate)
+    if out is not None:      # before the record is read and fitted (minutes): not after, when the fit would be lost
+        check_calibration_out(out, model)
     say = log or (lambda m: None)
     mapping = parse_mapping(_pairs(map))
     data_path, mapping, current_sign, drop_duplicate_rows, params = _shipped_record_options(
@@ -360,6 +387,41 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
     if out is not None:
         res.save(out)
     return res
+
+
+#: the files a calibration writes into its folder (:meth:`CalibrationReport.save`; the cell's ``ocv.csv``): checked
+#: before the run against a folder of the user's own (the save checks the files it actually has again)
+OUTPUT_FILES = ("params.toml", "report.json", "report.md", "fit_traces.csv", "ocv.csv", "fit_before_after.png",
+                "residuals_before_after.png", "evidence.png")
+
+
+def check_calibration_out(out, model: str) -> None:
+    """Refuse, before anything runs, an output folder the save would refuse after the fit (the rules of
+    :func:`shevsim.core.atomic.write_files`): a path that exists and is not a folder, a folder of the user's own
+    (no ``report.json``) holding a file of a name the calibration writes (`OUTPUT_FILES`), a place that cannot be
+    created or written.  Nothing is created here."""
+    import os
+    from ..core.errors import ShevsimError
+    what = f"calibrate {model}"
+    p = Path(out)
+    if (p.exists() or p.is_symlink()) and not p.is_dir():
+        raise ShevsimError(f"{what}: '{p}' exists and is not a folder: not replaced; choose another folder")
+    if p.is_dir() and not (p / MARKER).is_file():
+        clash = sorted(n for n in OUTPUT_FILES if (p / n).exists() or (p / n).is_symlink())
+        if clash:
+            raise ShevsimError(f"{what}: '{p}' holds files but no {MARKER} (not an output of shevsim), and "
+                               f"{clash[0]} would be replaced: choose another folder")
+    probe = p.absolute()
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ShevsimError(f"{what}: output folder '{p}': '{probe}' is a file, so the folder cannot be created")
+    try:        # a real write test in the nearest folder that exists (permission bits lie for root)
+        fd, tmp = tempfile.mkstemp(dir=probe, prefix=".shevsim-calibrate-probe-")
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as exc:
+        raise ShevsimError(f"{what}: output folder '{p}' is not writable: {exc.strerror or exc}") from None
 
 
 def _check_calibration_options(model: str, split: str, current_sign, power_sign: str, decimate) -> None:

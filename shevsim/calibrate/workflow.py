@@ -802,7 +802,15 @@ class _Run:
         if data.model != model_name:
             raise DataError(f"{data.path}: loaded for model '{data.model}', not '{model_name}'")
         self.t = data.df["time_s"].to_numpy(float)
-        self.train, self.hold, self.split_info = make_split(self.t, holdout, split)
+        try:
+            self.train, self.hold, self.split_info = make_split(self.t, holdout, split)
+        except DataError as exc:
+            if not str(exc).startswith("split leaves"):
+                raise
+            # a record too short (or decimated too far, or with a gap where the held-out blocks fall): say which
+            raise DataError(f"{data.path}: {exc}: the record has {self.t.size} samples over {self.t[-1] - self.t[0]:g} s "
+                            f"and a calibration needs at least 10 to fit and 10 held out (--holdout {holdout}, --split "
+                            f"{split}); give a longer record (or a smaller --decimate)") from None
         self.fitter = Fitter(model, data, self.train, self.hold, opts["sample_convention"])
         self.opts = opts
         self.fitter.progress = log
