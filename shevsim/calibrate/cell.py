@@ -272,6 +272,21 @@ class CellModel(CalibrationModel):
             known.update(vals)
         short_form = any(k in _LEGACY or k in ("thermal", "arrhenius_anchor") for k in known)
         self.given = set(known)
+        # the battery's own parameters typed (a string, a list or true/false for a number: an error naming the
+        # parameter), and the short form's numbers checked, before anything reads them
+        from .models import number_value, typed_values
+        known = typed_values(BatteryPackParams, known, f"{where}: battery parameters")
+        for k in ("soc0_frac", "h_conv_w_m2k", "change_width_s", "t_ref_c", "rc_pairs"):
+            if k in known and not math.isfinite(number_value(known[k], f"{where}: parameter '{k}'")):
+                raise DataError(f"{where}: parameter '{k}' must be finite, got {known[k]!r}")
+        if "rc_pairs" in known and known["rc_pairs"] not in (1, 2):
+            raise DataError(f"{where}: rc_pairs = {known['rc_pairs']!r}: the cell has 1 or 2 RC branches")
+        if "soc0_frac" in known and not (known["soc0_frac"] < 0 or 0.0 <= known["soc0_frac"] <= 1.0):
+            raise DataError(f"{where}: soc0_frac = {known['soc0_frac']!r}: the initial SOC is a fraction in [0, 1] "
+                            f"(or < 0: read from the record's first rest voltage)")
+        for k in ("h_conv_w_m2k", "change_width_s"):
+            if k in known and known[k] < 0:
+                raise DataError(f"{where}: parameter '{k}' must be >= 0, got {known[k]!r}")
         self.cell_limits: dict[str, float] = {}
         for k, v in known.items():
             if k in self.limits:
@@ -300,8 +315,23 @@ class CellModel(CalibrationModel):
                 raise DataError(f"{where}: unknown parameter '{k}' for the cell model{hint}")
         self.ocv_table = None
         if "ocv_soc_frac" in self.known:
-            soc = tuple(float(x) for x in self.known["ocv_soc_frac"])
-            v = tuple(float(x) for x in self.known["ocv_v"])
+            lists = {}
+            for key, name in (("ocv_soc_frac", "soc_frac"), ("ocv_v", "ocv_v")):
+                xs = self.known.get(key)
+                if not isinstance(xs, (list, tuple)):
+                    raise DataError(f"{where}: [ocv] {name} must be a list of numbers, got {xs!r}")
+                lists[name] = tuple(number_value(x, f"{where}: [ocv] {name}") for x in xs)
+            soc, v = lists["soc_frac"], lists["ocv_v"]
+            for name, xs in (("soc_frac", soc), ("ocv_v", v)):
+                bad = [j for j, x in enumerate(xs) if not math.isfinite(x)]
+                if bad:
+                    raise DataError(f"{where}: [ocv] {name}[{bad[0]}] = {xs[bad[0]]}: every value must be finite")
+            if soc and not (0.0 <= min(soc) and max(soc) <= 1.0):
+                raise DataError(f"{where}: [ocv] soc_frac must lie in [0, 1], got {min(soc):g}..{max(soc):g}"
+                                + (" (in percent? give it as soc_pct)" if max(soc) > 1.0 and max(soc) <= 100.0 else ""))
+            if v and float(np.median(v)) > 100.0:
+                raise DataError(f"{where}: [ocv] ocv_v median {float(np.median(v)):g} looks like millivolts: the cell's "
+                                f"open-circuit voltage in V is expected (divide by 1000)")
             if len(soc) != len(v) or len(soc) < 2 or any(b <= a for a, b in zip(soc, soc[1:])):
                 raise DataError(f"{where}: [ocv] soc_frac must increase strictly and match ocv_v in length")
             if any(b <= a for a, b in zip(v, v[1:])):

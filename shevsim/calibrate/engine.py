@@ -66,6 +66,7 @@ component's "off"):
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any, Mapping
 
 import numpy as np
@@ -130,6 +131,13 @@ class EngineModel(CalibrationModel):
 
     def __init__(self, known: Mapping[str, Any] | None = None, where: str = "<params>"):
         vals = _user_values(known, where)
+        # typed first (a string, a list or true/false for a number: an error naming the parameter)
+        from .models import number_value, typed_values
+        vals = typed_values(EngineGeneratorParams, vals, f"{where}: engine-generator parameters")
+        for k in _INPUTS:
+            if k in vals and not math.isfinite(number_value(vals[k], f"{where}: parameter '{k}'")):
+                raise DataError(f"{where}: parameter '{k}' (a held input of the engine-generator) must be finite, "
+                                f"got {vals[k]!r}")
         base = _default_params()
         self.base = base
         self.where = where

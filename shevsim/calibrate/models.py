@@ -101,7 +101,7 @@ class CalibrationModel:
             if k in self.known_defaults:
                 self.known[k] = v
             elif k in declared_names:
-                self.initial[k] = float(v)
+                self.initial[k] = number_value(v, f"{where}: parameter '{k}'")
             else:
                 import difflib
                 opts = list(self.known_defaults) + sorted(declared_names)
@@ -282,6 +282,34 @@ def sampling_grid(t: np.ndarray, *columns: np.ndarray):
     if tg.size == t.size and np.allclose(tg, t, rtol=0.0, atol=1e-9 * max(1.0, abs(float(t[-1])))):
         return t, [np.asarray(c, float) for c in columns], h, False
     return tg, [np.interp(tg, t, np.asarray(c, float)) for c in columns], h, True
+
+
+def number_value(v, where: str) -> float:
+    """``v`` as a float when it is a number (an integer or a float, not true/false, a string, a list or a date);
+    otherwise a DataError ``where: expected a number, got ...``."""
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise DataError(f"{where}: expected a number, got {v!r}")
+    try:
+        return float(v)
+    except OverflowError:
+        raise DataError(f"{where}: {v!r} is too large for a number") from None
+
+
+def typed_values(cls, values: Mapping[str, Any], where: str) -> dict:
+    """``values`` with each one that names a field of the parameter dataclass ``cls`` checked against the field's
+    declared type (a number, an integer, true/false, a string, a list of numbers; :func:`shevsim.core.params._coerce`)
+    - a DataError ``where: parameter 'NAME': expected ...`` otherwise; other names are left as they are."""
+    from ..core.errors import ShevsimError
+    from ..core.params import _coerce, _type_hints
+    hints = _type_hints(cls)
+    out = dict(values)
+    for k, v in values.items():
+        if k in hints:
+            try:
+                out[k] = _coerce(v, hints[k], f"{where}: parameter '{k}'")
+            except ShevsimError as exc:
+                raise DataError(str(exc)) from None
+    return out
 
 
 def resolve_known_files(vals: dict, fields, base_dir, where: str, what: str = "file") -> dict:

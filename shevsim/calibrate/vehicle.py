@@ -251,6 +251,12 @@ class VehicleModel(CalibrationModel):
 
     def __init__(self, known: Mapping[str, Any] | None = None, where: str = "<params>"):
         user = _user_values(known, where)
+        # each component's values typed first (a list or a date for a number: an error naming it, not a TypeError
+        # where the base class or an effect reads it)
+        from .models import typed_values
+        for comp, cls in _component_classes().items():
+            user.update(typed_values(cls.Params, {k: v for k, v in user.items() if comp in OWNERS.get(k, ())},
+                                     f"{where}: {comp} parameters"))
         self.given = set(user)
         super().__init__(user, where)
         # the known component parameters checked and typed (lists -> tuples, int -> float) by the components'
