@@ -233,7 +233,7 @@ def check_record_size(data, model_name: str, known: dict, allow_large: bool, log
 
 def grid_too_large(data, allow_large: bool) -> None:
     """Refuse (DataError) a record whose sampling grid - its span at the median sample step, what every model
-    simulates (:func:`~shevsim.calibrate.models.sampling_grid`) - has more than `MAX_RECORD_ROWS` points while its
+    simulates (`sampling_grid` of `shevsim.calibrate.models`) - has more than `MAX_RECORD_ROWS` points while its
     rows do not: time gaps (a logger stopped for days) would make a few hundred rows a simulation of millions of
     steps per fit.  ``allow_large`` calibrates it as it is."""
     import numpy as np
@@ -389,7 +389,7 @@ def run_calibration(model: str, data: str | Path, *, out: str | Path | None = No
     return res
 
 
-#: the files a calibration writes into its folder (:meth:`CalibrationReport.save`; the cell's ``ocv.csv``): checked
+#: the files a calibration writes into its folder (`CalibrationReport.save`; the cell's ``ocv.csv``): checked
 #: before the run against a folder of the user's own (the save checks the files it actually has again)
 OUTPUT_FILES = ("params.toml", "report.json", "report.md", "fit_traces.csv", "ocv.csv", "fit_before_after.png",
                 "residuals_before_after.png", "evidence.png")
@@ -397,7 +397,7 @@ OUTPUT_FILES = ("params.toml", "report.json", "report.md", "fit_traces.csv", "oc
 
 def check_calibration_out(out, model: str) -> None:
     """Refuse, before anything runs, an output folder the save would refuse after the fit (the rules of
-    :func:`shevsim.core.atomic.write_files`): a path that exists and is not a folder, a folder of the user's own
+    `shevsim.core.atomic.write_files`): a path that exists and is not a folder, a folder of the user's own
     (no ``report.json``) holding a file of a name the calibration writes (`OUTPUT_FILES`), a place that cannot be
     created or written.  Nothing is created here."""
     import os

@@ -650,87 +650,156 @@ def identifiability(fitter: "Fitter", effects, values: dict) -> list[dict]:
 DETECT_STEP = 1e-3      # finite-difference step of an effect's parameter, as a fraction of its bound range
 
 
-def detection_limits(fitter: "Fitter", selected, final: FitResult, skip=()) -> list[dict]:
-    """What the record could have shown: for every one-parameter effect not selected, the smallest change of its
-    parameter from its neutral value (the effect off) that the selection rule's held-out gain would see.
+def detection_limits(fitter: "Fitter", selected, final: FitResult, ref: dict, skip=(), held=()) -> list[dict]:
+    """What the record could have shown, to first order: for every one-parameter effect not selected, the smallest
+    change of its parameter from its neutral value (the effect off) whose own signal would gain the selection
+    rule's ``MIN_GAIN`` held-out.
 
-    Linearised at the final model: the effect's signal ``s`` per unit of its parameter (central difference of the
-    prediction at the neutral value, ``DETECT_STEP`` of the bound range) less what a refit of the fitted
-    parameters (declared and selected effects') takes of it - ``s`` projected out of their Jacobian's span on the
-    training samples with the fit's channel weights, the same coefficients applied to the held-out samples.  If
-    the record carried the effect at size ``d`` and nothing else changed, each of its evidence channels ``c``
-    would show the held-out RMSE ``sqrt(r_c^2 + a_c^2 d^2)`` (``r_c`` the final held-out RMSE, ``a_c`` the
-    held-out RMS of the signal left after the refit), and removing it would gain ``MIN_GAIN`` on those channels'
-    combined score at ``d = sqrt(n ((1 - MIN_GAIN)^-2 - 1) / sum_c (a_c / r_c)^2)``.  A true effect smaller than
-    that does not gain the held-out rule's share by its own signal on this record; a candidate can still gain more
-    by also fitting the model's form error (PyBaMM's Ai2020 cell with 12 % lost capacity: limit 0.51 A.h, the
-    truth 0.27 A.h below it, the candidate's held-out gain 8.2 % where its signal alone gives 3.6 %).  The BIC,
-    the claims and the plausibility checks come on top: a limit, not a promise.  ``absorbed_frac``: the share of the signal's
-    training norm the fitted parameters take (near 1: the nominal's own freedom mimics the effect).  Effects with
-    several parameters (a shape and an amplitude) and parameters the record measures directly are skipped; an
-    effect with no first-order signal at its neutral value (a limit that is not reached: regen_limit) is listed
-    with ``limit`` None."""
-    ps = [p for p in fitter._params_for(tuple(selected))]
+    For each direction from the neutral value, the effect's signal ``s`` per unit of its parameter (a difference
+    of the prediction) less what a refit of the fitted parameters takes of it: ``s`` projected out of their
+    Jacobian's span on the training samples with the fit's channel weights (a parameter on a bound moving only
+    inwards), the same coefficients applied to the held-out samples.  Not in that refit: parameters held within a
+    direct measurement's standard errors and those an effect's channel claim holds (``held``).  If the record carried the effect
+    at size ``d`` on top of the final model, channel ``c`` would show the held-out RMSE ``sqrt(r_c^2 + a_c^2 d^2)``
+    (``r_c`` the final held-out RMSE, ``a_c`` the held-out RMS of the signal left), and the rule's two gains,
+    (a) on the combined score over all channels (each over its baseline RMSE ``b_c``, ``ref``) and (d) on the
+    effect's evidence channels, reach ``MIN_GAIN`` at ``d = sqrt(((1 - g)^-2 - 1) sum r_c^2 / b_c^2 /
+    sum a_c^2 / b_c^2)`` over the channels of each; the limit is the larger (``binding``), per direction
+    (``limit_up``, ``limit_down``; ``limit`` the smaller).  The signal is then
+    taken again as the secant over +-d, and the limit recomputed until it settles (``tangent_limit``: the first
+    value; ``nonlinear`` when they differ by more than 20 %: a time constant, a saturation).  A limit, not a
+    promise: a true effect below it does not reach the gain by its own signal, but a candidate may still pass by
+    also fitting the model's form error or the noise's cross term.  On a record that already carries the effect
+    (``r_c`` includes it) the threshold of a one-channel effect is ``(1 - g)`` times the limit.  Skipped: effects
+    with several parameters, parameters measured directly, parameters already fitted; an effect whose claim is
+    tested on its channel (``Effect.channel_claim``: verified, any held-out gain passes) is listed with
+    ``limit`` None and the reason, as is one with no first-order signal at its neutral value (a limit not
+    reached: ``regen_limit``)."""
+    hold_names = set(held) | set(fitter.measured)
+    ps, lb, ub = [], [], []
+    for p in fitter._params_for(tuple(selected)):
+        if p.name in hold_names or p.name not in final.params:
+            continue
+        lo, hi = fitter.bounds_override.get(p.name, (p.lo, p.hi))
+        pos = _bound_position(p, float(final.params[p.name]), lo, hi)
+        ps.append(p)      # a parameter on a bound moves only inwards in the refit
+        lb.append(0.0 if pos <= BOUND_TOL else -np.inf)
+        ub.append(0.0 if pos >= 1.0 - BOUND_TOL else np.inf)
     values = dict(fitter.model.full_values({k: v for k, v in final.params.items() if k != "time_shift_s"}))
     values.update({k: v for k, v in final.params.items()})
     chans = list(fitter.channels)
     idx, hold = fitter.fit_idx, fitter.hold
     w = {c: float(fitter.weights[c]) for c in chans}
 
-    def stack(pred_p, pred_m, step, rows):
-        return np.concatenate([(np.asarray(pred_p[c], float)[rows] - np.asarray(pred_m[c], float)[rows]) / step * w[c]
-                               for c in chans])
+    def finite(a):
+        a = np.asarray(a, float)
+        return np.where(np.isfinite(a), a, 0.0)
 
     x0 = fitter._to_x(ps, values) if ps else np.empty(0)
-    cols_tr, cols_all = [], []
+    cols = []
     for j in range(len(ps)):
         xp, xm = x0.copy(), x0.copy()
         xp[j] = min(x0[j] + IDENT_STEP, 1.0)
         xm[j] = max(x0[j] - IDENT_STEP, 0.0)
-        vp = {**values, **fitter._to_values(ps, xp)}
-        vm = {**values, **fitter._to_values(ps, xm)}
-        pp, pm = fitter.simulate(vp), fitter.simulate(vm)
+        pp = fitter.simulate({**values, **fitter._to_values(ps, xp)})
+        pm = fitter.simulate({**values, **fitter._to_values(ps, xm)})
         step = xp[j] - xm[j]
-        cols_tr.append(stack(pp, pm, step, idx))
-        cols_all.append({c: (np.asarray(pp[c], float) - np.asarray(pm[c], float)) / step for c in chans})
-    J = np.nan_to_num(np.column_stack(cols_tr)) if cols_tr else np.zeros((sum(idx.size for _ in chans), 0))
+        cols.append({c: finite((np.asarray(pp[c], float) - np.asarray(pm[c], float)) / step) for c in chans})
+    J = (np.column_stack([np.concatenate([col[c][idx] * w[c] for c in chans]) for col in cols]) if cols else None)
+    r = {c: float(final.rmse[c]["holdout"]) for c in chans}
+    b = {c: max(float(ref.get(c, r[c])), 1e-300) for c in chans}
+    need = (1.0 - MIN_GAIN) ** -2 - 1.0
+
+    def left_rms(sig):
+        """Held-out RMS per channel of the signal ``sig`` ({channel: array}) left after the refit; its training
+        norm and the share the refit takes."""
+        s_tr = np.concatenate([sig[c][idx] * w[c] for c in chans])
+        if J is None:
+            beta = np.empty(0)
+        elif np.all(np.isinf(lb)) and np.all(np.isinf(ub)):
+            beta = np.linalg.lstsq(J, s_tr, rcond=None)[0]
+        else:
+            beta = optimize.lsq_linear(J, s_tr, bounds=(np.asarray(lb), np.asarray(ub))).x
+        norm = float(np.linalg.norm(s_tr))
+        left_tr = s_tr - (J @ beta if J is not None else 0.0)
+        a = {}
+        for c in chans:
+            lc = sig[c] - sum((beta[k] * cols[k][c] for k in range(len(cols))), np.zeros_like(sig[c]))
+            a[c] = float(np.sqrt(np.mean(lc[hold] ** 2))) if hold.any() else 0.0
+        return a, norm, (float(1.0 - (np.linalg.norm(left_tr) / norm) ** 2) if norm > 0 else float("nan"))
+
+    def limit_of(a, ev):
+        out = {}
+        for rule, cs in (("combined score", chans), ("its channels", ev)):
+            q = sum((a[c] / b[c]) ** 2 for c in cs)
+            out[rule] = math.sqrt(need * sum((r[c] / b[c]) ** 2 for c in cs) / q) if q > 0 else math.inf
+        rule = max(out, key=out.get)
+        return out[rule], rule
+
     out = []
     done = set(selected) | set(skip)
     for name, eff in fitter.effects.items():
         if name in done or len(eff.params) != 1:
             continue
         prm = eff.params[0]
-        if prm.name in fitter.measured or prm.name in {p.name for p in ps}:
+        if prm.name in fitter.measured or prm.name in {p.name for p in fitter._params_for(tuple(selected))}:
+            continue
+        ev = [c for c in (eff.evidence or eff.channels) if c in chans]
+        n0 = float(eff.neutral.get(prm.name, prm.default))
+        row = {"effect": name, "parameter": prm.name, "unit": prm.unit, "neutral": n0, "limit": None,
+               "channels": ev}
+        if eff.channel_claim is not None:
+            out.append({**row, "why_none": "its claim is tested on its own channel: verified, any held-out gain "
+                                           "passes, so no held-out limit applies"})
             continue
         lo, hi = fitter.bounds_override.get(prm.name, (prm.lo, prm.hi))
-        n0 = float(eff.neutral.get(prm.name, prm.default))
-        h = DETECT_STEP * (hi - lo)
-        up, dn = min(n0 + h, hi), max(n0 - h, lo)
-        if not (up > dn):
+        p0 = fitter.simulate({**values, prm.name: n0})
+
+        def signal(sign, d):
+            """The effect's signal per unit over a change ``sign * d`` from the neutral value (None past a bound)."""
+            v = n0 + sign * d
+            if not lo <= v <= hi or d <= 0.0:
+                return None
+            pv = fitter.simulate({**values, prm.name: v})
+            return {c: finite((np.asarray(pv[c], float) - np.asarray(p0[c], float)) / d) for c in chans}
+
+        per, absorbed = {}, None
+        for sign in (1.0, -1.0):
+            sig = signal(sign, DETECT_STEP * (hi - lo))
+            if sig is None or not ev:
+                continue
+            a, norm, ab = left_rms(sig)
+            absorbed = ab if absorbed is None else max(absorbed, ab)
+            if not norm > 0 or not any(a[c] > 0 for c in chans):
+                continue
+            lim, rule = limit_of(a, ev)
+            tangent = lim
+            for _ in range(4):        # the secant over the limit until it settles (time constants saturate)
+                sig2 = signal(sign, lim) if math.isfinite(lim) else None
+                if sig2 is None:
+                    break
+                a2, _n, _ab = left_rms(sig2)
+                new, rule = limit_of(a2, ev)
+                settled = abs(new / lim - 1.0) < 0.05 if math.isfinite(new) else True
+                lim = new
+                if settled:
+                    break
+            per[sign] = (lim, tangent, rule)
+        if not ev or (absorbed is None and not per):
             continue
-        pp = fitter.simulate({**values, prm.name: up})
-        pm = fitter.simulate({**values, prm.name: dn})
-        s_all = {c: (np.asarray(pp[c], float) - np.asarray(pm[c], float)) / (up - dn) for c in chans}
-        if not all(np.all(np.isfinite(s_all[c])) for c in chans):
+        if not per or not any(math.isfinite(v[0]) for v in per.values()):
+            out.append({**row, "why_none": "no first-order signal at its neutral value (a limit or threshold the "
+                                           "record does not reach there)", "absorbed_frac": absorbed})
             continue
-        s_tr = np.concatenate([s_all[c][idx] * w[c] for c in chans])
-        beta = np.linalg.lstsq(J, s_tr, rcond=None)[0] if J.shape[1] else np.empty(0)
-        left_tr = s_tr - (J @ beta if J.shape[1] else 0.0)
-        norm = float(np.linalg.norm(s_tr))
-        absorbed = float(1.0 - (np.linalg.norm(left_tr) / norm) ** 2) if norm > 0 else float("nan")
-        ev = [c for c in (eff.evidence or eff.channels) if c in chans]
-        a, r = {}, {}
-        for c in ev:
-            left = s_all[c] - (sum(beta[j] * np.nan_to_num(cols_all[j][c]) for j in range(len(ps))) if len(ps) else 0.0)
-            a[c] = float(np.sqrt(np.mean(left[hold] ** 2)))
-            r[c] = float(final.rmse[c]["holdout"])
-        q = sum((a[c] / max(r[c], 1e-300)) ** 2 for c in ev)
-        need = len(ev) * ((1.0 - MIN_GAIN) ** -2 - 1.0)
-        lim = float(math.sqrt(need / q)) if q > 0 and math.isfinite(q) and norm > 0 else None
-        out.append({"effect": name, "parameter": prm.name, "unit": prm.unit, "neutral": n0, "limit": lim,
-                    "relative": (lim / abs(n0) if lim is not None and n0 != 0.0 else None),
-                    "reachable": bool(lim is not None and (n0 + lim <= hi or n0 - lim >= lo)),
-                    "channels": ev, "signal_rms_per_unit": a, "absorbed_frac": absorbed})
+        sign, (lim, tangent, rule) = min(per.items(), key=lambda kv: kv[1][0])
+        up, dn = per.get(1.0), per.get(-1.0)
+        lo_p, hi_p = prm.plausible or (lo, hi)
+        out.append({**row, "limit": float(lim), "limit_up": (float(up[0]) if up and math.isfinite(up[0]) else None),
+                    "limit_down": (float(dn[0]) if dn and math.isfinite(dn[0]) else None), "binding": rule,
+                    "tangent_limit": float(tangent), "nonlinear": bool(abs(lim / tangent - 1.0) > 0.2),
+                    "relative": (lim / abs(n0) if n0 != 0.0 else None),
+                    "reachable": bool(n0 + lim <= hi_p or n0 - lim >= lo_p),
+                    "absorbed_frac": absorbed})
     return out
 
 
@@ -1980,9 +2049,19 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
     report = _report(run, selected, final, dropped=dropped, discrepancy=discrepancy, diag_before=diag_before,
                      diag_after=diag_after, unexplained=unexplained, baseline_failure=baseline_failure,
                      replay=replay, overlay=overlay, at_bounds=at_bounds, ident=ident, out_dir=out_dir)
-    report["detection_limits"] = detection_limits(run.fitter, selected, final)
+    try:
+        held = {k for e in selected for k in (run.claim_hold.get(e) or {})}
+        report["detection_limits"] = detection_limits(run.fitter, selected, final, run.ref,
+                                                      skip=[e for e in run.fitter.effects if e not in run.names],
+                                                      held=held)
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:   # a statement of the report, not the result
+        report["detection_limits"] = []
+        report["detection_error"] = f"{type(exc).__name__}: {exc}"
     report["detection_rule"] = {"min_holdout_gain": MIN_GAIN, "finite_difference_step": DETECT_STEP,
-                                "linearised_at": "the final model", "refit": "declared and selected parameters"}
+                                "at": "the final model, to first order (secant over the limit)",
+                                "refit": "declared and selected parameters (not measured, held or on a bound)"}
+    report["n_simulations"] = run.fitter.nsim
+    report["elapsed_s"] = time.perf_counter() - run.t_start
     if out_dir is not None:
         write_report(Path(out_dir), report, run.fitter, base, final, run.t, plots)
     return report
@@ -2300,14 +2379,22 @@ def render_markdown(rep: dict) -> str:
                   + ")" for n in rep["not_identifiable"]) + "."]
     dl = [d for d in rep.get("detection_limits") or [] if d.get("limit") is not None]
     if dl:
-        L += ["", f"**What this record can detect** (the smallest change of each one-parameter effect not selected "
-              f"that would gain the rule's {rep['detection_rule']['min_holdout_gain']:.0%} held-out on its channels, "
-              f"linearised at the final model with its fitted parameters refitted: a true effect smaller than this "
-              f"gains less than that by its own signal, a candidate that gains more also fits the model's form "
-              f"error; the other rules come on top): " + "; ".join(
-                  f"`{d['effect']}` {d['parameter']} +-{_g(d['limit'])} {d['unit']}"
+        L += ["", f"**What this record can detect, to first order** (for each one-parameter effect not selected, the "
+              f"smallest change whose own signal would gain the rule's "
+              f"{rep['detection_rule']['min_holdout_gain']:.0%} held-out - on the combined score and on its own "
+              f"channels - with the fitted parameters refitted beside it; a true effect below it does not reach the "
+              f"gain by its own signal, though a candidate can still pass by also fitting the model's form error): "
+              + "; ".join(
+                  (f"`{d['effect']}` {d['parameter']} +{_g(d['limit_up'])} / -{_g(d['limit_down'])} {d['unit']}"
+                   if d.get("limit_up") and d.get("limit_down")
+                   and abs(d["limit_up"] / d["limit_down"] - 1.0) > 0.05
+                   else f"`{d['effect']}` {d['parameter']} "
+                        + ("+-" if d.get("limit_up") and d.get("limit_down") else "+" if d.get("limit_up") else "-")
+                        + f"{_g(d['limit'])} {d['unit']}")
                   + (f" ({d['relative']:.1%} of {_g(d['neutral'])})" if d.get("relative") is not None else "")
-                  + ("" if d["reachable"] else ", beyond its bounds")
+                  + ("" if d["reachable"] else ", beyond its plausible range")
+                  + (", nonlinear (the tangent at the neutral value gave " + _g(d["tangent_limit"]) + ")"
+                     if d.get("nonlinear") else "")
                   + (f", {d['absorbed_frac']:.0%} of its signal taken by the fitted parameters"
                      if d.get("absorbed_frac") is not None and d["absorbed_frac"] >= 0.5 else "")
                   for d in dl) + "."]

@@ -638,10 +638,11 @@ def calibration_page(rep: dict, traces=None, title: str | None = None) -> Page:
     dl = [x for x in rep.get("detection_limits") or [] if x.get("limit") is not None]
     if dl:
         g = (rep.get("detection_rule") or {}).get("min_holdout_gain", 0.1)
-        body += (f"<p>What this record can detect (the smallest change of an effect not selected whose own signal "
-                 f"gains {g:.0%} held-out): "
-                 + esc("; ".join(f"{x['effect']} {x['parameter']} ±{fmt(x['limit'])} {x['unit']}" for x in dl))
-                 + "</p>")
+        body += (f"<p>What this record can detect, to first order (the smallest change of an effect not selected "
+                 f"whose own signal would gain the rule's {g:.0%} held-out, the fitted parameters refitted beside "
+                 f"it): " + esc("; ".join(f"{x['effect']} {x['parameter']} ±{fmt(x['limit'])} {x['unit']}"
+                                         + ("" if x.get("reachable", True) else " (beyond its plausible range)")
+                                         for x in dl)) + "</p>")
     for n in d.get("notes") or []:
         body += f'<p class="note">note: {esc(n)}</p>'
     from .calibration_text import decimate_advice

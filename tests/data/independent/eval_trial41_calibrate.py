@@ -183,9 +183,13 @@ def main():
             dl = [x for x in r.get("detection_limits") or [] if x["effect"] == EXPECT.get(case)
                   and x["limit"] is not None and x["parameter"] in c["truth"]]
             if dl:
-                size = abs(float(c["truth"][dl[0]["parameter"]]) - dl[0]["neutral"])
-                text += (f"; detection limit +-{dl[0]['limit']:.4g} {dl[0]['unit']}, truth {size:.4g}: "
-                         + ("below it, the record's miss" if size < dl[0]["limit"] else "above it, the rules' miss"))
+                tv = float(c["truth"][dl[0]["parameter"]])
+                size = abs(tv - dl[0]["neutral"])
+                lim = dl[0].get("limit_up" if tv >= dl[0]["neutral"] else "limit_down") or dl[0]["limit"]
+                below = size < 0.9 * lim      # the record carries the effect: (1 - MIN_GAIN) x the limit
+                text += (f"; first-order detection limit {lim:.4g} {dl[0]['unit']}, truth {size:.4g}: "
+                         + ("below it, not shown by the record's own signal" if below
+                            else "above it, shown to first order, not named by the rules"))
         print(f"| {gen} | {label} | {named} | {exp}{mark} | {text} | {ho} | {wall:.0f} |", flush=True)
     print()
     for g in n_none:
