@@ -305,7 +305,8 @@ def fmt(gen: str, r: dict) -> str:
         named += f"; model-form discrepancy: {', '.join(map(str, r['discrepancy']))}"
     if r.get("detection"):
         d = r["detection"]
-        named += (f"; first-order detection limit +-{d['limit']:.4g} {d['unit']}, the truth {d['truth_size']:.4g} "
+        named += (f"; first-order detection limit {d['limit']:.4g} {d['unit']} (the truth's direction), the truth "
+                  f"{d['truth_size']:.4g} "
                   + ("below it: not shown by the record's own signal" if d["below"]
                      else "above it: shown to first order, not named by the rules"))
     if r.get("parameter"):
