@@ -601,6 +601,11 @@ def _check_time(df: pd.DataFrame, path: Path, line_of: np.ndarray, drop_duplicat
     return df, line_of
 
 
+#: more long sample steps than this in a record: variable-rate sampling (a logger that samples on change, slowly at
+#: rest: the shipped Nissan Leaf records have 224), said as such rather than as dropouts
+GAP_NOTE_MANY = 10
+
+
 def time_gaps(t: np.ndarray) -> tuple[np.ndarray, float]:
     """The sample steps of ``t`` longer than ``GAP_STEPS`` x its median step (a logger dropout; the same rule as
     :func:`shevsim.calibrate.timing.band_limited_read`): ``(indices k of the steps t[k] -> t[k+1], median step)``."""
@@ -622,6 +627,10 @@ def gap_note(t: np.ndarray, line_of: np.ndarray | None = None) -> str | None:
     j = int(k[np.argmax(t[k + 1] - t[k])])
     where = (f"lines {_row_of(j, line_of)}-{_row_of(j + 1, line_of)}" if line_of is not None
              else f"t = {t[j]:g} s")
+    if k.size > GAP_NOTE_MANY:     # a logger that samples on change (slowly at rest): not dropouts
+        return (f"variable sampling: {k.size} sample steps longer than 10x the median step {h:g} s, the longest "
+                f"{t[j + 1] - t[j]:g} s ({where}); the model's inputs are interpolated linearly between samples - "
+                f"right for a logger that samples on change, not across a stop of the logger")
     return (f"time gaps: {k.size} sample step(s) longer than 10x the median step {h:g} s, the longest "
             f"{t[j + 1] - t[j]:g} s ({where}, {t[j]:g} -> {t[j + 1]:g} s); the model's inputs are interpolated "
             f"linearly across a gap - if the logger was off there, cut the record at the gap and calibrate the "

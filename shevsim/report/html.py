@@ -640,7 +640,10 @@ def calibration_page(rep: dict, traces=None, title: str | None = None) -> Page:
         g = (rep.get("detection_rule") or {}).get("min_holdout_gain", 0.1)
         body += (f"<p>What this record can detect, to first order (the smallest change of an effect not selected "
                  f"whose own signal would gain the rule's {g:.0%} held-out, the fitted parameters refitted beside "
-                 f"it): " + esc("; ".join(f"{x['effect']} {x['parameter']} ±{fmt(x['limit'])} {x['unit']}"
+                 f"it): " + esc("; ".join(f"{x['effect']} {x['parameter']} "
+                                         + ("±" if x.get("limit_up") and x.get("limit_down")
+                                            else "+" if x.get("limit_up") else "−")
+                                         + f"{fmt(x['limit'])} {x['unit']}"
                                          + ("" if x.get("reachable", True) else " (beyond its plausible range)")
                                          for x in dl)) + "</p>")
     for n in d.get("notes") or []:

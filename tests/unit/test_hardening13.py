@@ -83,6 +83,17 @@ def test_a_time_gap_is_stated_in_the_notes(tmp_path):
                 if n.startswith("time gaps")]
 
 
+def test_a_logger_that_samples_on_change_is_said_to_sample_variably_not_to_drop_out():
+    """The shipped Nissan Leaf record is logged every second under current and every minute at rest (224 long steps):
+    variable sampling, not 224 dropouts to cut the record at."""
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[2]
+    m = load_measured(root / "data" / "measured" / "nissan_leaf_cell" / "leaf_1C.csv", "cell", current_sign="auto")
+    notes = [n for n in m.notes if "sampl" in n or "gap" in n]
+    assert any(n.startswith("variable sampling: 224 sample steps") for n in notes), notes
+    assert not any(n.startswith("time gaps") for n in notes)
+
+
 def test_a_gap_that_makes_the_grid_huge_is_refused_before_the_fit(tmp_path):
     from shevsim.calibrate.report import check_record_size
     header, rows = _vehicle_rows()
