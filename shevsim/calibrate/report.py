@@ -398,9 +398,11 @@ OUTPUT_FILES = ("params.toml", "report.json", "report.md", "fit_traces.csv", "oc
 def check_calibration_out(out, model: str) -> None:
     """Refuse, before anything runs, an output folder the save would refuse after the fit (the rules of
     `shevsim.core.atomic.write_files`): a path that exists and is not a folder, a folder of the user's own
-    (no ``report.json``) holding a file of a name the calibration writes (`OUTPUT_FILES`), a place that cannot be
-    created or written.  Nothing is created here."""
+    (no ``report.json``) holding a file of a name the calibration writes (`OUTPUT_FILES`), an earlier calibration's
+    file changed since it was written (`shevsim.core.atomic.edited_outputs`: a hand-edited ``params.toml``), a place
+    that cannot be created or written.  Nothing is created here."""
     import os
+    from ..core.atomic import edited_message, edited_outputs
     from ..core.errors import ShevsimError
     what = f"calibrate {model}"
     p = Path(out)
@@ -411,6 +413,10 @@ def check_calibration_out(out, model: str) -> None:
         if clash:
             raise ShevsimError(f"{what}: '{p}' holds files but no {MARKER} (not an output of shevsim), and "
                                f"{clash[0]} would be replaced: choose another folder")
+    if p.is_dir() and (p / MARKER).is_file():         # an earlier calibration: a file changed since is kept
+        bad = edited_outputs(p, OUTPUT_FILES, MARKER)
+        if bad:
+            raise ShevsimError(edited_message(what, p, bad))
     probe = p.absolute()
     while not probe.exists():
         probe = probe.parent

@@ -6,6 +6,7 @@ usual permissions (``mkstemp`` creates it 0600).
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import tempfile
@@ -96,12 +97,83 @@ def read_files(folder: str | Path, exclude: tuple[str, ...] = ()) -> dict[str, b
     return out
 
 
+#: the hidden list, in an output folder `write_files` wrote, of each file's SHA-256 as written (a file whose content
+#: is no longer one of them was changed since, by somebody else: never replaced)
+MANIFEST = ".shevsim-files.json"
+#: a shevsim report page (``shevsim report DIR`` rewrites report.html after the output): its generator mark
+_REPORT_MARK = '<meta name="generator" content="shevsim'
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of a file's content."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _read_manifest(out: Path) -> dict[str, list[str]] | None:
+    """``{name: [sha256, ...]}`` from ``out/MANIFEST``; None when there is none (an output written before the
+    manifest existed) or it is not one of ours."""
+    try:
+        doc = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError, RecursionError):
+        return None
+    files = doc.get("sha256") if isinstance(doc, dict) else None
+    if not isinstance(files, dict):
+        return None
+    return {str(k): [h for h in (v if isinstance(v, list) else [v]) if isinstance(h, str)] for k, v in files.items()}
+
+
+def edited_outputs(out_dir: str | Path, names, marker: str) -> list[str]:
+    """The names in ``names`` that exist in the output folder ``out_dir`` (one holding ``marker``) but are not as
+    shevsim wrote them there: changed since (their SHA-256 is not one `MANIFEST` lists), added by somebody else
+    (not listed), or not a regular file.  An output written before the manifest existed has none: there a file
+    modified more than a second after ``marker`` (written last) counts as changed.  A report page with shevsim's
+    generator mark (``shevsim report DIR`` rewrote it) is ours."""
+    out = Path(out_dir)
+    man = _read_manifest(out)
+    try:
+        t_marker = (out / marker).stat().st_mtime
+    except OSError:
+        t_marker = None
+    bad = []
+    for name in names:
+        q = out / name
+        if not (q.exists() or q.is_symlink()) or name == MANIFEST:
+            continue
+        try:
+            if q.is_symlink() or not q.is_file():
+                bad.append(name)
+            elif q.suffix == ".html" and _REPORT_MARK in q.read_text(errors="replace")[:4000]:
+                continue
+            elif man is not None:
+                if file_sha256(q) not in man.get(name, []):
+                    bad.append(name)
+            elif t_marker is not None and name != marker and q.stat().st_mtime > t_marker + 1.0:
+                bad.append(name)
+        except OSError:
+            bad.append(name)
+    return bad
+
+
+def edited_message(what: str, out: str | Path, bad: list[str]) -> str:
+    """The refusal of `edited_outputs`' findings, naming the first file."""
+    return (f"{what}: '{Path(out) / bad[0]}' was changed since shevsim wrote it (or was put there by somebody else)"
+            + (f", as were {len(bad) - 1} more ({', '.join(bad[1:4])})" if len(bad) > 1 else "")
+            + ": not replaced; move it away or choose another folder")
+
+
 def write_files(out_dir: str | Path, files: dict[str, bytes], marker: str, what: str) -> Path:
     """Write ``files`` (relative path -> bytes) into ``out_dir``, each atomically; return the folder.
 
-    Files of the same names are replaced (an earlier output of the same kind); other files are kept.
-    A folder that holds files but no ``marker`` (say ``summary.json``) is not an output of ours and is
-    refused before anything is written, as is a path that exists and is not a folder."""
+    Files of the same names are replaced only where they are an earlier output of the same kind exactly as
+    shevsim wrote it (`edited_outputs`: a file a user changed or put there is refused, naming it, before anything
+    is written); other files are kept.  A folder that holds files but no ``marker`` (say ``summary.json``) is not
+    an output of ours and is refused, as is a path that exists and is not a folder.  The hashes of what is
+    written go to the hidden `MANIFEST`: first with the earlier and the new hash of each name (a crash between
+    two files leaves every file one of them), then with the new ones only."""
     from .errors import ShevsimError
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -111,6 +183,22 @@ def write_files(out_dir: str | Path, files: dict[str, bytes], marker: str, what:
         if clash:
             raise ShevsimError(f"{what}: '{out}' holds files but no {marker} (not an output of shevsim), and "
                                f"{clash[0]} would be replaced: choose another folder")
+    old: dict[str, list[str]] = {}
+    if out.is_dir() and (out / marker).is_file():
+        bad = edited_outputs(out, sorted(files), marker)
+        if bad:
+            raise ShevsimError(edited_message(what, out, bad))
+        old = _read_manifest(out) or {}
+        for name in files:   # an earlier output without a manifest: what is there now is what shevsim wrote
+            q = out / name
+            if name not in old and q.is_file() and not q.is_symlink():
+                old[name] = [file_sha256(q)]
+    new = {name: hashlib.sha256(data).hexdigest() for name, data in files.items()}
+    both = {**old, **{n: list(dict.fromkeys(old.get(n, []) + [h])) for n, h in new.items()}}
+    out.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(out / MANIFEST, json.dumps({"sha256": both}, indent=1, sort_keys=True))
     for name in sorted(files, key=lambda n: n == marker):      # the marker last: a complete folder has it
         write_bytes_atomic(out / name, files[name])
+    write_text_atomic(out / MANIFEST, json.dumps({"sha256": {**old, **{n: [h] for n, h in new.items()}}},
+                                                 indent=1, sort_keys=True))
     return out

@@ -6,7 +6,6 @@ beside them in ``units`` and written into the saved metadata.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import re
@@ -19,7 +18,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .atomic import write_json_atomic  # the one atomic JSON writer (re-exported)
+from .atomic import file_sha256, write_json_atomic  # the one atomic JSON writer (re-exported)
 from .errors import OutputError, ShevsimError, os_error_text
 
 
@@ -285,15 +284,6 @@ _OWN_FIGURE = re.compile(r"^[a-z0-9_]{1,64}\.png$")
 def _own_name(name: Any) -> bool:
     """True for a plain file name shevsim writes into a result folder (no folder part, no dot file)."""
     return isinstance(name, str) and (name in _OWN_FILES or bool(_OWN_FIGURE.match(name)))
-
-
-def file_sha256(path: str | Path) -> str:
-    """SHA-256 (hex) of a file's content."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _earlier_manifest(out_dir: Path) -> dict[str, str | None] | None:

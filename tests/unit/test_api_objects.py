@@ -11,6 +11,7 @@ from matplotlib.figure import Figure
 
 import shevsim
 from shevsim.calibrate.report import CalibrationReport
+from shevsim.core.atomic import MANIFEST
 from shevsim.calibrate.synthetic import synth_vehicle
 from shevsim.core.errors import DataError, ScenarioError, ShevsimError
 from shevsim.studies.result import StudyResult
@@ -42,8 +43,10 @@ def test_run_study_tradeoff_in_a_notebook(tmp_path, monkeypatch):
     assert _one_line_and_short(repr(st)) and "tradeoff" in repr(st) and f"{best_rate / 1e3:g} kW/s" in repr(st)
     assert "<table" in st._repr_html_()
     saved = st.save(tmp_path / "saved")
-    assert {p.name for p in saved.iterdir()} == set(st.files) >= {"fig_a2_tradeoff.png", "summary.json", "tradeoff.csv",
-                                                             "report.html"}
+    # what save writes, and the hidden list of its hashes (a file changed since is never replaced on a re-save)
+    assert {p.name for p in saved.iterdir() if p.name != MANIFEST} == set(st.files) >= {
+        "fig_a2_tradeoff.png", "summary.json", "tradeoff.csv", "report.html"}
+    assert set(json.loads((saved / MANIFEST).read_text())["sha256"]) == set(st.files)
     assert json.loads((saved / "summary.json").read_text())["best_within_loss"]["rate_wps"] == best_rate
 
 
