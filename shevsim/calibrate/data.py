@@ -24,6 +24,7 @@ measured voltage response (dV/dI must be negative for discharge-positive current
 from __future__ import annotations
 
 import difflib
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping
@@ -60,7 +61,7 @@ COLUMN_INFO = {
     "soot_rate_mgps": ("soot mass rate [mg/s]", ("soot", "pm", "particulate", "particulates")),
 }
 #: unit words per canonical suffix (a header ``Battery_Temp_degC`` names a temperature in degC)
-UNIT_WORDS = {"_s": ("s", "sec", "secs", "seconds", "ms", "min", "h"), "_a": ("a", "amp", "amps", "ma"),
+UNIT_WORDS = {"_s": ("s", "sec", "secs", "seconds", "ms", "us", "ns", "min", "h"), "_a": ("a", "amp", "amps", "ma"),
               "_v": ("v", "volt", "volts", "mv"),
               "_c": ("c", "degc", "k", "celsius", "temp", "temperature", "degf"),
               "_mps": ("mps", "kmh", "kph", "mph"), "_w": ("w", "kw", "watt", "watts"),
@@ -77,7 +78,8 @@ SIGNED = {"cell": {"current_a": ("--current-sign", CURRENT_SIGNS)},
 #: Units a column may be declared in (a header suffix ``time_ms`` or ``--unit time_s=ms``), converted to the
 #: canonical SI column on load: unit -> (scale, offset), SI = value * scale + offset; per canonical suffix.
 UNITS = {
-    "_s": {"s": (1.0, 0.0), "ms": (1e-3, 0.0), "min": (60.0, 0.0), "h": (3600.0, 0.0)},
+    "_s": {"s": (1.0, 0.0), "ms": (1e-3, 0.0), "us": (1e-6, 0.0), "ns": (1e-9, 0.0), "min": (60.0, 0.0),
+           "h": (3600.0, 0.0)},
     "_a": {"a": (1.0, 0.0), "ma": (1e-3, 0.0)},
     "_v": {"v": (1.0, 0.0), "mv": (1e-3, 0.0)},
     "_w": {"w": (1.0, 0.0), "kw": (1e3, 0.0)},
@@ -88,8 +90,23 @@ UNITS = {
 #: A value of this magnitude or more (or an infinite one) in a canonical column is no measurement: an instrument's
 #: overload code (9.9E+37 of many meters and loggers) or an overflow; refused naming the column and line.
 OVERLOAD_VALUE = 1e30
-#: Largest plausible sample step of a calibration record (s): 10 or more "seconds" looks like milliseconds.
+#: Largest plausible sample step of a calibration record (s): 10 or more "seconds" looks like milliseconds (or
+#: microseconds, nanoseconds: the unit that brings the step under it is named).
 MAX_PLAUSIBLE_STEP_S = 10.0
+#: Smallest plausible sample step (s): a step under a millisecond (a logger above 1 kHz) looks like hours or minutes.
+MIN_PLAUSIBLE_STEP_S = 1e-3
+#: A vehicle's median |acceleration| while moving above this (m/s^2, half a g; a drive's is under 1) means the
+#: time column runs slower than seconds (minutes or hours)
+MAX_MEDIAN_ACCEL_MPS2 = 5.0
+
+
+def _time_unit_guess(step_s: float, coarse: bool) -> str | None:
+    """The time unit that makes a median sample step of ``step_s`` "seconds" plausible (0.01-1 s preferred):
+    ``coarse`` for a step too short (hours or minutes), else too long (ms, us, ns)."""
+    cands = (("h", 3600.0), ("min", 60.0)) if coarse else (("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9))
+    ok = [(abs(math.log10(step_s * f) + 0.5), u) for u, f in cands
+          if MIN_PLAUSIBLE_STEP_S <= step_s * f < MAX_PLAUSIBLE_STEP_S]
+    return min(ok)[1] if ok else None
 #: Smallest plausible cell resistance seen through dV/dI (ohm): below it, with large current numbers, the
 #: current column looks like milliamps.
 MIN_APPARENT_RESISTANCE_OHM = 1e-4
@@ -375,13 +392,46 @@ def _row_of(df_index: int, line_of: np.ndarray) -> int:
     return int(line_of[df_index])
 
 
-def _file_lines(path: Path) -> np.ndarray:
+def _text_encoding(path: Path) -> tuple[str, str | None]:
+    """The text encoding of a record and a note when it is not UTF-8: a byte-order mark (UTF-16 of spreadsheet
+    "Unicode text" exports, UTF-8 with BOM), UTF-16 without one (a NUL in every other byte), else UTF-8 when the
+    whole file decodes as such, else Windows-1252 (the loggers' and spreadsheets' 8-bit Western code page;
+    Latin-1 where a byte is undefined there), said with the first byte that is not UTF-8."""
+    import gzip
+    opener = gzip.open if str(path).endswith(".gz") else open
+    with opener(path, "rb") as fh:
+        data = fh.read()
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        return "utf-16", "decoded as UTF-16 (its byte-order mark)"
+    if data[:3] == b"\xef\xbb\xbf":
+        return "utf-8-sig", None
+    head = data[:4096]
+    if len(head) >= 8 and head[1::2].count(0) > 0.9 * len(head[1::2]):
+        return "utf-16-le", "decoded as UTF-16 little-endian (no byte-order mark; a NUL in every other byte)"
+    if len(head) >= 8 and head[0::2].count(0) > 0.9 * len(head[0::2]):
+        return "utf-16-be", "decoded as UTF-16 big-endian (no byte-order mark; a NUL in every other byte)"
+    try:
+        data.decode("utf-8")
+        return "utf-8", None
+    except UnicodeDecodeError as exc:
+        where = exc.start
+    try:
+        data.decode("cp1252")
+        enc, name = "cp1252", "Windows-1252"
+    except UnicodeDecodeError:
+        enc, name = "latin-1", "Latin-1"
+    line = data.count(b"\n", 0, where) + 1
+    return enc, (f"decoded as {name}: not UTF-8 (byte 0x{data[where]:02x} on line {line}); save the file as "
+                 f"UTF-8 if a name or unit reads wrong")
+
+
+def _file_lines(path: Path, encoding: str = "utf-8") -> np.ndarray:
     """1-based file line number of each data row (skipping comment lines and the header)."""
     import gzip
     opener = gzip.open if str(path).endswith(".gz") else open
     lines = []
     header_seen = False
-    with opener(path, "rt", encoding="utf-8", errors="replace") as fh:
+    with opener(path, "rt", encoding=encoding, errors="replace") as fh:
         for ln, line in enumerate(fh, start=1):
             s = line.strip()
             if not s or s.startswith("#"):
@@ -400,11 +450,11 @@ def _runs(mask: np.ndarray):
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
 
 
-def _sniff_format(path: Path) -> dict:
+def _sniff_format(path: Path, encoding: str = "utf-8-sig") -> dict:
     """pandas options for a CSV as spreadsheets export it: ``;`` separators with decimal commas, tabs."""
     import gzip
     opener = gzip.open if str(path).endswith(".gz") else open
-    with opener(path, "rt", encoding="utf-8-sig", errors="replace") as fh:
+    with opener(path, "rt", encoding=encoding, errors="replace") as fh:
         for line in fh:
             s = line.strip()
             if s and not s.startswith("#"):
@@ -459,11 +509,19 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, np.ndarray]:
         raise DataError(f"{path}: {why}")
     import warnings
     try:
+        encoding, enc_note = _text_encoding(path)
+    except OSError as exc:
+        raise DataError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+    except (EOFError, ValueError) as exc:         # a damaged .gz
+        raise DataError(f"{path}: cannot be read: {type(exc).__name__}: {exc}") from None
+    if encoding == "utf-8":
+        encoding = "utf-8-sig"
+    try:
         with warnings.catch_warnings():
             # a row longer than the header would lose its extra values silently: an error instead
             warnings.simplefilter("error", pd.errors.ParserWarning)
-            raw = pd.read_csv(path, comment="#", skipinitialspace=True, encoding="utf-8-sig", index_col=False,
-                              **_sniff_format(path))
+            raw = pd.read_csv(path, comment="#", skipinitialspace=True, encoding=encoding, index_col=False,
+                              **_sniff_format(path, encoding))
     except pd.errors.ParserWarning as exc:
         raise DataError(f"{path}: a data row has more values than the header has columns ({exc}); nothing is "
                         f"dropped silently: fix the header or the row") from exc
@@ -478,9 +536,10 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, np.ndarray]:
         raise DataError(f"{path}: duplicate column names in the header ({', '.join(raw.columns)})")
     if raw.shape[0] < 3:
         raise DataError(f"{path}: only {raw.shape[0]} data rows")
-    line_of = _file_lines(path)
+    line_of = _file_lines(path, encoding)
     if line_of.size != raw.shape[0]:  # blank lines inside etc.: fall back to header offset
         line_of = np.arange(raw.shape[0]) + 2
+    raw.attrs["encoding_note"] = enc_note
     return raw, line_of
 
 
@@ -691,7 +750,7 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
             _unit_problems_into(_provisional_frame(raw, cols, declared), model, line_of,
                                 {d[0] for d in declared.values()}, problems, fixes)
         raise _problems_error(path, problems, fixes, note)
-    notes = []
+    notes = [raw.attrs["encoding_note"]] if raw.attrs.get("encoding_note") else []
     sign_how = "guessed" if current_sign == "auto" else "stated"
     if current_sign == "auto":
         if guessed is None:         # no current/voltage (not a cell): the canonical convention
@@ -783,18 +842,33 @@ def _unit_problems_into(df, model, line_of, declared, problems: list, fixes: dic
     t = arr("time_s")
     dt = np.diff(t) if t is not None else np.array([])
     dt = dt[np.isfinite(dt)]
-    if "time_s" not in declared and dt.size and float(np.median(dt)) >= MAX_PLAUSIBLE_STEP_S:
-        bad("time_s", f"median sample step {float(np.median(dt)):g} s looks like milliseconds (calibration "
-                      f"records are sampled every 0.01-1 s); name the column 'time_ms' or pass --unit time_s=ms "
-                      f"to convert (--unit time_s=s if the step really is that long)", 1, "--unit time_s=ms")
+    step = float(np.median(dt)) if dt.size else float("nan")
+    words = {"ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds", "min": "minutes", "h": "hours"}
+    if "time_s" not in declared and dt.size and (step >= MAX_PLAUSIBLE_STEP_S or 0.0 < step < MIN_PLAUSIBLE_STEP_S):
+        coarse = step < MIN_PLAUSIBLE_STEP_S
+        u = _time_unit_guess(step, coarse)
+        what = (f"looks like {words[u]}" if u else
+                f"is not in seconds (no time unit brings it to {MIN_PLAUSIBLE_STEP_S:g}-{MAX_PLAUSIBLE_STEP_S:g} s)")
+        bad("time_s", f"median sample step {step:g} s {what} (calibration records are sampled every 0.01-1 s)"
+                      + (f"; name the column 'time_{u}' or pass --unit time_s={u} to convert" if u else "")
+                      + f" (--unit time_s=s if the step really is that {'short' if coarse else 'long'})", 1,
+            f"--unit time_s={u}" if u else None)
     elif model == "vehicle" and "time_s" not in declared and dt.size and "speed_mps" in df:
         s = arr("speed_mps")
         tt = np.diff(t)
         acc = np.abs(np.diff(s)) / np.where(tt > 0, tt, np.inf)
+        moving = np.isfinite(acc) & (np.abs(s[1:]) > 1.0)
+        med = float(np.median(acc[moving])) if moving.sum() >= 10 else float("nan")
         if np.nanmax(s) - np.nanmin(s) > 2.0 and np.nanmax(acc) < 0.02:
             bad("time_s", f"speed varies by {np.nanmax(s) - np.nanmin(s):.3g} m/s but never faster than "
                           f"{np.nanmax(acc):.2g} m/s^2: the time column looks like milliseconds; name it 'time_ms' or "
                           f"pass --unit time_s=ms", 1, "--unit time_s=ms")
+        elif med > MAX_MEDIAN_ACCEL_MPS2:
+            u = "h" if med / 60.0 > MAX_MEDIAN_ACCEL_MPS2 else "min"
+            bad("time_s", f"the speed changes by a median {med:.3g} m/s^2 while moving ({med / 9.81:.2g} g; a "
+                          f"drive's is under 1 m/s^2): the time column looks like {words[u]}; name it 'time_{u}' or "
+                          f"pass --unit time_s={u} (--unit time_s=s if it really is in seconds)", 1,
+                f"--unit time_s={u}")
     if model == "cell" and "current_a" not in declared and "current_a" in df and "voltage_v" in df:
         i = arr("current_a")
         di, dv = np.diff(i), np.diff(arr("voltage_v"))
