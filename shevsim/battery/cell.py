@@ -57,9 +57,11 @@ _ECM_COLS = ("soc_frac", "t_c", "rs_ohm", "r1_ohm", "c1_f", "r2_ohm", "c2_f")
 
 @memo_file
 def read_csv_table(path: Path, cols: tuple[str, ...]) -> tuple[tuple[float, ...], ...]:
+    from shevsim.core.errors import file_problem
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: table file not found")
+    why = file_problem(path, "table file")       # not found, a folder, a device: said as such
+    if why is not None:
+        raise DataError(f"{path}: {why}")
     rows: list[list[float]] = []
     try:   # utf-8-sig: a byte-order mark of a spreadsheet export is not part of the first column's name
         with open(path, newline="", encoding="utf-8-sig") as fh:

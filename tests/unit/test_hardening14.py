@@ -63,3 +63,11 @@ def test_a_header_in_microseconds_is_converted(tmp_path, frame):
     frame.rename(columns={"time_s": "time_us"}).assign(time_us=frame["time_s"] * 1e6).to_csv(p, index=False)
     got = load_measured(str(p), "vehicle")
     assert abs(got.df["time_s"].to_numpy() - frame["time_s"].to_numpy()).max() < 1e-9
+
+
+def test_a_cell_table_given_as_a_folder_is_named_as_a_folder(tmp_path):
+    from shevsim.battery.cell import read_csv_table
+    with pytest.raises(DataError, match=r"is a folder, not a table file: give the file itself"):
+        read_csv_table(tmp_path, ("soc_frac", "ocv_v"))
+    with pytest.raises(DataError, match=r"nothere\.csv: table file not found"):
+        read_csv_table(tmp_path / "nothere.csv", ("soc_frac", "ocv_v"))
