@@ -37,8 +37,12 @@ def _limit(rep, effect):
 def test_the_limit_is_in_the_report_per_direction_and_a_bound_of_the_nominal_shows_in_it():
     """FASTSim's Bolt on UDDS (no effect): a payload of 300 kg is above the mass limit in both directions (the
     payload record is named: test_calibrate_out_of_sample.py::test_vehicle_with_its_published_curve_names_the_payload).
-    On HWFET the nominal's regenerative efficiency sits on its upper bound and may move only inwards in the refit,
-    so a heavier vehicle's extra regeneration is left to show: the limit up is less than half the limit down."""
+    On HWFET with 300 kg of payload the nominal's regenerative efficiency sits on its upper bound and the record
+    pushes past it (a model-form discrepancy): it moves both ways in the refit, so what of a heavier vehicle's extra
+    regeneration it would take past the bound is not counted as the mass's own evidence.  Checked against what the
+    record does: the mass candidate's fitted size and its measured held-out gain are the ones the limit implies
+    within 3 points (measured: +272 kg, 7.7 % gained, 6.0 % implied; with the regeneration held on its bound the
+    limit was 178 kg up and implied 33 %)."""
     ud, _ = _run("none")
     lim = _limit(ud, "mass_error")
     assert lim["unit"] == "kg" and lim["reachable"]
@@ -52,8 +56,15 @@ def test_the_limit_is_in_the_report_per_direction_and_a_bound_of_the_nominal_sho
     hw, _ = _run("payload_hwfet")
     assert hw["selected_effects"] == []
     assert "regen_efficiency_scale_frac" in {b["parameter"] for b in hw["parameters_at_bounds"]}
+    assert "regen_efficiency_scale_frac" in {b["parameter"] for d in hw["model_form_discrepancy"]
+                                             for b in d.get("declared_on_bound") or []}
     m = _limit(hw, "mass_error")
-    assert m["limit_up"] < 0.6 * m["limit_down"], m
+    (cand,) = [c for c in hw["rounds"][0]["candidates"] if c["effects"] == ["mass_error"]]
+    size = cand["parameters"]["mass_kg"] - m["neutral"]
+    lim_dir = m["limit_up"] if size > 0 else m["limit_down"]
+    need = (1.0 - MIN_GAIN) ** -2 - 1.0          # the record carries the effect: its residual includes it
+    implied = 1.0 - math.sqrt(max(1.0 - need * (size / lim_dir) ** 2, 0.0))
+    assert abs(cand["gain"] - implied) < 0.03, (cand["gain"], implied, size, lim_dir)
 
 
 def _gain_at(d: float, lim: dict) -> float:
