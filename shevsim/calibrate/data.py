@@ -392,6 +392,16 @@ def _row_of(df_index: int, line_of: np.ndarray) -> int:
     return int(line_of[df_index])
 
 
+#: binary files a user may hand over for a record (their first bytes), refused by name rather than parsed as text
+_BINARY_KINDS = ((b"PK\x03\x04", "a ZIP archive (an .xlsx workbook?)"),
+                 (b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1", "an OLE2 compound file (an .xls workbook?)"),
+                 (b"MATLAB 5.0 MAT-file", "a MATLAB .mat file"), (b"\x89HDF\r\n\x1a\n", "an HDF5 file (a MATLAB v7.3 .mat?)"),
+                 (b"PAR1", "a Parquet file"), (b"\x1f\x8b", "a gzip file whose name does not end in .gz"),
+                 (b"%PDF", "a PDF document"), (b"MDF     ", "an ASAM MDF measurement file"))
+_BINARY_FIX = ("export the channels as a CSV (UTF-8, a header row naming the columns; e.g. pandas: "
+               "pd.read_parquet(f).to_csv('record.csv', index=False); MATLAB: writetable(T, 'record.csv'))")
+
+
 def _text_encoding(path: Path) -> tuple[str, str | None]:
     """The text encoding of a record and a note when it is not UTF-8: a byte-order mark (UTF-16 of spreadsheet
     "Unicode text" exports, UTF-8 with BOM), UTF-16 without one (a NUL in every other byte), else UTF-8 when the
@@ -401,6 +411,9 @@ def _text_encoding(path: Path) -> tuple[str, str | None]:
     opener = gzip.open if str(path).endswith(".gz") else open
     with opener(path, "rb") as fh:
         data = fh.read()
+    kind = next((k for magic, k in _BINARY_KINDS if data.startswith(magic)), None)
+    if kind is not None:
+        raise DataError(f"{path}: is {kind}, not a CSV text file: {_BINARY_FIX}")
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
         return "utf-16", "decoded as UTF-16 (its byte-order mark)"
     if data[:3] == b"\xef\xbb\xbf":
@@ -410,6 +423,9 @@ def _text_encoding(path: Path) -> tuple[str, str | None]:
         return "utf-16-le", "decoded as UTF-16 little-endian (no byte-order mark; a NUL in every other byte)"
     if len(head) >= 8 and head[0::2].count(0) > 0.9 * len(head[0::2]):
         return "utf-16-be", "decoded as UTF-16 big-endian (no byte-order mark; a NUL in every other byte)"
+    if b"\x00" in head:
+        raise DataError(f"{path}: holds NUL bytes (byte {head.index(0)}): a binary file, not a CSV text file: "
+                        f"{_BINARY_FIX}")
     try:
         data.decode("utf-8")
         return "utf-8", None
@@ -541,6 +557,51 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, np.ndarray]:
         line_of = np.arange(raw.shape[0]) + 2
     raw.attrs["encoding_note"] = enc_note
     return raw, line_of
+
+
+#: timestamps a time column may hold instead of seconds: ISO 8601 date and time (``2026-11-27 10:00:01.5``,
+#: ``...T10:00:01Z``, ``...+01:00``), and a time of day or an elapsed time (``10:00:01.5``, ``0 days 00:00:01``)
+_ISO_STAMP = r"^\d{4}-\d{2}-\d{2}[T ]\d{1,2}:\d{2}(:\d{2}(\.\d+)?)?(Z|[+-]\d{2}:?\d{2})?$"
+_CLOCK_STAMP = r"^(\d+ days? )?\d{1,3}:\d{2}:\d{2}(\.\d+)?$"
+
+
+def _timestamps_to_seconds(raw: pd.DataFrame, mapping: dict, declared: dict, path: Path,
+                           line_of: np.ndarray) -> str | None:
+    """A time column of timestamps (`_ISO_STAMP`, `_CLOCK_STAMP`; every value in one of the two forms) replaced in
+    ``raw`` by the seconds from its first value; the note saying so, else None.  A time of day that passes
+    midnight goes on into the next day.  A unit declared for such a column is refused (a timestamp has its own);
+    any other text is left to the numeric checks (named with its line), with a hint when it looks like a date."""
+    col = mapping.get("time_s", "time_s")
+    if col not in raw.columns or pd.api.types.is_numeric_dtype(raw[col]):
+        return None
+    txt = raw[col].astype(str).str.strip()
+    form = next((f for f, rx in (("ISO 8601 date and time", _ISO_STAMP), ("hh:mm:ss", _CLOCK_STAMP))
+                 if txt.str.fullmatch(rx).all()), None)
+    if form is None:
+        if txt.str.contains(r"\d[:/.]\d+[:/.]\d", regex=True).mean() > 0.5 \
+                and pd.to_numeric(txt, errors="coerce").isna().mean() > 0.5:
+            k = int(np.flatnonzero(pd.to_numeric(txt, errors="coerce").isna().to_numpy())[0])
+            raise DataError(f"{path}: column '{col}', line {_row_of(k, line_of)} and on: {txt.iloc[k]!r} looks like a timestamp "
+                            f"in a form other than ISO 8601 (2026-11-27 10:00:01.5) or hh:mm:ss (a day-first or "
+                            f"month-first date is ambiguous): write the time so, or as seconds")
+        return None
+    unit = next((d[3] for c, d in declared.items() if d[0] == "time_s" and c in (col, "time_s")), None)
+    if unit not in (None, "s"):
+        raise DataError(f"{path}: column '{col}' holds timestamps ({form}), which carry their own unit; a unit "
+                        f"'{unit}' was declared for it: drop it (--unit / the header's suffix)")
+    if form.startswith("ISO"):
+        try:
+            stamps = pd.to_datetime(txt, format="ISO8601", utc=True)
+        except (ValueError, OverflowError) as exc:
+            raise DataError(f"{path}: column '{col}': a timestamp that is no date ({exc})") from None
+        sec = (stamps - stamps.iloc[0]).dt.total_seconds().to_numpy(float)
+    else:
+        sec = pd.to_timedelta(txt).dt.total_seconds().to_numpy(float)
+        back = np.diff(sec) < -43200.0            # a time of day past midnight
+        sec = sec + 86400.0 * np.concatenate([[0], np.cumsum(back)])
+        sec = sec - sec[0]
+    raw[col] = sec
+    return f"time column '{col}' read as timestamps ({form}): seconds from the first, {txt.iloc[0]}"
 
 
 def _column_mapping(raw: pd.DataFrame, model: str, mapping, units, path: Path) -> tuple[dict, dict]:
@@ -739,6 +800,7 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
     ambient = None if ambient_c is None else (check_ambient(ambient_c, ambient_from, model), ambient_from)
     raw, line_of = _read_table(path)
     mapping, declared = _column_mapping(raw, model, mapping, units, path)
+    stamp_note = _timestamps_to_seconds(raw, mapping, declared, path, line_of)
     canon_all = REQUIRED[model] + OPTIONAL[model]
     guessed, problems, fixes, cols, note = _precheck(
         path, raw, model, mapping, canon_all, current_sign if check_sign or current_sign == "auto" else "auto-skip",
@@ -750,7 +812,7 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
             _unit_problems_into(_provisional_frame(raw, cols, declared), model, line_of,
                                 {d[0] for d in declared.values()}, problems, fixes)
         raise _problems_error(path, problems, fixes, note)
-    notes = [raw.attrs["encoding_note"]] if raw.attrs.get("encoding_note") else []
+    notes = [n for n in (raw.attrs.get("encoding_note"), stamp_note) if n]
     sign_how = "guessed" if current_sign == "auto" else "stated"
     if current_sign == "auto":
         if guessed is None:         # no current/voltage (not a cell): the canonical convention

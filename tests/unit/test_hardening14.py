@@ -71,3 +71,47 @@ def test_a_cell_table_given_as_a_folder_is_named_as_a_folder(tmp_path):
         read_csv_table(tmp_path, ("soc_frac", "ocv_v"))
     with pytest.raises(DataError, match=r"nothere\.csv: table file not found"):
         read_csv_table(tmp_path / "nothere.csv", ("soc_frac", "ocv_v"))
+
+
+@pytest.mark.parametrize("fmt, start", [("%Y-%m-%d %H:%M:%S.%f", "2026-11-27 10:00:00"),
+                                        ("%Y-%m-%dT%H:%M:%SZ", "2026-11-27 10:00:00"),
+                                        ("%H:%M:%S", "2026-11-27 23:55:00")])      # passes midnight
+def test_a_time_column_of_timestamps_is_read_as_seconds_from_the_first(tmp_path, frame, fmt, start):
+    p = tmp_path / "rec.csv"
+    stamps = pd.Timestamp(start) + pd.to_timedelta(frame["time_s"], unit="s")
+    frame.assign(time_s=stamps.dt.strftime(fmt)).to_csv(p, index=False)
+    got = load_measured(str(p), "vehicle")
+    t = frame["time_s"].to_numpy()
+    assert abs(got.df["time_s"].to_numpy() - (t - t[0])).max() < 1e-6
+    assert any("read as timestamps" in n for n in got.notes)
+
+
+def test_a_day_first_date_is_refused_as_ambiguous_naming_column_and_line(tmp_path, frame):
+    p = tmp_path / "rec.csv"
+    stamps = pd.Timestamp("2026-11-27 10:00:00") + pd.to_timedelta(frame["time_s"], unit="s")
+    frame.assign(time_s=stamps.dt.strftime("%d.%m.%Y %H:%M:%S")).to_csv(p, index=False)
+    with pytest.raises(DataError, match=r"column 'time_s', line 2 and on: '27\.11\.2026 10:00:00' looks like a "
+                                        r"timestamp"):
+        load_measured(str(p), "vehicle")
+
+
+def test_a_unit_declared_for_a_timestamp_column_is_refused(tmp_path, frame):
+    p = tmp_path / "rec.csv"
+    stamps = pd.Timestamp("2026-11-27 10:00:00") + pd.to_timedelta(frame["time_s"], unit="s")
+    frame.assign(time_s=stamps.dt.strftime("%H:%M:%S")).to_csv(p, index=False)
+    with pytest.raises(DataError, match="carry their own unit"):
+        load_measured(str(p), "vehicle", units={"time_s": "ms"})
+
+
+@pytest.mark.parametrize("head, kind", [(b"PK\x03\x04" + b"\x14" * 60, "a ZIP archive (an .xlsx workbook?)"),
+                                        (b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1" + b"\x00" * 60, "an OLE2 compound file"),
+                                        (b"MATLAB 5.0 MAT-file, Platform: GLNXA64" + b" " * 80, "a MATLAB .mat file"),
+                                        (b"\x89HDF\r\n\x1a\n" + b"\x00" * 60, "an HDF5 file"),
+                                        (b"PAR1" + b"\x00" * 60 + b"PAR1", "a Parquet file"),
+                                        (b"time_s,speed_mps\n0,\x00\x01\x02\n", "holds NUL bytes")])
+def test_a_binary_file_is_named_for_what_it_is(tmp_path, head, kind):
+    p = tmp_path / "record.csv"
+    p.write_bytes(head)
+    with pytest.raises(DataError) as ei:
+        load_measured(str(p), "vehicle")
+    assert str(ei.value).startswith(f"{p}: ") and kind in str(ei.value) and "export the channels as a CSV" in str(ei.value)
