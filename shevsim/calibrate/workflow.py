@@ -145,6 +145,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import re
 import tempfile
 import time
 from dataclasses import dataclass
@@ -651,7 +652,7 @@ DETECT_STEP = 1e-3      # finite-difference step of an effect's parameter, as a 
 
 
 def detection_limits(fitter: "Fitter", selected, final: FitResult, ref: dict, skip=(), held=(),
-                     pushed=()) -> list[dict]:
+                     pushed=(), shapes: list | None = None) -> list[dict]:
     """What the record could have shown, to first order: for every one-parameter effect not selected, the smallest
     change of its parameter from its neutral value (the effect off) whose own signal would gain the selection
     rule's ``MIN_GAIN`` held-out.
@@ -683,7 +684,13 @@ def detection_limits(fitter: "Fitter", selected, final: FitResult, ref: dict, sk
     with several parameters, parameters measured directly, parameters already fitted; an effect whose claim is
     tested on its channel (``Effect.channel_claim``: verified, any held-out gain passes) is listed with
     ``limit`` None and the reason, as is one with no first-order signal at its neutral value (a limit not
-    reached: ``regen_limit``)."""
+    reached: ``regen_limit``).
+
+    ``shapes`` (a list, when given) receives one row per effect with several parameters of one unit (knots: an OCV
+    correction, dU/dT, grade segments; `shape_limit`), linear in them: per rule the held-out Gram matrix ``Q`` of
+    the signals left after the refit (over the channels' baselines) and ``R``, so that a change ``delta`` of the
+    knots gains the rule's ``MIN_GAIN`` when ``delta' Q delta >= need R``; and the rms knot change of its most and
+    least visible shapes (the extremes over the rules' eigenvectors and 512 fixed random directions)."""
     hold_names = set(held) | set(fitter.measured)
     ps, lb, ub = [], [], []
     for p in fitter._params_for(tuple(selected)):
@@ -722,6 +729,12 @@ def detection_limits(fitter: "Fitter", selected, final: FitResult, ref: dict, sk
     def left_rms(sig):
         """Held-out RMS per channel of the signal ``sig`` ({channel: array}) left after the refit; its training
         norm and the share the refit takes."""
+        lv, norm, ab = left_vec(sig)
+        return ({c: float(np.sqrt(np.mean(lv[c] ** 2))) if lv[c].size else 0.0 for c in chans}, norm, ab)
+
+    def left_vec(sig):
+        """The held-out samples per channel of the signal ``sig`` left after the refit; its training norm and the
+        share the refit takes."""
         s_tr = np.concatenate([sig[c][idx] * w[c] for c in chans])
         if J is None:
             beta = np.empty(0)
@@ -731,11 +744,11 @@ def detection_limits(fitter: "Fitter", selected, final: FitResult, ref: dict, sk
             beta = optimize.lsq_linear(J, s_tr, bounds=(np.asarray(lb), np.asarray(ub))).x
         norm = float(np.linalg.norm(s_tr))
         left_tr = s_tr - (J @ beta if J is not None else 0.0)
-        a = {}
+        lv = {}
         for c in chans:
             lc = sig[c] - sum((beta[k] * cols[k][c] for k in range(len(cols))), np.zeros_like(sig[c]))
-            a[c] = float(np.sqrt(np.mean(lc[hold] ** 2))) if hold.any() else 0.0
-        return a, norm, (float(1.0 - (np.linalg.norm(left_tr) / norm) ** 2) if norm > 0 else float("nan"))
+            lv[c] = lc[hold] if hold.any() else np.zeros(0)
+        return lv, norm, (float(1.0 - (np.linalg.norm(left_tr) / norm) ** 2) if norm > 0 else float("nan"))
 
     def limit_of(a, ev):
         out = {}
@@ -809,7 +822,79 @@ def detection_limits(fitter: "Fitter", selected, final: FitResult, ref: dict, sk
                     "relative": (lim / abs(n0) if n0 != 0.0 else None),
                     "reachable": bool(n0 + lim <= hi_p or n0 - lim >= lo_p),
                     "absorbed_frac": absorbed})
+    if shapes is not None:
+        fitted_names = {p.name for p in fitter._params_for(tuple(selected))}
+        for name, eff in fitter.effects.items():
+            if name in done or len(eff.params) < 2 or len({p.unit for p in eff.params}) != 1 \
+                    or len({re.sub(r"\[\d+\]$", "", p.name) for p in eff.params}) != 1 \
+                    or not all(re.search(r"\[\d+\]$", p.name) for p in eff.params):
+                continue      # knots: one indexed parameter name, one unit
+            if any(p.name in fitter.measured or p.name in fitted_names for p in eff.params):
+                continue
+            ev = [c for c in (eff.evidence or eff.channels) if c in chans]
+            if not ev or not hold.any():
+                continue
+            row = _shape_row(fitter, eff, values, chans, ev, left_vec, finite, r, b, need, int(hold.sum()))
+            if row is not None:
+                shapes.append(row)
     return out
+
+
+def _shape_row(fitter, eff, values, chans, ev, left_vec, finite, r, b, need, n_hold) -> dict | None:
+    """`detection_limits`' row of an effect with several parameters of one unit (see there)."""
+    n0 = {p.name: float(eff.neutral.get(p.name, p.default)) for p in eff.params}
+    base = {**values, **n0}
+    p0 = fitter.simulate(base)
+    left, absorbed = [], []
+    for prm in eff.params:
+        lo, hi = fitter.bounds_override.get(prm.name, (prm.lo, prm.hi))
+        step = DETECT_STEP * (hi - lo)
+        sign = 1.0 if n0[prm.name] + step <= hi else -1.0
+        pv = fitter.simulate({**base, prm.name: n0[prm.name] + sign * step})
+        lv, _norm, ab = left_vec({c: finite((np.asarray(pv[c], float) - np.asarray(p0[c], float)) / (sign * step))
+                                  for c in chans})
+        left.append(lv)
+        absorbed.append(ab)
+    k = len(left)
+    rules = {}
+    for rule, cs in (("combined score", chans), ("its channels", ev)):
+        q = np.zeros((k, k))
+        for c in cs:
+            m = np.column_stack([left[j][c] for j in range(k)])
+            q += m.T @ m / n_hold / b[c] ** 2
+        rules[rule] = {"Q": q.tolist(), "R": float(sum((r[c] / b[c]) ** 2 for c in cs)), "channels": list(cs)}
+    row = {"effect": eff.name, "parameters": [p.name for p in eff.params], "unit": eff.params[0].unit,
+           "about": [p.doc for p in eff.params], "neutral": [n0[p.name] for p in eff.params], "need": need,
+           "rules": rules, "channels": ev, "absorbed_frac": [float(a) for a in absorbed], "linear": True}
+    dirs = [np.asarray(v) for ru in rules.values() for v in np.linalg.eigh(np.asarray(ru["Q"]))[1].T]
+    dirs += list(np.random.default_rng(0).standard_normal((512, k)))
+    lims = [(shape_limit(row, u)["limit_rms"], i) for i, u in enumerate(dirs)]
+    (lo_lim, i_lo), (hi_lim, i_hi) = min(lims), max(lims)
+    if not math.isfinite(lo_lim):
+        return None
+    unit_vec = lambda u: (np.asarray(u, float) / np.linalg.norm(u)).tolist()   # noqa: E731
+    row.update(limit_rms_min=float(lo_lim), limit_rms_max=float(hi_lim),
+               shape_min=unit_vec(dirs[i_lo]), shape_max=unit_vec(dirs[i_hi]))
+    return row
+
+
+def shape_limit(row: dict, delta) -> dict:
+    """For a `detection_limits` shape row (an effect with several parameters of one unit) and a change ``delta`` of
+    its parameters from their neutral values: the rms size of the smallest change of that shape whose own signal
+    gains the rule's held-out (the larger over the rules: ``limit_rms``), ``delta``'s rms size, and their ratio
+    (>= 1: the record shows it to first order; on a record that already carries it, >= 1 - MIN_GAIN for one
+    channel)."""
+    d = np.asarray(delta, float)
+    size = float(np.linalg.norm(d))
+    if size == 0.0:
+        return {"limit_rms": math.inf, "size_rms": 0.0, "ratio": 0.0}
+    u = d / size
+    lim = 0.0
+    for ru in row["rules"].values():
+        g = float(u @ np.asarray(ru["Q"]) @ u)
+        lim = max(lim, math.sqrt(row["need"] * ru["R"] / g) if g > 0 else math.inf)
+    k = math.sqrt(d.size)
+    return {"limit_rms": lim / k, "size_rms": size / k, "ratio": (size / lim) if lim > 0 else math.inf}
 
 
 def _score(fr: FitResult, ref: dict, channels=None, judged: bool = False) -> float:
@@ -2061,9 +2146,11 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
     try:
         held = {k for e in selected for k in (run.claim_hold.get(e) or {})}
         pushed = {b.get("parameter") for d in discrepancy for b in (d.get("declared_on_bound") or [])}
+        shapes: list = []
         report["detection_limits"] = detection_limits(run.fitter, selected, final, run.ref,
                                                       skip=[e for e in run.fitter.effects if e not in run.names],
-                                                      held=held, pushed=pushed)
+                                                      held=held, pushed=pushed, shapes=shapes)
+        report["detection_shapes"] = shapes
     except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:   # a statement of the report, not the result
         report["detection_limits"] = []
         report["detection_error"] = f"{type(exc).__name__}: {exc}"
@@ -2409,6 +2496,14 @@ def render_markdown(rep: dict) -> str:
                   + (f", {d['absorbed_frac']:.0%} of its signal taken by the fitted parameters"
                      if d.get("absorbed_frac") is not None and d["absorbed_frac"] >= 0.5 else "")
                   for d in dl) + "."]
+    shp = rep.get("detection_shapes") or []
+    if shp:
+        L += ["", "**Effects with several parameters of one unit** (knots; linear): the rms change of the knots whose "
+              "own signal would gain the rule's held-out, from the effect's most visible shape to its least visible: "
+              + "; ".join(f"`{d['effect']}` ({len(d['parameters'])} knots) {_g(d['limit_rms_min'])} to "
+                          + (_g(d["limit_rms_max"]) if math.isfinite(d["limit_rms_max"])
+                             else "never (a shape the record does not see, or that the fitted parameters take whole)")
+                          + f" {d['unit']}" for d in shp) + "."]
     if rep.get("replay") and "error" in rep["replay"]:
         L += ["", f"Replay through the simulator: {rep['replay']['error']}"]
     elif rep.get("replay"):

@@ -646,6 +646,13 @@ def calibration_page(rep: dict, traces=None, title: str | None = None) -> Page:
                                          + f"{fmt(x['limit'])} {x['unit']}"
                                          + ("" if x.get("reachable", True) else " (beyond its plausible range)")
                                          for x in dl)) + "</p>")
+    shp = rep.get("detection_shapes") or []
+    if shp:
+        body += ("<p>Effects with several knots: the rms change of the knots that would gain it, from the most to the "
+                 "least visible shape: " + esc("; ".join(
+                     f"{x['effect']} ({len(x['parameters'])} knots) {fmt(x['limit_rms_min'])} to "
+                     + (fmt(x["limit_rms_max"]) if x["limit_rms_max"] != float("inf") else "never")
+                     + f" {x['unit']}" for x in shp)) + "</p>")
     for n in d.get("notes") or []:
         body += f'<p class="note">note: {esc(n)}</p>'
     from .calibration_text import decimate_advice

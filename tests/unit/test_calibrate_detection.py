@@ -181,3 +181,55 @@ def test_a_saturating_effect_is_read_on_its_secant_and_a_claim_effect_gets_no_li
     assert d["nonlinear"] and d["limit"] > 1.2 * d["tangent_limit"]
     ga, _ = _gains(f, dict(meas, ch1=meas["ch1"] + 0.25 * np.tanh(d["limit"]) * s), [u1], [u2], s)
     assert abs(ga - MIN_GAIN) <= 0.03, ga
+
+
+def _gains_k(f, meas, regs1, regs2, extra1):
+    """As `_gains` with several regressors of the effect on ch1 (its knots): the combined-score gain."""
+    tr, ho = ~f.hold, f.hold
+
+    def fit(cols1, cols2):
+        a = np.vstack([np.column_stack(cols1)[tr], np.column_stack(cols2)[tr]])
+        beta = np.linalg.lstsq(a, np.concatenate([meas["ch1"][tr], meas["ch2"][tr]]), rcond=None)[0]
+        return {c: float(np.sqrt(np.mean((np.column_stack(x) @ beta - meas[c])[ho] ** 2)))
+                for c, x in (("ch1", cols1), ("ch2", cols2))}
+    cur = fit(regs1, regs2)
+    cand = fit(regs1 + list(extra1), regs2 + [np.zeros_like(e) for e in extra1])
+    return 1.0 - math.sqrt((cand["ch1"] ** 2 + cand["ch2"] ** 2) / (cur["ch1"] ** 2 + cur["ch2"] ** 2))
+
+
+def test_an_effect_with_knots_gets_the_limit_of_each_shape_and_exact_least_squares_agree():
+    """Two knots ``c[0]``, ``c[1]`` on ch1 whose signals overlap each other and the declared parameter's: the
+    shape row's Gram matrix gives, for any change of the knots, the size at which its own signal gains the rule's
+    10 %; an exact least-squares fit of both knots on a record carrying that change gains it within 3 points, at
+    half of it less, at twice of it more - along the most visible shape, the least visible and another.  An effect
+    whose parameters are not knots of one unit gets no shape row."""
+    from shevsim.calibrate.models import Effect, Param
+    from shevsim.calibrate.workflow import shape_limit
+    n = 3000
+    t = np.arange(n, dtype=float)
+    u1, u2 = np.sin(t / 37.0), np.cos(t / 91.0)
+    s1 = np.sign(np.sin(t / 13.0))
+    s2 = 0.6 * s1 + 0.5 * np.sin(t / 5.0) + 0.4 * u1
+    eff = {"knots": Effect("knots", "two knots on ch1", (Param("c[0]", "V", -10.0, 10.0, 0.0, "knot at 0.2"),
+                                                         Param("c[1]", "V", -10.0, 10.0, 0.0, "knot at 0.8")),
+                           {"c[0]": 0.0, "c[1]": 0.0}, ("ch1",)),
+           "two": Effect("two", "two parameters, not knots", (Param("g", "1", -1.0, 1.0, 0.0, "gain"),
+                                                             Param("h", "1", -1.0, 1.0, 0.0, "scale")),
+                         {"g": 0.0, "h": 0.0}, ("ch1",))}
+    f, meas, final = _stub(eff, lambda v: {"ch1": v["k"] * u1 + v["c[0]"] * s1 + v["c[1]"] * s2
+                                           + v["g"] * v["h"] * u2, "ch2": v["k"] * u2}, n)
+    shapes: list = []
+    detection_limits(f, [], final, {c: final.rmse[c]["holdout"] for c in f.channels}, shapes=shapes)
+    (row,) = shapes
+    assert row["effect"] == "knots" and row["linear"] and row["limit_rms_min"] < row["limit_rms_max"]
+    assert shape_limit(row, row["shape_min"])["limit_rms"] == pytest.approx(row["limit_rms_min"])
+    for u in (row["shape_min"], row["shape_max"], [1.0, -0.3]):
+        u = np.asarray(u) / np.linalg.norm(u)
+        lim = shape_limit(row, u)["limit_rms"] * math.sqrt(2)          # |delta| at the limit
+        for factor, lo, hi in ((1.0, MIN_GAIN - 0.03, MIN_GAIN + 0.03), (0.5, -1.0, MIN_GAIN - 0.03),
+                               (2.0, MIN_GAIN + 0.03, 1.0)):
+            d = factor * lim * u
+            ga = _gains_k(f, dict(meas, ch1=meas["ch1"] + d[0] * s1 + d[1] * s2), [u1], [u2], [s1, s2])
+            assert lo <= ga <= hi, (list(u), factor, ga)
+            if factor != 1.0:
+                assert (shape_limit(row, d)["ratio"] > 1.0) == (factor > 1.0)
