@@ -93,20 +93,44 @@ OVERLOAD_VALUE = 1e30
 #: Largest plausible sample step of a calibration record (s): 10 or more "seconds" looks like milliseconds (or
 #: microseconds, nanoseconds: the unit that brings the step under it is named).
 MAX_PLAUSIBLE_STEP_S = 10.0
-#: Smallest plausible sample step (s): a step under a millisecond (a logger above 1 kHz) looks like hours or minutes.
-MIN_PLAUSIBLE_STEP_S = 1e-3
-#: A vehicle's median |acceleration| while moving above this (m/s^2, half a g; a drive's is under 1) means the
-#: time column runs slower than seconds (minutes or hours)
+#: Smallest plausible sample step (s): under 0.1 ms (a logger above 10 kHz) the time column looks like hours or
+#: minutes; from there to 1 ms (1-10 kHz: a fast logger, or a 1 Hz record in hours) a note says which unit it would be
+MIN_PLAUSIBLE_STEP_S = 1e-4
+NOTE_STEP_S = 1e-3
+#: A vehicle's median |acceleration| while moving, over windows of `ACCEL_WINDOW_S` (so that a fast logger's speed
+#: noise does not count), above this (m/s^2, half a g; a drive's is under 1) means the time column runs slower than
+#: seconds (minutes or hours)
 MAX_MEDIAN_ACCEL_MPS2 = 5.0
+ACCEL_WINDOW_S = 0.2
 
 
-def _time_unit_guess(step_s: float, coarse: bool) -> str | None:
-    """The time unit that makes a median sample step of ``step_s`` "seconds" plausible (0.01-1 s preferred):
-    ``coarse`` for a step too short (hours or minutes), else too long (ms, us, ns)."""
+def _median_moving_accel(t: np.ndarray, v: np.ndarray) -> float:
+    """Median |dv/dt| while moving (|v| > 1 m/s), over windows of at least `ACCEL_WINDOW_S` (whole samples), so
+    that the speed noise of a fast logger is not read as acceleration; NaN with fewer than 10 such windows."""
+    ok = np.isfinite(t) & np.isfinite(v)
+    t, v = t[ok], v[ok]
+    if t.size < 3:
+        return float("nan")
+    step = float(np.median(np.diff(t)))
+    if not step > 0:
+        return float("nan")
+    k = max(1, int(math.ceil(ACCEL_WINDOW_S / step - 1e-9)))
+    dt = t[k:] - t[:-k]
+    acc = np.abs(v[k:] - v[:-k]) / np.where(dt > 0, dt, np.inf)
+    moving = np.isfinite(acc) & (np.abs(v[k:]) > 1.0) & (np.abs(v[:-k]) > 1.0)
+    return float(np.median(acc[moving])) if moving.sum() >= 10 else float("nan")
+
+
+def _time_unit_guess(step_s: float, coarse: bool) -> list[str]:
+    """The time units that make a median sample step of ``step_s`` "seconds" plausible (a step of 1 ms to 10 s),
+    the likeliest first (nearest 0.3 s): ``coarse`` for a step too short (hours, minutes), else too long (ms, us,
+    ns)."""
     cands = (("h", 3600.0), ("min", 60.0)) if coarse else (("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9))
-    ok = [(abs(math.log10(step_s * f) + 0.5), u) for u, f in cands
-          if MIN_PLAUSIBLE_STEP_S <= step_s * f < MAX_PLAUSIBLE_STEP_S]
-    return min(ok)[1] if ok else None
+    ok = sorted((abs(math.log10(step_s * f) + 0.5), u) for u, f in cands
+                if NOTE_STEP_S <= step_s * f * (1.0 + 1e-6) and step_s * f < MAX_PLAUSIBLE_STEP_S)
+    return [u for _, u in ok]
+
+
 #: Smallest plausible cell resistance seen through dV/dI (ohm): below it, with large current numbers, the
 #: current column looks like milliamps.
 MIN_APPARENT_RESISTANCE_OHM = 1e-4
@@ -397,65 +421,97 @@ _BINARY_KINDS = ((b"PK\x03\x04", "a ZIP archive (an .xlsx workbook?)"),
                  (b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1", "an OLE2 compound file (an .xls workbook?)"),
                  (b"MATLAB 5.0 MAT-file", "a MATLAB .mat file"), (b"\x89HDF\r\n\x1a\n", "an HDF5 file (a MATLAB v7.3 .mat?)"),
                  (b"PAR1", "a Parquet file"), (b"\x1f\x8b", "a gzip file whose name does not end in .gz"),
+                 (b"BZh", "a bzip2 file whose name does not end in .bz2"),
+                 (b"\xfd7zXZ\x00", "an xz file whose name does not end in .xz"),
                  (b"%PDF", "a PDF document"), (b"MDF     ", "an ASAM MDF measurement file"))
 _BINARY_FIX = ("export the channels as a CSV (UTF-8, a header row naming the columns; e.g. pandas: "
                "pd.read_parquet(f).to_csv('record.csv', index=False); MATLAB: writetable(T, 'record.csv'))")
 
 
-def _text_encoding(path: Path) -> tuple[str, str | None]:
-    """The text encoding of a record and a note when it is not UTF-8: a byte-order mark (UTF-16 of spreadsheet
-    "Unicode text" exports, UTF-8 with BOM), UTF-16 without one (a NUL in every other byte), else UTF-8 when the
-    whole file decodes as such, else Windows-1252 (the loggers' and spreadsheets' 8-bit Western code page;
-    Latin-1 where a byte is undefined there), said with the first byte that is not UTF-8."""
+#: compressed records, by the file name's last suffix (any case): read decompressed, as pandas would
+_COMPRESSED = {".gz": "gzip", ".bz2": "bz2", ".xz": "xz", ".zip": "zip"}
+
+
+def _record_bytes(path: Path) -> bytes:
+    """The record's bytes, decompressed by its suffix (`_COMPRESSED`; a .zip holding exactly one file); a damaged
+    archive is a DataError naming the file."""
+    import bz2
     import gzip
-    opener = gzip.open if str(path).endswith(".gz") else open
-    with opener(path, "rb") as fh:
-        data = fh.read()
-    kind = next((k for magic, k in _BINARY_KINDS if data.startswith(magic)), None)
+    import lzma
+    import zipfile
+    import zlib
+    kind = _COMPRESSED.get(path.suffix.lower())
+    try:
+        if kind is None:
+            return path.read_bytes()
+        if kind == "zip":
+            with zipfile.ZipFile(path) as z:
+                names = [n for n in z.namelist() if not n.endswith("/")]
+                if len(names) != 1:
+                    raise DataError(f"{path}: a .zip record must hold exactly one file (it holds {len(names)}: "
+                                    f"{', '.join(names[:4])})")
+                return z.read(names[0])
+        return {"gzip": gzip, "bz2": bz2, "xz": lzma}[kind].decompress(path.read_bytes())
+    except DataError:
+        raise
+    except OSError as exc:
+        raise DataError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+    except (EOFError, ValueError, zlib.error, lzma.LZMAError, zipfile.BadZipFile, RuntimeError) as exc:
+        raise DataError(f"{path}: a damaged {kind} file: {type(exc).__name__}: {exc}") from None
+
+
+def _decode_record(path: Path, data: bytes) -> tuple[str, str | None]:
+    """The record's text and a note when it is not UTF-8: a byte-order mark (UTF-16 of spreadsheet "Unicode
+    text" exports, UTF-8 with BOM), UTF-16 without one (a NUL in every other byte), else UTF-8 when the whole file
+    decodes as such, else Windows-1252 (the loggers' and spreadsheets' 8-bit Western code page; Latin-1 where a
+    byte is undefined there), said with the first byte that is not UTF-8.  A binary file (`_BINARY_KINDS`, NUL
+    bytes) is a DataError naming what it is."""
+    kind = next((k for magic, k in _BINARY_KINDS if data.startswith(magic)
+                 and (magic != b"PAR1" or data.rstrip().endswith(b"PAR1"))), None)
     if kind is not None:
         raise DataError(f"{path}: is {kind}, not a CSV text file: {_BINARY_FIX}")
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
-        return "utf-16", "decoded as UTF-16 (its byte-order mark)"
-    if data[:3] == b"\xef\xbb\xbf":
-        return "utf-8-sig", None
+        try:
+            return data.decode("utf-16"), "decoded as UTF-16 (its byte-order mark)"
+        except UnicodeDecodeError as exc:
+            raise DataError(f"{path}: a UTF-16 byte-order mark, but not UTF-16 text (byte {exc.start})") from None
     head = data[:4096]
-    if len(head) >= 8 and head[1::2].count(0) > 0.9 * len(head[1::2]):
-        return "utf-16-le", "decoded as UTF-16 little-endian (no byte-order mark; a NUL in every other byte)"
-    if len(head) >= 8 and head[0::2].count(0) > 0.9 * len(head[0::2]):
-        return "utf-16-be", "decoded as UTF-16 big-endian (no byte-order mark; a NUL in every other byte)"
+    for enc, pos, end in (("utf-16-le", 1, "little"), ("utf-16-be", 0, "big")):
+        if len(head) >= 8 and head[pos::2].count(0) > 0.9 * len(head[pos::2]):
+            try:
+                return (data.decode(enc), f"decoded as UTF-16 {end}-endian (no byte-order mark; a NUL in every "
+                                          f"other byte)")
+            except UnicodeDecodeError:
+                break
     if b"\x00" in head:
         raise DataError(f"{path}: holds NUL bytes (byte {head.index(0)}): a binary file, not a CSV text file: "
                         f"{_BINARY_FIX}")
+    body = data[3:] if data[:3] == b"\xef\xbb\xbf" else data
     try:
-        data.decode("utf-8")
-        return "utf-8", None
+        return body.decode("utf-8"), None
     except UnicodeDecodeError as exc:
-        where = exc.start
+        where = exc.start + (len(data) - len(body))
     try:
-        data.decode("cp1252")
-        enc, name = "cp1252", "Windows-1252"
+        text, name = body.decode("cp1252"), "Windows-1252"
     except UnicodeDecodeError:
-        enc, name = "latin-1", "Latin-1"
+        text, name = body.decode("latin-1"), "Latin-1"
     line = data.count(b"\n", 0, where) + 1
-    return enc, (f"decoded as {name}: not UTF-8 (byte 0x{data[where]:02x} on line {line}); save the file as "
-                 f"UTF-8 if a name or unit reads wrong")
+    return text, (f"decoded as {name}: not UTF-8 (byte 0x{data[where]:02x} on line {line}); save the file as UTF-8 "
+                  f"if a name or unit reads wrong")
 
 
-def _file_lines(path: Path, encoding: str = "utf-8") -> np.ndarray:
+def _file_lines(text: str) -> np.ndarray:
     """1-based file line number of each data row (skipping comment lines and the header)."""
-    import gzip
-    opener = gzip.open if str(path).endswith(".gz") else open
     lines = []
     header_seen = False
-    with opener(path, "rt", encoding=encoding, errors="replace") as fh:
-        for ln, line in enumerate(fh, start=1):
-            s = line.strip()
-            if not s or s.startswith("#"):
-                continue
-            if not header_seen:
-                header_seen = True
-                continue
-            lines.append(ln)
+    for ln, line in enumerate(text.split("\n"), start=1):     # as the parser counts lines (not \x0c, \x85 ...)
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        if not header_seen:
+            header_seen = True
+            continue
+        lines.append(ln)
     return np.asarray(lines, dtype=np.int64)
 
 
@@ -466,19 +522,16 @@ def _runs(mask: np.ndarray):
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
 
 
-def _sniff_format(path: Path, encoding: str = "utf-8-sig") -> dict:
+def _sniff_format(text: str) -> dict:
     """pandas options for a CSV as spreadsheets export it: ``;`` separators with decimal commas, tabs."""
-    import gzip
-    opener = gzip.open if str(path).endswith(".gz") else open
-    with opener(path, "rt", encoding=encoding, errors="replace") as fh:
-        for line in fh:
-            s = line.strip()
-            if s and not s.startswith("#"):
-                if ";" in s and "," not in s:
-                    return {"sep": ";", "decimal": ","}
-                if "\t" in s and "," not in s:
-                    return {"sep": "\t"}
-                return {}
+    for line in text.splitlines():
+        s = line.strip()
+        if s and not s.startswith("#"):
+            if ";" in s and "," not in s:
+                return {"sep": ";", "decimal": ","}
+            if "\t" in s and "," not in s:
+                return {"sep": "\t"}
+            return {}
     return {}
 
 
@@ -523,21 +576,15 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, np.ndarray]:
     why = file_problem(path, "data file")
     if why is not None:
         raise DataError(f"{path}: {why}")
+    import io
     import warnings
-    try:
-        encoding, enc_note = _text_encoding(path)
-    except OSError as exc:
-        raise DataError(f"{path}: cannot be read: {exc.strerror or exc}") from None
-    except (EOFError, ValueError) as exc:         # a damaged .gz
-        raise DataError(f"{path}: cannot be read: {type(exc).__name__}: {exc}") from None
-    if encoding == "utf-8":
-        encoding = "utf-8-sig"
+    text, enc_note = _decode_record(path, _record_bytes(path))
     try:
         with warnings.catch_warnings():
             # a row longer than the header would lose its extra values silently: an error instead
             warnings.simplefilter("error", pd.errors.ParserWarning)
-            raw = pd.read_csv(path, comment="#", skipinitialspace=True, encoding=encoding, index_col=False,
-                              **_sniff_format(path, encoding))
+            raw = pd.read_csv(io.StringIO(text), comment="#", skipinitialspace=True, index_col=False,
+                              **_sniff_format(text))
     except pd.errors.ParserWarning as exc:
         raise DataError(f"{path}: a data row has more values than the header has columns ({exc}); nothing is "
                         f"dropped silently: fix the header or the row") from exc
@@ -552,7 +599,7 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, np.ndarray]:
         raise DataError(f"{path}: duplicate column names in the header ({', '.join(raw.columns)})")
     if raw.shape[0] < 3:
         raise DataError(f"{path}: only {raw.shape[0]} data rows")
-    line_of = _file_lines(path, encoding)
+    line_of = _file_lines(text)
     if line_of.size != raw.shape[0]:  # blank lines inside etc.: fall back to header offset
         line_of = np.arange(raw.shape[0]) + 2
     raw.attrs["encoding_note"] = enc_note
@@ -561,8 +608,8 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, np.ndarray]:
 
 #: timestamps a time column may hold instead of seconds: ISO 8601 date and time (``2026-11-27 10:00:01.5``,
 #: ``...T10:00:01Z``, ``...+01:00``), and a time of day or an elapsed time (``10:00:01.5``, ``0 days 00:00:01``)
-_ISO_STAMP = r"^\d{4}-\d{2}-\d{2}[T ]\d{1,2}:\d{2}(:\d{2}(\.\d+)?)?(Z|[+-]\d{2}:?\d{2})?$"
-_CLOCK_STAMP = r"^(\d+ days? )?\d{1,3}:\d{2}:\d{2}(\.\d+)?$"
+_ISO_STAMP = r"^\d{4}-\d{2}-\d{2}[T ]\d{1,2}:\d{2}(:\d{2}([.,]\d+)?)?(Z|[+-]\d{2}:?\d{2})?$"
+_CLOCK_STAMP = r"^(\d+ days? )?\d{1,7}:\d{2}:\d{2}([.,]\d+)?$"
 
 
 def _timestamps_to_seconds(raw: pd.DataFrame, mapping: dict, declared: dict, path: Path,
@@ -574,9 +621,15 @@ def _timestamps_to_seconds(raw: pd.DataFrame, mapping: dict, declared: dict, pat
     col = mapping.get("time_s", "time_s")
     if col not in raw.columns or pd.api.types.is_numeric_dtype(raw[col]):
         return None
-    txt = raw[col].astype(str).str.strip()
-    form = next((f for f, rx in (("ISO 8601 date and time", _ISO_STAMP), ("hh:mm:ss", _CLOCK_STAMP))
-                 if txt.str.fullmatch(rx).all()), None)
+    txt = raw[col].astype(str).str.strip().str.replace(",", ".", regex=False)   # ISO 8601's decimal comma
+    forms = (("ISO 8601 date and time", _ISO_STAMP), ("hh:mm:ss", _CLOCK_STAMP))
+    form = next((f for f, rx in forms if txt.str.fullmatch(rx).all()), None)
+    for f, rx in forms:       # most values a timestamp of one form: the first that is not, named
+        m = txt.str.fullmatch(rx).to_numpy()
+        if form is None and m.mean() > 0.5:
+            k = int(np.flatnonzero(~m)[0])
+            raise DataError(f"{path}: column '{col}', line {_row_of(k, line_of)}: {raw[col].iloc[k]!r} is not a "
+                            f"timestamp ({f}) like the other values of the column")
     if form is None:
         if txt.str.contains(r"\d[:/.]\d+[:/.]\d", regex=True).mean() > 0.5 \
                 and pd.to_numeric(txt, errors="coerce").isna().mean() > 0.5:
@@ -841,7 +894,7 @@ def load_measured(path, model: str, mapping: Mapping[str, str] | None = None,
         if gap:
             notes.append(gap)
     if check_units:
-        _unit_problems_into(df, model, line_of, {d[0] for d in declared.values()}, problems, fixes)
+        _unit_problems_into(df, model, line_of, {d[0] for d in declared.values()}, problems, fixes, notes)
     if problems:
         raise _problems_error(path, problems, fixes)
     if "current_a" in SIGNED[model] and current_sign == CURRENT_SIGNS[1]:
@@ -889,10 +942,11 @@ def _check_units(df, model, path, line_of, declared=frozenset()):
         raise _problems_error(path, problems, fixes)
 
 
-def _unit_problems_into(df, model, line_of, declared, problems: list, fixes: dict) -> None:
+def _unit_problems_into(df, model, line_of, declared, problems: list, fixes: dict, notes: list | None = None) -> None:
     """The unit checks of each canonical column there is (time in ms, current in mA, speed in km/h, power in kW,
     temperature in K, voltage in mV, implausible values): each problem appended to ``problems`` as
-    ``column 'X', line N: what was detected; the option that fixes it``, the option into ``fixes``."""
+    ``column 'X', line N: what was detected; the option that fixes it``, the option into ``fixes``; what is only
+    likely (a 1-10 kHz time step: hours or minutes?) into ``notes`` when given."""
     def bad(col, msg, k, fix=None):
         problems.append(f"column '{col}', line {_row_of(k, line_of)}: {msg}")
         if fix:
@@ -906,31 +960,45 @@ def _unit_problems_into(df, model, line_of, declared, problems: list, fixes: dic
     dt = dt[np.isfinite(dt)]
     step = float(np.median(dt)) if dt.size else float("nan")
     words = {"ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds", "min": "minutes", "h": "hours"}
-    if "time_s" not in declared and dt.size and (step >= MAX_PLAUSIBLE_STEP_S or 0.0 < step < MIN_PLAUSIBLE_STEP_S):
+
+    def units_text(us):
+        return " or ".join(words[u] for u in us)
+
+    def fix_text(col_, us):
+        return (f"name the column '{col_[:-2]}_{us[0]}' or pass " + " / ".join(f"--unit {col_}={u}" for u in us))
+
+    tol = 1.0 + 1e-6            # a step read back from text lands a rounding error either side of its value
+    if "time_s" not in declared and dt.size and (step >= MAX_PLAUSIBLE_STEP_S or 0.0 < step * tol < MIN_PLAUSIBLE_STEP_S):
         coarse = step < MIN_PLAUSIBLE_STEP_S
-        u = _time_unit_guess(step, coarse)
-        what = (f"looks like {words[u]}" if u else
-                f"is not in seconds (no time unit brings it to {MIN_PLAUSIBLE_STEP_S:g}-{MAX_PLAUSIBLE_STEP_S:g} s)")
-        bad("time_s", f"median sample step {step:g} s {what} (calibration records are sampled every 0.01-1 s)"
-                      + (f"; name the column 'time_{u}' or pass --unit time_s={u} to convert" if u else "")
+        us = _time_unit_guess(step, coarse)
+        what = (f"looks like {units_text(us)}" if us else
+                f"is not in seconds (no time unit brings it to {NOTE_STEP_S:g}-{MAX_PLAUSIBLE_STEP_S:g} s)")
+        bad("time_s", f"median sample step {step:g} s {what} (calibration records are sampled every 0.001-1 s)"
+                      + (f"; {fix_text('time_s', us)} to convert" if us else "")
                       + f" (--unit time_s=s if the step really is that {'short' if coarse else 'long'})", 1,
-            f"--unit time_s={u}" if u else None)
-    elif model == "vehicle" and "time_s" not in declared and dt.size and "speed_mps" in df:
+            f"--unit time_s={us[0]}" if us else None)
+        return_early = True
+    else:
+        return_early = False
+    if not return_early and "time_s" not in declared and dt.size and step < 0.9 * NOTE_STEP_S and notes is not None:
+        us = _time_unit_guess(step, True)
+        if us:
+            notes.append(f"column 'time_s': median sample step {step:g} s ({1.0 / step:.3g} Hz); if the time is in "
+                         f"{units_text(us)} rather than seconds, pass " + " / ".join(f"--unit time_s={u}" for u in us))
+    if not return_early and model == "vehicle" and "time_s" not in declared and dt.size and "speed_mps" in df:
         s = arr("speed_mps")
         tt = np.diff(t)
         acc = np.abs(np.diff(s)) / np.where(tt > 0, tt, np.inf)
-        moving = np.isfinite(acc) & (np.abs(s[1:]) > 1.0)
-        med = float(np.median(acc[moving])) if moving.sum() >= 10 else float("nan")
+        med = _median_moving_accel(t, s)
         if np.nanmax(s) - np.nanmin(s) > 2.0 and np.nanmax(acc) < 0.02:
             bad("time_s", f"speed varies by {np.nanmax(s) - np.nanmin(s):.3g} m/s but never faster than "
                           f"{np.nanmax(acc):.2g} m/s^2: the time column looks like milliseconds; name it 'time_ms' or "
                           f"pass --unit time_s=ms", 1, "--unit time_s=ms")
         elif med > MAX_MEDIAN_ACCEL_MPS2:
-            u = "h" if med / 60.0 > MAX_MEDIAN_ACCEL_MPS2 else "min"
-            bad("time_s", f"the speed changes by a median {med:.3g} m/s^2 while moving ({med / 9.81:.2g} g; a "
-                          f"drive's is under 1 m/s^2): the time column looks like {words[u]}; name it 'time_{u}' or "
-                          f"pass --unit time_s={u} (--unit time_s=s if it really is in seconds)", 1,
-                f"--unit time_s={u}")
+            bad("time_s", f"the speed changes by a median {med:.3g} m/s^2 while moving ({med / 9.81:.2g} g, over "
+                          f"{ACCEL_WINDOW_S:g} s or a sample; a drive's is under 1 m/s^2): the time column looks like "
+                          f"minutes or hours; {fix_text('time_s', ['min', 'h'])} (--unit time_s=s if it really is in "
+                          f"seconds)", 1, "--unit time_s=min")
     if model == "cell" and "current_a" not in declared and "current_a" in df and "voltage_v" in df:
         i = arr("current_a")
         di, dv = np.diff(i), np.diff(arr("voltage_v"))

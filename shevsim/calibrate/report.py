@@ -402,14 +402,14 @@ def check_calibration_out(out, model: str) -> None:
     file changed since it was written (`shevsim.core.atomic.edited_outputs`: a hand-edited ``params.toml``), a place
     that cannot be created or written.  Nothing is created here."""
     import os
-    from ..core.atomic import edited_message, edited_outputs
+    from ..core.atomic import edited_message, edited_outputs, foreign_files
     from ..core.errors import ShevsimError
     what = f"calibrate {model}"
     p = Path(out)
     if (p.exists() or p.is_symlink()) and not p.is_dir():
         raise ShevsimError(f"{what}: '{p}' exists and is not a folder: not replaced; choose another folder")
     if p.is_dir() and not (p / MARKER).is_file():
-        clash = sorted(n for n in OUTPUT_FILES if (p / n).exists() or (p / n).is_symlink())
+        clash = foreign_files(p, OUTPUT_FILES)
         if clash:
             raise ShevsimError(f"{what}: '{p}' holds files but no {MARKER} (not an output of shevsim), and "
                                f"{clash[0]} would be replaced: choose another folder")

@@ -652,7 +652,7 @@ DETECT_STEP = 1e-3      # finite-difference step of an effect's parameter, as a 
 
 
 def detection_limits(fitter: "Fitter", selected, final: FitResult, ref: dict, skip=(), held=(),
-                     pushed=(), shapes: list | None = None) -> list[dict]:
+                     pushed=(), shapes: list | None = None, only_shapes: bool = False) -> list[dict]:
     """What the record could have shown, to first order: for every one-parameter effect not selected, the smallest
     change of its parameter from its neutral value (the effect off) whose own signal would gain the selection
     rule's ``MIN_GAIN`` held-out.
@@ -690,7 +690,8 @@ def detection_limits(fitter: "Fitter", selected, final: FitResult, ref: dict, sk
     correction, dU/dT, grade segments; `shape_limit`), linear in them: per rule the held-out Gram matrix ``Q`` of
     the signals left after the refit (over the channels' baselines) and ``R``, so that a change ``delta`` of the
     knots gains the rule's ``MIN_GAIN`` when ``delta' Q delta >= need R``; and the rms knot change of its most and
-    least visible shapes (the extremes over the rules' eigenvectors and 512 fixed random directions)."""
+    least visible shapes (the extremes over the rules' eigenvectors and 512 fixed random directions).
+    ``only_shapes``: those rows alone (the one-parameter effects skipped)."""
     hold_names = set(held) | set(fitter.measured)
     ps, lb, ub = [], [], []
     for p in fitter._params_for(tuple(selected)):
@@ -761,7 +762,7 @@ def detection_limits(fitter: "Fitter", selected, final: FitResult, ref: dict, sk
     out = []
     done = set(selected) | set(skip)
     for name, eff in fitter.effects.items():
-        if name in done or len(eff.params) != 1:
+        if name in done or len(eff.params) != 1 or only_shapes:
             continue
         prm = eff.params[0]
         if prm.name in fitter.measured or prm.name in {p.name for p in fitter._params_for(tuple(selected))}:
@@ -834,25 +835,30 @@ def detection_limits(fitter: "Fitter", selected, final: FitResult, ref: dict, sk
             ev = [c for c in (eff.evidence or eff.channels) if c in chans]
             if not ev or not hold.any():
                 continue
-            row = _shape_row(fitter, eff, values, chans, ev, left_vec, finite, r, b, need, int(hold.sum()))
+            bounded = bool(np.isfinite(lb).any() or np.isfinite(ub).any()) if ps else False
+            row = _shape_row(fitter, eff, values, chans, ev, left_vec, finite, r, b, need, int(hold.sum()), bounded)
             if row is not None:
                 shapes.append(row)
     return out
 
 
-def _shape_row(fitter, eff, values, chans, ev, left_vec, finite, r, b, need, n_hold) -> dict | None:
-    """`detection_limits`' row of an effect with several parameters of one unit (see there)."""
+def _shape_row(fitter, eff, values, chans, ev, left_vec, finite, r, b, need, n_hold, bounded=False) -> dict | None:
+    """`detection_limits`' row of an effect with several parameters of one unit (see there).  With a refit
+    parameter on a bound (``bounded``: it moves one way only, so the projection is not linear) the two extreme
+    shapes' limits are taken again from their own signals, each sign (``linear`` False: `shape_limit` of any other
+    shape is then the Gram matrix's approximation)."""
     n0 = {p.name: float(eff.neutral.get(p.name, p.default)) for p in eff.params}
     base = {**values, **n0}
     p0 = fitter.simulate(base)
-    left, absorbed = [], []
+    left, absorbed, sigs = [], [], []
     for prm in eff.params:
         lo, hi = fitter.bounds_override.get(prm.name, (prm.lo, prm.hi))
         step = DETECT_STEP * (hi - lo)
         sign = 1.0 if n0[prm.name] + step <= hi else -1.0
         pv = fitter.simulate({**base, prm.name: n0[prm.name] + sign * step})
-        lv, _norm, ab = left_vec({c: finite((np.asarray(pv[c], float) - np.asarray(p0[c], float)) / (sign * step))
-                                  for c in chans})
+        sig = {c: finite((np.asarray(pv[c], float) - np.asarray(p0[c], float)) / (sign * step)) for c in chans}
+        lv, _norm, ab = left_vec(sig)
+        sigs.append(sig)
         left.append(lv)
         absorbed.append(ab)
     k = len(left)
@@ -865,7 +871,7 @@ def _shape_row(fitter, eff, values, chans, ev, left_vec, finite, r, b, need, n_h
         rules[rule] = {"Q": q.tolist(), "R": float(sum((r[c] / b[c]) ** 2 for c in cs)), "channels": list(cs)}
     row = {"effect": eff.name, "parameters": [p.name for p in eff.params], "unit": eff.params[0].unit,
            "about": [p.doc for p in eff.params], "neutral": [n0[p.name] for p in eff.params], "need": need,
-           "rules": rules, "channels": ev, "absorbed_frac": [float(a) for a in absorbed], "linear": True}
+           "rules": rules, "channels": ev, "absorbed_frac": [float(a) for a in absorbed], "linear": not bounded}
     dirs = [np.asarray(v) for ru in rules.values() for v in np.linalg.eigh(np.asarray(ru["Q"]))[1].T]
     dirs += list(np.random.default_rng(0).standard_normal((512, k)))
     lims = [(shape_limit(row, u)["limit_rms"], i) for i, u in enumerate(dirs)]
@@ -873,6 +879,19 @@ def _shape_row(fitter, eff, values, chans, ev, left_vec, finite, r, b, need, n_h
     if not math.isfinite(lo_lim):
         return None
     unit_vec = lambda u: (np.asarray(u, float) / np.linalg.norm(u)).tolist()   # noqa: E731
+    if bounded:          # the extreme shapes from their own signals, each sign (the bounded refit is not linear)
+        def own(u):
+            lims = []
+            for sgn in (1.0, -1.0):
+                lv, _n, _ab = left_vec({c: sgn * sum(ui * sg[c] for ui, sg in zip(u, sigs)) for c in chans})
+                lim = 0.0
+                for ru in rules.values():
+                    q = sum(float(np.mean(lv[c] ** 2)) / b[c] ** 2 for c in ru["channels"])
+                    lim = max(lim, math.sqrt(need * ru["R"] / q) if q > 0 else math.inf)
+                lims.append(lim / math.sqrt(k))
+            return lims
+        u_lo, u_hi = np.asarray(unit_vec(dirs[i_lo])), np.asarray(unit_vec(dirs[i_hi]))
+        lo_lim, hi_lim = min(own(u_lo)), max(own(u_hi))
     row.update(limit_rms_min=float(lo_lim), limit_rms_max=float(hi_lim),
                shape_min=unit_vec(dirs[i_lo]), shape_max=unit_vec(dirs[i_hi]))
     return row
@@ -2146,14 +2165,21 @@ def _run_workflow(model_name, data, known, holdout, split, out_dir, effects, plo
     try:
         held = {k for e in selected for k in (run.claim_hold.get(e) or {})}
         pushed = {b.get("parameter") for d in discrepancy for b in (d.get("declared_on_bound") or [])}
-        shapes: list = []
         report["detection_limits"] = detection_limits(run.fitter, selected, final, run.ref,
                                                       skip=[e for e in run.fitter.effects if e not in run.names],
-                                                      held=held, pushed=pushed, shapes=shapes)
-        report["detection_shapes"] = shapes
+                                                      held=held, pushed=pushed)
     except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:   # a statement of the report, not the result
         report["detection_limits"] = []
         report["detection_error"] = f"{type(exc).__name__}: {exc}"
+    try:        # the knots' shapes on their own: a failure there does not take the limits above with it
+        shapes: list = []
+        detection_limits(run.fitter, selected, final, run.ref, skip=[e for e in run.fitter.effects
+                                                                     if e not in run.names],
+                         held=held, pushed=pushed, shapes=shapes, only_shapes=True)
+        report["detection_shapes"] = shapes
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        report["detection_shapes"] = []
+        report["detection_shapes_error"] = f"{type(exc).__name__}: {exc}"
     report["detection_rule"] = {"min_holdout_gain": MIN_GAIN, "finite_difference_step": DETECT_STEP,
                                 "at": "the final model, to first order (secant over the limit)",
                                 "refit": "declared and selected parameters (not measured or held; one on a bound "
@@ -2500,10 +2526,11 @@ def render_markdown(rep: dict) -> str:
     if shp:
         L += ["", "**Effects with several parameters of one unit** (knots; linear): the rms change of the knots whose "
               "own signal would gain the rule's held-out, from the effect's most visible shape to its least visible: "
-              + "; ".join(f"`{d['effect']}` ({len(d['parameters'])} knots) {_g(d['limit_rms_min'])} to "
-                          + (_g(d["limit_rms_max"]) if math.isfinite(d["limit_rms_max"])
+              + "; ".join(f"`{d['effect']}` ({len(d['parameters'])} knots) {_g(d['limit_rms_min'])} {d['unit']} to "
+                          + (f"{_g(d['limit_rms_max'])} {d['unit']}" if math.isfinite(d["limit_rms_max"])
                              else "never (a shape the record does not see, or that the fitted parameters take whole)")
-                          + f" {d['unit']}" for d in shp) + "."]
+                          + ("" if d.get("linear", True) else " (a fitted parameter on a bound: approximate)")
+                          for d in shp) + "."]
     if rep.get("replay") and "error" in rep["replay"]:
         L += ["", f"Replay through the simulator: {rep['replay']['error']}"]
     elif rep.get("replay"):

@@ -158,6 +158,25 @@ def edited_outputs(out_dir: str | Path, names, marker: str) -> list[str]:
     return bad
 
 
+def foreign_files(out_dir: str | Path, names) -> list[str]:
+    """The names in ``names`` that exist in ``out_dir`` (a folder without its marker: a first save that did not
+    finish, or a user's folder) and are not listed in its `MANIFEST` with their present content (a crash during
+    shevsim's first save there leaves only listed files)."""
+    out = Path(out_dir)
+    man = _read_manifest(out) or {}
+    bad = []
+    for name in sorted(names):
+        q = out / name
+        if not (q.exists() or q.is_symlink()):
+            continue
+        try:
+            if q.is_symlink() or not q.is_file() or file_sha256(q) not in man.get(name, []):
+                bad.append(name)
+        except OSError:
+            bad.append(name)
+    return bad
+
+
 def edited_message(what: str, out: str | Path, bad: list[str]) -> str:
     """The refusal of `edited_outputs`' findings, naming the first file."""
     return (f"{what}: '{Path(out) / bad[0]}' was changed since shevsim wrote it (or was put there by somebody else)"
@@ -170,29 +189,33 @@ def write_files(out_dir: str | Path, files: dict[str, bytes], marker: str, what:
 
     Files of the same names are replaced only where they are an earlier output of the same kind exactly as
     shevsim wrote it (`edited_outputs`: a file a user changed or put there is refused, naming it, before anything
-    is written); other files are kept.  A folder that holds files but no ``marker`` (say ``summary.json``) is not
-    an output of ours and is refused, as is a path that exists and is not a folder.  The hashes of what is
-    written go to the hidden `MANIFEST`: first with the earlier and the new hash of each name (a crash between
-    two files leaves every file one of them), then with the new ones only."""
+    is written); other files are kept.  A folder that holds files of these names but no ``marker`` (say
+    ``summary.json``) is not an output of ours and is refused (`foreign_files`: unless the manifest lists them as
+    they are - a first save that crashed), as is a path that exists and is not a folder.  The hashes of what is
+    written go to the hidden `MANIFEST`, merged with what it lists already (another kind of output in the same
+    folder; an older output's files adopted as they were written): first with the earlier and the new hash of
+    each name (a crash between two files leaves every file one of them), then with the new ones only."""
     from .errors import ShevsimError
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ShevsimError(f"{what}: '{out}' exists and is not a folder: not replaced; choose another folder")
     if out.is_dir() and not (out / marker).is_file():
-        clash = sorted(n for n in files if (out / n).exists())
+        clash = foreign_files(out, files)
         if clash:
             raise ShevsimError(f"{what}: '{out}' holds files but no {marker} (not an output of shevsim), and "
                                f"{clash[0]} would be replaced: choose another folder")
-    old: dict[str, list[str]] = {}
+    old: dict[str, list[str]] = (_read_manifest(out) or {}) if out.is_dir() else {}
     if out.is_dir() and (out / marker).is_file():
         bad = edited_outputs(out, sorted(files), marker)
         if bad:
             raise ShevsimError(edited_message(what, out, bad))
-        old = _read_manifest(out) or {}
-        for name in files:   # an earlier output without a manifest: what is there now is what shevsim wrote
-            q = out / name
-            if name not in old and q.is_file() and not q.is_symlink():
-                old[name] = [file_sha256(q)]
+        if _read_manifest(out) is None:    # an output written before the list: adopt what is as it was written
+            t_marker = (out / marker).stat().st_mtime
+            for q in sorted(out.rglob("*")):
+                rel = q.relative_to(out).as_posix()
+                if q.is_file() and not q.is_symlink() and not rel.startswith(".") \
+                        and q.stat().st_mtime <= t_marker + 1.0:
+                    old.setdefault(rel, [file_sha256(q)])
     new = {name: hashlib.sha256(data).hexdigest() for name, data in files.items()}
     both = {**old, **{n: list(dict.fromkeys(old.get(n, []) + [h])) for n, h in new.items()}}
     out.mkdir(parents=True, exist_ok=True)

@@ -233,3 +233,58 @@ def test_an_effect_with_knots_gets_the_limit_of_each_shape_and_exact_least_squar
             assert lo <= ga <= hi, (list(u), factor, ga)
             if factor != 1.0:
                 assert (shape_limit(row, d)["ratio"] > 1.0) == (factor > 1.0)
+
+
+def test_with_a_refit_parameter_on_its_bound_the_extreme_shapes_come_from_their_own_signals():
+    """The declared ``k`` on its lower bound 0 (the record made with k = 0): the refit moves it one way only, so the
+    projection is not linear; the row says so, and the two extreme shapes' limits agree with an exact bounded
+    least-squares fit (scipy's lsq_linear, k >= 0) within 3 points of the rule's 10 % (the second knot's signal
+    lies mostly along the declared one's: read from the unbounded Gram matrix, the most visible shape's limit
+    gained 13.1 %)."""
+    import types
+
+    from scipy import optimize
+
+    from shevsim.calibrate.models import Effect, Param
+    n = 3000
+    t = np.arange(n, dtype=float)
+    u1, u2 = np.sin(t / 37.0), np.cos(t / 91.0)
+    s1 = np.sign(np.sin(t / 13.0))
+    s2 = 0.3 * s1 + 0.3 * np.sin(t / 5.0) + 1.5 * u1
+    eff = {"knots": Effect("knots", "two knots on ch1", (Param("c[0]", "V", -10.0, 10.0, 0.0, "knot at 0.2"),
+                                                         Param("c[1]", "V", -10.0, 10.0, 0.0, "knot at 0.8")),
+                           {"c[0]": 0.0, "c[1]": 0.0}, ("ch1",))}
+
+    def sim(v):
+        return {"ch1": v["k"] * u1 + v["c[0]"] * s1 + v["c[1]"] * s2, "ch2": v["k"] * u2}
+    f, meas, final = _stub(eff, lambda v: sim({**v, "k": v.get("k", 1.0)}), n)
+    rng = np.random.default_rng(1)
+    meas = {c: sim({"k": 0.0, "c[0]": 0.0, "c[1]": 0.0})[c] + 0.3 * rng.standard_normal(n) for c in ("ch1", "ch2")}
+    hold = f.hold
+    rm = {c: {"holdout": float(np.sqrt(np.mean(meas[c][hold] ** 2)))} for c in meas}
+    final = types.SimpleNamespace(params={"k": 0.0}, rmse=rm)
+    shapes: list = []
+    detection_limits(f, [], final, {c: rm[c]["holdout"] for c in meas}, shapes=shapes, only_shapes=True)
+    (row,) = shapes
+    assert row["linear"] is False
+    tr, ho = ~hold, hold
+
+    def held_rmse(m, cols1, cols2, lb):
+        a = np.vstack([np.column_stack(cols1)[tr], np.column_stack(cols2)[tr]])
+        beta = optimize.lsq_linear(a, np.concatenate([m["ch1"][tr], m["ch2"][tr]]),
+                                   bounds=(lb, [np.inf] * len(lb))).x
+        return [float(np.sqrt(np.mean((np.column_stack(x) @ beta - m[c])[ho] ** 2)))
+                for c, x in (("ch1", cols1), ("ch2", cols2))]
+
+    gains = []
+    for u, lim_rms in ((row["shape_min"], row["limit_rms_min"]), (row["shape_max"], row["limit_rms_max"])):
+        best = None
+        for sgn in (1.0, -1.0):
+            d = sgn * lim_rms * math.sqrt(2) * np.asarray(u)
+            m = dict(meas, ch1=meas["ch1"] + d[0] * s1 + d[1] * s2)
+            cur = held_rmse(m, [u1], [u2], [0.0])
+            cand = held_rmse(m, [u1, s1, s2], [u2, 0 * s1, 0 * s2], [0.0, -np.inf, -np.inf])
+            g = 1.0 - math.sqrt((cand[0] ** 2 + cand[1] ** 2) / (cur[0] ** 2 + cur[1] ** 2))
+            best = g if best is None else (max(best, g) if u is row["shape_min"] else min(best, g))
+        gains.append(best)
+    assert all(abs(g - MIN_GAIN) <= 0.03 for g in gains), gains

@@ -115,3 +115,92 @@ def test_a_binary_file_is_named_for_what_it_is(tmp_path, head, kind):
     with pytest.raises(DataError) as ei:
         load_measured(str(p), "vehicle")
     assert str(ei.value).startswith(f"{p}: ") and kind in str(ei.value) and "export the channels as a CSV" in str(ei.value)
+
+
+# ---- the reviewer's cases (fourteenth session): fast loggers, compressed files, timestamps' edge forms
+
+def _cell_csv(path, rate_hz, n=20000, t0=0.0):
+    import numpy as np
+    t = t0 + np.arange(n) / rate_hz
+    i = 2.0 * np.sin(2 * np.pi * t / 7.0) + 1.0
+    v = 3.7 - 0.05 * i - 0.02 * (t - t0) / t.max()
+    pd.DataFrame({"time_s": t, "current_a": i, "voltage_v": v, "t_surface_c": 25.0, "t_ambient_c": 25.0}).to_csv(
+        path, index=False, float_format="%.6f")
+
+
+@pytest.mark.parametrize("rate_hz, t0", [(1000.0, 0.0), (1000.0, 1000.0), (2000.0, 0.0)])
+def test_a_fast_cell_logger_is_not_refused_as_minutes(tmp_path, rate_hz, t0):
+    p = tmp_path / "cell.csv"
+    _cell_csv(p, rate_hz, t0=t0)
+    got = load_measured(str(p), "cell", current_sign="discharge-positive")
+    assert len(got.df) == 20000
+
+
+def test_a_1hz_cell_record_in_hours_gets_a_note_naming_the_units(tmp_path):
+    p = tmp_path / "cell.csv"
+    _cell_csv(p, 3600.0, n=3600)
+    got = load_measured(str(p), "cell", current_sign="discharge-positive")
+    assert any("--unit time_s=h" in n and "--unit time_s=min" in n for n in got.notes)
+
+
+def test_a_noisy_100hz_vehicle_record_is_not_read_as_minutes(tmp_path, frame):
+    import numpy as np
+    t = np.arange(0.0, frame["time_s"].iloc[-1], 0.01)
+    v = np.interp(t, frame["time_s"], frame["speed_mps"]) + 0.1 * np.random.default_rng(0).standard_normal(t.size)
+    p = tmp_path / "v100.csv"
+    pd.DataFrame({"time_s": t, "speed_mps": v, "power_w": np.interp(t, frame["time_s"], frame["power_w"])}).to_csv(
+        p, index=False)
+    assert len(load_measured(str(p), "vehicle").df) == t.size
+
+
+@pytest.mark.parametrize("suffix", [".csv.gz", ".CSV.GZ", ".csv.bz2", ".csv.xz", ".csv.zip"])
+def test_a_compressed_record_is_read_by_its_suffix(tmp_path, frame, suffix):
+    p = tmp_path / f"rec{suffix}"
+    comp = {".gz": "gzip", ".bz2": "bz2", ".xz": "xz", ".zip": "zip"}[Path(suffix.lower()).suffix]
+    frame.to_csv(p, index=False, compression={"method": comp, "archive_name": "rec.csv"} if comp == "zip" else comp)
+    got = load_measured(str(p), "vehicle")
+    assert len(got.df) == len(frame)
+
+
+def test_a_damaged_gzip_record_is_a_clear_error(tmp_path, frame):
+    import gzip
+    p = tmp_path / "rec.csv.gz"
+    blob = bytearray(gzip.compress(frame.to_csv(index=False).encode()))
+    blob[40:60] = b"\xff" * 20
+    p.write_bytes(bytes(blob))
+    with pytest.raises(DataError, match=r"rec\.csv\.gz: a damaged gzip file"):
+        load_measured(str(p), "vehicle")
+
+
+def test_iso_timestamps_with_a_decimal_comma_and_long_elapsed_hours(tmp_path, frame):
+    t = frame["time_s"].to_numpy()
+    stamps = (pd.Timestamp("2026-11-27 10:00:00") + pd.to_timedelta(t, unit="s")).strftime("%Y-%m-%d %H:%M:%S,%f")
+    p = tmp_path / "comma.csv"
+    frame.assign(time_s=stamps).to_csv(p, index=False, sep=";", decimal=",")
+    assert abs(load_measured(str(p), "vehicle").df["time_s"].to_numpy() - (t - t[0])).max() < 1e-6
+    hours = [f"{1000 + int(x) // 3600}:{(int(x) % 3600) // 60:02d}:{int(x) % 60:02d}" for x in t]
+    p = tmp_path / "ageing.csv"
+    frame.assign(time_s=hours).to_csv(p, index=False)
+    assert abs(load_measured(str(p), "vehicle").df["time_s"].to_numpy() - (t - t[0])).max() < 1e-6
+
+
+def test_an_empty_cell_in_a_timestamp_column_is_named_at_its_line(tmp_path, frame):
+    stamps = list((pd.Timestamp("2026-11-27 10:00:00") + pd.to_timedelta(frame["time_s"], unit="s"))
+                  .dt.strftime("%Y-%m-%d %H:%M:%S"))
+    stamps[9] = ""
+    p = tmp_path / "gap.csv"
+    frame.assign(time_s=stamps).to_csv(p, index=False)
+    with pytest.raises(DataError, match=r"column 'time_s', line 11: .* is not a timestamp"):
+        load_measured(str(p), "vehicle")
+
+
+def test_a_header_starting_par1_is_a_csv_and_a_bom_file_with_a_latin_byte_is_read(tmp_path, frame):
+    p = tmp_path / "par.csv"
+    frame.rename(columns={"power_w": "PAR1_power"}).to_csv(p, index=False, columns=["PAR1_power", "time_s",
+                                                                                    "speed_mps"])
+    got = load_measured(str(p), "vehicle", mapping={"power_w": "PAR1_power"})
+    assert len(got.df) == len(frame)
+    p = tmp_path / "bom.csv"
+    p.write_bytes(b"\xef\xbb\xbf# Pr\xfcfstand\n" + frame.to_csv(index=False).encode())
+    got = load_measured(str(p), "vehicle")
+    assert any("Windows-1252" in n for n in got.notes)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 
 import pytest
 
@@ -65,16 +66,18 @@ def test_a_crash_between_two_files_leaves_a_folder_a_rerun_accepts(tmp_path, mon
     real = atomic.write_bytes_atomic
     calls = []
 
-    def crash_on_second(path, data):
+    def crash_on_third(path, data):        # 1: the manifest (both hashes), 2: params.toml, 3: report.md
         calls.append(path)
-        if len(calls) == 2:
+        if len(calls) == 3:
             raise OSError("disk gone")
         return real(path, data)
 
-    monkeypatch.setattr(atomic, "write_bytes_atomic", crash_on_second)
+    monkeypatch.setattr(atomic, "write_bytes_atomic", crash_on_third)
     with pytest.raises(OSError):
         write_files(out, _files("2"), "report.json", "calibrate cell")
     monkeypatch.setattr(atomic, "write_bytes_atomic", real)
+    assert [Path(c).name for c in calls] == [MANIFEST, "params.toml", "report.md"]
+    assert (out / "params.toml").read_text() == "[params]\nx = 2\n" and (out / "report.md").read_text() == "# 1\n"
     # one file new, one old: both hashes are listed, so the re-run is not refused
     assert edited_outputs(out, list(_files("2")), "report.json") == []
     write_files(out, _files("3"), "report.json", "calibrate cell")
@@ -90,3 +93,53 @@ def test_calibrate_refuses_before_the_fit_when_params_toml_was_edited(tmp_path):
         f.write("# tuned by hand\n")
     with pytest.raises(ShevsimError, match=r"calibrate cell: .*params\.toml' was changed"):
         check_calibration_out(out, "cell")
+
+
+def test_a_crash_during_the_first_save_leaves_a_folder_the_next_run_accepts(tmp_path, monkeypatch):
+    out = tmp_path / "cal"
+    real = atomic.write_bytes_atomic
+    calls = []
+
+    def crash_on_third(path, data):
+        calls.append(path)
+        if len(calls) == 3:
+            raise OSError("disk gone")
+        return real(path, data)
+
+    monkeypatch.setattr(atomic, "write_bytes_atomic", crash_on_third)
+    with pytest.raises(OSError):
+        write_files(out, _files("1"), "report.json", "calibrate cell")
+    monkeypatch.setattr(atomic, "write_bytes_atomic", real)
+    assert (out / "params.toml").is_file() and not (out / "report.json").exists()
+    write_files(out, _files("2"), "report.json", "calibrate cell")         # listed as written: accepted
+    assert (out / "params.toml").read_text() == "[params]\nx = 2\n"
+    # but a file of the user's of one of those names in a folder without the marker is still refused
+    other = tmp_path / "mine"
+    other.mkdir()
+    (other / "params.toml").write_text("mine\n")
+    with pytest.raises(ShevsimError, match="holds files but no report.json"):
+        write_files(other, _files("1"), "report.json", "calibrate cell")
+
+
+def test_two_kinds_of_output_in_one_folder_keep_each_others_hashes(tmp_path):
+    out = tmp_path / "both"
+    write_files(out, _files("1"), "report.json", "calibrate cell")
+    write_files(out, {"summary.json": b"{}", "table.csv": b"a\n1\n"}, "summary.json", "study tradeoff")
+    write_files(out, _files("2"), "report.json", "calibrate cell")          # untouched: not refused
+    write_files(out, {"summary.json": b"{}", "table.csv": b"a\n2\n"}, "summary.json", "study tradeoff")
+    assert (out / "params.toml").read_text() == "[params]\nx = 2\n" and (out / "table.csv").read_text() == "a\n2\n"
+
+
+def test_an_older_output_is_adopted_whole_so_a_figure_left_out_once_is_still_ours(tmp_path):
+    out = tmp_path / "old"
+    out.mkdir()
+    files = {**_files("1"), "maps.png": b"\x89PNG..."}
+    for n, b in files.items():
+        (out / n).write_bytes(b)
+    t = (out / "report.json").stat().st_mtime
+    for n in files:
+        os.utime(out / n, (t - 5, t - 5))
+    os.utime(out / "report.json", (t, t))
+    write_files(out, _files("2"), "report.json", "calibrate cell")          # without the figure
+    write_files(out, {**_files("3"), "maps.png": b"\x89PNG2"}, "report.json", "calibrate cell")
+    assert (out / "maps.png").read_bytes() == b"\x89PNG2"
