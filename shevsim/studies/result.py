@@ -281,6 +281,25 @@ def failed_rows(which: str, rows) -> tuple[int, list[str]]:
     return 0, []
 
 
+def check_study_out(out: str | Path, which: str) -> None:
+    """Refuse, before a study runs, an output folder whose earlier output has a file changed since shevsim wrote
+    it (`shevsim.core.atomic.edited_outputs` over every file its manifest lists: the names a study writes again),
+    or a path that exists and is not a folder; the save's own checks follow after the run."""
+    from ..core.atomic import MANIFEST, _read_manifest, edited_message, edited_outputs
+    from ..core.errors import ShevsimError
+    p = Path(out)
+    what = f"study {which}"
+    if (p.exists() or p.is_symlink()) and not p.is_dir():
+        raise ShevsimError(f"{what}: '{p}' exists and is not a folder: not replaced; choose another folder")
+    man = _read_manifest(p) if p.is_dir() else None
+    if not man:
+        return
+    marker = next((n for n in sorted(man) if n.endswith(".json") and (p / n).is_file()), MARKER)
+    bad = edited_outputs(p, [n for n in sorted(man) if n != MANIFEST and (p / n).exists()], marker)
+    if bad:
+        raise ShevsimError(edited_message(what, p, bad))
+
+
 def run_study(which: str, scenario: str | Path | None = None, *, out: str | Path | None = None,
               workers: int = 2, scheduler: str | None = None, cache: str | Path | None = None,
               supervisor: str = "supervisor", stop_s: float | None = None,
@@ -323,6 +342,8 @@ def run_study(which: str, scenario: str | Path | None = None, *, out: str | Path
         when the evaluations stop (finished ones are in the cache).
     """
     opts = _check_options(which, options)
+    if out is not None:       # before the study runs (minutes): a file changed in an earlier output is kept
+        check_study_out(out, which)
     say = log or (lambda m: None)
     work = Path(tempfile.mkdtemp(prefix=f"shevsim_study_{which}_"))
     try:

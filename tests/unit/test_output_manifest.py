@@ -143,3 +143,13 @@ def test_an_older_output_is_adopted_whole_so_a_figure_left_out_once_is_still_our
     write_files(out, _files("2"), "report.json", "calibrate cell")          # without the figure
     write_files(out, {**_files("3"), "maps.png": b"\x89PNG2"}, "report.json", "calibrate cell")
     assert (out / "maps.png").read_bytes() == b"\x89PNG2"
+
+
+def test_a_study_refuses_before_it_runs_when_a_file_of_its_earlier_output_was_edited(tmp_path):
+    from shevsim.studies.result import check_study_out
+    out = tmp_path / "st"
+    write_files(out, {"summary.json": b"{}", "tradeoff.csv": b"rate\n1\n"}, "summary.json", "study tradeoff")
+    check_study_out(out, "tradeoff")                                        # as written: fine
+    (out / "tradeoff.csv").write_text("rate\n1\n2\n")
+    with pytest.raises(ShevsimError, match=r"study tradeoff: .*tradeoff\.csv' was changed"):
+        check_study_out(out, "tradeoff")
