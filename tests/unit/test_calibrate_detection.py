@@ -127,8 +127,10 @@ def _stub(effects, sim, n=3000, noise=0.3, seed=0):
 
 def _gains(f, meas, regs1, regs2, extra1):
     """Held-out gains (rule a: all channels over the record's own baseline; rule d: ch1) of the exact least-squares
-    fit with the effect's regressor ``extra1`` on ch1 over the fit without it."""
+    fit with the effect's regressors ``extra1`` (one array, or a list of them: its knots) on ch1 over the fit
+    without them."""
     tr, ho = ~f.hold, f.hold
+    extra = list(extra1) if isinstance(extra1, list) else [extra1]
 
     def fit(cols1, cols2):
         a = np.vstack([np.column_stack(cols1)[tr], np.column_stack(cols2)[tr]])
@@ -136,7 +138,7 @@ def _gains(f, meas, regs1, regs2, extra1):
         return {c: float(np.sqrt(np.mean((np.column_stack(x) @ beta - meas[c])[ho] ** 2)))
                 for c, x in (("ch1", cols1), ("ch2", cols2))}
     cur = fit(regs1, regs2)
-    cand = fit(regs1 + [extra1], regs2 + [np.zeros_like(extra1)])
+    cand = fit(regs1 + extra, regs2 + [np.zeros_like(e) for e in extra])
     ga = 1.0 - math.sqrt((cand["ch1"] ** 2 + cand["ch2"] ** 2) / (cur["ch1"] ** 2 + cur["ch2"] ** 2))
     return ga, 1.0 - cand["ch1"] / cur["ch1"]
 
@@ -183,18 +185,19 @@ def test_a_saturating_effect_is_read_on_its_secant_and_a_claim_effect_gets_no_li
     assert abs(ga - MIN_GAIN) <= 0.03, ga
 
 
-def _gains_k(f, meas, regs1, regs2, extra1):
-    """As `_gains` with several regressors of the effect on ch1 (its knots): the combined-score gain."""
-    tr, ho = ~f.hold, f.hold
-
-    def fit(cols1, cols2):
-        a = np.vstack([np.column_stack(cols1)[tr], np.column_stack(cols2)[tr]])
-        beta = np.linalg.lstsq(a, np.concatenate([meas["ch1"][tr], meas["ch2"][tr]]), rcond=None)[0]
-        return {c: float(np.sqrt(np.mean((np.column_stack(x) @ beta - meas[c])[ho] ** 2)))
-                for c, x in (("ch1", cols1), ("ch2", cols2))}
-    cur = fit(regs1, regs2)
-    cand = fit(regs1 + list(extra1), regs2 + [np.zeros_like(e) for e in extra1])
-    return 1.0 - math.sqrt((cand["ch1"] ** 2 + cand["ch2"] ** 2) / (cur["ch1"] ** 2 + cur["ch2"] ** 2))
+def _two_knots(along_u1: float):
+    """Two knots ``c[0]``, ``c[1]`` on ch1 (signals ``s1``, ``s2``; ``s2`` partly along ``s1`` and, by
+    ``along_u1``, along the declared parameter's ``u1``): ``(t, u1, u2, s1, s2, {"knots": Effect})``."""
+    from shevsim.calibrate.models import Effect, Param
+    t = np.arange(3000, dtype=float)
+    u1, u2 = np.sin(t / 37.0), np.cos(t / 91.0)
+    s1 = np.sign(np.sin(t / 13.0))
+    share = 0.6 if along_u1 < 1.0 else 0.3
+    s2 = share * s1 + (0.5 if along_u1 < 1.0 else 0.3) * np.sin(t / 5.0) + along_u1 * u1
+    eff = {"knots": Effect("knots", "two knots on ch1", (Param("c[0]", "V", -10.0, 10.0, 0.0, "knot at 0.2"),
+                                                         Param("c[1]", "V", -10.0, 10.0, 0.0, "knot at 0.8")),
+                           {"c[0]": 0.0, "c[1]": 0.0}, ("ch1",))}
+    return t, u1, u2, s1, s2, eff
 
 
 def test_an_effect_with_knots_gets_the_limit_of_each_shape_and_exact_least_squares_agree():
@@ -205,14 +208,9 @@ def test_an_effect_with_knots_gets_the_limit_of_each_shape_and_exact_least_squar
     whose parameters are not knots of one unit gets no shape row."""
     from shevsim.calibrate.models import Effect, Param
     from shevsim.calibrate.workflow import shape_limit
-    n = 3000
-    t = np.arange(n, dtype=float)
-    u1, u2 = np.sin(t / 37.0), np.cos(t / 91.0)
-    s1 = np.sign(np.sin(t / 13.0))
-    s2 = 0.6 * s1 + 0.5 * np.sin(t / 5.0) + 0.4 * u1
-    eff = {"knots": Effect("knots", "two knots on ch1", (Param("c[0]", "V", -10.0, 10.0, 0.0, "knot at 0.2"),
-                                                         Param("c[1]", "V", -10.0, 10.0, 0.0, "knot at 0.8")),
-                           {"c[0]": 0.0, "c[1]": 0.0}, ("ch1",)),
+    t, u1, u2, s1, s2, eff = _two_knots(0.4)
+    n = t.size
+    eff = {**eff,
            "two": Effect("two", "two parameters, not knots", (Param("g", "1", -1.0, 1.0, 0.0, "gain"),
                                                              Param("h", "1", -1.0, 1.0, 0.0, "scale")),
                          {"g": 0.0, "h": 0.0}, ("ch1",))}
@@ -229,7 +227,7 @@ def test_an_effect_with_knots_gets_the_limit_of_each_shape_and_exact_least_squar
         for factor, lo, hi in ((1.0, MIN_GAIN - 0.03, MIN_GAIN + 0.03), (0.5, -1.0, MIN_GAIN - 0.03),
                                (2.0, MIN_GAIN + 0.03, 1.0)):
             d = factor * lim * u
-            ga = _gains_k(f, dict(meas, ch1=meas["ch1"] + d[0] * s1 + d[1] * s2), [u1], [u2], [s1, s2])
+            ga, _ = _gains(f, dict(meas, ch1=meas["ch1"] + d[0] * s1 + d[1] * s2), [u1], [u2], [s1, s2])
             assert lo <= ga <= hi, (list(u), factor, ga)
             if factor != 1.0:
                 assert (shape_limit(row, d)["ratio"] > 1.0) == (factor > 1.0)
@@ -245,15 +243,8 @@ def test_with_a_refit_parameter_on_its_bound_the_extreme_shapes_come_from_their_
 
     from scipy import optimize
 
-    from shevsim.calibrate.models import Effect, Param
-    n = 3000
-    t = np.arange(n, dtype=float)
-    u1, u2 = np.sin(t / 37.0), np.cos(t / 91.0)
-    s1 = np.sign(np.sin(t / 13.0))
-    s2 = 0.3 * s1 + 0.3 * np.sin(t / 5.0) + 1.5 * u1
-    eff = {"knots": Effect("knots", "two knots on ch1", (Param("c[0]", "V", -10.0, 10.0, 0.0, "knot at 0.2"),
-                                                         Param("c[1]", "V", -10.0, 10.0, 0.0, "knot at 0.8")),
-                           {"c[0]": 0.0, "c[1]": 0.0}, ("ch1",))}
+    t, u1, u2, s1, s2, eff = _two_knots(1.5)
+    n = t.size
 
     def sim(v):
         return {"ch1": v["k"] * u1 + v["c[0]"] * s1 + v["c[1]"] * s2, "ch2": v["k"] * u2}

@@ -14,6 +14,18 @@ from shevsim.core.atomic import MANIFEST, edited_outputs, write_files
 from shevsim.core.errors import ShevsimError
 
 
+def _crash_on(n: int, calls: list):
+    """A stand-in for `atomic.write_bytes_atomic` that raises on its ``n``-th call (the calls' paths in ``calls``)."""
+    real = atomic.write_bytes_atomic
+
+    def write(path, data):
+        calls.append(path)
+        if len(calls) == n:
+            raise OSError("disk gone")
+        return real(path, data)
+    return write
+
+
 def _files(v: str) -> dict[str, bytes]:
     return {"params.toml": f"[params]\nx = {v}\n".encode(), "report.md": f"# {v}\n".encode(),
             "report.json": json.dumps({"v": v}).encode()}
@@ -64,15 +76,9 @@ def test_a_crash_between_two_files_leaves_a_folder_a_rerun_accepts(tmp_path, mon
     out = tmp_path / "cal"
     write_files(out, _files("1"), "report.json", "calibrate cell")
     real = atomic.write_bytes_atomic
-    calls = []
-
-    def crash_on_third(path, data):        # 1: the manifest (both hashes), 2: params.toml, 3: report.md
-        calls.append(path)
-        if len(calls) == 3:
-            raise OSError("disk gone")
-        return real(path, data)
-
-    monkeypatch.setattr(atomic, "write_bytes_atomic", crash_on_third)
+    calls: list = []
+    # 1: the manifest (both hashes), 2: params.toml, 3: report.md (crashes)
+    monkeypatch.setattr(atomic, "write_bytes_atomic", _crash_on(3, calls))
     with pytest.raises(OSError):
         write_files(out, _files("2"), "report.json", "calibrate cell")
     monkeypatch.setattr(atomic, "write_bytes_atomic", real)
@@ -98,15 +104,7 @@ def test_calibrate_refuses_before_the_fit_when_params_toml_was_edited(tmp_path):
 def test_a_crash_during_the_first_save_leaves_a_folder_the_next_run_accepts(tmp_path, monkeypatch):
     out = tmp_path / "cal"
     real = atomic.write_bytes_atomic
-    calls = []
-
-    def crash_on_third(path, data):
-        calls.append(path)
-        if len(calls) == 3:
-            raise OSError("disk gone")
-        return real(path, data)
-
-    monkeypatch.setattr(atomic, "write_bytes_atomic", crash_on_third)
+    monkeypatch.setattr(atomic, "write_bytes_atomic", _crash_on(3, []))
     with pytest.raises(OSError):
         write_files(out, _files("1"), "report.json", "calibrate cell")
     monkeypatch.setattr(atomic, "write_bytes_atomic", real)
