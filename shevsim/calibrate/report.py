@@ -402,21 +402,11 @@ def check_calibration_out(out, model: str) -> None:
     file changed since it was written (`shevsim.core.atomic.edited_outputs`: a hand-edited ``params.toml``), a place
     that cannot be created or written.  Nothing is created here."""
     import os
-    from ..core.atomic import edited_message, edited_outputs, foreign_files
+    from ..core.atomic import check_output_folder
     from ..core.errors import ShevsimError
     what = f"calibrate {model}"
     p = Path(out)
-    if (p.exists() or p.is_symlink()) and not p.is_dir():
-        raise ShevsimError(f"{what}: '{p}' exists and is not a folder: not replaced; choose another folder")
-    if p.is_dir() and not (p / MARKER).is_file():
-        clash = foreign_files(p, OUTPUT_FILES)
-        if clash:
-            raise ShevsimError(f"{what}: '{p}' holds files but no {MARKER} (not an output of shevsim), and "
-                               f"{clash[0]} would be replaced: choose another folder")
-    if p.is_dir() and (p / MARKER).is_file():         # an earlier calibration: a file changed since is kept
-        bad = edited_outputs(p, OUTPUT_FILES, MARKER)
-        if bad:
-            raise ShevsimError(edited_message(what, p, bad))
+    check_output_folder(p, OUTPUT_FILES, MARKER, what)   # an earlier calibration's changed file is kept
     probe = p.absolute()
     while not probe.exists():
         probe = probe.parent

@@ -184,6 +184,27 @@ def edited_message(what: str, out: str | Path, bad: list[str]) -> str:
             + ": not replaced; move it away or choose another folder")
 
 
+def check_output_folder(out_dir: str | Path, names, marker: str, what: str) -> None:
+    """Refuse (`ShevsimError`, naming the file) writing ``names`` into ``out_dir``: a path that is not a folder; a
+    folder without ``marker`` holding one of the names not as shevsim wrote it (`foreign_files`); an earlier output
+    (``marker`` there) one of whose files was changed since (`edited_outputs`).  Nothing is written."""
+    from .errors import ShevsimError
+    out = Path(out_dir)
+    if (out.exists() or out.is_symlink()) and not out.is_dir():
+        raise ShevsimError(f"{what}: '{out}' exists and is not a folder: not replaced; choose another folder")
+    if not out.is_dir():
+        return
+    if not (out / marker).is_file():
+        clash = foreign_files(out, names)
+        if clash:
+            raise ShevsimError(f"{what}: '{out}' holds files but no {marker} (not an output of shevsim), and "
+                               f"{clash[0]} would be replaced: choose another folder")
+        return
+    bad = edited_outputs(out, names, marker)
+    if bad:
+        raise ShevsimError(edited_message(what, out, bad))
+
+
 def write_files(out_dir: str | Path, files: dict[str, bytes], marker: str, what: str) -> Path:
     """Write ``files`` (relative path -> bytes) into ``out_dir``, each atomically; return the folder.
 
@@ -195,20 +216,10 @@ def write_files(out_dir: str | Path, files: dict[str, bytes], marker: str, what:
     written go to the hidden `MANIFEST`, merged with what it lists already (another kind of output in the same
     folder; an older output's files adopted as they were written): first with the earlier and the new hash of
     each name (a crash between two files leaves every file one of them), then with the new ones only."""
-    from .errors import ShevsimError
     out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise ShevsimError(f"{what}: '{out}' exists and is not a folder: not replaced; choose another folder")
-    if out.is_dir() and not (out / marker).is_file():
-        clash = foreign_files(out, files)
-        if clash:
-            raise ShevsimError(f"{what}: '{out}' holds files but no {marker} (not an output of shevsim), and "
-                               f"{clash[0]} would be replaced: choose another folder")
+    check_output_folder(out, sorted(files), marker, what)
     old: dict[str, list[str]] = (_read_manifest(out) or {}) if out.is_dir() else {}
     if out.is_dir() and (out / marker).is_file():
-        bad = edited_outputs(out, sorted(files), marker)
-        if bad:
-            raise ShevsimError(edited_message(what, out, bad))
         if _read_manifest(out) is None:    # an output written before the list: adopt what is as it was written
             t_marker = (out / marker).stat().st_mtime
             for q in sorted(out.rglob("*")):
