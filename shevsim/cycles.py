@@ -281,21 +281,10 @@ def load_cycle(path: str | Path, name: str | None = None, check_units: bool = Tr
 
 
 def _read_text(path: Path) -> str:
-    """The cycle file as text (UTF-8, byte-order mark dropped); unreadable, binary or too large: an error."""
-    from .core.errors import file_problem
-    why = file_problem(path, "cycle file", MAX_CYCLE_BYTES)
-    if why is not None:
-        raise _fail(path, None, None, why)
-    try:
-        raw = path.read_bytes()
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise _fail(path, None, None, f"not UTF-8 text (byte {exc.start}): save the cycle as a UTF-8 CSV") from exc
-    except OSError as exc:
-        raise _fail(path, None, None, f"cannot read cycle file: {exc}") from exc
-    if "\x00" in text:
-        raise _fail(path, None, None, "contains NUL bytes: not a text CSV (UTF-16 or binary?)")
-    return text
+    """The cycle file as text (:func:`shevsim.core.textfile.read_text_file`: UTF-8, UTF-16 or Windows-1252, a
+    byte-order mark dropped); unreadable, binary or too large: an error naming the file."""
+    from .core.textfile import read_text_file
+    return read_text_file(path, "cycle file", MAX_CYCLE_BYTES)[0]
 
 
 def _cycle_columns(path: Path, header_line: int, header: list[str]):

@@ -57,17 +57,13 @@ _ECM_COLS = ("soc_frac", "t_c", "rs_ohm", "r1_ohm", "c1_f", "r2_ohm", "c2_f")
 
 @memo_file
 def read_csv_table(path: Path, cols: tuple[str, ...]) -> tuple[tuple[float, ...], ...]:
-    from shevsim.core.errors import file_problem
+    from shevsim.core.textfile import read_text_file
     path = Path(path)
-    why = file_problem(path, "table file")       # not found, a folder, a device: said as such
-    if why is not None:
-        raise DataError(f"{path}: {why}")
+    # not found, a folder, a device, a binary file: said as such; UTF-8 (a spreadsheet's byte-order mark is not part
+    # of the first column's name), UTF-16 or Windows-1252
+    text = read_text_file(path, "table file")[0]
     rows: list[list[float]] = []
-    try:   # utf-8-sig: a byte-order mark of a spreadsheet export is not part of the first column's name
-        with open(path, newline="", encoding="utf-8-sig") as fh:
-            lines = [ln for ln in fh if ln.strip() and not ln.lstrip().startswith("#")]
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: cannot read the table as UTF-8 text: {exc}") from exc
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     sep = ";" if lines and ";" in lines[0] and "," not in lines[0] else ","
     reader = csv.reader(lines, delimiter=sep)
     header = [h.strip() for h in next(reader, [])]

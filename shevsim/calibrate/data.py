@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from ..core.errors import DataError
+from ..core.textfile import decode_text
 
 REQUIRED = {
     "cell": ("time_s", "current_a", "voltage_v", "t_surface_c", "t_ambient_c"),
@@ -416,18 +417,6 @@ def _row_of(df_index: int, line_of: np.ndarray) -> int:
     return int(line_of[df_index])
 
 
-#: binary files a user may hand over for a record (their first bytes), refused by name rather than parsed as text
-_BINARY_KINDS = ((b"PK\x03\x04", "a ZIP archive (an .xlsx workbook?)"),
-                 (b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1", "an OLE2 compound file (an .xls workbook?)"),
-                 (b"MATLAB 5.0 MAT-file", "a MATLAB .mat file"), (b"\x89HDF\r\n\x1a\n", "an HDF5 file (a MATLAB v7.3 .mat?)"),
-                 (b"PAR1", "a Parquet file"), (b"\x1f\x8b", "a gzip file whose name does not end in .gz"),
-                 (b"BZh", "a bzip2 file whose name does not end in .bz2"),
-                 (b"\xfd7zXZ\x00", "an xz file whose name does not end in .xz"),
-                 (b"%PDF", "a PDF document"), (b"MDF     ", "an ASAM MDF measurement file"))
-_BINARY_FIX = ("export the channels as a CSV (UTF-8, a header row naming the columns; e.g. pandas: "
-               "pd.read_parquet(f).to_csv('record.csv', index=False); MATLAB: writetable(T, 'record.csv'))")
-
-
 #: compressed records, by the file name's last suffix (any case): read decompressed, as pandas would
 _COMPRESSED = {".gz": "gzip", ".bz2": "bz2", ".xz": "xz", ".zip": "zip"}
 
@@ -458,46 +447,6 @@ def _record_bytes(path: Path) -> bytes:
         raise DataError(f"{path}: cannot be read: {exc.strerror or exc}") from None
     except (EOFError, ValueError, zlib.error, lzma.LZMAError, zipfile.BadZipFile, RuntimeError) as exc:
         raise DataError(f"{path}: a damaged {kind} file: {type(exc).__name__}: {exc}") from None
-
-
-def _decode_record(path: Path, data: bytes) -> tuple[str, str | None]:
-    """The record's text and a note when it is not UTF-8: a byte-order mark (UTF-16 of spreadsheet "Unicode
-    text" exports, UTF-8 with BOM), UTF-16 without one (a NUL in every other byte), else UTF-8 when the whole file
-    decodes as such, else Windows-1252 (the loggers' and spreadsheets' 8-bit Western code page; Latin-1 where a
-    byte is undefined there), said with the first byte that is not UTF-8.  A binary file (`_BINARY_KINDS`, NUL
-    bytes) is a DataError naming what it is."""
-    kind = next((k for magic, k in _BINARY_KINDS if data.startswith(magic)
-                 and (magic != b"PAR1" or data.rstrip().endswith(b"PAR1"))), None)
-    if kind is not None:
-        raise DataError(f"{path}: is {kind}, not a CSV text file: {_BINARY_FIX}")
-    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
-        try:
-            return data.decode("utf-16"), "decoded as UTF-16 (its byte-order mark)"
-        except UnicodeDecodeError as exc:
-            raise DataError(f"{path}: a UTF-16 byte-order mark, but not UTF-16 text (byte {exc.start})") from None
-    head = data[:4096]
-    for enc, pos, end in (("utf-16-le", 1, "little"), ("utf-16-be", 0, "big")):
-        if len(head) >= 8 and head[pos::2].count(0) > 0.9 * len(head[pos::2]):
-            try:
-                return (data.decode(enc), f"decoded as UTF-16 {end}-endian (no byte-order mark; a NUL in every "
-                                          f"other byte)")
-            except UnicodeDecodeError:
-                break
-    if b"\x00" in head:
-        raise DataError(f"{path}: holds NUL bytes (byte {head.index(0)}): a binary file, not a CSV text file: "
-                        f"{_BINARY_FIX}")
-    body = data[3:] if data[:3] == b"\xef\xbb\xbf" else data
-    try:
-        return body.decode("utf-8"), None
-    except UnicodeDecodeError as exc:
-        where = exc.start + (len(data) - len(body))
-    try:
-        text, name = body.decode("cp1252"), "Windows-1252"
-    except UnicodeDecodeError:
-        text, name = body.decode("latin-1"), "Latin-1"
-    line = data.count(b"\n", 0, where) + 1
-    return text, (f"decoded as {name}: not UTF-8 (byte 0x{data[where]:02x} on line {line}); save the file as UTF-8 "
-                  f"if a name or unit reads wrong")
 
 
 def _file_lines(text: str) -> np.ndarray:
@@ -578,7 +527,7 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, np.ndarray]:
         raise DataError(f"{path}: {why}")
     import io
     import warnings
-    text, enc_note = _decode_record(path, _record_bytes(path))
+    text, enc_note = decode_text(_record_bytes(path), path)
     try:
         with warnings.catch_warnings():
             # a row longer than the header would lose its extra values silently: an error instead

@@ -165,10 +165,8 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray, list[str], list[int]
     a UTF-8 byte-order mark, CRLF line ends, ``;`` separators (with decimal commas), trailing empty columns."""
     comments, rows, lines, header = [], [], [], None
     sep = ","
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: cannot read the file as UTF-8 text: {exc}") from exc
+    from shevsim.core.textfile import read_text_file
+    text = read_text_file(path, "map file")[0]      # UTF-8, UTF-16 or Windows-1252; a binary file named
     for lineno, line in enumerate(text.splitlines(), 1):
         s = line.strip()
         if not s:
@@ -210,8 +208,10 @@ def read_columns(path, columns: tuple[str, ...], checked: bool = False) -> dict[
     and within the physical range the column's unit-suffixed name declares
     (:func:`shevsim.core.params.name_rule`: ``efficiency_frac`` in (0, 1], ``fuel_gps`` >= 0, ...)."""
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: map file not found")
+    from shevsim.core.errors import file_problem
+    why = file_problem(path, "map file")        # not found, a folder, a device: said as such
+    if why is not None:
+        raise DataError(f"{path}: {why}")
     header, data, _, lines = _read_table(path)
     out = {}
     for c in columns:

@@ -114,7 +114,7 @@ def test_a_binary_file_is_named_for_what_it_is(tmp_path, head, kind):
     p.write_bytes(head)
     with pytest.raises(DataError) as ei:
         load_measured(str(p), "vehicle")
-    assert str(ei.value).startswith(f"{p}: ") and kind in str(ei.value) and "export the channels as a CSV" in str(ei.value)
+    assert str(ei.value).startswith(f"{p}: ") and kind in str(ei.value) and "export the columns as a CSV" in str(ei.value)
 
 
 # ---- the reviewer's cases (fourteenth session): fast loggers, compressed files, timestamps' edge forms
