@@ -27,6 +27,12 @@ is a record with a timing artefact: its power stands for the value half a sample
 run counts as a one-effect record, not a no-effect one (the trial's own runner counted the right ``timing`` of
 ``none_pmean`` as a false selection; since the eleventh session).  Averaging every channel is no delay between
 them: nothing extra is expected there.
+
+The generator's own physics, as ``benchmarks/calibration_independent.py`` counts it (``_present``): every DFN record
+carries solid diffusion, which the user's equivalent-circuit nominal lacks, so ``solid_diffusion`` named with its
+time within the particles' R^2/D (the truth file's two electrodes) widened by 25 % is not a false selection and is
+allowed beside the expected effect, never required; the row says so, and the strict counts (any effect beyond the
+expected ones wrong) are printed beside (since the fifteenth session; before, only the strict count).
 """
 from __future__ import annotations
 
@@ -37,6 +43,8 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parents[2] / "benchmarks"))
+from calibration_independent import _present  # noqa: E402  (the benchmark's rule for the generator's own physics)
 CELL_MAP = ["--map", "time_s=t_s", "--map", "current_a=I_pack_A", "--map", "voltage_v=U_cell_V",
             "--map", "t_surface_c=T_cell_degC", "--map", "t_ambient_c=T_amb_degC"]
 VEH_MAP = ["--map", "time_s=time_s", "--map", "speed_mps=speed_kmh", "--map", "power_w=batt_power_kw",
@@ -139,6 +147,7 @@ def main():
     print("| generator | case | named | expected | fitted vs truth | held-out before -> after | wall s |")
     print("|---|---|---|---|---|---|---|")
     false_sel, n_none, good, n_one = {}, {}, [], []
+    false_strict, good_strict = {}, []
     rs_seed = {}
     for gen, model, pre, case, c, label, extra in runs():
         if only and not any(f"{gen}_{label}".startswith(p) for p in only):
@@ -162,8 +171,17 @@ def main():
         if model == "cell" and case.startswith("none"):
             rs_seed.setdefault((gen, c["seed"]), fp.get("rs_scale"))
         shift = (0.5 * c.get("dt_s", 1.0) if c.get("logger") == "mean-ending-power" and not extra else None)
-        text, ok = judge(model, case, c["truth"], fp, sel, rs_seed.get((gen, c["seed"])),
+        # the generator's own physics (the benchmark's rule, _present): solid diffusion named on a PyBaMM record
+        # with its time within the particles' R^2/D widened by 25 % is not a false selection; the strict verdict
+        # (any effect beyond the expected ones wrong) is kept beside it
+        own = _present(pre, [x for x in sel if x != EXPECT.get(case)], fp) if model == "cell" else None
+        sel_j = [x for x in sel if x != "solid_diffusion"] if own else sel
+        text, ok = judge(model, case, c["truth"], fp, sel_j, rs_seed.get((gen, c["seed"])),
                          c.get("solid_diffusion_time_s"), shift)
+        ok_strict = judge(model, case, c["truth"], fp, sel, rs_seed.get((gen, c["seed"])),
+                          c.get("solid_diffusion_time_s"), shift)[1] if own else ok
+        if own:
+            text += "; " + "; ".join(own) + " (the generator's own physics)"
         flags = [k.replace("_", " ").replace("model form", "model-form") for k in ("baseline_failure", "model_form_discrepancy") if r.get(k)]
         named = (", ".join(sel) or "nothing") + "".join(f" [{x}]" for x in flags)
         rb, ra = r["rmse_before"], r["rmse_after"]
@@ -173,11 +191,14 @@ def main():
             exp = " + ".join(sorted(x for x in (EXPECT.get(case), "timing") if x))
         if ok is None:
             n_none[gen] = n_none.get(gen, 0) + 1
-            false_sel[gen] = false_sel.get(gen, 0) + bool(sel)
+            false_sel[gen] = false_sel.get(gen, 0) + bool(sel_j)
+            false_strict[gen] = false_strict.get(gen, 0) + bool(sel)
         else:
             n_one.append(f"{gen}_{label}")
             if ok:
                 good.append(f"{gen}_{label}")
+            if ok_strict:
+                good_strict.append(f"{gen}_{label}")
         mark = "" if ok is None else (" (ok)" if ok else " (MISS)")
         if ok is False:      # a miss read against what the record can detect (the report's detection_limits)
             dl = [x for x in r.get("detection_limits") or [] if x["effect"] == EXPECT.get(case)
@@ -193,8 +214,10 @@ def main():
         print(f"| {gen} | {label} | {named} | {exp}{mark} | {text} | {ho} | {wall:.0f} |", flush=True)
     print()
     for g in n_none:
-        print(f"false selections on no-effect records, {g}: {false_sel[g]}/{n_none[g]}")
-    print(f"one-effect records named alone and within tolerance: {len(good)}/{len(n_one)}")
+        print(f"false selections on no-effect records, {g}: {false_sel[g]}/{n_none[g]} "
+              f"(strictly, the generator's own solid diffusion counted: {false_strict[g]}/{n_none[g]})")
+    print(f"one-effect records named alone and within tolerance: {len(good)}/{len(n_one)} "
+          f"(strictly: {len(good_strict)}/{len(n_one)})")
     print("misses: " + (", ".join(x for x in n_one if x not in good) or "none"))
 
 
