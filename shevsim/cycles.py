@@ -234,8 +234,8 @@ def load_cycle(path: str | Path, name: str | None = None, check_units: bool = Tr
         CSV file. ``#`` lines and blank lines are comments; the first other line is
         the header and must contain a time and a speed column: ``time_s`` (or ``time_ms``, ``time_min``)
         and ``speed_mps`` (or ``speed_kmh``, ``speed_mph``), converted to SI on load.  Spreadsheet
-        exports are read as they come: UTF-8 byte-order mark, CRLF line ends, ``;`` separators with
-        decimal commas, trailing empty columns.
+        exports are read as they come: UTF-8 (with or without a byte-order mark), UTF-16 ("Unicode text"),
+        Windows-1252, CRLF line ends, ``;`` separators with decimal commas, trailing empty columns.
     name : str, optional
         Cycle name; defaults to the file stem.
     check_units : bool
