@@ -121,11 +121,7 @@ Parameters the record measures directly (``CalibrationModel.measured_params``, e
 offset read in the rests of a cell record): the parameter is held within its measurement's +-3 standard
 errors, and its effect is not held to the ``MIN_GAIN`` held-out gain (its parameter is not inferred from
 the residual): it passes when it improves the held-out error of its channels at all, worsens no channel by
-more than ``MAX_WORSEN``; where the model it is added to fails on every channel it acts on (held-out error >
-``BASELINE_FAILURE_RATIO`` x the noise floor there) no gain is asked, only the worsening rule: the fit under load is
-then the model's form error, larger than the correction's own signal (PyBaMM OKane2022 DFN with a -0.2 A offset on
-a nominal with LFP-shaped resistance tables, 12.6x: the rests read -0.2003 +- 0.0004 A, the held-out voltage moved
-+1.2 % with it, and an initial SOC was named instead); the BIC rule is not applied to a significant measurement (the BIC weighs an inferred
+more than ``MAX_WORSEN``; the BIC rule is not applied to a significant measurement (the BIC weighs an inferred
 parameter's complexity against the training fit, and the training fit can worsen with a measured correction where the
 nominal's declared parameters had bent to its absence there); measured as zero (not ``significant``), it does not
 pass.  In a round, a passing effect whose parameters are all measured and significant is selected before the
@@ -306,9 +302,6 @@ class FitResult:
     held: dict | None = None
     #: passed on a direct measurement the record's own check confirmed, not on the held-out rule (_Run.assess)
     measured_confirmed: bool = False
-    #: a significant measurement judged without a held-out gain: the current model's held-out error on the
-    #: effect's channels, in noise floors (each > BASELINE_FAILURE_RATIO; empty: the gain rule applied)
-    form_failed: dict | None = None
 
     @property
     def judged(self) -> dict:
@@ -1194,11 +1187,6 @@ class _Run:
                                     + (f"; the refit of the declared parameters moves {off_note}" if off_note else "")
                                     + ("; the BIC rule is not applied to a significant measurement" if sig_measured
                                        else "")
-                                    + (f"; no held-out gain is asked: the model it is added to fails on "
-                                       + ", ".join(f"{c} ({r:.1f}x its noise floor)" for c, r in fr.form_failed.items())
-                                       + f", a form error the fit under load cannot separate from the correction "
-                                       f"(held-out score {-fr.gain:+.1%} with it, no channel worse by more than "
-                                       f"{MAX_WORSEN:.0%})" if fr.form_failed else "")
                                     + ")" if measured else "")
         elif confirmed:
             fr.reason = ("passes: its parameter measured directly ("
@@ -1235,22 +1223,9 @@ class _Run:
         min_gain = 0.0 if measured else MIN_GAIN
         own_all, weak = set(), []
         for e in effs:
-            own_all.update(c for c in f.channels if c in (f.effects[e].evidence or f.effects[e].channels))
-        # a significant measurement added to a model that fails on the channels it acts on (held-out error
-        # > BASELINE_FAILURE_RATIO x the noise floor there): the held-out fit under load is then the model's form
-        # error, larger than the correction's own signal, and cannot test the measurement - no gain is asked,
-        # the worsening rule stays (PyBaMM OKane2022 DFN with a -0.2 A offset on an LFP-shaped nominal, 12.6x: the
-        # rests read -0.2003 +- 0.0004 A, the held-out voltage moved +1.2 %, and an initial SOC took its place)
-        fr.form_failed = {}
-        if measured and all(f.measured[k].get("significant", False) for k in eff_params):
-            ratios = {c: cm[c]["holdout"] / self.noise[c]["value"] for c in f.channels if c in own_all
-                      and self.noise[c]["value"] > 0.0}
-            if ratios and len(ratios) == len(own_all) and min(ratios.values()) > BASELINE_FAILURE_RATIO:
-                fr.form_failed = ratios
-                min_gain = -math.inf
-        for e in effs:
             own = [c for c in f.channels if c in (f.effects[e].evidence or f.effects[e].channels)]
-            if own and len(own) < len(f.channels) and not fr.form_failed:
+            own_all.update(own)
+            if own and len(own) < len(f.channels):
                 se = bool(src) and fr.rmse_sel is not None and not any(c in f.effects[e].channels for c in src)
                 re_ = self.ref_sel if se else self.ref
                 g = 1.0 - _score(fr, re_, own, se) / _score(current, re_, own, se)
@@ -2414,8 +2389,7 @@ def _md_evidence(rep: dict) -> list[str]:
           f"Rule: held-out score gain >= {r['min_holdout_gain']:.0%}, no channel worse by > {r['max_channel_worsening']:.0%}, "
           f"autocorrelation-corrected BIC drop >= {r['min_bic_drop']:g}; or a held-out RMSE halved on some channel "
           f"with no channel worse by > {r['max_channel_worsening']:.0%}.  A parameter the record measures directly "
-          f"and significantly: any held-out gain (none where the model fails on its channels, > {BASELINE_FAILURE_RATIO:g}x the "
-          f"noise floor), no BIC rule, selected before the inferred candidates of its round.  "
+          f"and significantly: any held-out gain, no BIC rule, selected before the inferred candidates of its round.  "
           f"An effect selected while a declared parameter of the nominal sits on a bound the record pushes against "
           f"(the BIC falls by >= {r['min_bic_drop']:g} a step past it) is a model-form discrepancy.", ""]
     for rd in rep["rounds"]:
