@@ -2483,7 +2483,8 @@ def render_markdown(rep: dict) -> str:
                 return f"in the final model: {_g(fp[k])}"
             return ("measured as zero: not applied" if not m.get("significant", True) else
                     "**not applied**: not in the final model or params.toml (the candidates' table, the backward "
-                    "elimination and the discrepancy list say why)")
+                    "elimination and the discrepancy list say why)"
+                    + (f"; {m['alternative']}" if m.get("alternative") else ""))
         L += ["", "Measured directly by the record (a candidate fit holds it within +-3 standard errors): " + "; ".join(
             f"`{k}` = {_g(m['value'])} (standard error {_g(m['se'])}) from {m['how']} - {_applied(k, m)}"
             for k, m in rep["measured_parameters"].items()) + "."]

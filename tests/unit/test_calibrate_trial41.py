@@ -72,6 +72,7 @@ def test_minivan_payload_is_named_as_mass_within_5_percent():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("gen, case", [("ra", "none"), ("ra", "none_2"), ("ok", "none"), ("ok", "none_2"), ("ok", "none_swing"),
+                                       ("ok", "none_standing_charge"),
                                        ("emv", "none"), ("emv", "none_2"), ("emv", "none_2hz"),
                                        ("emv", "none_mean")])
 def test_no_effect_records_name_no_physical_effect(gen, case):
@@ -117,3 +118,20 @@ def test_a_drive_and_park_warming_is_not_read_as_a_temperature_law():
     assert rep["selected_effects"] == [], rep["selected_effects"]
     (c,) = [c for c in rep["rounds"][0]["candidates"] if c["name"] == "arrhenius_resistance"]
     assert not c["passed"]
+
+
+def test_a_real_standing_current_at_rest_is_not_read_as_a_sensor_offset():
+    """A reviewer's record (fifteenth session): OKane2022 DFN with a real -0.2 A current all through, rests included,
+    logged as it flows - no offset.  The rests read -0.2003 +- 0.0004 A, as they do on the offset record
+    (``current_offset``), so the level alone cannot tell the two apart; the fit under load must gain with the
+    offset, and here it loses (the nominal fails at 12.5x its noise floor, where a waived gain named this offset).
+    The report says what else the level can be."""
+    rep, _ = _run("ok", "none_standing_charge", effects=["current_offset", "initial_soc"])
+    assert "current_offset" not in rep["selected_effects"], rep["selected_effects"]
+    m = rep["measured_parameters"]["current_offset_a"]
+    assert m["significant"] and m["value"] == pytest.approx(-0.2, abs=0.002)
+    (c,) = [c for c in rep["rounds"][0]["candidates"] if c["name"] == "current_offset"]
+    assert not c["passed"] and c["gain"] <= 0.0, c
+    from shevsim.calibrate.workflow import render_markdown
+    md = render_markdown(rep)
+    assert "**not applied**" in md and "a real current the cell carried at rest" in md, md

@@ -43,7 +43,11 @@ Cases (``CASES``; the seeds fix the drive and the noise):
 * ``cooling_change``: the total heat transfer coefficient x 2.5 from 1990 s (a fan switched on 100 s into the
   third drive; 0.5 s sigmoid);
 * ``none_swing``, ``capacity_swing`` (x 0.87, the drive of ``none_swing``), ``current_offset_swing`` (-4 % of 1C
-  as ``current_offset``): the swing protocol.
+  as ``current_offset``): the swing protocol;
+* ``none_standing_charge`` (a reviewer's case, fifteenth session): the drive of ``current_offset`` with a real
+  current of -4 % of 1C (a charger's trickle) added all through, rests included, and logged as it flows: no effect
+  is missing (the logged current is the cell's), but the rests read the level ``current_offset`` would, so the
+  level alone cannot tell a standing current from a sensor offset.
 
 The user's nominal (``cell_trial41_<set>_nominal.toml``): the rated capacity (OKane2022 PyBaMM's nominal 5.0 A.h;
 Ramadass2004 1.75 A.h, since PyBaMM's 1.0 A.h is only its current scale: its DFN holds 1.775 A.h at C/25), a
@@ -91,7 +95,9 @@ CASES = {"none": {"seed": 4111, "soc0": 0.90},
          "cooling_change": {"seed": 4116, "soc0": 0.90, "h_factor": 2.5, "t_change_s": 1990.0},
          "none_swing": {"seed": 4117, "soc0": 0.95, "protocol": "swing"},
          "capacity_swing": {"seed": 4117, "soc0": 0.95, "protocol": "swing", "am_factor": 0.87},
-         "current_offset_swing": {"seed": 4119, "soc0": 0.95, "protocol": "swing", "offset_logged_a": -0.04 * CAP}}
+         "current_offset_swing": {"seed": 4119, "soc0": 0.95, "protocol": "swing", "offset_logged_a": -0.04 * CAP},
+         # a reviewer's case (fifteenth session): a real standing current, logged as it flows (no offset)
+         "none_standing_charge": {"seed": 4114, "soc0": 0.90, "standing_current_a": -0.04 * CAP}}
 
 
 def base_params(soc0=None):
@@ -199,6 +205,7 @@ def main():
             continue
         rng = np.random.default_rng(case["seed"])
         tk, ik = current_knots(rng, case.get("protocol", "commute"))
+        ik = ik + case.get("standing_current_a", 0.0)      # flows all through, rests included, and is logged
         t = np.arange(0.0, tk[-1] + 1e-9, 1.0)
         t0 = time.perf_counter()
         v, temp = simulate(case, tk, ik, t)
