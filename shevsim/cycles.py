@@ -256,7 +256,8 @@ def load_cycle(path: str | Path, name: str | None = None, check_units: bool = Tr
     path = Path(path)
     text = _read_text(path)
     rows: list[tuple[int, str]] = []
-    for lineno, line in enumerate(text.splitlines(), start=1):
+    from .core.textfile import text_lines
+    for lineno, line in enumerate(text_lines(text), start=1):
         s = line.strip()
         if not s or s.startswith("#"):
             continue

@@ -57,14 +57,15 @@ _ECM_COLS = ("soc_frac", "t_c", "rs_ohm", "r1_ohm", "c1_f", "r2_ohm", "c2_f")
 
 @memo_file
 def read_csv_table(path: Path, cols: tuple[str, ...]) -> tuple[tuple[float, ...], ...]:
-    from shevsim.core.textfile import read_text_file
+    from shevsim.core.textfile import read_text_file, text_lines
     path = Path(path)
     # not found, a folder, a device, a binary file: said as such; UTF-8 (a spreadsheet's byte-order mark is not part
     # of the first column's name), UTF-16 or Windows-1252
     text = read_text_file(path, "table file")[0]
     rows: list[list[float]] = []
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
-    sep = ";" if lines and ";" in lines[0] and "," not in lines[0] else ","
+    lines = [ln for ln in text_lines(text) if ln.strip() and not ln.lstrip().startswith("#")]
+    # ';' (with decimal commas) or a tab (a spreadsheet's "Unicode text" export) where the header has no comma
+    sep = (";" if ";" in lines[0] else "\t" if "\t" in lines[0] else ",") if lines and "," not in lines[0] else ","
     reader = csv.reader(lines, delimiter=sep)
     header = [h.strip() for h in next(reader, [])]
     missing = [c for c in cols if c not in header]

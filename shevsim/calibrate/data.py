@@ -527,7 +527,7 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, np.ndarray]:
         raise DataError(f"{path}: {why}")
     import io
     import warnings
-    text, enc_note = decode_text(_record_bytes(path), path)
+    text, enc_note = decode_text(_record_bytes(path), path, decompresses=True)
     try:
         with warnings.catch_warnings():
             # a row longer than the header would lose its extra values silently: an error instead

@@ -165,9 +165,9 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray, list[str], list[int]
     a UTF-8 byte-order mark, CRLF line ends, ``;`` separators (with decimal commas), trailing empty columns."""
     comments, rows, lines, header = [], [], [], None
     sep = ","
-    from shevsim.core.textfile import read_text_file
+    from shevsim.core.textfile import read_text_file, text_lines
     text = read_text_file(path, "map file")[0]      # UTF-8, UTF-16 or Windows-1252; a binary file named
-    for lineno, line in enumerate(text.splitlines(), 1):
+    for lineno, line in enumerate(text_lines(text), 1):
         s = line.strip()
         if not s:
             continue

@@ -66,3 +66,43 @@ def test_a_binary_file_given_as_a_cycle_map_or_table_is_named(tmp_path, head, ki
 def test_a_folder_given_as_a_map_is_named_as_one(tmp_path):
     with pytest.raises(DataError, match="is a folder, not a map file"):
         read_columns(tmp_path, ("speed_radps", "torque_max_nm"))
+
+
+# ---- a reviewer's cases (fifteenth session)
+
+def test_utf32_is_read_with_its_mark_and_refused_clearly_without(tmp_path):
+    text = CYCLE.read_text(encoding="utf-8")
+    p = tmp_path / "c32.csv"
+    p.write_bytes(text.encode("utf-32"))
+    assert np.array_equal(load_cycle(p).speed_mps, load_cycle(CYCLE).speed_mps)
+    p.write_bytes(text.encode("utf-32-le"))      # read as UTF-16 it keeps NULs: refused, not a NUL-laden header
+    with pytest.raises(DataError, match="still holds NUL characters"):
+        load_cycle(p)
+
+
+def test_a_compressed_cycle_map_or_table_is_told_to_be_decompressed(tmp_path):
+    import gzip
+    p = tmp_path / "cyc.csv.gz"
+    p.write_bytes(gzip.compress(CYCLE.read_bytes()))
+    for read in (lambda: load_cycle(p), lambda: read_columns(p, ("speed_radps", "torque_max_nm")),
+                 lambda: read_csv_table(p, ("soc_frac", "ocv_v"))):
+        with pytest.raises(DataError) as ei:
+            read()
+        assert "is a gzip-compressed file: decompress it first" in str(ei.value), ei.value
+
+
+def test_a_latin1_byte_that_python_counts_as_a_line_break_is_not_one(tmp_path):
+    """0x81 is undefined in Windows-1252, so the file is read as Latin-1, where 0x85 is U+0085 - a line break to
+    ``str.splitlines``, not to an editor or to the CSV."""
+    p = tmp_path / "l1.csv"
+    p.write_bytes(b"# caf\xe9 \x85 \x81\n" + CYCLE.read_bytes())
+    assert np.array_equal(load_cycle(p).speed_mps, load_cycle(CYCLE).speed_mps)
+
+
+def test_a_tab_separated_unicode_text_cell_table_is_read(tmp_path):
+    """A spreadsheet's "Unicode text" export: UTF-16, tab-separated."""
+    t0 = read_csv_table(TABLE, ("soc_frac", "ocv_v"))
+    rows = [ln for ln in TABLE.read_text(encoding="utf-8").splitlines() if ln and not ln.startswith("#")]
+    p = tmp_path / "tab.csv"
+    p.write_bytes(("\r\n".join(r.replace(",", "\t") for r in rows) + "\r\n").encode("utf-16"))
+    assert read_csv_table(p, ("soc_frac", "ocv_v")) == t0
