@@ -2,9 +2,10 @@
 
 Spreadsheets and loggers write CSV in more than UTF-8: "Unicode text" exports are UTF-16 (with a byte-order mark,
 or without one: a NUL in every other byte), Western Windows machines write Windows-1252.  :func:`decode_text` reads
-them all and says which it used; a binary file (a workbook, a MATLAB or HDF5 file, Parquet, a PDF, an MDF
-measurement, an archive under a wrong name, anything with NUL bytes) is a :class:`DataError` naming what it is and
-how to export a CSV.  :func:`read_text_file` does the same for a file on disk, checked first by
+them all (UTF-32 with its byte-order mark too) and says which it used; a binary file (a workbook, a MATLAB or HDF5
+file, Parquet, a PDF, an MDF measurement, anything with NUL bytes) is a :class:`DataError` naming what it is and how
+to export a CSV, a compressed one (gzip, bzip2, xz) what to do with it.  :func:`text_lines` splits text into lines
+as an editor does.  :func:`read_text_file` does the same for a file on disk, checked first by
 :func:`shevsim.core.errors.file_problem` (not found, a folder, a device, too large).
 """
 from __future__ import annotations
