@@ -515,8 +515,12 @@ def test_a_capacity_that_pushes_the_slow_branch_onto_its_limit_is_not_named():
     # on the tenth session's machine the pair fitted 4.7 % above the rated capacity and gained > 10 %; on an AMD
     # EPYC's OpenBLAS kernels its own channel gains 9.5 % and it is refused by the held-out rule).  Where the pair
     # fits a sizeable capacity that the held-out rule would pass, the slow branch's limit is what refuses it.
+    # Since the capacity starts from 0.85, 1.0 and 1.15x the rated one (fifteenth session) the pair reaches another
+    # optimum, 5.196 A.h with the low-SOC law's scale on its upper bound (gain 34 %): refused as implausible, the
+    # check made before the slow branch's limit - a refusal of the same trade with another piece of its evidence.
     if pair["parameters"]["capacity_ah"] > 1.02 * 5.0 and pair["gain"] > 0.10 and "held-out" not in pair["reason"]:
-        assert "pushing the slow RC branch onto its time-constant limit" in pair["reason"], pair["reason"]
+        assert ("pushing the slow RC branch onto its time-constant limit" in pair["reason"]
+                or pair["reason"].startswith("implausible: lowsoc_r_scale_frac")), pair["reason"]
     assert 500.0 < tmax < 700.0
 
 
